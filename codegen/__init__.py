@@ -1,0 +1,1 @@
+"""Code generation: from a synthesis artifact to a standalone scheduled controller (Python, C99)."""

@@ -1,0 +1,71 @@
+"""The ``pressor`` console script: a small dispatcher over the stages' own CLIs.
+
+Each stage owns its subcommands in its own ``cli.py`` (DESIGN.md §2). This module only knows which
+module serves which subcommand and imports that module when, and only when, the subcommand runs:
+``pressor run`` never loads the solver, ``pressor synth`` never loads serial or rerun.
+
+A stage CLI module exposes ``main(command: str, argv: list[str]) -> int`` and parses ``argv`` itself.
+Exit codes: 0 success, 1 the run completed but a check failed, 2 bad usage or bad input.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+#: subcommand -> (module that serves it, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "synth": ("synthesis.cli", "synthesize, verify and write a controller artifact"),
+    "verify": ("synthesis.cli", "independent checks of an artifact (default: the shipped design)"),
+    "codegen": (
+        "codegen.cli",
+        "emit a standalone scheduled controller (python or C) from an artifact",
+    ),
+    "scenarios": ("hil_sim.cli", "list the named SIL scenarios"),
+    "trial": ("hil_sim.cli", "in-silico cohort trial of a controller on seeded patients"),
+    "device": ("hil_sim.device", "run the simulated patient/pump/monitor device on a serial port"),
+    "sil": ("runtime.cli", "software-in-the-loop run: device process + runtime over a serial link"),
+    "run": ("runtime.cli", "run the controller runtime alone on a serial port"),
+    "faults": ("runtime.cli", "list the injectable fault kinds"),
+}
+
+USAGE_EXIT = 2
+
+
+def _usage() -> str:
+    width = max(len(name) for name in COMMANDS)
+    lines = ["usage: pressor COMMAND [ARGS...]", "", "commands:"]
+    lines += [f"  {name:<{width}}  {text}" for name, (_, text) in COMMANDS.items()]
+    lines += ["", "'pressor COMMAND --help' shows a command's options."]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Dispatch ``pressor COMMAND ...`` to the stage that owns COMMAND.
+
+    Parameters
+    ----------
+    argv
+        Arguments after the program name; ``sys.argv[1:]`` when omitted.
+
+    Returns
+    -------
+    int
+        The process exit code (0 ok, 1 a check failed, 2 bad usage or input).
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args or args[0] in ("-h", "--help", "help"):
+        print(_usage())
+        return 0 if args else USAGE_EXIT
+    command, rest = args[0], args[1:]
+    if command not in COMMANDS:
+        print(
+            f"pressor: unknown command {command!r}; one of: {', '.join(COMMANDS)}", file=sys.stderr
+        )
+        return USAGE_EXIT
+    module = importlib.import_module(COMMANDS[command][0])
+    return int(module.main(command, rest))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,69 @@
+"""The one small interface every controller the runtime can run implements.
+
+Both the generated LPV modules (``codegen``) and the PI baseline (:mod:`runtime.pi_controller`)
+satisfy :class:`Controller`; the loop, the in-process simulator (``hil_sim``) and user code call
+nothing else. A step is a pure function of the controller's own state and its arguments: no clock,
+no I/O, no allocation that grows.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+
+@runtime_checkable
+class ControllerStatus(Protocol):
+    """Flags describing the last step.
+
+    Attributes
+    ----------
+    saturated
+        The command was clamped to [0, max_rate_ml_h] (anti-windup active).
+    rho_clamped
+        A scheduling parameter was outside the design box and was clamped to it.
+    rho_rate_limited
+        A scheduling parameter changed faster than the synthesis rate bound and was rate-limited.
+    """
+
+    saturated: bool
+    rho_clamped: bool
+    rho_rate_limited: bool
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """A discrete-time MAP controller stepped once per sample period.
+
+    Attributes
+    ----------
+    sample_period_s
+        The period (s) the controller was designed/discretised for; the loop must run at it.
+    max_rate_ml_h
+        Upper pump limit (ml/h); every command lies in [0, max_rate_ml_h].
+    """
+
+    sample_period_s: float
+    max_rate_ml_h: float
+
+    def step(self, map_mmhg: float, target_mmhg: float, K: float, T: float, tau: float) -> float:
+        """Advance one sample period and return the infusion command (ml/h) for this tick.
+
+        Parameters
+        ----------
+        map_mmhg
+            Measured mean arterial pressure (mmHg).
+        target_mmhg
+            MAP target (mmHg).
+        K, T, tau
+            Scheduling parameters: sensitivity (mmHg/(ml/h)), lag (s), delay (s).
+        """
+        ...
+
+    def reset(self) -> None:
+        """Return to the initial state (zero infusion, empty delay line)."""
+        ...
+
+    @property
+    def status(self) -> ControllerStatus:
+        """Flags of the last step."""
+        ...
