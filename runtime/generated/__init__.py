@@ -1,0 +1,1 @@
+"""Generated controller modules committed for the runtime (written by ``pressor codegen``)."""
