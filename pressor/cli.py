@@ -16,7 +16,10 @@ import sys
 #: subcommand -> (module that serves it, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "synth": ("synthesis.cli", "synthesize, verify and write a controller artifact"),
-    "verify": ("synthesis.verify_cli", "independent checks of an artifact (default: the shipped design)"),
+    "verify": (
+        "synthesis.verify_cli",
+        "independent checks of an artifact (default: the shipped design)",
+    ),
     "codegen": (
         "codegen.cli",
         "emit a standalone scheduled controller (python or C) from an artifact",
