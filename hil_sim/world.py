@@ -1,0 +1,230 @@
+"""The device side of the loop: patient + pump + MAP monitor + disturbances + the clinician's target.
+
+Pure core, stepped in lockstep by its caller (the in-process simulator :mod:`hil_sim.closed_loop` or
+the serial-link device process ``hil_sim.device``); the order per tick k is::
+
+    obs = world.observe()            # tick k: measured MAP, target, scheduling truth
+    u = controller.step(...)         # caller's controller
+    world.apply_command(u)           # the command answering tick k
+    status = world.advance()         # integrate one sample period -> tick k + 1
+
+Everything the world emits (observation and pump status fields) and every command it receives is
+rounded to float32, the precision of the serial link, so the in-process simulator and the serial SIL
+see the same numbers and produce the same trajectory bit for bit. Scheduling parameters (K, T, τ)
+are the patient's truth (the paper's "parameter generation" block; an estimator replaces it later).
+Random numbers (sensor noise) come from the patient's own seeded stream, so a trajectory depends only
+on (scenario, patient_seed, sample period, commands).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hil_sim.cohort import draw_patient, patient_rng
+from hil_sim.disturbance import DisturbanceSum
+from hil_sim.patient import FrozenParams, Patient, PatientParams
+from hil_sim.pump import Pump
+from hil_sim.scenario import Scenario, load_scenario
+from hil_sim.sensor import Sensor
+
+_F32 = np.float32
+
+
+def f32(x: float) -> float:
+    """``x`` rounded to the nearest float32 (as it would cross the serial link)."""
+    return float(_F32(x))
+
+
+@dataclass(frozen=True, slots=True)
+class Observation:
+    """What the device reports for tick k (all floats already float32-rounded).
+
+    Attributes
+    ----------
+    tick
+        Sample index k.
+    sim_time_s
+        k · sample period (s).
+    map_mmhg
+        Measured MAP (mmHg); NaN when the monitor has no valid value.
+    quality
+        Monitor quality flags (:data:`hil_sim.sensor.QUALITY_INVALID`).
+    target_mmhg
+        The clinician's MAP target (mmHg).
+    K, T_s, tau_s
+        Scheduling parameters: sensitivity (mmHg/(ml/h)), lag (s), delay (s).
+    sched_valid
+        Whether the scheduling parameters are valid.
+    """
+
+    tick: int
+    sim_time_s: float
+    map_mmhg: float
+    quality: int
+    target_mmhg: float
+    K: float
+    T_s: float
+    tau_s: float
+    sched_valid: bool
+
+
+@dataclass(frozen=True, slots=True)
+class PumpStatus:
+    """The pump after an advance to tick k (floats float32-rounded).
+
+    Attributes
+    ----------
+    tick
+        The tick the world has advanced to.
+    delivered_ml_h
+        Rate flowing now (ml/h).
+    volume_ml
+        Volume delivered since the start (ml).
+    alarms
+        Pump alarm bit flags (:mod:`hil_sim.pump`).
+    """
+
+    tick: int
+    delivered_ml_h: float
+    volume_ml: float
+    alarms: int
+
+
+class World:
+    """Patient, pump, monitor and target for one scenario and one patient seed.
+
+    Parameters
+    ----------
+    scenario
+        A :class:`~hil_sim.scenario.Scenario` or a scenario name / path.
+    patient_seed
+        Seed of the patient (coefficients and monitor noise); ignored for the coefficients of a
+        frozen scenario.
+    sample_period_s
+        Loop period (s); a whole multiple of the scenario's internal patient step.
+    """
+
+    def __init__(
+        self, scenario: Scenario | str, patient_seed: int, sample_period_s: float = 0.1
+    ) -> None:
+        self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        sc = self.scenario
+        if not 0.0 < sample_period_s <= 10.0:
+            raise ValueError(f"sample_period_s={sample_period_s!r} outside (0, 10] s")
+        n_sub = round(sample_period_s / sc.internal_step_s)
+        if n_sub < 1 or abs(n_sub * sc.internal_step_s - sample_period_s) > 1e-9 * sample_period_s:
+            raise ValueError(
+                f"sample_period_s={sample_period_s} s is not a whole multiple of the scenario's"
+                f" patient.internal_step_s={sc.internal_step_s} s"
+            )
+        self.sample_period_s = float(sample_period_s)
+        self.patient_seed = int(patient_seed)
+        self.params: PatientParams | FrozenParams = (
+            sc.frozen if sc.frozen is not None else draw_patient(patient_seed)
+        )
+        self._h = sample_period_s / n_sub
+        self._n_sub = n_sub
+        self.patient = Patient(self.params, self._h)
+        self.pump = Pump(sc.pump)
+        self.sensor = Sensor(sc.sensor, patient_rng(patient_seed, 1))
+        self.disturbance = DisturbanceSum(sc.disturbances)
+        self.baseline_mmhg = self.params.baseline_mmhg
+        self.tick = 0
+        self.last_command_ml_h = math.nan
+        self.last_mean_rate_ml_h = 0.0
+        self._obs: Observation | None = None
+
+    # -- the pinned API ---------------------------------------------------------------------------
+    @property
+    def sim_time_s(self) -> float:
+        """Time of the current tick (s)."""
+        return self.tick * self.sample_period_s
+
+    def target_at(self, t_s: float) -> float:
+        """The clinician's target (mmHg) at ``t_s``: baseline, then baseline + step from t0."""
+        sc = self.scenario
+        return self.baseline_mmhg + (sc.step_mmhg if t_s >= sc.step_time_s - 1e-9 else 0.0)
+
+    def true_map_mmhg(self) -> float:
+        """True MAP now (mmHg): baseline + ΔMAP + disturbances."""
+        return self.patient.map_mmhg + self.disturbance(self.sim_time_s)
+
+    def observe(self) -> Observation:
+        """The observation of the current tick (computed once per tick; repeated calls agree)."""
+        obs = self._obs
+        if obs is not None and obs.tick == self.tick:
+            return obs
+        t = self.sim_time_s
+        reading, quality = self.sensor.read(t, self.true_map_mmhg())
+        p = self.patient
+        obs = Observation(
+            self.tick,
+            f32(t),
+            f32(reading),
+            quality,
+            f32(self.target_at(t)),
+            f32(p.K),
+            f32(p.T_s),
+            f32(p.tau_s),
+            True,
+        )
+        self._obs = obs
+        return obs
+
+    def apply_command(self, rate_ml_h: float) -> None:
+        """Receive the infusion command (ml/h) answering the current tick (float32-rounded)."""
+        if self._obs is None or self._obs.tick != self.tick:
+            self.observe()  # the monitor samples every tick whether or not anyone asked
+        cmd = f32(rate_ml_h)
+        self.last_command_ml_h = cmd
+        self.pump.command(cmd)
+
+    def advance(self) -> PumpStatus:
+        """Integrate one sample period (pump, then patient, per internal step); tick k → k + 1."""
+        if self._obs is None or self._obs.tick != self.tick:
+            self.observe()
+        pump, patient, h = self.pump, self.patient, self._h
+        total = 0.0
+        for _ in range(self._n_sub):
+            mean = pump.advance(h)
+            patient.step(mean)
+            total += mean
+        self.last_mean_rate_ml_h = total / self._n_sub
+        self.tick += 1
+        return PumpStatus(self.tick, f32(pump.delivered_ml_h), f32(pump.volume_ml), pump.alarms)
+
+    def truth(self) -> dict[str, float | int]:
+        """Ground truth now, for recording only (never for control)."""
+        p = self.patient
+        return {
+            "tick": self.tick,
+            "sim_time_s": self.sim_time_s,
+            "map_mmhg": self.true_map_mmhg(),
+            "delta_map_mmhg": p.delta_map_mmhg,
+            "disturbance_mmhg": self.disturbance(self.sim_time_s),
+            "baseline_mmhg": self.baseline_mmhg,
+            "target_mmhg": self.target_at(self.sim_time_s),
+            "K": p.K,
+            "T_s": p.T_s,
+            "tau_s": p.tau_s,
+            "pump_rate_ml_h": self.pump.delivered_ml_h,
+            "mean_rate_ml_h": self.last_mean_rate_ml_h,
+            "volume_ml": self.pump.volume_ml,
+            "pump_alarms": self.pump.alarms,
+        }
+
+    # -- scenario-level facts ---------------------------------------------------------------------
+    def required_delta_mmhg(self) -> float:
+        """Largest ΔMAP (mmHg) the target asks of the drug over the scenario (disturbances included)."""
+        sc = self.scenario
+        t = np.arange(sc.step_time_s, sc.duration_s + 1.0, 1.0)
+        need = [self.target_at(x) - self.baseline_mmhg - self.disturbance(x) for x in t]
+        return float(max(need)) if need else 0.0
+
+    def reachable(self) -> bool:
+        """Whether the pump's maximum rate can hold the target at this patient's sensitivity."""
+        achievable = self.params.max_delta_map_mmhg(self.scenario.pump.max_rate_ml_h)
+        return self.required_delta_mmhg() <= achievable
