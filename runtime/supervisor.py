@@ -43,6 +43,7 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
 - ``SCHED_INVALID`` scheduling marked invalid or non-finite (when ``sched_required``);
 - ``SCHED_OUT_OF_BOX`` K, T or τ outside ``sched_box``;
 - ``SCHED_RATE`` |Δρ|/Δt above ``sched_rate_tolerance`` × ``sched_rate_bounds``;
+- ``TARGET_INVALID`` the MAP target is non-finite or outside the plausible MAP range;
 - ``COMMAND_INVALID`` the controller returned a non-finite command (held, → HOLD);
 - ``COMMAND_CLAMPED`` the controller returned a command outside [0, max] (clamped; an alarm, not a
   state change).
@@ -86,6 +87,7 @@ class Fault(IntFlag):
     SCHED_RATE = 1 << 9
     COMMAND_INVALID = 1 << 10
     COMMAND_CLAMPED = 1 << 11
+    TARGET_INVALID = 1 << 12
 
 
 #: faults that do not change the state (the command is clamped and the event logged)
@@ -196,6 +198,7 @@ def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
         ("SCHED_INVALID", "scheduling marked invalid or non-finite; same tick"),
         ("SCHED_OUT_OF_BOX", f"K, T, tau outside {box}; same tick"),
         ("SCHED_RATE", rates),
+        ("TARGET_INVALID", "target non-finite or outside the MAP range; same tick"),
         ("COMMAND_INVALID", "controller returned a non-finite command; same tick, held"),
         ("COMMAND_CLAMPED", f"controller command outside [0, {cfg.max_rate_ml_h}] ml/h; clamped"),
         (
@@ -330,6 +333,7 @@ class Supervisor:
         sched_valid: bool = True,
         sample_age_s: float = 0.0,
         link_silence_s: float = 0.0,
+        target_mmhg: float = 80.0,
     ) -> bool:
         """Check this tick's inputs and update the state; return True if the controller is to run.
 
@@ -345,6 +349,8 @@ class Supervisor:
             Time (s) since the newest sample was received; the MAP checks are skipped once stale.
         link_silence_s
             Time (s) since any frame was received from the device.
+        target_mmhg
+            The MAP target (mmHg) the controller will be given.
         """
         cfg = self.config
         self._now_s = now_s
@@ -358,6 +364,8 @@ class Supervisor:
         else:
             faults |= self._check_map(now_s, map_mmhg, quality)
             faults |= self._check_sched(now_s, K, T_s, tau_s, sched_valid)
+            if not cfg.map_min_mmhg <= target_mmhg <= cfg.map_max_mmhg:  # False for NaN too
+                faults |= Fault.TARGET_INVALID
         self.faults = faults
         state = self.state
         if faults:

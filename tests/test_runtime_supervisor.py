@@ -65,6 +65,7 @@ def test_startup_with_bad_sample_commands_zero_and_does_not_run_controller():
         ({"map_mmhg": GOOD_MAP + 35.0}, Fault.MAP_SPIKE),
         ({"quality": 1}, Fault.SENSOR_QUALITY),
         ({"sample_age_s": 0.5}, Fault.STALE_SAMPLE),
+        ({"target_mmhg": math.nan}, Fault.TARGET_INVALID),
     ],
 )
 def test_sensor_fault_is_detected_same_tick_and_holds_last_command_with_alarm(bad_inputs, fault):

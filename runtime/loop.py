@@ -1,0 +1,409 @@
+"""The fixed-rate loop: the shell around the controller step (PX4 module style).
+
+Each tick: read the newest MAP sample, target and scheduling parameters from the link, pass them
+through the :class:`~runtime.supervisor.Supervisor`, step the controller (a pure call), send the
+command, record. The loop counts its own timing (:class:`~runtime.timing.TimingStats`).
+
+Two ways to keep time (injected clocks, :mod:`runtime.clock`):
+
+Lockstep (default in ``pressor sil``)
+    The device sends tick k's sample and waits for tick k's command (PX4 SITL style); the runtime's
+    :class:`~runtime.clock.VirtualClock` follows the sample's sim time. The order per tick is the
+    in-process simulator's (observe → step → apply → advance), so with a clean link the serial run
+    reproduces it sample for sample. A device that sends nothing for ``stall_timeout_s`` of *wall*
+    time ends the run with :class:`DeviceStalled`: in lockstep sim time stands still while the
+    device is silent, so the supervisor's time-based link watchdog cannot fire, and declaring link
+    loss from wall time would make the trajectory depend on host load.
+
+Real time (``--realtime``)
+    The :class:`~runtime.clock.MonotonicClock` releases a tick at each absolute deadline
+    ``t0 + k·Ts``; the loop drains the link, takes the newest sample and answers it. Sample age and
+    link silence are measured on the wall clock, so the stale-sample and link-loss watchdogs are
+    real. Lateness and skipped periods are counted.
+
+Execution time of a tick = wall time from release (lockstep: sample decoded; real time: deadline
+reached) to the command written to the port. Recording happens after the command is sent.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
+from runtime.controller import Controller
+from runtime.link.endpoint import (
+    MODE_AUTO,
+    MODE_SAFE,
+    STATE_FINISHED,
+    STATE_RUNNING,
+    LinkClosedError,
+    LinkEndpoint,
+    TickInputs,
+)
+from runtime.recorder import CHANNEL_INDEX, CHANNELS, Recorder
+from runtime.supervisor import State, Supervisor, SupervisorConfig, fault_names
+from runtime.timing import TimingStats
+
+_NAN = math.nan
+
+
+class DeviceStalled(RuntimeError):
+    """The device sent no sample for ``stall_timeout_s`` (wall clock) in lockstep."""
+
+
+@dataclass
+class Trajectory:
+    """Per-tick signals of a run, in preallocated arrays that grow by doubling.
+
+    Attributes (after :meth:`arrays`): ``tick``, ``sim_time_s``, ``map_mmhg`` (as measured),
+    ``target_mmhg``, ``command_ml_h`` (sent to the pump), ``controller_ml_h`` (the controller's raw
+    output, NaN when it did not run), ``state`` (supervisor state).
+    """
+
+    capacity: int = 1 << 14
+    n: int = 0
+    data: np.ndarray = field(init=False)
+
+    FIELDS = ("tick", "sim_time_s", "map_mmhg", "target_mmhg", "command_ml_h", "controller_ml_h")
+
+    def __post_init__(self) -> None:
+        self.data = np.empty((self.capacity, len(self.FIELDS) + 1), dtype=np.float64)
+
+    def append(self, row: tuple[float, ...]) -> None:
+        """Store one tick (FIELDS order, then the state)."""
+        if self.n == self.data.shape[0]:
+            self.data = np.concatenate([self.data, np.empty_like(self.data)])
+        self.data[self.n] = row
+        self.n += 1
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Copies of the recorded columns by name."""
+        d = self.data[: self.n]
+        out = {name: d[:, i].copy() for i, name in enumerate(self.FIELDS)}
+        out["tick"] = out["tick"].astype(np.int64)
+        out["state"] = d[:, -1].astype(np.int64)
+        return out
+
+
+@dataclass
+class LoopResult:
+    """What a run produced: the trajectory, timing, link counters and supervisor account."""
+
+    trajectory: dict[str, np.ndarray]
+    timing: dict[str, float | int]
+    link: dict[str, int]
+    detections: dict[str, int]
+    ticks_in_state: dict[str, int]
+    transitions: list[dict[str, Any]]
+    commands_out_of_range: int
+    ended: str
+
+
+def sched_limits_of(controller: Controller) -> tuple[Any, Any]:
+    """The design box and rate bounds a generated controller declares, else ``(None, None)``.
+
+    Looked up on the instance, then on its module: ``RHO_MIN``/``RHO_MAX`` (3 values: K, T s,
+    τ s) and ``RHO_RATE_MAX`` (3 values per s). The PI baseline declares none (it is not
+    scheduled), so its scheduling inputs are not checked.
+    """
+    module = sys.modules.get(type(controller).__module__)
+    sources = (controller, module)
+
+    def find(name: str) -> Any:
+        for src in sources:
+            if src is not None and hasattr(src, name):
+                return getattr(src, name)
+        return None
+
+    lo, hi, rate = find("RHO_MIN"), find("RHO_MAX"), find("RHO_RATE_MAX")
+    box = None
+    if lo is not None and hi is not None and len(lo) == 3 and len(hi) == 3:
+        box = tuple((float(a), float(b)) for a, b in zip(lo, hi, strict=True))
+    rates = tuple(float(r) for r in rate) if rate is not None and len(rate) == 3 else None
+    return box, rates
+
+
+def supervisor_config_for(
+    controller: Controller, sensor_noise_mmhg: float, **overrides: Any
+) -> SupervisorConfig:
+    """A supervisor configuration matched to ``controller`` and the device's sensor.
+
+    Sample period and pump limit come from the controller; the scheduling box and rates from
+    :func:`sched_limits_of`; the flatline check is on only when the sensor is noisy (a noise-free
+    simulated sensor legitimately repeats values). ``overrides`` replace any field.
+    """
+    box, rates = sched_limits_of(controller)
+    cfg: dict[str, Any] = {
+        "sample_period_s": float(controller.sample_period_s),
+        "max_rate_ml_h": float(controller.max_rate_ml_h),
+        "flatline_enabled": sensor_noise_mmhg > 0.0,
+        "sched_required": box is not None,
+        "sched_box": box,
+        "sched_rate_bounds": rates,
+        "stale_after_s": 3.5 * float(controller.sample_period_s),
+    }
+    cfg.update(overrides)
+    return SupervisorConfig(**cfg)
+
+
+class Loop:
+    """The runtime loop over a connected :class:`LinkEndpoint`.
+
+    Parameters
+    ----------
+    controller
+        Any :class:`~runtime.controller.Controller` (stepped once per tick).
+    supervisor
+        The safety supervisor (its config's period must match the controller's).
+    endpoint
+        Runtime-side endpoint, handshake done.
+    recorder
+        Optional rerun recorder (closed by the caller).
+    heartbeat_every
+        Ticks between runtime heartbeats (about 1 s of run time at the default).
+    """
+
+    def __init__(
+        self,
+        controller: Controller,
+        supervisor: Supervisor,
+        endpoint: LinkEndpoint,
+        recorder: Recorder | None = None,
+        heartbeat_every: int = 10,
+    ) -> None:
+        self.controller = controller
+        self.sup = supervisor
+        self.ep = endpoint
+        self.recorder = recorder
+        self.period_s = float(controller.sample_period_s)
+        self.timing = TimingStats(self.period_s)
+        self.trajectory = Trajectory()
+        self.heartbeat_every = max(1, int(heartbeat_every))
+        self.ticks_in_state = [0] * len(State)
+        self.transitions: list[dict[str, Any]] = []
+        self.out_of_range = 0
+        self._row = [_NAN] * len(CHANNELS)
+        self._count = 0
+
+    # ------------------------------------------------------------------ one tick
+    def tick(
+        self,
+        inp: TickInputs,
+        now_s: float,
+        release_wall_s: float,
+        *,
+        sample_age_s: float = 0.0,
+        link_silence_s: float = 0.0,
+        lateness_s: float = 0.0,
+        skipped: int = 0,
+    ) -> float:
+        """Supervise, step, send and record one tick; return the command sent (ml/h)."""
+        sup = self.sup
+        run = sup.assess(
+            now_s,
+            inp.map_mmhg,
+            inp.quality,
+            inp.K,
+            inp.T_s,
+            inp.tau_s,
+            inp.sched_valid,
+            sample_age_s,
+            link_silence_s,
+            inp.target_mmhg,
+        )
+        raw = (
+            self.controller.step(inp.map_mmhg, inp.target_mmhg, inp.K, inp.T_s, inp.tau_s)
+            if run
+            else None
+        )
+        command = sup.finalize(raw)
+        state = sup.state
+        if self._count % self.heartbeat_every == 0:
+            self.ep.send_heartbeat(inp.tick, STATE_RUNNING, flush=False)
+        self.ep.send_command(inp.tick, command, MODE_AUTO if state == State.AUTO else MODE_SAFE)
+        exec_s = perf_counter_s() - release_wall_s
+        self._count += 1
+        self.timing.record(exec_s, lateness_s, skipped)
+        if not 0.0 <= command <= sup.config.max_rate_ml_h:  # by construction never; counted anyway
+            self.out_of_range += 1
+        self.ticks_in_state[state] += 1
+        raw_f = _NAN if raw is None else raw
+        self.trajectory.append(
+            (inp.tick, inp.sim_time_s, inp.map_mmhg, inp.target_mmhg, command, raw_f, state)
+        )
+        if sup.transition is not None:
+            old, new, faults = sup.transition
+            event = {
+                "tick": inp.tick,
+                "sim_time_s": inp.sim_time_s,
+                "from": old.name,
+                "to": new.name,
+                "faults": fault_names(faults),
+            }
+            self.transitions.append(event)
+            if self.recorder is not None:
+                self.recorder.event(
+                    inp.tick,
+                    inp.sim_time_s,
+                    f"{old.name} -> {new.name}: {', '.join(event['faults']) or 'inputs good'}",
+                    warn=new in (State.HOLD, State.FAILSAFE),
+                )
+        if self.recorder is not None:
+            self._record(inp, raw_f, command, state, exec_s, lateness_s)
+        return command
+
+    def _record(
+        self,
+        inp: TickInputs,
+        raw: float,
+        command: float,
+        state: State,
+        exec_s: float,
+        lateness_s: float,
+    ) -> None:
+        row = self._row
+        ix = CHANNEL_INDEX
+        pump = self.ep.pump_status
+        c = self.ep.counters
+        row[ix["/patient/map_mmhg"]] = inp.map_mmhg
+        row[ix["/controller/target_mmhg"]] = inp.target_mmhg
+        row[ix["/controller/command_ml_h"]] = raw
+        row[ix["/pump/command_ml_h"]] = command
+        row[ix["/pump/rate_ml_h"]] = pump.delivered_ml_h if pump is not None else _NAN
+        row[ix["/pump/volume_ml"]] = pump.volume_ml if pump is not None else _NAN
+        row[ix["/schedule/K"]] = inp.K
+        row[ix["/schedule/T_s"]] = inp.T_s
+        row[ix["/schedule/tau_s"]] = inp.tau_s
+        row[ix["/loop/exec_us"]] = exec_s * 1e6
+        row[ix["/loop/lateness_us"]] = lateness_s * 1e6
+        row[ix["/safety/state"]] = float(state)
+        row[ix["/safety/faults"]] = float(self.sup.faults)
+        row[ix["/safety/alarm"]] = 1.0 if self.sup.alarm else 0.0
+        row[ix["/link/bad_frames"]] = float(
+            c.bad_crc + c.refused_unsigned + c.refused_bad_signature + c.resyncs
+        )
+        assert self.recorder is not None
+        self.recorder.record(inp.tick, inp.sim_time_s, row)
+
+    # ------------------------------------------------------------------ drivers
+    def run_lockstep(self, n_ticks: int, stall_timeout_s: float = 10.0) -> LoopResult:
+        """Answer the device's samples one by one until ``n_ticks`` are answered (0: until it ends).
+
+        Raises
+        ------
+        DeviceStalled
+            No sample for ``stall_timeout_s`` (s, wall clock) while the device has not finished.
+        """
+        clock = VirtualClock()
+        ep = self.ep
+        answered = 0
+        ended = "completed"
+        poll_s = min(0.5, stall_timeout_s)
+        while n_ticks == 0 or answered < n_ticks:
+            waited = 0.0
+            inp = None
+            try:
+                while inp is None:
+                    inp = ep.wait_for_sample(poll_s)
+                    if inp is None:
+                        if ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FINISHED:
+                            break
+                        waited += poll_s
+                        if waited >= stall_timeout_s:
+                            raise DeviceStalled(
+                                f"device sent no sample for {stall_timeout_s} s after"
+                                f" {answered} ticks"
+                            )
+            except LinkClosedError:
+                ended = "device closed the link"
+                break
+            if inp is None:
+                ended = "device finished"
+                break
+            release = perf_counter_s()
+            clock.advance_to(inp.sim_time_s)
+            self.tick(inp, clock.now_s(), release)
+            answered += 1
+        self._finish()
+        return self.result(ended)
+
+    def run_realtime(
+        self,
+        n_ticks: int,
+        first_sample_timeout_s: float = 10.0,
+        clock: MonotonicClock | None = None,
+    ) -> LoopResult:
+        """Run on the wall clock with absolute deadlines for ``n_ticks`` periods (0: until the end).
+
+        Each period answers the newest sample received; stale samples and link silence feed the
+        supervisor's watchdogs.
+        """
+        ep = self.ep
+        first = ep.wait_for_sample(first_sample_timeout_s)
+        if first is None:
+            raise DeviceStalled(f"no first sample within {first_sample_timeout_s} s")
+        clock = clock or MonotonicClock()
+        sched = PeriodicSchedule(self.period_s, origin_s=clock.now_s())
+        newest: TickInputs = first
+        last_sample_s = last_frame_s = sched.origin_s
+        frames_seen = ep.counters.frames_received
+        skipped = 0
+        ended = "completed"
+        k = 0
+        while n_ticks == 0 or k < n_ticks:
+            deadline = sched.deadline_s()
+            now = clock.wait_until(deadline)
+            release = perf_counter_s()
+            try:
+                ep.poll(0.0)
+            except LinkClosedError:
+                ended = "device closed the link"
+                break
+            # drain to the newest sample (older ones are superseded, not queued)
+            while ep._samples:  # noqa: SLF001 - no public non-blocking drain in the endpoint yet
+                newest = ep._next_sample()  # noqa: SLF001
+                last_sample_s = now
+            if ep.counters.frames_received != frames_seen:
+                frames_seen = ep.counters.frames_received
+                last_frame_s = now
+            self.tick(
+                newest,
+                now,
+                release,
+                sample_age_s=now - last_sample_s,
+                link_silence_s=now - last_frame_s,
+                lateness_s=now - deadline,
+                skipped=skipped,
+            )
+            k += 1
+            if ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FINISHED:
+                ended = "device finished"
+                break
+            _, skipped = sched.next_release(clock.now_s())
+        self._finish()
+        return self.result(ended)
+
+    def _finish(self) -> None:
+        try:
+            last = int(self.trajectory.data[self.trajectory.n - 1, 0]) if self.trajectory.n else 0
+            self.ep.send_heartbeat(last, STATE_FINISHED)
+        except LinkClosedError:
+            pass
+
+    def result(self, ended: str) -> LoopResult:
+        """Collect the run's account."""
+        return LoopResult(
+            trajectory=self.trajectory.arrays(),
+            timing=self.timing.summary(),
+            link=self.ep.counters.as_dict(),
+            detections=dict(self.sup.detections),
+            ticks_in_state={s.name: self.ticks_in_state[s] for s in State},
+            transitions=list(self.transitions),
+            commands_out_of_range=self.out_of_range,
+            ended=ended,
+        )
