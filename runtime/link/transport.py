@@ -1,0 +1,316 @@
+"""Byte transports for the MAVLink link: pyserial URLs and device paths, pty pairs, ``loop://``.
+
+Everything here returns a *port*: an object with the small subset of the pyserial API the
+endpoint uses (``write(bytes)``, ``read(n)``, ``in_waiting``, ``close()``, ``timeout``). Real
+pyserial objects satisfy it; :class:`FdPort` wraps the leader side of a pty (which has no device
+path pyserial could open) with the same subset.
+
+Facts this module relies on (DESIGN.md §5):
+
+- A pty in cooked mode mangles bytes (CR/LF translation, echo, ^C...); both sides are put in raw
+  mode at once, before anyone writes.
+- pyserial flushes its input when it opens a port, so a peer's bytes sent earlier are lost: the
+  endpoints handshake after both ends are open (repeated hellos, see ``endpoint.handshake``).
+- ``port.read(port.in_waiting or 1)`` returns as soon as anything is there; ``read(n)`` would wait
+  the whole timeout for n bytes. Changing ``timeout`` on an open posix port reconfigures the tty
+  (tcsetattr) - it is set once, at open.
+- A pty ignores the baud rate; link timing, if needed, is modelled in virtual time.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import os
+import select
+import struct
+import termios
+import tty
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import serial
+
+#: Default read timeout (s): how long one blocking ``read`` may wait for the first byte. Wait loops
+#: in the endpoint re-check their own deadline after each read, so this only bounds overshoot.
+DEFAULT_READ_TIMEOUT_S = 0.01
+
+
+class Port(Protocol):
+    """The subset of a pyserial port the link uses."""
+
+    timeout: float | None
+
+    def write(self, data: bytes, /) -> int | None: ...
+
+    def read(self, size: int = 1, /) -> bytes: ...
+
+    @property
+    def in_waiting(self) -> int: ...
+
+    def close(self) -> None: ...
+
+
+def open_port(spec: str, *, timeout_s: float = DEFAULT_READ_TIMEOUT_S, baudrate: int = 115200):
+    """Open a pyserial port from a URL (``loop://``, ``socket://host:port``, ...) or a device path.
+
+    Parameters
+    ----------
+    spec
+        A pyserial URL or a device path (``/dev/ttyUSB0``, ``/dev/pts/7``).
+    timeout_s
+        Read timeout (s) for one blocking read; set once here.
+    baudrate
+        Line rate for real UARTs (ignored by ptys and URLs without a line).
+
+    Returns
+    -------
+    serial.SerialBase
+        The open port.
+
+    Raises
+    ------
+    serial.SerialException
+        When the port cannot be opened (the message names ``spec``).
+    """
+    port = serial.serial_for_url(spec, baudrate=baudrate, timeout=timeout_s, write_timeout=None)
+    return port
+
+
+class FdPort:
+    """A pyserial-like port over a raw file descriptor (the leader side of a pty).
+
+    Parameters
+    ----------
+    fd
+        An open file descriptor; owned (closed by :meth:`close`).
+    timeout_s
+        Read timeout (s): ``read`` returns what is there after at most this long.
+    """
+
+    def __init__(self, fd: int, timeout_s: float = DEFAULT_READ_TIMEOUT_S) -> None:
+        self.fd = fd
+        self.timeout: float | None = timeout_s
+        self.is_open = True
+        self._buf = bytearray(4)
+
+    @property
+    def in_waiting(self) -> int:
+        """Bytes readable without blocking."""
+        fcntl.ioctl(self.fd, termios.FIONREAD, self._buf)
+        return struct.unpack("i", self._buf)[0]
+
+    def read(self, size: int = 1) -> bytes:
+        """Read up to ``size`` bytes, waiting at most ``timeout`` for the first one.
+
+        Returns ``b""`` on timeout. Raises :class:`serial.SerialException` (as pyserial does for a
+        vanished device) when no process holds the follower open any more (EIO on a pty leader).
+        """
+        if not self.is_open:
+            raise serial.PortNotOpenError()
+        ready, _, _ = select.select([self.fd], [], [], self.timeout)
+        if not ready:
+            return b""
+        try:
+            data = os.read(self.fd, size)
+        except OSError as exc:
+            if exc.errno == errno.EIO:  # follower closed by every process
+                raise serial.SerialException(f"pty fd {self.fd}: peer closed the link") from exc
+            raise
+        if not data:
+            raise serial.SerialException(f"pty fd {self.fd}: peer closed the link")
+        return data
+
+    def write(self, data: bytes) -> int:
+        """Write all of ``data`` (blocking until the kernel took it)."""
+        if not self.is_open:
+            raise serial.PortNotOpenError()
+        view = memoryview(data)
+        total = 0
+        while total < len(view):
+            total += os.write(self.fd, view[total:])
+        return total
+
+    def flush(self) -> None:
+        """Nothing to flush: writes go straight to the kernel."""
+
+    def reset_input_buffer(self) -> None:
+        """Discard pending input."""
+        termios.tcflush(self.fd, termios.TCIFLUSH)
+
+    def close(self) -> None:
+        """Close the descriptor (idempotent)."""
+        if self.is_open:
+            self.is_open = False
+            os.close(self.fd)
+
+
+@dataclass
+class PtyPair:
+    """A pseudo-terminal pair, both sides in raw mode from the start.
+
+    The leader side stays in this process as an :class:`FdPort` (:meth:`leader_port`); the follower
+    is a real tty device at :attr:`follower_path` that another process (or thread) opens with
+    pyserial. The pair keeps its own follower descriptor open until :meth:`close_follower` so that
+    (a) the raw settings persist while the peer is starting and (b) reads on the leader do not fail
+    with EIO before the peer has opened the follower.
+
+    Attributes
+    ----------
+    leader_fd, follower_fd
+        The two descriptors from ``os.openpty``.
+    follower_path
+        Device path of the follower (``/dev/pts/N``).
+    """
+
+    leader_fd: int
+    follower_fd: int
+    follower_path: str
+    _leader_taken: bool = field(default=False, repr=False)
+    _follower_closed: bool = field(default=False, repr=False)
+
+    @classmethod
+    def open(cls) -> PtyPair:
+        """Create the pair and put both sides in raw mode at once."""
+        leader, follower = os.openpty()
+        for fd in (leader, follower):
+            tty.setraw(fd, termios.TCSANOW)
+        return cls(leader, follower, os.ttyname(follower))
+
+    def leader_port(self, timeout_s: float = DEFAULT_READ_TIMEOUT_S) -> FdPort:
+        """The leader side as a port (ownership of the descriptor moves to the port)."""
+        self._leader_taken = True
+        return FdPort(self.leader_fd, timeout_s)
+
+    def follower_port(self, timeout_s: float = DEFAULT_READ_TIMEOUT_S):
+        """Open the follower by path with pyserial (what a separate process does)."""
+        return open_port(self.follower_path, timeout_s=timeout_s)
+
+    def close_follower(self) -> None:
+        """Drop this process's follower descriptor (after the peer has opened it)."""
+        if not self._follower_closed:
+            self._follower_closed = True
+            os.close(self.follower_fd)
+
+    def close(self) -> None:
+        """Close what this object still owns."""
+        self.close_follower()
+        if not self._leader_taken:
+            self._leader_taken = True
+            os.close(self.leader_fd)
+
+
+class CrossedPort:
+    """One end of an in-process link built from two pyserial ``loop://`` ports.
+
+    A ``loop://`` port reads back what is written to it; crossing two of them gives a full-duplex
+    pair: this end writes into the peer's loop and reads its own.
+    """
+
+    def __init__(self, own, peer) -> None:
+        self._own = own
+        self._peer = peer
+
+    @property
+    def timeout(self) -> float | None:
+        return self._own.timeout
+
+    @property
+    def in_waiting(self) -> int:
+        return self._own.in_waiting
+
+    def read(self, size: int = 1) -> bytes:
+        return self._own.read(size)
+
+    def write(self, data: bytes) -> int | None:
+        return self._peer.write(data)
+
+    def flush(self) -> None:
+        """Nothing buffered on this side."""
+
+    def close(self) -> None:
+        """Close this end's loop (the peer then reads nothing more)."""
+        self._own.close()
+
+
+def loop_pair(
+    timeout_s: float = DEFAULT_READ_TIMEOUT_S, buffer_size: int = 1 << 16
+) -> tuple[CrossedPort, CrossedPort]:
+    """Two connected in-process ports over pyserial ``loop://`` (for tests and ``--link loop``).
+
+    Parameters
+    ----------
+    timeout_s
+        Read timeout (s) of both ends.
+    buffer_size
+        Bytes each direction holds before a writer blocks (use a reader thread per end).
+    """
+    a = serial.serial_for_url("loop://", timeout=timeout_s, do_not_open=True)
+    b = serial.serial_for_url("loop://", timeout=timeout_s, do_not_open=True)
+    for p in (a, b):
+        p.buffer_size = buffer_size
+        p.open()
+    return CrossedPort(a, b), CrossedPort(b, a)
+
+
+class FaultyPort:
+    """Fault injection on the write path of a port: corrupt or drop whole writes deterministically.
+
+    Every ``corrupt_every``-th write has one byte flipped (position chosen by a seeded generator,
+    XOR with a non-zero mask); every ``drop_every``-th write is discarded. Writes are frames or
+    bursts of frames as the endpoint emits them, so "every N frames" holds when the endpoint flushes
+    per frame. 0 disables a fault.
+
+    Parameters
+    ----------
+    port
+        The port to wrap.
+    corrupt_every, drop_every
+        Period (writes) of each fault; 0 = never.
+    seed
+        Seed of the byte-position generator.
+    """
+
+    def __init__(self, port, *, corrupt_every: int = 0, drop_every: int = 0, seed: int = 0) -> None:
+        import random
+
+        if corrupt_every < 0 or drop_every < 0:
+            raise ValueError("corrupt_every and drop_every must be >= 0")
+        self._port = port
+        self.corrupt_every = corrupt_every
+        self.drop_every = drop_every
+        self._rng = random.Random(seed)
+        self.writes = 0
+        self.corrupted = 0
+        self.dropped = 0
+
+    @property
+    def timeout(self) -> float | None:
+        return self._port.timeout
+
+    @property
+    def in_waiting(self) -> int:
+        return self._port.in_waiting
+
+    def read(self, size: int = 1) -> bytes:
+        return self._port.read(size)
+
+    def write(self, data: bytes) -> int | None:
+        self.writes += 1
+        if self.drop_every and self.writes % self.drop_every == 0:
+            self.dropped += 1
+            return len(data)
+        if self.corrupt_every and self.writes % self.corrupt_every == 0 and data:
+            buf = bytearray(data)
+            buf[self._rng.randrange(len(buf))] ^= self._rng.randrange(1, 256)
+            self.corrupted += 1
+            data = bytes(buf)
+        return self._port.write(data)
+
+    def flush(self) -> None:
+        flush = getattr(self._port, "flush", None)
+        if flush is not None:
+            flush()
+
+    def close(self) -> None:
+        self._port.close()

@@ -1,0 +1,131 @@
+"""The pressor MAVLink dialect: XML and committed module agree, ids stay free, every message
+round-trips through real frames."""
+
+from __future__ import annotations
+
+import math
+import struct
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from runtime.link import generate
+from runtime.link.dialect import pressor as mavlink
+from runtime.link.endpoint import LinkEndpoint, Signing
+from runtime.link.transport import open_port
+
+
+def test_committed_module_matches_what_mavgen_generates_from_the_xml(tmp_path):
+    fresh = generate.generate(generate.XML_PATH, tmp_path / "pressor.py")
+    assert fresh.read_text() == generate.MODULE_PATH.read_text(), (
+        "runtime/link/dialect/pressor.py is stale: run `python -m runtime.link.generate`"
+    )
+
+
+def test_generation_uses_mavlink2_so_no_message_is_dropped():
+    # mavgen's default wire protocol 1.0 silently drops every id > 255: all of ours
+    assert mavlink.WIRE_PROTOCOL_VERSION == "2.0"
+    names = {cls.name for cls in mavlink.mavlink_map.values()}
+    assert {
+        "PRESSOR_HEARTBEAT",
+        "PRESSOR_HELLO",
+        "MAP_SAMPLE",
+        "SCHEDULING_PARAMS",
+        "MAP_TARGET",
+        "INFUSION_COMMAND",
+        "PUMP_STATUS",
+    } <= names
+
+
+def _ids_defined_in_our_xml() -> set[int]:
+    root = ET.parse(generate.XML_PATH).getroot()
+    return {int(m.get("id")) for m in root.iter("message")}
+
+
+def test_message_ids_are_in_our_block_and_unused_by_pymavlink_all_dialect():
+    from pymavlink.dialects.v20 import all as all_dialect
+
+    ours = _ids_defined_in_our_xml()
+    assert len(ours) == 7 and all(45000 <= mid < 45100 for mid in ours)
+    assert not ours & set(all_dialect.mavlink_map), "id collision with pymavlink's all dialect"
+
+
+def test_included_standard_messages_are_identical_to_pymavlink_s():
+    from pymavlink.dialects.v20 import all as all_dialect
+
+    included = set(mavlink.mavlink_map) - _ids_defined_in_our_xml()
+    assert 0 in included  # the standard HEARTBEAT, for generic MAVLink tools
+    for mid in included:
+        assert mavlink.mavlink_map[mid].crc_extra == all_dialect.mavlink_map[mid].crc_extra
+
+
+def test_invalid_xml_is_reported_not_exited(tmp_path):
+    bad = tmp_path / "bad.xml"
+    bad.write_text(
+        "<mavlink><messages><message id='45000' name='X'><field type='nonsense' name='a'>a"
+        "</field></message></messages></mavlink>"
+    )
+    with pytest.raises(RuntimeError, match="bad.xml"):
+        generate.generate(bad, tmp_path / "bad.py")
+
+
+_TYPE_VALUES = {
+    "float": [1.5, -123.25, math.inf],
+    "double": [1234.0625, -0.1, 1e-300],
+    "uint8_t": [0, 1, 255],
+    "uint16_t": [0, 513, 65535],
+    "uint32_t": [0, 70000, 4294967295],
+    "int32_t": [0, -70000, 2147483647],
+    "int16_t": [0, -513, 32767],
+    "int8_t": [0, -1, 127],
+    "uint64_t": [0, 1 << 40, (1 << 64) - 1],
+}
+
+
+def _sample_args(cls, variant: int) -> list:
+    args = []
+    for name, ftype in zip(cls.fieldnames, cls.fieldtypes, strict=True):
+        if ftype == "char":
+            args.append(f"v{variant}-{name}".encode()[:32])
+        else:
+            args.append(_TYPE_VALUES[ftype][variant])
+    return args
+
+
+@pytest.mark.parametrize("variant", [0, 1, 2])
+@pytest.mark.parametrize("signed", [False, True])
+@pytest.mark.parametrize("msg_id", sorted(mavlink.mavlink_map))
+def test_every_message_round_trips_through_a_real_frame(msg_id, signed, variant):
+    cls = mavlink.mavlink_map[msg_id]
+    port = open_port("loop://")
+    sign = Signing.generate(seed=7) if signed else None
+    ep = LinkEndpoint(port, "runtime", signing=sign)
+    got = []
+    ep.on_message = got.append
+    args = _sample_args(cls, variant)
+    frame = ep.send(cls(*args))
+    assert frame[0] == 0xFD and bool(frame[2] & 1) == signed
+    ep.poll(0.5)
+    assert len(got) == 1 and got[0].id == msg_id
+    for name, ftype, sent in zip(cls.fieldnames, cls.fieldtypes, args, strict=True):
+        value = getattr(got[0], name)
+        if ftype == "float":  # float32 on the wire
+            sent = struct.unpack("<f", struct.pack("<f", sent))[0]
+        if ftype == "char":  # decoded as str
+            sent = sent.decode()
+        assert value == sent, name
+    assert ep.counters.bad_crc == 0 and ep.counters.junk_bytes == 0
+    port.close()
+
+
+def test_nan_map_sample_survives_the_wire():
+    port = open_port("loop://")
+    ep = LinkEndpoint(port, "device")
+    got = []
+    ep.on_message = got.append
+    ep.send_tick(5, 0.5, math.nan, 3, 90.0, 0.5, 150.0, 30.0, False)
+    ep.poll(0.5)
+    sample = [m for m in got if m.id == mavlink.MAVLINK_MSG_ID_MAP_SAMPLE][0]
+    assert math.isnan(sample.map_mmhg) and sample.quality == 3 and sample.tick == 5
+    assert [m.id for m in got] == [45003, 45004, 45002], "sample must be the last frame of a tick"
+    port.close()
