@@ -119,16 +119,18 @@ class PIBaseline:
     def closed_loop(self, k: float, t_s: float, tau_s: float) -> DelaySystem:
         """The PI loop as a :class:`DelaySystem` for stability/LMI analysis.
 
-        Exogenous input w: a load disturbance on dMAP (mmHg/s); performance output z = [dMAP,
-        x_e / T] (mmHg) — the closed-loop state matrices are what matter for stability.
+        Exogenous input w: an output-side load d (mmHg) entering as T dMAP/dt = -dMAP + K u(t-tau) + d;
+        performance output z = dMAP (mmHg),
+        which the integral action drives back to zero (the closed-loop state matrices are what
+        matter for stability; this channel keeps the L2 gain modest for the LMI).
         """
         a, ad = self._loop_matrices(k, t_s)
         return DelaySystem(
             A=a,
             Ad=ad,
-            B=np.array([[1.0], [0.0]]),
-            C=np.array([[1.0, 0.0], [0.0, 1.0 / t_s]]),
-            Cd=np.zeros((2, 2)),
-            D=np.zeros((2, 1)),
+            B=np.array([[1.0 / t_s], [0.0]]),
+            C=np.array([[1.0, 0.0]]),
+            Cd=np.zeros((1, 2)),
+            D=np.zeros((1, 1)),
             tau=float(tau_s),
         )

@@ -1,0 +1,65 @@
+"""The delay-dependent analysis LMI certifies stable delay loops and refuses unstable ones."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from synthesis.analysis_lmi import analyse
+from synthesis.closed_loop import DelaySystem
+from synthesis.pi_baseline import PIBaseline
+
+
+def _scalar(a: float, ad: float, tau: float) -> DelaySystem:
+    one = np.ones((1, 1))
+    return DelaySystem(a * one, ad * one, one, one, 0 * one, 0 * one, tau)
+
+
+def _single(system: DelaySystem, **kw) -> object:
+    return analyse([system], np.zeros((1, 1)), np.zeros(1), np.zeros(1), system.tau, **kw)
+
+
+def test_pi_loop_on_nominal_plant_is_certified() -> None:
+    res = _single(PIBaseline().closed_loop(0.55, 150.0, 40.0), p_dependence="constant")
+    assert res.certified
+    assert np.all(res.margins > 0) and np.all(res.p_min_eig > 0)
+    assert 0.0 < res.gamma < 10.0
+
+
+def test_pi_loop_past_its_delay_margin_is_not_certified() -> None:
+    # kp = 15 (ml/h)/mmHg: the rightmost roots are in the right half-plane (delay-stability test)
+    res = _single(PIBaseline(kp=15.0).closed_loop(0.55, 150.0, 40.0), p_dependence="constant")
+    assert not res.certified
+
+
+def test_gamma_is_a_valid_upper_bound_on_the_exact_l2_gain() -> None:
+    # x' = -x + 0.1 x(t - 1) + w, z = x: H-infinity norm is the DC gain 1 / (1 - 0.1)
+    res = _single(_scalar(-1.0, 0.1, 1.0), backoff=0.0)
+    assert res.certified
+    assert 1.0 / 0.9 - 1e-6 <= res.gamma <= 1.0 / 0.9 * 1.01
+
+
+def test_pure_delayed_feedback_certified_well_inside_the_pi_over_2_bound_only() -> None:
+    # x' = -x(t - tau) is stable iff tau < pi/2; a sufficient LMI may certify less, never more
+    assert _single(_scalar(0.0, -1.0, 1.0)).certified
+    assert not _single(_scalar(0.0, -1.0, 1.7)).certified
+
+
+def test_parameter_dependent_p_with_rate_vertices_on_a_small_grid() -> None:
+    # x' = -(1 + 0.5 rho) x + 0.2 x(t - tau(rho)), tau = 0.5 + 0.25 rho, rho in [-1, 1]
+    rho = np.linspace(-1.0, 1.0, 5)[:, None]
+    systems = [_scalar(-(1.0 + 0.5 * r), 0.2, 0.5 + 0.25 * r) for r in rho[:, 0]]
+    res = analyse(systems, rho, np.array([0.1]), np.array([0.25]), 0.75, p_dependence="affine")
+    assert res.certified
+    assert res.n_lmis == 5 * 2  # two rate vertices per point
+    assert res.margins.shape == (5,)
+
+
+def test_delay_rate_of_one_or_more_is_rejected() -> None:
+    with pytest.raises(ValueError, match="1 s/s"):
+        analyse([_scalar(-1.0, 0.1, 1.0)], np.zeros((1, 1)), np.array([4.0]), np.array([0.5]), 1.0)
+
+
+def test_delay_above_tau_max_is_rejected() -> None:
+    with pytest.raises(ValueError, match="tau_max_s"):
+        analyse([_scalar(-1.0, 0.1, 2.0)], np.zeros((1, 1)), np.zeros(1), np.zeros(1), 1.0)
