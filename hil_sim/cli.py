@@ -1,0 +1,146 @@
+"""``pressor scenarios`` and ``pressor trial``: the named scenarios and the in-silico cohort trial.
+
+``pressor trial --controller lpv|pi|PATH --patients N --seed S --scenario NAME [--jobs J] --out DIR``
+prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
+(reachable patients; unreachable ones counted and listed apart), and writes ``DIR/patients.json``,
+``DIR/patients.csv`` and ``DIR/summary.json`` atomically. Same arguments → identical files, whatever
+``--jobs``. Exit 0 on completion, 2 on bad usage or input (one line naming field, value and range).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+USAGE_EXIT = 2
+
+
+class _ArgParser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2
+        print(f"{self.prog}: {message}", file=sys.stderr)
+        raise SystemExit(USAGE_EXIT)
+
+
+def _scenarios(argv: list[str]) -> int:
+    from hil_sim.scenario import ScenarioError, load_scenario, scenario_names
+
+    _ArgParser(prog="pressor scenarios", description="list the named scenarios").parse_args(argv)
+    names = scenario_names()
+    width = max(len(n) for n in names)
+    for name in names:
+        try:
+            desc = load_scenario(name).description
+        except ScenarioError as exc:
+            desc = f"INVALID: {exc}"
+        print(f"{name:<{width}}  {desc}")
+    return 0
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "-"
+    return f"{v:.4g}" if abs(v) < 1e4 else f"{v:.0f}"
+
+
+def format_table(summary: dict[str, Any]) -> str:
+    """The terminal table: median and p90 of every metric, reachable patients first."""
+    from runtime.metrics import RUN_METRICS
+
+    m = summary["metrics"]
+    lines = [
+        f"trial: controller={summary['controller']} scenario={summary['scenario']}"
+        f" seed={summary['cohort_seed']} patients={summary['n_patients']}"
+        f" (reachable {m['n_reachable']}, unreachable {m['n_unreachable']},"
+        f" unstable {m['n_unstable']})",
+        f"{'metric':<24}{'median':>10}{'p90':>10}{'n':>5}{'null':>5}"
+        f" | {'unreach. median':>15}{'p90':>10}",
+    ]
+    for key in RUN_METRICS:
+        r = m["reachable"][key]
+        u = m["unreachable"][key]
+        lines.append(
+            f"{key:<24}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}{r['n']:>5}{r['n_null']:>5}"
+            f" | {_fmt(u['median']):>15}{_fmt(u['p90']):>10}"
+        )
+    if summary["unreachable_patient_seeds"]:
+        lines.append(f"unreachable patient seeds: {summary['unreachable_patient_seeds']}")
+    if summary["unstable_patient_seeds"]:
+        lines.append(f"unstable patient seeds: {summary['unstable_patient_seeds']}")
+    return "\n".join(lines)
+
+
+def _progress_bar(done: int, total: int) -> None:
+    width = 30
+    filled = int(width * done / total)
+    end = "\n" if done == total else ""
+    print(
+        f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} patients",
+        end=end,
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def _trial(argv: list[str]) -> int:
+    p = _ArgParser(prog="pressor trial", description="in-silico cohort trial of a controller")
+    p.add_argument("--controller", default="pi", help="pi | lpv | PATH to a generated module")
+    p.add_argument("--patients", type=int, default=20, help="cohort size N (1..100000)")
+    p.add_argument("--seed", type=int, default=1, help="cohort seed S (>= 0)")
+    p.add_argument("--scenario", default="paper-disturbance", help="scenario name or .toml path")
+    p.add_argument("--jobs", type=int, default=1, help="worker processes (1..64)")
+    p.add_argument("--rate", type=float, default=10.0, help="loop rate in Hz (default 10)")
+    p.add_argument("--out", required=True, type=Path, help="output directory")
+    args = p.parse_args(argv)
+    if not 1 <= args.patients <= 100000:
+        p.error(f"field '--patients' = {args.patients} outside [1, 100000]")
+    if not 0 <= args.seed <= 9_000_000_000_000:
+        p.error(f"field '--seed' = {args.seed} outside [0, 9000000000000]")
+    if not 1 <= args.jobs <= 64:
+        p.error(f"field '--jobs' = {args.jobs} outside [1, 64]")
+    if not 0.1 <= args.rate <= 1000.0:
+        p.error(f"field '--rate' = {args.rate} outside [0.1, 1000] Hz")
+
+    from hil_sim.scenario import ScenarioError, load_scenario
+    from hil_sim.trial import run_trial, summarize, write_outputs
+    from runtime.controller_loader import ControllerSpecError, load_controller
+
+    period = 1.0 / args.rate
+    try:
+        scenario = load_scenario(args.scenario)
+    except ScenarioError as exc:
+        print(f"pressor trial: {exc}", file=sys.stderr)
+        return USAGE_EXIT
+    try:
+        load_controller(args.controller, period)
+    except ControllerSpecError as exc:
+        print(f"pressor trial: {exc}", file=sys.stderr)
+        return USAGE_EXIT
+    try:
+        records = run_trial(
+            scenario, args.controller, args.seed, args.patients, args.jobs, period, _progress_bar
+        )
+    except ValueError as exc:  # e.g. a loop rate the scenario's patient step does not divide
+        print(f"pressor trial: {exc}", file=sys.stderr)
+        return USAGE_EXIT
+    summary = summarize(records, scenario, args.controller, args.seed)
+    write_outputs(args.out, records, summary)
+    print(format_table(summary))
+    print(
+        f"wrote {args.out / 'patients.json'}, {args.out / 'patients.csv'}, {args.out / 'summary.json'}"
+    )
+    return 0
+
+
+def main(command: str, argv: list[str]) -> int:
+    """Entry point for the dispatcher: ``scenarios`` or ``trial``."""
+    try:
+        if command == "scenarios":
+            return _scenarios(argv)
+        if command == "trial":
+            return _trial(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
+        return int(exc.code or 0)
+    print(f"hil_sim.cli: unknown command {command!r}", file=sys.stderr)
+    return USAGE_EXIT

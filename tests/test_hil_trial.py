@@ -1,0 +1,90 @@
+"""`pressor trial` / `pressor scenarios`: outputs, determinism across --jobs, usage errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from hil_sim.cli import main
+
+SHORT = """
+name = "short-disturbance"
+description = "5 min version of paper-disturbance for tests"
+duration_s = 300.0
+[patient]
+mode = "nonlinear"
+[target]
+step_mmhg = 20.0
+[sensor]
+noise_std_mmhg = 0.1
+[[disturbances]]
+kind = "hemorrhage"
+start_s = 120.0
+ramp_s = 60.0
+depth_mmhg = 10.0
+"""
+
+
+@pytest.fixture()
+def short_scenario(tmp_path: Path) -> Path:
+    path = tmp_path / "short.toml"
+    path.write_text(SHORT)
+    return path
+
+
+def _run(tmp: Path, scenario: Path, jobs: int, name: str) -> Path:
+    out = tmp / name
+    argv = ["--controller", "pi", "--patients", "4", "--seed", "1", "--scenario", str(scenario)]
+    assert main("trial", argv + ["--jobs", str(jobs), "--out", str(out)]) == 0
+    return out
+
+
+def test_trial_files_identical_across_runs_and_jobs(tmp_path: Path, short_scenario: Path):
+    a = _run(tmp_path, short_scenario, 1, "a")
+    b = _run(tmp_path, short_scenario, 2, "b")
+    for f in ("patients.json", "patients.csv", "summary.json"):
+        assert (a / f).read_bytes() == (b / f).read_bytes(), f
+
+
+def test_trial_outputs_name_seed_coefficients_and_metrics(tmp_path, short_scenario, capsys):
+    out = _run(tmp_path, short_scenario, 1, "a")
+    patients = json.loads((out / "patients.json").read_text())
+    assert [p["patient_seed"] for p in patients] == [1000000, 1000001, 1000002, 1000003]
+    for p in patients:
+        assert 0.1 <= p["coefficients"]["k0"] <= 1.0
+        assert isinstance(p["reachable"], bool) and isinstance(p["stable"], bool)
+        assert p["reachable"] == (p["required_delta_mmhg"] <= p["max_delta_mmhg"])
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["n_patients"] == 4
+    m = summary["metrics"]
+    assert m["n_reachable"] + m["n_unreachable"] == 4
+    assert set(m["reachable"]["settling_time_s"]) == {"median", "p90", "n", "n_null"}
+    csv_lines = (out / "patients.csv").read_text().splitlines()
+    assert csv_lines[0].startswith("patient_seed,a_k,k0") and len(csv_lines) == 5
+    text = capsys.readouterr()
+    assert "settling_time_s" in text.out and "median" in text.out
+    assert "4/4 patients" in text.err
+
+
+def test_trial_rejects_bad_inputs_with_exit_2_and_one_line(tmp_path, short_scenario, capsys):
+    base = ["--seed", "1", "--out", str(tmp_path / "x")]
+    assert main("trial", base + ["--patients", "0", "--scenario", str(short_scenario)]) == 2
+    assert "'--patients' = 0 outside [1, 100000]" in capsys.readouterr().err
+    assert main("trial", base + ["--scenario", "no-such-scenario"]) == 2
+    assert "must be one of" in capsys.readouterr().err
+    bad = tmp_path / "nope.py"
+    assert main("trial", base + ["--controller", str(bad), "--scenario", str(short_scenario)]) == 2
+    err = capsys.readouterr().err
+    assert "not found" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()
+
+
+def test_scenarios_lists_required_names_one_line_each(capsys):
+    assert main("scenarios", []) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    names = [line.split()[0] for line in lines]
+    for required in ("nominal-step", "paper-tracking", "paper-disturbance"):
+        assert required in names
+    assert all("INVALID" not in line for line in lines)
