@@ -691,6 +691,25 @@ class LinkEndpoint:
             t.tick if t is not None else -1,
         )
 
+    def next_sample(self) -> TickInputs | None:
+        """Runtime, non-blocking: the oldest sample already received and not yet returned.
+
+        Call :meth:`poll` first to read the port.
+        """
+        return self._next_sample()
+
+    def newest_sample(self) -> TickInputs | None:
+        """Runtime, non-blocking: the newest sample already received; older ones not yet returned
+        are superseded (counted in ``stale``). ``None`` when nothing new arrived.
+        """
+        samples = self._samples
+        if not samples:
+            return None
+        if len(samples) > 1:
+            self.counters.stale += len(samples) - 1
+            del samples[:-1]
+        return self._next_sample()
+
     def wait_for_sample(self, timeout_s: float) -> TickInputs | None:
         """Runtime: the next new MAP sample with the tick's scheduling parameters and target.
 

@@ -1,0 +1,276 @@
+"""``pressor device``: the simulated pump / patient monitor on a serial port.
+
+Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:`runtime.link`:
+
+1. open the port (a pyserial URL or device path, e.g. the follower of the pty ``pressor sil``
+   created, or one end of a ``socat`` pair), handshake: announce itself with a hello (scenario,
+   patient seed, sample period, sensor noise, number of ticks, link mode) every 0.2 s until the
+   runtime answers;
+2. per tick k (lockstep, PX4 SITL style): send tick k's scheduling parameters, target and MAP sample
+   (plus a heartbeat once per simulated second), wait for the infusion command answering tick k,
+   apply it, advance the world one sample period, queue the pump status (it leaves with the next
+   tick's frames: one write, one pty wake-up per tick). A tick whose command does not arrive within
+   ``--retransmit`` seconds (wall) is sent again; after ``--link-timeout`` seconds without an answer
+   the device gives up (heartbeat FAULT, exit 1);
+3. at the end of ``--duration`` send a FINISHED heartbeat and close; a runtime that closes the link
+   first ends the run too (exit 0, reported on stderr).
+
+``--realtime`` runs on the wall clock instead: tick k is released at t0 + k·Ts (absolute deadlines),
+the command answering it is applied if it arrived before the next release, otherwise the pump keeps
+the previous rate (counted as a timeout).
+
+Sim time comes from the device. The run clock used for signing timestamps and the .tlog is the
+world's sim time, so a lockstep run is byte-for-byte reproducible.
+
+Exit codes: 0 run completed (or the runtime closed the link), 1 link lost / handshake failed,
+2 bad usage or input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any
+
+#: default wall-clock timeouts (s)
+RETRANSMIT_S = 0.5
+LINK_TIMEOUT_S = 10.0
+HANDSHAKE_TIMEOUT_S = 30.0
+
+
+class _UsageError(Exception):
+    """Bad CLI input; the message is the one line to print."""
+
+
+@dataclass(frozen=True)
+class DeviceResult:
+    """What a device run did: ticks completed, how it ended, link counters."""
+
+    ticks: int
+    ended: str
+    counters: dict[str, int]
+
+
+def _parser(command: str) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=f"pressor {command}",
+        description="Run the simulated patient/pump/monitor device on a serial port.",
+    )
+    p.add_argument("--port", required=True, help="device path or pyserial URL (e.g. /dev/pts/7)")
+    p.add_argument("--scenario", default="paper-tracking", help="scenario name or .toml path")
+    p.add_argument("--patient-seed", type=int, default=0, help="patient seed (0..2^32-1)")
+    p.add_argument("--duration", type=float, default=None, help="s (default: the scenario's)")
+    p.add_argument("--rate", type=float, default=10.0, help="sample rate, Hz (default 10)")
+    p.add_argument("--realtime", action="store_true", help="run on the wall clock")
+    p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file (32 B / hex)")
+    p.add_argument("--tlog", default=None, help="write every link frame to this .tlog")
+    p.add_argument(
+        "--retransmit", type=float, default=RETRANSMIT_S, help="s without a command before resend"
+    )
+    p.add_argument(
+        "--link-timeout", type=float, default=LINK_TIMEOUT_S, help="s without a command: give up"
+    )
+    p.add_argument(
+        "--handshake-timeout", type=float, default=HANDSHAKE_TIMEOUT_S, help="s to wait for hello"
+    )
+    return p
+
+
+def _check_range(name: str, value: float, lo: float, hi: float, unit: str, lo_open: bool) -> None:
+    ok = (value > lo if lo_open else value >= lo) and value <= hi and math.isfinite(value)
+    if not ok:
+        bracket = "(" if lo_open else "["
+        raise _UsageError(f"{name}: value {value} outside {bracket}{lo}, {hi}] {unit}".rstrip())
+
+
+def main(command: str, argv: list[str]) -> int:
+    """Entry point of ``pressor device`` (see the module docstring)."""
+    args = _parser(command).parse_args(argv)
+    try:
+        _check_range("--rate", args.rate, 0.0, 1000.0, "Hz", lo_open=True)
+        if args.duration is not None:
+            _check_range("--duration", args.duration, 0.0, 30 * 24 * 3600.0, "s", lo_open=True)
+        _check_range("--patient-seed", args.patient_seed, 0, 2**32 - 1, "", lo_open=False)
+        for opt in ("retransmit", "link_timeout", "handshake_timeout"):
+            _check_range(f"--{opt.replace('_', '-')}", getattr(args, opt), 0.0, 3600.0, "s", True)
+        world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate)
+        signing = _load_signing(args.signing_key)
+    except _UsageError as exc:
+        print(f"pressor {command}: {exc}", file=sys.stderr)
+        return 2
+
+    from runtime.link import LinkClosedError, LinkEndpoint, LinkError, ManualClock, TlogWriter
+    from runtime.link.transport import open_port
+
+    try:
+        port = open_port(args.port)
+    except Exception as exc:  # pyserial raises SerialException / ValueError for bad URLs
+        print(f"pressor {command}: --port: cannot open {args.port!r}: {exc}", file=sys.stderr)
+        return 2
+    tlog = TlogWriter(args.tlog) if args.tlog else None
+    clock = ManualClock()
+    ep = LinkEndpoint(port, "device", signing=signing, clock=clock, tlog=tlog)
+    try:
+        result = run_device(
+            ep,
+            world,
+            clock,
+            duration_s=args.duration,
+            realtime=args.realtime,
+            retransmit_s=args.retransmit,
+            link_timeout_s=args.link_timeout,
+            handshake_timeout_s=args.handshake_timeout,
+        )
+    except LinkClosedError:
+        result = DeviceResult(world.tick, "runtime closed the link", ep.counters.as_dict())
+    except LinkError as exc:
+        print(f"pressor {command}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        ep.close()
+        if tlog is not None:
+            tlog.close()
+    print(f"pressor {command}: {result.ended} after {result.ticks} ticks", file=sys.stderr)
+    return 0 if result.ended in ("completed", "runtime closed the link") else 1
+
+
+def _make_world(scenario: str, seed: int, period_s: float) -> Any:
+    from hil_sim.scenario import ScenarioError
+    from hil_sim.world import World
+
+    try:
+        return World(scenario, seed, period_s)
+    except ScenarioError as exc:
+        raise _UsageError(str(exc)) from exc
+    except ValueError as exc:
+        raise _UsageError(f"--rate: {exc}") from exc
+
+
+def _load_signing(path: str | None) -> Any:
+    if path is None:
+        return None
+    from runtime.link import Signing
+
+    try:
+        return Signing.from_file(path)
+    except OSError as exc:
+        raise _UsageError(f"--signing-key: cannot read {path}: {exc.strerror}") from exc
+    except ValueError as exc:
+        raise _UsageError(f"--signing-key: {exc}") from exc
+
+
+def run_device(
+    ep: Any,
+    world: Any,
+    clock: Any,
+    *,
+    duration_s: float | None = None,
+    realtime: bool = False,
+    retransmit_s: float = RETRANSMIT_S,
+    link_timeout_s: float = LINK_TIMEOUT_S,
+    handshake_timeout_s: float = HANDSHAKE_TIMEOUT_S,
+) -> DeviceResult:
+    """Run ``world`` as the device end of the link ``ep`` (handshake included).
+
+    Parameters
+    ----------
+    ep
+        A device-role :class:`runtime.link.LinkEndpoint` whose clock is ``clock``.
+    world
+        A fresh :class:`hil_sim.world.World`.
+    clock
+        The endpoint's :class:`runtime.link.ManualClock`; set to the world's sim time (s).
+    duration_s
+        Simulated time (s); default the scenario's duration. ``round(duration / Ts)`` ticks.
+    realtime
+        Wall-clock mode instead of lockstep.
+    retransmit_s, link_timeout_s, handshake_timeout_s
+        Wall-clock timeouts (s), see the module docstring.
+
+    Returns
+    -------
+    DeviceResult
+
+    Raises
+    ------
+    runtime.link.LinkClosedError
+        The runtime closed the link.
+    runtime.link.LinkError
+        The handshake failed.
+    """
+    from runtime.link import (
+        LINK_LOCKSTEP,
+        LINK_REALTIME,
+        MODE_STOP,
+        STATE_FAULT,
+        STATE_FINISHED,
+        STATE_RUNNING,
+        Hello,
+    )
+
+    ts = world.sample_period_s
+    duration = world.scenario.duration_s if duration_s is None else duration_s
+    n = int(round(duration / ts))
+    hello = Hello(
+        world.scenario.name,
+        world.patient_seed,
+        ts,
+        float(world.scenario.sensor.noise_std_mmhg),
+        n,
+        LINK_REALTIME if realtime else LINK_LOCKSTEP,
+    )
+    ep.handshake(hello, timeout_s=handshake_timeout_s)
+    hb_every = max(1, int(round(1.0 / ts)))
+    observe, apply_command, advance = world.observe, world.apply_command, world.advance
+    send_obs, wait_cmd, send_status = ep.send_observation, ep.wait_for_command, ep.send_pump_status
+    t0 = time.monotonic()
+    rate = 0.0
+    for k in range(n):
+        clock.t = world.sim_time_s
+        obs = observe()
+        if k % hb_every == 0:
+            ep.send_heartbeat(k, STATE_RUNNING, flush=False)
+        if realtime:
+            _sleep_until(ep, t0 + k * ts)
+            send_obs(obs)
+            cmd = wait_cmd(k, max(0.0, t0 + (k + 1) * ts - time.monotonic()))
+        else:
+            send_obs(obs)
+            cmd = wait_cmd(k, retransmit_s)
+            waited = retransmit_s
+            while cmd is None:
+                if waited >= link_timeout_s:
+                    ep.send_heartbeat(k, STATE_FAULT)
+                    return DeviceResult(k, "no command from the runtime", ep.counters.as_dict())
+                ep.counters.retransmits += 1
+                send_obs(obs)
+                cmd = wait_cmd(k, retransmit_s)
+                waited += retransmit_s
+        if cmd is not None:
+            rate = 0.0 if cmd.mode == MODE_STOP else cmd.rate_ml_h
+        apply_command(rate)
+        status = advance()
+        clock.t = world.sim_time_s
+        send_status(
+            status.tick, status.delivered_ml_h, status.volume_ml, status.alarms, flush=False
+        )
+    if realtime:
+        _sleep_until(ep, t0 + n * ts)
+    ep.send_heartbeat(n, STATE_FINISHED)
+    return DeviceResult(n, "completed", ep.counters.as_dict())
+
+
+def _sleep_until(ep: Any, deadline: float) -> None:
+    """Process incoming frames until the wall clock reaches ``deadline`` (monotonic s)."""
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0.0:
+            return
+        if left > 0.015:  # a port read may block ~10 ms past its timeout: stop polling early
+            ep.poll(left - 0.012)
+        else:
+            ep.flush()
+            time.sleep(left)

@@ -1,0 +1,197 @@
+"""``pressor device`` as a real process on a pty, driven by a scripted runtime end."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hil_sim.closed_loop import simulate
+from hil_sim.device import main as device_main
+from hil_sim.world import World
+from runtime.link import (
+    STATE_FAULT,
+    STATE_FINISHED,
+    Hello,
+    LinkClosedError,
+    LinkEndpoint,
+    PtyPair,
+    Signing,
+    TlogWriter,
+    read_tlog,
+)
+from runtime.pi_controller import PIController
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _spawn_device(pair: PtyPair, *args: str) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "pressor", "device", "--port", pair.follower_path, *args]
+    return subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
+
+
+def _run_pi_runtime(ep: LinkEndpoint, max_ticks: int = 10**9) -> tuple[list, list]:
+    """A minimal runtime: PI controller, one command per sample, until the device finishes."""
+    peer = ep.handshake(Hello("pi"), timeout_s=30.0)
+    ctrl = PIController(sample_period_s=peer.sample_period_s)
+    maps, cmds = [], []
+    while len(maps) < max_ticks:
+        x = ep.wait_for_sample(5.0)
+        if x is None:
+            assert ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FINISHED
+            break
+        assert x.sched_tick == x.target_tick == x.tick
+        u = ctrl.step(x.map_mmhg, x.target_mmhg, x.K, x.T_s, x.tau_s)
+        ep.send_command(x.tick, u)
+        maps.append(x.map_mmhg)
+        cmds.append(u)
+        if len(maps) == peer.n_ticks:
+            break
+    return maps, cmds
+
+
+def _finish(proc: subprocess.Popen, pair: PtyPair, ep: LinkEndpoint) -> int:
+    rc = proc.wait(timeout=30)
+    pair.close_follower()
+    ep.close()
+    return rc
+
+
+def test_device_process_in_lockstep_over_a_pty_matches_the_in_process_simulation():
+    seed, duration = 3, 300.0
+    pair = PtyPair.open()
+    ep = LinkEndpoint(pair.leader_port(), "runtime")
+    proc = _spawn_device(
+        pair, "--scenario", "paper-tracking", "--patient-seed", str(seed), "--duration", "300"
+    )
+    maps, cmds = _run_pi_runtime(ep)
+    # the FINISHED heartbeat follows the last command's answer
+    deadline = time.monotonic() + 10
+    while ep.peer_heartbeat is None or ep.peer_heartbeat[1] != STATE_FINISHED:
+        assert time.monotonic() < deadline
+        try:
+            ep.poll(0.1)
+        except LinkClosedError:
+            break
+    assert _finish(proc, pair, ep) == 0, proc.stderr.read()
+    assert ep.peer_hello.name == "paper-tracking" and ep.peer_hello.patient_seed == seed
+    ref = simulate(World("paper-tracking", seed, 0.1), PIController(0.1), duration_s=duration)
+    assert len(maps) == len(ref.map_mmhg) == 3000
+    assert np.array_equal(np.array(maps), ref.map_mmhg, equal_nan=True)
+    sent = np.array(cmds, dtype=np.float32).astype(float)  # float32 on the wire
+    assert np.array_equal(sent, ref.command_ml_h)
+    assert np.ptp(ref.map_mmhg[np.isfinite(ref.map_mmhg)]) > 1.0  # the loop really moved MAP
+    c = ep.counters
+    assert c.bad_crc == c.seq_gaps == c.timeouts == c.junk_bytes == 0
+    assert ep.pump_status is not None and ep.pump_status.tick == 3000
+
+
+def _signed_device_run(tmp_path: Path, tag: str, key: Path) -> tuple[bytes, bytes]:
+    pair = PtyPair.open()
+    rlog = TlogWriter(tmp_path / f"{tag}-runtime.tlog")
+    ep = LinkEndpoint(pair.leader_port(), "runtime", signing=Signing.from_file(key), tlog=rlog)
+    dlog = tmp_path / f"{tag}-device.tlog"
+    proc = _spawn_device(
+        pair,
+        *("--scenario", "paper-tracking", "--patient-seed", "5", "--duration", "20"),
+        *("--signing-key", str(key), "--tlog", str(dlog)),
+    )
+    maps, _ = _run_pi_runtime(ep)
+    assert len(maps) == 200
+    assert _finish(proc, pair, ep) == 0, proc.stderr.read()
+    rlog.close()
+    return dlog.read_bytes(), rlog.path.read_bytes()
+
+
+def test_signed_device_runs_are_byte_identical_and_every_frame_is_signed(tmp_path):
+    key = Signing.generate(seed=11).write(tmp_path / "key.hex")
+    first = _signed_device_run(tmp_path, "a", key)
+    second = _signed_device_run(tmp_path, "b", key)
+    assert first == second
+    frames = list(read_tlog(tmp_path / "a-device.tlog"))
+    assert len(frames) > 600 and all(f[2] & 1 for _, f in frames)
+    stamps = [t for t, _ in frames]
+    assert stamps == sorted(stamps) and stamps[-1] == 20_000_000  # run clock, µs
+
+
+def test_device_refuses_an_unsigned_runtime_and_gives_up_after_the_link_timeout(tmp_path):
+    key = Signing.generate(seed=12).write(tmp_path / "key.hex")
+    pair = PtyPair.open()
+    ep = LinkEndpoint(pair.leader_port(), "runtime")  # no key: its hello and commands are unsigned
+    proc = _spawn_device(
+        pair,
+        *("--scenario", "paper-tracking", "--duration", "5", "--signing-key", str(key)),
+        *("--handshake-timeout", "1.0"),
+    )
+    ep._hello = Hello("pi")  # answer the device's hellos (unsigned, so they are refused)
+    deadline = time.monotonic() + 20
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            ep.poll(0.05)
+        except LinkClosedError:
+            break
+    assert _finish(proc, pair, ep) == 1
+    assert ep.counters.frames_received >= 2  # the device kept announcing itself
+
+
+def test_device_retransmits_a_tick_without_answer_then_reports_fault():
+    pair = PtyPair.open()
+    ep = LinkEndpoint(pair.leader_port(), "runtime")
+    proc = _spawn_device(
+        pair,
+        *("--scenario", "paper-tracking", "--duration", "5"),
+        *("--retransmit", "0.05", "--link-timeout", "0.3"),
+    )
+    ep.handshake(Hello("pi"), timeout_s=30.0)
+    first = ep.wait_for_sample(5.0)
+    assert first is not None and first.tick == 0
+    deadline = time.monotonic() + 10
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            ep.poll(0.05)
+        except LinkClosedError:
+            break
+    assert _finish(proc, pair, ep) == 1
+    assert ep.counters.duplicates >= 4  # tick 0 sent again every 50 ms
+    assert ep.next_sample() is None  # the loop never sees a retransmitted tick twice
+    assert ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FAULT
+
+
+def test_device_exits_cleanly_when_the_runtime_closes_the_link():
+    pair = PtyPair.open()
+    ep = LinkEndpoint(pair.leader_port(), "runtime")
+    proc = _spawn_device(pair, "--scenario", "paper-tracking", "--duration", "100")
+    maps, _ = _run_pi_runtime(ep, max_ticks=10)
+    assert len(maps) == 10
+    pair.close_follower()
+    ep.close()
+    assert proc.wait(timeout=30) == 0
+    assert "runtime closed the link" in proc.stderr.read()
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--scenario", "no-such-scenario"], "no-such-scenario"),
+        (["--rate", "0"], "--rate"),
+        (["--rate", "7"], "--rate"),  # 1/7 s is not a multiple of the patient step
+        (["--duration", "-1"], "--duration"),
+        (["--patient-seed", "-3"], "--patient-seed"),
+        (["--signing-key", "/nonexistent/key"], "--signing-key"),
+    ],
+)
+def test_bad_device_input_exits_2_with_one_line_naming_the_option(args, needle, capsys):
+    rc = device_main("device", ["--port", "loop://", *args])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and needle in err and len(err.splitlines()) == 1
+
+
+def test_an_unopenable_port_exits_2(tmp_path, capsys):
+    rc = device_main("device", ["--port", str(tmp_path / "missing-tty")])
+    assert rc == 2 and "--port" in capsys.readouterr().err
