@@ -173,7 +173,11 @@ class SupervisorConfig:
 def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
     """Each detectable fault kind with its detection rule and bound under ``cfg`` (for ``pressor faults``)."""
     ts = cfg.sample_period_s
-    box = "not checked (controller not scheduled)" if cfg.sched_box is None else str(cfg.sched_box)
+    box = (
+        "not checked (controller not scheduled)"
+        if cfg.sched_box is None
+        else f"K, T, tau outside {cfg.sched_box}; same tick"
+    )
     rates = (
         "not checked"
         if cfg.sched_rate_bounds is None
@@ -196,7 +200,7 @@ def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
         ("STALE_SAMPLE", f"newest sample older than {cfg.stale_after_s} s"),
         ("LINK_LOSS", f"no frame for {cfg.link_loss_after_s} s -> FAILSAFE at once"),
         ("SCHED_INVALID", "scheduling marked invalid or non-finite; same tick"),
-        ("SCHED_OUT_OF_BOX", f"K, T, tau outside {box}; same tick"),
+        ("SCHED_OUT_OF_BOX", box),
         ("SCHED_RATE", rates),
         ("TARGET_INVALID", "target non-finite or outside the MAP range; same tick"),
         ("COMMAND_INVALID", "controller returned a non-finite command; same tick, held"),

@@ -1,0 +1,532 @@
+"""``pressor sil``, ``pressor run`` and ``pressor faults``: the runtime's command line.
+
+``pressor sil`` is the main job: it starts the device (``python -m pressor device --port ...``) as
+its own process — the runtime never imports ``hil_sim`` —, connects to it over a pseudo-terminal
+(a real tty to pyserial), signs the link (a fresh key per run unless ``--signing-key``), runs the
+loop in lockstep (or ``--realtime``), records everything to an ``.rrd``, prints the DESIGN.md §3
+metric summary and the ``rerun FILE.rrd`` command to replay it.
+
+``pressor run --port DEV`` is the runtime end alone (a device on a real cable or a ``socat`` pty).
+
+``pressor faults`` lists the fault kinds the supervisor detects, with their detection bounds and
+reactions. (Fault *injection*, ``--fault KIND``, belongs to the device side and is not part of
+this module.)
+
+Summary JSON (``--summary``): run identity, the §3 metrics (``runtime.metrics.run_metrics``) plus
+``commands_out_of_range``, the supervisor's account and the link's error counts. It holds only
+values that are functions of the seed (no wall-clock timing), so two runs give identical files;
+loop timing (p50/p99/max) is printed and recorded under ``/loop``.
+
+``reachable`` is inferred from the run, since the runtime does not know the patient: false when the
+pump sat at its limit for the whole final 10 % of the run with MAP still more than 5 mmHg below the
+target.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+USAGE_EXIT = 2
+DEFAULT_SCENARIO = "paper-tracking"
+DEFAULT_PATIENT_SEED = 1
+DEFAULT_DURATION_S = 1800.0
+DEFAULT_RATE_HZ = 10.0
+
+
+class UsageError(Exception):
+    """Bad input: the message names the option or file, the value and the allowed range."""
+
+
+# ---------------------------------------------------------------------- argument parsing
+def _positive(name: str, high: float):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} {text!r}: not a number") from None
+        if not (math.isfinite(value) and 0.0 < value <= high):
+            raise argparse.ArgumentTypeError(f"{name} {text!r}: allowed (0, {high:g}]")
+        return value
+
+    return parse
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--patient-seed {text!r}: not an integer") from None
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"--patient-seed {text!r}: allowed [0, 2**32)")
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, exit 2
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--controller", default="lpv", help="lpv (default), pi, or a generated .py")
+    p.add_argument(
+        "--rate",
+        type=_positive("--rate", 1000.0),
+        default=DEFAULT_RATE_HZ,
+        help="loop rate in Hz (default 10)",
+    )
+    p.add_argument("--realtime", action="store_true", help="wall clock instead of lockstep")
+    p.add_argument("--rrd", type=Path, help="rerun recording to write (FILE.rrd)")
+    p.add_argument("--tlog", type=Path, help="MAVLink telemetry log of every frame")
+    p.add_argument("--summary", type=Path, help="write the metric summary as JSON")
+    p.add_argument("--signing-key", type=Path, help="32-byte key file (raw or 64 hex chars)")
+    p.add_argument(
+        "--stall-timeout",
+        type=_positive("--stall-timeout", 3600.0),
+        default=10.0,
+        help="lockstep: give up after this many wall seconds without a sample (default 10)",
+    )
+
+
+def _sil_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="pressor sil", description="device process + runtime over a serial link")
+    _common(p)
+    p.add_argument("--scenario", default=DEFAULT_SCENARIO, help="scenario name (pressor scenarios)")
+    p.add_argument("--patient-seed", type=_seed, default=DEFAULT_PATIENT_SEED)
+    p.add_argument(
+        "--duration",
+        type=_positive("--duration", 7 * 86400.0),
+        default=DEFAULT_DURATION_S,
+        help="simulated time in s (default 1800)",
+    )
+    p.add_argument("--link", default="pty", help="pty (default) or a pyserial URL / device path")
+    p.add_argument("--no-signing", action="store_true", help="run the link unsigned")
+    return p
+
+
+def _run_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="pressor run", description="the controller runtime alone on a serial port")
+    _common(p)
+    p.add_argument("--port", required=True, help="device path or pyserial URL")
+    p.add_argument(
+        "--ticks", type=int, default=0, help="stop after N ticks (0: when the device ends)"
+    )
+    return p
+
+
+# ---------------------------------------------------------------------- summary
+def _step_of(
+    t: np.ndarray, map_mmhg: np.ndarray, target: np.ndarray
+) -> tuple[float | None, float | None]:
+    """The target step (time s, size mmHg) as the runtime sees it.
+
+    The first change of the target; or, if the target never changes, the distance from the first
+    MAP sample to the target at the first tick (a run that starts ≥ 1 mmHg away from its target,
+    like ``paper-tracking`` whose step is at t = 0). ``(None, None)`` otherwise.
+    """
+    finite = np.isfinite(target)
+    if not finite.any():
+        return None, None
+    i0 = int(np.argmax(finite))
+    first = target[i0]
+    changed = np.flatnonzero(finite & (target != first))
+    if changed.size:
+        i = int(changed[0])
+        return float(t[i]), float(target[i] - first)
+    d = float(first - map_mmhg[i0])
+    if math.isfinite(d) and abs(d) >= 1.0:
+        return float(t[i0]), d
+    return None, None
+
+
+def _reachable(map_mmhg: np.ndarray, target: np.ndarray, cmd: np.ndarray, umax: float) -> bool:
+    n_tail = max(1, int(round(0.1 * cmd.size)))
+    at_limit = bool(np.all(cmd[-n_tail:] >= umax * (1.0 - 1e-6)))
+    below = np.nanmedian(target[-n_tail:] - map_mmhg[-n_tail:]) > 5.0
+    return not (at_limit and below)
+
+
+def build_summary(result: Any, identity: dict[str, Any], max_rate_ml_h: float, noisy: bool):
+    """The JSON-ready summary of a run: identity, §3 metrics, supervisor and link account."""
+    from runtime.metrics import run_metrics
+
+    tr = result.trajectory
+    t, y, r, u = tr["sim_time_s"], tr["map_mmhg"], tr["target_mmhg"], tr["command_ml_h"]
+    if t.size < 2:
+        metrics: dict[str, Any] = {"error": "fewer than 2 ticks: no metrics"}
+    else:
+        step_t, step_d = _step_of(t, y, r)
+        metrics = run_metrics(
+            t,
+            y,
+            r,
+            u,
+            max_rate_ml_h,
+            step_time_s=step_t,
+            step_mmhg=step_d,
+            noisy=noisy,
+            reachable=_reachable(y, r, u, max_rate_ml_h),
+        )
+    metrics["commands_out_of_range"] = result.commands_out_of_range
+    link = result.link
+    return {
+        **identity,
+        "ticks": int(t.size),
+        "ended": result.ended,
+        "metrics": metrics,
+        "supervisor": {
+            "detections": result.detections,
+            "ticks_in_state": result.ticks_in_state,
+            "transitions": result.transitions[:100],
+        },
+        "link_errors": {
+            k: link[k]
+            for k in (
+                "bad_crc",
+                "seq_gaps",
+                "frames_lost",
+                "refused_unsigned",
+                "refused_bad_signature",
+            )
+        },
+    }
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "null"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+def print_summary(summary: dict[str, Any], timing: dict[str, Any], out=sys.stdout) -> None:
+    """Human-readable summary (metrics, supervisor, loop timing)."""
+    print(
+        f"run: controller {summary.get('controller')}  scenario {summary.get('scenario')}"
+        f"  patient seed {summary.get('patient_seed')}  {summary['ticks']} ticks"
+        f"  ({summary['ended']})",
+        file=out,
+    )
+    print("metrics (DESIGN.md §3):", file=out)
+    for k, v in summary["metrics"].items():
+        print(f"  {k:<24} {_fmt(v)}", file=out)
+    sup = summary["supervisor"]
+    states = ", ".join(f"{k} {v}" for k, v in sup["ticks_in_state"].items() if v)
+    print(f"supervisor: ticks in state: {states}", file=out)
+    if sup["detections"]:
+        print(f"  faults detected: {sup['detections']}", file=out)
+    print(
+        "loop timing: exec p50/p99/max {exec_p50_us:.1f}/{exec_p99_us:.1f}/{exec_max_us:.1f} us;"
+        " lateness p50/p99/max {lateness_p50_us:.1f}/{lateness_p99_us:.1f}/{lateness_max_us:.1f}"
+        " us; overruns {overruns}; skipped {skipped_periods}".format(**timing),
+        file=out,
+    )
+    errs = {k: v for k, v in summary["link_errors"].items() if v}
+    print(f"link: {'clean' if not errs else errs}", file=out)
+
+
+def _write_json_atomic(path: Path, data: dict[str, Any]) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
+    os.replace(tmp, path)
+
+
+# ---------------------------------------------------------------------- running
+def _load_controller(spec: str, period_s: float):
+    from runtime.controller_loader import ControllerSpecError, load_controller
+
+    try:
+        return load_controller(spec, sample_period_s=period_s)
+    except ControllerSpecError as exc:
+        hint = ""
+        if spec == "lpv":
+            hint = (
+                " (the shipped LPV module is generated by 'pressor codegen --target python"
+                " --out runtime/generated'; use --controller pi meanwhile)"
+            )
+        raise UsageError(f"--controller {spec}: {exc}{hint}") from None
+
+
+def _check_out_path(opt: str, path: Path | None, suffix: str | None = None) -> None:
+    if path is None:
+        return
+    if suffix and path.suffix != suffix:
+        raise UsageError(f"{opt} {path}: expected a {suffix} file name")
+    if not path.parent.resolve().is_dir():
+        raise UsageError(f"{opt} {path}: directory {path.parent} does not exist")
+
+
+def _signing(args: argparse.Namespace, allow_generate: bool):
+    from runtime.link.endpoint import Signing
+
+    if args.signing_key is not None:
+        try:
+            return Signing.from_file(args.signing_key)
+        except (OSError, ValueError) as exc:
+            raise UsageError(f"--signing-key {args.signing_key}: {exc}") from None
+    if allow_generate and not getattr(args, "no_signing", False):
+        return Signing.generate()
+    return None
+
+
+def run_runtime(
+    port: Any,
+    args: argparse.Namespace,
+    identity: dict[str, Any],
+    signing: Any,
+    on_connected: Any = None,
+    peer_alive: Any = None,
+    handshake_timeout_s: float = 30.0,
+) -> tuple[dict[str, Any], Any, Path | None]:
+    """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result, rrd)."""
+    from runtime.link.endpoint import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkEndpoint, LinkError
+    from runtime.link.tlog import TlogWriter
+    from runtime.loop import Loop, supervisor_config_for
+    from runtime.supervisor import Supervisor
+
+    period_s = 1.0 / args.rate
+    controller = _load_controller(args.controller, period_s)
+    tlog = TlogWriter(args.tlog) if args.tlog is not None else None
+    ep = LinkEndpoint(port, "runtime", signing=signing, tlog=tlog)
+    recorder = None
+    try:
+        mode = LINK_REALTIME if args.realtime else LINK_LOCKSTEP
+        name = (
+            Path(args.controller).stem if args.controller not in ("pi", "lpv") else args.controller
+        )
+        hello = Hello(name[:32], sample_period_s=period_s, link_mode=mode)
+        waited = 0.0
+        while True:  # short attempts, so a device process that died is noticed at once
+            try:
+                peer = ep.handshake(hello, timeout_s=0.25)
+                break
+            except LinkError:
+                waited += 0.25
+                if (peer_alive is not None and not peer_alive()) or waited >= handshake_timeout_s:
+                    raise
+        if on_connected is not None:
+            on_connected()
+        if abs(peer.sample_period_s - period_s) > 1e-9:
+            raise UsageError(
+                f"device sample_period_s {peer.sample_period_s} s differs from --rate"
+                f" {args.rate} Hz (period {period_s} s)"
+            )
+        identity = {
+            **identity,
+            "scenario": peer.name,
+            "patient_seed": peer.patient_seed,
+            "sensor_noise_mmhg": float(peer.sensor_noise_mmhg),
+        }
+        sup = Supervisor(supervisor_config_for(controller, peer.sensor_noise_mmhg))
+        rrd = args.rrd
+        if rrd is not None:
+            from runtime.recorder import Recorder
+
+            label = (
+                f"{identity['controller']}|{peer.name}|seed{peer.patient_seed}|{args.rate}Hz"
+                f"|{'realtime' if args.realtime else 'lockstep'}"
+            )
+            recorder = Recorder(rrd, run_label=label)
+        loop = Loop(controller, sup, ep, recorder=recorder, heartbeat_every=round(args.rate))
+        if args.realtime:
+            n = peer.n_ticks if peer.n_ticks else getattr(args, "ticks", 0)
+            result = loop.run_realtime(n)
+        else:
+            n = getattr(args, "ticks", 0) or peer.n_ticks
+            result = loop.run_lockstep(n, stall_timeout_s=args.stall_timeout)
+        if recorder is not None:
+            recorder.close()
+            recorder = None
+        summary = build_summary(
+            result, identity, controller.max_rate_ml_h, noisy=peer.sensor_noise_mmhg > 0.0
+        )
+        return summary, result, rrd
+    finally:
+        if recorder is not None:
+            recorder.abort()
+        ep.close()
+        if tlog is not None:
+            tlog.close()
+
+
+def _finish(summary: dict[str, Any], result: Any, rrd: Path | None, args) -> int:
+    print_summary(summary, result.timing)
+    if args.summary is not None:
+        _write_json_atomic(args.summary, summary)
+        print(f"summary: {args.summary}")
+    if rrd is not None:
+        print(f"recording: {rrd}\nreplay:    rerun {rrd}")
+    return 1 if summary["metrics"].get("commands_out_of_range") else 0
+
+
+def _main_sil(argv: list[str]) -> int:
+    args = _sil_parser().parse_args(argv)
+    if args.rrd is None:
+        args.rrd = Path(
+            f"pressor_sil_{Path(args.controller).stem}_{args.scenario}_seed{args.patient_seed}.rrd"
+        )
+    _check_out_path("--rrd", args.rrd, ".rrd")
+    _check_out_path("--tlog", args.tlog)
+    _check_out_path("--summary", args.summary)
+    _load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device starts
+    signing = _signing(args, allow_generate=True)
+    identity = {
+        "controller": args.controller,
+        "link": args.link,
+        "mode": "realtime" if args.realtime else "lockstep",
+        "rate_hz": args.rate,
+        "duration_s": args.duration,
+        "signed": signing is not None,
+    }
+    if args.link != "pty":
+        raise UsageError(
+            f"--link {args.link}: pressor sil starts the device on a pty it creates; for a device"
+            " on another port run 'pressor device --port ...' there and 'pressor run --port"
+            f" {args.link}' here"
+        )
+    from runtime.link.transport import PtyPair
+
+    pair = PtyPair.open()
+    with tempfile.TemporaryDirectory(prefix="pressor-sil-") as tmp:
+        cmd = [
+            sys.executable,
+            "-m",
+            "pressor",
+            "device",
+            "--port",
+            pair.follower_path,
+            "--scenario",
+            args.scenario,
+            "--patient-seed",
+            str(args.patient_seed),
+            "--duration",
+            repr(args.duration),
+            "--rate",
+            repr(args.rate),
+        ]
+        if args.realtime:
+            cmd.append("--realtime")
+        if signing is not None:
+            cmd += ["--signing-key", str(signing.write(Path(tmp) / "signing.key"))]
+        device_log = Path(tmp) / "device.log"
+        with open(device_log, "wb") as log:
+            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+        port = pair.leader_port()
+        try:
+            summary, result, rrd = run_runtime(
+                port,
+                args,
+                identity,
+                signing,
+                on_connected=pair.close_follower,
+                peer_alive=lambda: proc.poll() is None,
+            )
+        except Exception:
+            _stop(proc)
+            text = device_log.read_text(errors="replace").strip()
+            if proc.returncode == USAGE_EXIT and text:
+                raise UsageError(text.splitlines()[-1]) from None
+            if text:
+                print(f"device output:\n{text}", file=sys.stderr)
+            raise
+        finally:
+            pair.close()
+        code = _stop(proc, grace_s=10.0)
+        if code not in (0, None):
+            text = device_log.read_text(errors="replace").strip()
+            print(f"device exited with {code}:\n{text}", file=sys.stderr)
+    status = _finish(summary, result, rrd, args)
+    return status
+
+
+def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:
+    """Wait for our device process; terminate it (by its pid) if it does not exit in time."""
+    try:
+        return proc.wait(timeout=grace_s)
+    except subprocess.TimeoutExpired:
+        proc.terminate()
+        try:
+            return proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            return proc.wait()
+
+
+def _main_run(argv: list[str]) -> int:
+    args = _run_parser().parse_args(argv)
+    if args.ticks < 0:
+        raise UsageError(f"--ticks {args.ticks}: allowed >= 0")
+    _check_out_path("--rrd", args.rrd, ".rrd")
+    _check_out_path("--tlog", args.tlog)
+    _check_out_path("--summary", args.summary)
+    _load_controller(args.controller, 1.0 / args.rate)
+    signing = _signing(args, allow_generate=False)
+    from runtime.link.transport import open_port
+
+    try:
+        port = open_port(args.port)
+    except Exception as exc:  # pyserial raises several types for a bad path/URL
+        raise UsageError(f"--port {args.port}: cannot open: {exc}") from None
+    identity = {
+        "controller": args.controller,
+        "link": args.port,
+        "mode": "realtime" if args.realtime else "lockstep",
+        "rate_hz": args.rate,
+        "signed": signing is not None,
+    }
+    summary, result, rrd = run_runtime(port, args, identity, signing)
+    return _finish(summary, result, rrd, args)
+
+
+def _main_faults(argv: list[str]) -> int:
+    from runtime.supervisor import SupervisorConfig, detection_bounds
+
+    p = _Parser(prog="pressor faults", description="fault kinds the supervisor detects")
+    p.add_argument("--rate", type=_positive("--rate", 1000.0), default=DEFAULT_RATE_HZ)
+    args = p.parse_args(argv)
+    cfg = SupervisorConfig(sample_period_s=1.0 / args.rate, stale_after_s=3.5 / args.rate)
+    print(f"Faults the runtime supervisor detects (defaults at {args.rate:g} Hz):")
+    rows = detection_bounds(cfg)
+    width = max(len(k) for k, _ in rows)
+    for kind, text in rows:
+        print(f"  {kind:<{width}}  {text}")
+    print(
+        "Scheduling checks use the design box and rate bounds a generated controller declares"
+        " (RHO_MIN, RHO_MAX, RHO_RATE_MAX); the PI baseline is not scheduled."
+    )
+    return 0
+
+
+def main(command: str, argv: list[str]) -> int:
+    """Entry point for ``pressor sil | run | faults`` (see the module docstring).
+
+    Returns 0 on success, 1 if the run completed but a check failed (or the device stalled),
+    2 on bad usage or input (one line on stderr naming the option or file, value and range).
+    """
+    from runtime.link.endpoint import LinkError
+    from runtime.loop import DeviceStalled
+
+    handlers = {"sil": _main_sil, "run": _main_run, "faults": _main_faults}
+    if command not in handlers:
+        print(f"runtime.cli: unknown command {command!r}", file=sys.stderr)
+        return USAGE_EXIT
+    try:
+        return handlers[command](argv)
+    except UsageError as exc:
+        print(str(exc), file=sys.stderr)
+        return USAGE_EXIT
+    except (DeviceStalled, LinkError) as exc:
+        print(f"pressor {command}: {exc}", file=sys.stderr)
+        return 1
+    except SystemExit as exc:  # argparse --help
+        return int(exc.code or 0)
