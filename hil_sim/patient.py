@@ -175,10 +175,11 @@ class VariableDelayBuffer:
         width = b - a
         if width > 1e-9 * self.h:
             return (self.cumulative_at(b) - self.cumulative_at(a)) / width
-        # Source interval degenerate (τ growing at 1 s/s or more): point value of u at its middle.
+        # Source interval degenerate (τ growing at 1 s/s or more): the right-continuous point value
+        # of u at its middle (U is piecewise linear, so a tiny forward difference is exact).
         m = 0.5 * (a + b)
-        eps = 0.25 * self.h
-        return (self.cumulative_at(m + eps) - self.cumulative_at(m - eps)) / (2.0 * eps)
+        eps = 1e-6 * self.h
+        return (self.cumulative_at(m + eps) - self.cumulative_at(m)) / eps
 
 
 def _tau_filter(p: PatientParams, h: float) -> tuple[tuple[float, ...], tuple[float, float]]:

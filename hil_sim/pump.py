@@ -136,6 +136,8 @@ class Pump:
             self.rate_ml_h = cfg.safe_rate_ml_h
             self.alarms |= ALARM_WATCHDOG
         volume_ml_h_s = 0.0
+        n_segments = 0
+        full_flow: float | None = None
         # Piecewise over the step: pending rate changes, the occlusion edges, the reservoir running dry.
         while t < t_end - 1e-12:
             seg_end = t_end
@@ -156,6 +158,8 @@ class Pump:
                 seg_end = t + seg
                 self.alarms |= ALARM_RESERVOIR_EMPTY
             volume_ml_h_s += flow * seg
+            n_segments += 1
+            full_flow = flow if (t == self.time_s and seg_end == t_end) else None
             self.volume_ml += flow * seg / 3600.0
             t = seg_end
             while self._pending and self._pending[0][0] <= t + 1e-12:
@@ -167,4 +171,6 @@ class Pump:
         else:
             self.alarms &= ~ALARM_OCCLUSION
         self.delivered_ml_h = 0.0 if self.alarms & ALARM_RESERVOIR_EMPTY else flow_now
+        if n_segments == 1 and full_flow is not None:
+            return full_flow  # one segment over the whole step: the rate itself, no round-off
         return volume_ml_h_s / dt_s
