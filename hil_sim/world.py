@@ -19,6 +19,7 @@ on (scenario, patient_seed, sample period, commands).
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,12 +31,15 @@ from hil_sim.pump import Pump
 from hil_sim.scenario import Scenario, load_scenario
 from hil_sim.sensor import Sensor
 
-_F32 = np.float32
+_F32 = struct.Struct("<f")
 
 
-def f32(x: float) -> float:
-    """``x`` rounded to the nearest float32 (as it would cross the serial link)."""
-    return float(_F32(x))
+def f32(x: float, _pack=_F32.pack, _unpack=_F32.unpack) -> float:
+    """``x`` rounded to the nearest float32 (as it would cross the serial link); ±inf on overflow."""
+    try:
+        return _unpack(_pack(x))[0]
+    except OverflowError:
+        return math.copysign(math.inf, x)
 
 
 @dataclass(frozen=True, slots=True)
@@ -136,6 +140,7 @@ class World:
         self.last_command_ml_h = math.nan
         self.last_mean_rate_ml_h = 0.0
         self._obs: Observation | None = None
+        self._true_map = math.nan
 
     # -- the pinned API ---------------------------------------------------------------------------
     @property
@@ -150,6 +155,8 @@ class World:
 
     def true_map_mmhg(self) -> float:
         """True MAP now (mmHg): baseline + ΔMAP + disturbances."""
+        if self._obs is not None and self._obs.tick == self.tick:
+            return self._true_map
         return self.patient.map_mmhg + self.disturbance(self.sim_time_s)
 
     def observe(self) -> Observation:
@@ -158,7 +165,8 @@ class World:
         if obs is not None and obs.tick == self.tick:
             return obs
         t = self.sim_time_s
-        reading, quality = self.sensor.read(t, self.true_map_mmhg())
+        self._true_map = self.patient.map_mmhg + self.disturbance(t)
+        reading, quality = self.sensor.read(t, self._true_map)
         p = self.patient
         obs = Observation(
             self.tick,

@@ -1,0 +1,46 @@
+"""Trial throughput: simulated patient-hours per wall-clock minute per core (target >= 50).
+
+Runs the in-process closed loop (World + controller, 10 Hz) on one core for a few patients of a
+scenario and prints the figure. Usage::
+
+    python benchmarks/trial.py [--scenario paper-disturbance] [--controller pi] [--patients 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from hil_sim.cohort import cohort_seeds
+from hil_sim.scenario import load_scenario
+from hil_sim.trial import run_patient
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--scenario", default="paper-disturbance")
+    p.add_argument("--controller", default="pi")
+    p.add_argument("--patients", type=int, default=5)
+    args = p.parse_args()
+    scenario = load_scenario(args.scenario)
+    seeds = cohort_seeds(1, args.patients)
+    run_patient(scenario, args.controller, seeds[0])  # warm-up (imports, caches)
+    t0 = time.process_time()
+    w0 = time.perf_counter()
+    for s in seeds:
+        run_patient(scenario, args.controller, s)
+    cpu = time.process_time() - t0
+    wall = time.perf_counter() - w0
+    hours = args.patients * scenario.duration_s / 3600.0
+    print(
+        f"scenario={scenario.name} controller={args.controller} patients={args.patients}"
+        f" simulated={hours:.2f} patient-h wall={wall:.2f} s cpu={cpu:.2f} s"
+    )
+    print(
+        f"throughput: {hours / (cpu / 60.0):.1f} patient-hours per wall minute per core (cpu time)"
+    )
+    print(f"            {hours / (wall / 60.0):.1f} patient-hours per wall minute (this process)")
+
+
+if __name__ == "__main__":
+    main()
