@@ -88,6 +88,12 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rrd", type=Path, help="rerun recording to write (FILE.rrd)")
     p.add_argument("--tlog", type=Path, help="MAVLink telemetry log of every frame")
     p.add_argument("--summary", type=Path, help="write the metric summary as JSON")
+    p.add_argument(
+        "--timing",
+        type=Path,
+        help="write loop timing (p50/p99/max), wall time and link counters as JSON"
+        " (host-dependent, unlike --summary)",
+    )
     p.add_argument("--signing-key", type=Path, help="32-byte key file (raw or 64 hex chars)")
     p.add_argument(
         "--stall-timeout",
@@ -209,8 +215,9 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def print_summary(summary: dict[str, Any], timing: dict[str, Any], out=sys.stdout) -> None:
-    """Human-readable summary (metrics, supervisor, loop timing)."""
+def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = None) -> None:
+    """Human-readable summary (metrics, supervisor, loop timing) to ``out`` (default stdout)."""
+    out = sys.stdout if out is None else out
     print(
         f"run: controller {summary.get('controller')}  scenario {summary.get('scenario')}"
         f"  patient seed {summary.get('patient_seed')}  {summary['ticks']} ticks"
@@ -364,6 +371,15 @@ def _finish(summary: dict[str, Any], result: Any, rrd: Path | None, args) -> int
     if args.summary is not None:
         _write_json_atomic(args.summary, summary)
         print(f"summary: {args.summary}")
+    if args.timing is not None:
+        status = {
+            "loop": result.timing,
+            "run_wall_s": result.wall_s,
+            "sim_s": summary["ticks"] / summary["rate_hz"],
+            "link": result.link,
+        }
+        _write_json_atomic(args.timing, status)
+        print(f"timing: {args.timing}")
     if rrd is not None:
         print(f"recording: {rrd}\nreplay:    rerun {rrd}")
     return 1 if summary["metrics"].get("commands_out_of_range") else 0
@@ -378,6 +394,7 @@ def _main_sil(argv: list[str]) -> int:
     _check_out_path("--rrd", args.rrd, ".rrd")
     _check_out_path("--tlog", args.tlog)
     _check_out_path("--summary", args.summary)
+    _check_out_path("--timing", args.timing)
     _load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device starts
     signing = _signing(args, allow_generate=True)
     identity = {
@@ -469,6 +486,7 @@ def _main_run(argv: list[str]) -> int:
     _check_out_path("--rrd", args.rrd, ".rrd")
     _check_out_path("--tlog", args.tlog)
     _check_out_path("--summary", args.summary)
+    _check_out_path("--timing", args.timing)
     _load_controller(args.controller, 1.0 / args.rate)
     signing = _signing(args, allow_generate=False)
     from runtime.link.transport import open_port

@@ -102,6 +102,7 @@ class LoopResult:
     transitions: list[dict[str, Any]]
     commands_out_of_range: int
     ended: str
+    wall_s: float = 0.0
 
 
 def sched_limits_of(controller: Controller) -> tuple[Any, Any]:
@@ -189,6 +190,7 @@ class Loop:
         self.out_of_range = 0
         self._row = [_NAN] * len(CHANNELS)
         self._count = 0
+        self._wall0 = perf_counter_s()
 
     # ------------------------------------------------------------------ one tick
     def tick(
@@ -301,6 +303,7 @@ class Loop:
         """
         clock = VirtualClock()
         ep = self.ep
+        self._wall0 = perf_counter_s()
         answered = 0
         ended = "completed"
         poll_s = min(0.5, stall_timeout_s)
@@ -348,6 +351,7 @@ class Loop:
         if first is None:
             raise DeviceStalled(f"no first sample within {first_sample_timeout_s} s")
         clock = clock or MonotonicClock()
+        self._wall0 = perf_counter_s()
         sched = PeriodicSchedule(self.period_s, origin_s=clock.now_s())
         newest: TickInputs = first
         last_sample_s = last_frame_s = sched.origin_s
@@ -364,9 +368,9 @@ class Loop:
             except LinkClosedError:
                 ended = "device closed the link"
                 break
-            # drain to the newest sample (older ones are superseded, not queued)
-            while ep._samples:  # noqa: SLF001 - no public non-blocking drain in the endpoint yet
-                newest = ep._next_sample()  # noqa: SLF001
+            fresh = ep.newest_sample()  # older unanswered samples are superseded, not queued
+            if fresh is not None:
+                newest = fresh
                 last_sample_s = now
             if ep.counters.frames_received != frames_seen:
                 frames_seen = ep.counters.frames_received
@@ -406,4 +410,5 @@ class Loop:
             transitions=list(self.transitions),
             commands_out_of_range=self.out_of_range,
             ended=ended,
+            wall_s=perf_counter_s() - self._wall0,
         )
