@@ -156,3 +156,45 @@ def test_stalled_device_ends_lockstep_run_with_device_stalled():
     with pytest.raises(DeviceStalled, match="after 20 ticks"):
         run_runtime(a, stall_timeout_s=1.0)
     th.join(10)
+
+
+def realtime_device(port, n_send, stop):
+    """Real-time device on the wall clock: a sample every 0.1 s for ``n_send`` ticks, then silence."""
+    import time
+
+    ep = LinkEndpoint(port, "device")
+    ep.handshake(Hello("rt-plant", 1, TS, 0.0, 0, LINK_LOCKSTEP))
+    t0 = time.perf_counter()
+    for k in range(n_send):
+        ep.send_tick(k, k * TS, 70.0, 0, 80.0, 0.55, 150.0, 40.0, True)
+        while time.perf_counter() < t0 + (k + 1) * TS:
+            ep.poll(0.01)
+    while not stop.is_set():  # keep the port open but send nothing: a silent, not a closed, link
+        ep.poll(0.05)
+
+
+def test_realtime_watchdogs_flag_stale_sample_then_link_loss_and_failsafe():
+    a, b = loop_pair()
+    stop = threading.Event()
+    th = threading.Thread(target=realtime_device, args=(b, 10, stop), daemon=True)
+    th.start()
+    ep = LinkEndpoint(a, "runtime")
+    ep.handshake(Hello("pi"), timeout_s=10.0)
+    pi = PIController(sample_period_s=TS)
+    sup = Supervisor(supervisor_config_for(pi, 0.0, safe_rate_ml_h=0.0))
+    try:
+        res = Loop(pi, sup, ep).run_realtime(n_ticks=25)
+    finally:
+        stop.set()
+        th.join(5)
+        ep.close()
+    states = list(res.trajectory["state"])
+    to = [t["to"] for t in res.transitions]
+    assert to[:3] == ["AUTO", "HOLD", "FAILSAFE"], res.transitions
+    assert res.transitions[1]["faults"] == ["STALE_SAMPLE"]
+    assert "LINK_LOSS" in res.transitions[2]["faults"]
+    hold_at, failsafe_at = states.index(State.HOLD), states.index(State.FAILSAFE)
+    # samples stop after ~1.0 s: stale after 0.35 s, link loss after 1.0 s (a few ticks of slack)
+    assert 10 <= hold_at <= 16 and 6 <= failsafe_at - hold_at <= 9
+    assert res.timing["ticks"] == 25
+    assert all(0.0 <= c <= 120.0 for c in res.trajectory["command_ml_h"])
