@@ -1,0 +1,569 @@
+"""Theorem 3 of the paper as a batched LMI problem (cvxpy, solved by Clarabel).
+
+Derivation (checked here, since the printed theorem has errors)
+--------------------------------------------------------------
+Lyapunov–Krasovskii functional for the closed loop ``ẋ = A x + Ad x(t−τ) + B w``::
+
+    V = xᵀP(ρ)x + ∫_{t−τ}^{t} xᵀQx ds + τ̄ ∫_{−τ̄}^{0}∫_{t+θ}^{t} ẋᵀRẋ ds dθ
+
+With Jensen's inequality ``−τ̄∫_{t−τ}^{t}ẋᵀRẋ ≤ −(x − x_τ)ᵀR(x − x_τ)`` (τ ≤ τ̄) the condition
+``V̇ + zᵀz/γ − γwᵀw < 0`` is a quadratic form in ``ζ = [ẋ; x; x_τ; w]`` that must be negative on
+``[−I, A, Ad, B] ζ = 0``. Finsler's lemma with the slack ``[V1; λ2 V1; λ3 V1; 0]`` and a Schur
+complement on z gives the 5-block analysis LMI (symmetric, ``He(M) = M + Mᵀ``)::
+
+    [ τ̄²R − 2V1     P − λ2V1 + V1A      −λ3V1 + V1Ad              V1B      0   ]
+    [      ⋆       Ṗ+Q−R + λ2He(V1A)   R + λ2V1Ad + λ3AᵀV1        λ2V1B    Cᵀ  ]
+    [      ⋆            ⋆        −(1−τ̇)Q − R + λ3He(V1Ad)       λ3V1B    Cdᵀ ]  ≺ 0
+    [      ⋆            ⋆               ⋆                          −γI     Dᵀ  ]
+    [      ⋆            ⋆               ⋆                           ⋆     −γI  ]
+
+For synthesis take V1 = 𝒳 = [[X, N], [Nᵀ, ⋆]] with 𝒳⁻¹ = [[Y, M], [Mᵀ, ⋆]], Π1 = [[Y, I], [Mᵀ, 0]]
+and the congruence diag(Π1, Π1, Π1, I, I). Then Π1ᵀ𝒳Π1 = Ṽ = [[Y, I], [I, X]], Π1ᵀ𝒳A_clΠ1 = 𝒜,
+Π1ᵀ𝒳B_cl = 𝓑, C_clΠ1 = 𝒞 (the paper's linearising change of variables), and P̃, Q̃, R̃ = Π1ᵀ(·)Π1,
+all **2n×2n** (the printed n×n is an erratum). This is Theorem 3 with the τ̄²R̃ term in block (1,1)
+instead of the printed 6th block row/column; the printed 6-block form is not what Finsler gives and
+was measured to be far more conservative (γ 23.6 vs 8.5 on the same grid).
+
+Which guarantee the controller carries (deviation from the paper)
+-----------------------------------------------------------------
+The congruence carries a *constant* Q̃, R̃ and ``∂P̃/∂ρ`` back to the closed loop only if Π1 is
+constant, i.e. Y and M constant. The paper lets X and Y both depend on ρ; that breaks the proof.
+Here ``xy_dependence = "x"`` keeps **Y constant and X(ρ) in the basis**, with the factorisation
+``M = I, N = I − X(ρ)Y`` (smooth, no SVD): Π1 is constant, the slack 𝒳(ρ) may vary freely (Finsler
+needs no derivative of it), so the rate-bounded L2-gain guarantee of the LKF holds on the grid
+nodes exactly as written. ``xy_dependence = "constant"`` (X, Y constant) is also rigorous and
+more conservative. Between grid nodes nothing is certified by the synthesis: the independent
+verification (``synthesis.verify``) re-checks on denser grids.
+
+Other choices
+-------------
+* Rate terms, ``rate_terms = "vertices"`` (the paper): the LMI is affine in ρ̇, so it is imposed at all
+  2³ sign combinations (±νi) at each grid node; the τ̇ in Ξ22 is the same ρ̇3 as in ∂P̃/∂ρ3 (τ is the
+  third parameter, ∂τ/∂ρ3 = 1). ``rate_terms = "bound"`` (default, faster): node-local symmetric
+  Z_{g,i} with Z_{g,i} ⪰ ±∂P̃/∂ρ̂_i(ρ_g) and ``Ṗ`` replaced by Σ_i ν̂_i Z_{g,i}, which bounds every
+  vertex from above; ``−(1 − τ̇)Q̃`` is largest at τ̇ = +ν_τ because Q̃ ⪰ 0. This implies the vertex
+  conditions (sufficient, slightly more conservative) with one large LMI per node instead of eight.
+* Strict inequalities become ``⪯ −εI`` / ``⪰ εI``.
+* λ2, λ3 are fixed (line search in :mod:`synthesis.line_search`), making the problem an SDP.
+* Everything is in the scaled coordinates of :mod:`synthesis.scaling`.
+
+Build
+-----
+The LMI is one numeric function of the decision vector, vectorised over grid points and rate
+vertices (:func:`lmi_blocks`). Because it is affine, evaluating it at 0 and at unit vectors (in
+chunks) gives its exact sparse affine map ``vec F(x) = F0 + A x``; cvxpy receives that as a single
+batched PSD constraint ``reshape(b − A x, (N, m, m)) ⪰ 0`` and compiles in well under a second.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from synthesis import basis
+from synthesis.config import DesignConfig
+from synthesis.model import N_STATE, N_W, N_Y, N_Z, plant_batch
+from synthesis.scaling import Scaling
+
+N2 = 2 * N_STATE  # closed-loop order
+
+
+@dataclass(frozen=True)
+class Block:
+    """One decision matrix: ``nb`` basis coefficients of a ``rows × cols`` matrix."""
+
+    name: str
+    rows: int
+    cols: int
+    sym: bool
+    nb: int
+
+    @property
+    def size(self) -> int:
+        per = self.rows * (self.rows + 1) // 2 if self.sym else self.rows * self.cols
+        return per * self.nb
+
+
+class Layout:
+    """Positions of every decision matrix inside the decision vector."""
+
+    def __init__(self, xy_dependence: str, rate_terms: str = "vertices", n_nodes: int = 0) -> None:
+        nbx = basis.N_BASIS if xy_dependence == "x" else 1
+        nb = basis.N_BASIS
+        n = N_STATE
+        self.blocks = [
+            Block("P", N2, N2, True, nb),
+            Block("Q", N2, N2, True, 1),
+            Block("R", N2, N2, True, 1),
+            Block("X", n, n, True, nbx),
+            Block("Y", n, n, True, 1),
+            Block("Ah", n, n, False, nb),
+            Block("Adh", n, n, False, nb),
+            Block("Bh", n, N_Y, False, nb),
+            Block("Ch", 1, n, False, nb),
+            Block("Cdh", 1, n, False, nb),
+            Block("Dk", 1, N_Y, False, nb),
+            Block("gamma", 1, 1, False, 1),
+        ]
+        if rate_terms == "bound":
+            # node-local bounds Z_{g,i} ⪰ ±∂P̃/∂ρ̂_i (3 per node), see module docstring
+            self.blocks.append(Block("Z", N2, N2, True, 3 * n_nodes))
+        self.offsets: dict[str, int] = {}
+        off = 0
+        for b in self.blocks:
+            self.offsets[b.name] = off
+            off += b.size
+        self.nvar = off
+        self.by_name = {b.name: b for b in self.blocks}
+
+    def unpack(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """Decision vectors (J, nvar) -> name -> (J, nb, rows, cols) coefficient arrays."""
+        x = np.atleast_2d(x)
+        j = x.shape[0]
+        out = {}
+        for b in self.blocks:
+            seg = x[:, self.offsets[b.name] : self.offsets[b.name] + b.size]
+            if b.sym:
+                iu = np.triu_indices(b.rows)
+                m = np.zeros((j, b.nb, b.rows, b.rows))
+                vals = seg.reshape(j, b.nb, -1)
+                m[:, :, iu[0], iu[1]] = vals
+                m[:, :, iu[1], iu[0]] = vals
+            else:
+                m = seg.reshape(j, b.nb, b.rows, b.cols)
+            out[b.name] = m
+        return out
+
+    def pack(self, coeffs: dict[str, np.ndarray]) -> np.ndarray:
+        """Inverse of :meth:`unpack` for one vector (coefficients (nb, rows, cols))."""
+        x = np.zeros(self.nvar)
+        for b in self.blocks:
+            c = np.asarray(coeffs[b.name], dtype=float).reshape(b.nb, b.rows, b.cols)
+            if b.sym:
+                iu = np.triu_indices(b.rows)
+                seg = c[:, iu[0], iu[1]].reshape(-1)
+            else:
+                seg = c.reshape(-1)
+            x[self.offsets[b.name] : self.offsets[b.name] + b.size] = seg
+        return x
+
+
+@dataclass(frozen=True)
+class Problem:
+    """The numeric data of one synthesis problem (scaled coordinates)."""
+
+    cfg: DesignConfig
+    scaling: Scaling
+    layout: Layout
+    rho: np.ndarray  # (G, 3) physical grid nodes
+    rho_hat: np.ndarray  # (G, 3)
+    plant: dict[str, np.ndarray]  # scaled, (G, r, c)
+    weights: np.ndarray  # (G, nb)
+    dweights: np.ndarray  # (G, 3, nb)
+    vertices: np.ndarray  # (V, 3) signs
+    nu_hat: np.ndarray  # (3,) bounds on |dρ̂/dt̂|
+    nu_tau: float  # bound on |dτ/dt| (dimensionless)
+    tau_bar_hat: float  # max delay in scaled time
+
+    @property
+    def size(self) -> int:
+        """Order m of each synthesis LMI."""
+        return 3 * N2 + N_W + N_Z
+
+
+def make_problem(cfg: DesignConfig, rho: np.ndarray | None = None) -> Problem:
+    """Set up the scaled problem on ``cfg``'s grid (or on the given (G, 3) physical points)."""
+    sc = Scaling.for_box(cfg.model.box, cfg.solver.time_scale_s)
+    if rho is None:
+        g = cfg.grid()
+        rho = np.array(list(itertools.product(*g)), dtype=float)
+    rho = np.atleast_2d(np.asarray(rho, dtype=float))
+    rho_hat = sc.to_hat(rho)
+    plant = sc.plant(plant_batch(rho, cfg.model))
+    return Problem(
+        cfg=cfg,
+        scaling=sc,
+        layout=Layout(cfg.solver.xy_dependence, cfg.solver.rate_terms, rho.shape[0]),
+        rho=rho,
+        rho_hat=rho_hat,
+        plant=plant,
+        weights=basis.basis_weights(rho_hat),
+        dweights=basis.basis_derivatives(rho_hat),
+        vertices=np.array(list(itertools.product((-1.0, 1.0), repeat=3))),
+        nu_hat=sc.rate_hat(cfg.model.rate_bounds),
+        nu_tau=float(cfg.model.rate_bounds[2]),
+        tau_bar_hat=float(cfg.model.box[2, 1] / sc.time_s),
+    )
+
+
+def _ev(c: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Coefficients (J, nb, r, c) at weights (G, nb) -> (J, G, r, c)."""
+    if c.shape[1] == 1:
+        return np.broadcast_to(c[:, :1], (c.shape[0], w.shape[0], *c.shape[2:]))
+    return np.einsum("gb,jbrc->jgrc", w, c)
+
+
+def _t(m: np.ndarray) -> np.ndarray:
+    return np.swapaxes(m, -1, -2)
+
+
+def lmi_blocks(prob: Problem, vals: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The transformed closed-loop quantities of Theorem 3 at every grid node.
+
+    Parameters
+    ----------
+    prob
+        The problem.
+    vals
+        Decision coefficients, name -> (J, nb, r, c).
+
+    Returns
+    -------
+    dict
+        ``V, A, Ad, B, C, Cd, D, P, Q, R`` (J, G, ·, ·) and ``dP`` (J, G, 3, 2n, 2n).
+    """
+    p, w = prob.plant, prob.weights
+    X = _ev(vals["X"], w)
+    Y = _ev(vals["Y"], w)
+    Ah, Adh, Bh = _ev(vals["Ah"], w), _ev(vals["Adh"], w), _ev(vals["Bh"], w)
+    Ch, Cdh, Dk = _ev(vals["Ch"], w), _ev(vals["Cdh"], w), _ev(vals["Dk"], w)
+    A, Ad, B1, B2 = p["A"], p["Ad"], p["B1"], p["B2"]
+    C1, C1d, C2, C2d = p["C1"], p["C1d"], p["C2"], p["C2d"]
+    D11, D12, D21 = p["D11"], p["D12"], p["D21"]
+    j, g = X.shape[0], w.shape[0]
+    eye = np.broadcast_to(np.eye(N_STATE), (j, g, N_STATE, N_STATE))
+    B2Dk = B2 @ Dk
+
+    def cat(a, b, c, d):
+        return np.concatenate(
+            [np.concatenate([a, b], axis=-1), np.concatenate([c, d], axis=-1)], axis=-2
+        )
+
+    V = cat(Y, eye, eye, X)
+    cA = cat(A @ Y + B2 @ Ch, A + B2Dk @ C2, Ah, X @ A + Bh @ C2)
+    cAd = cat(Ad @ Y + B2 @ Cdh, Ad + B2Dk @ C2d, Adh, X @ Ad + Bh @ C2d)
+    cB = np.concatenate([B1 + B2Dk @ D21, X @ B1 + Bh @ D21], axis=-2)
+    cC = np.concatenate([C1 @ Y + D12 @ Ch, C1 + D12 @ Dk @ C2], axis=-1)
+    cCd = np.concatenate([C1d @ Y + D12 @ Cdh, C1d + D12 @ Dk @ C2d], axis=-1)
+    cD = D11 + D12 @ Dk @ D21
+    P = _ev(vals["P"], w)
+    dP = np.einsum("gib,jbrc->jgirc", prob.dweights, vals["P"])
+    Q = _ev(vals["Q"], w)
+    R = _ev(vals["R"], w)
+    return {
+        "V": V,
+        "A": cA,
+        "Ad": cAd,
+        "B": cB,
+        "C": cC,
+        "Cd": cCd,
+        "D": cD,
+        "P": P,
+        "dP": dP,
+        "Q": Q,
+        "R": R,
+        "gamma": vals["gamma"][:, 0, 0, 0],
+    }
+
+
+def assemble(
+    V: np.ndarray,
+    P: np.ndarray,
+    Pdot: np.ndarray,
+    Q: np.ndarray,
+    R: np.ndarray,
+    A: np.ndarray,
+    Ad: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    Cd: np.ndarray,
+    D: np.ndarray,
+    gamma: np.ndarray,
+    taudot: np.ndarray,
+    tau_bar: float,
+    lambda2: float,
+    lambda3: float,
+) -> np.ndarray:
+    """The 5-block analysis matrix (see module docstring) for batched arguments.
+
+    Every matrix argument has the same leading batch shape ``S``; ``gamma`` and ``taudot`` have
+    shape ``S``. ``V`` plays the slack V1 (𝒳 or Ṽ) and ``A``… the products V1·A (𝒜) etc.:
+    the caller passes ``VA = V1 A`` in ``A``, ``VAd`` in ``Ad`` and ``VB`` in ``B``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape ``S + (m, m)`` with m = 3·n2 + nw + nz; the condition is ``F ≺ 0``.
+    """
+    n2 = V.shape[-1]
+    nw = B.shape[-1]
+    nz = C.shape[-2]
+    s = np.broadcast_shapes(
+        V.shape[:-2], P.shape[:-2], Pdot.shape[:-2], A.shape[:-2], gamma.shape, taudot.shape
+    )
+    g = gamma[..., None, None]
+    td = taudot[..., None, None]
+    m = 3 * n2 + nw + nz
+    F = np.zeros((*s, m, m))
+    i1, i2, i3, i4, i5 = (
+        slice(0, n2),
+        slice(n2, 2 * n2),
+        slice(2 * n2, 3 * n2),
+        slice(3 * n2, 3 * n2 + nw),
+        slice(3 * n2 + nw, m),
+    )
+    F[..., i1, i1] = tau_bar**2 * R - 2.0 * V
+    F[..., i1, i2] = P - lambda2 * V + A
+    F[..., i1, i3] = -lambda3 * V + Ad
+    F[..., i1, i4] = B
+    F[..., i2, i2] = Pdot + Q - R + lambda2 * (A + _t(A))
+    F[..., i2, i3] = R + lambda3 * _t(A) + lambda2 * Ad
+    F[..., i2, i4] = lambda2 * B
+    F[..., i2, i5] = _t(C)
+    F[..., i3, i3] = -(1.0 - td) * Q - R + lambda3 * (Ad + _t(Ad))
+    F[..., i3, i4] = lambda3 * B
+    F[..., i3, i5] = _t(Cd)
+    F[..., i4, i4] = -g * np.eye(nw)
+    F[..., i4, i5] = _t(D)
+    F[..., i5, i5] = -g * np.eye(nz)
+    # fill the lower triangle
+    iu = np.triu_indices(m, 1)
+    F[..., iu[1], iu[0]] = F[..., iu[0], iu[1]]
+    return F
+
+
+def synthesis_lmi(prob: Problem, vals: dict[str, np.ndarray]) -> np.ndarray:
+    """Theorem 3 (5-block form) at every grid node and rate vertex.
+
+    Returns
+    -------
+    numpy.ndarray
+        (J, G, V, m, m); the condition is ``F ≺ 0``.
+    """
+    blk = lmi_blocks(prob, vals)
+    if prob.cfg.solver.rate_terms == "bound":
+        # one LMI per node: Ṗ ⪯ Σ_i ν̂_i Z_{g,i}; −(1 − τ̇)Q̃ is largest at τ̇ = +ν_τ (Q̃ ⪰ 0)
+        verts = np.ones((1, 3))
+        j = blk["V"].shape[0]
+        z = vals["Z"].reshape(j, -1, 3, N2, N2)
+        pdot = np.einsum("i,jgirc->jgrc", prob.nu_hat, z)[:, :, None]
+    else:
+        verts = prob.vertices  # (V, 3)
+        # Ṗ at each vertex: Σ_i s_i ν̂_i ∂P̃/∂ρ̂_i  -> (J, G, V, n2, n2)
+        pdot = np.einsum("vi,i,jgirc->jgvrc", verts, prob.nu_hat, blk["dP"])
+    taudot = verts[:, 2] * prob.nu_tau  # (V,)
+
+    def e(a):
+        return a[:, :, None]
+
+    j, g = blk["V"].shape[:2]
+    nv = verts.shape[0]
+    gam = np.broadcast_to(blk["gamma"][:, None, None], (j, g, nv))
+    td = np.broadcast_to(taudot[None, None, :], (j, g, nv))
+    return assemble(
+        e(blk["V"]),
+        e(blk["P"]),
+        pdot,
+        e(blk["Q"]),
+        e(blk["R"]),
+        e(blk["A"]),
+        e(blk["Ad"]),
+        e(blk["B"]),
+        e(blk["C"]),
+        e(blk["Cd"]),
+        e(blk["D"]),
+        gam,
+        td,
+        prob.tau_bar_hat,
+        prob.cfg.solver.lambda2,
+        prob.cfg.solver.lambda3,
+    )
+
+
+def positivity(prob: Problem, vals: dict[str, np.ndarray]) -> np.ndarray:
+    """Matrices that must be ≻ 0: P̃ at every node, Q̃, R̃ (and Z ∓ ∂P̃ in "bound" mode).
+
+    Shape (J, k, 2n, 2n).
+    """
+    P = _ev(vals["P"], prob.weights)
+    Q = vals["Q"][:, :1]
+    R = vals["R"][:, :1]
+    parts = [P, Q, R]
+    if prob.cfg.solver.rate_terms == "bound":
+        j = P.shape[0]
+        dP = np.einsum("gib,jbrc->jgirc", prob.dweights, vals["P"])
+        z = vals["Z"].reshape(j, -1, 3, N2, N2)
+        parts += [(z - dP).reshape(j, -1, N2, N2), (z + dP).reshape(j, -1, N2, N2)]
+    return np.concatenate(parts, axis=1)
+
+
+def affine_map(
+    prob: Problem, fn: Callable[[Problem, dict[str, np.ndarray]], np.ndarray], chunk: int = 64
+) -> tuple[sp.csr_matrix, np.ndarray, tuple[int, ...]]:
+    """Exact sparse affine map of an affine matrix function of the decision vector.
+
+    Returns ``(A, b, shape)`` with ``fn(x).reshape(-1) == A @ x + b`` and ``shape`` the shape of
+    ``fn`` for one vector.
+    """
+    lay = prob.layout
+    f0 = fn(prob, lay.unpack(np.zeros((1, lay.nvar))))[0]
+    shape = f0.shape
+    b = f0.reshape(-1)
+    rows, cols, data = [], [], []
+    for start in range(0, lay.nvar, chunk):
+        stop = min(lay.nvar, start + chunk)
+        e = np.zeros((stop - start, lay.nvar))
+        e[np.arange(stop - start), np.arange(start, stop)] = 1.0
+        d = fn(prob, lay.unpack(e)).reshape(stop - start, -1) - b[None, :]
+        jj, rr = np.nonzero(np.abs(d) > 1e-13)
+        rows.append(rr)
+        cols.append(jj + start)
+        data.append(d[jj, rr])
+    A = sp.csr_matrix(
+        (np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(b.size, lay.nvar),
+    )
+    return A, b, shape
+
+
+@dataclass
+class SolveResult:
+    """Outcome of one SDP solve."""
+
+    status: str
+    gamma: float
+    x: np.ndarray | None
+    solve_time_s: float
+    build_time_s: float
+    iterations: int | None
+    n_lmi: int
+    lmi_size: int
+
+
+def _run(problem, solver_opts: dict) -> tuple[str, float, int | None]:
+    import cvxpy as cp
+
+    t0 = time.perf_counter()
+    try:
+        problem.solve(solver=cp.CLARABEL, **solver_opts)
+    except cp.error.SolverError as exc:  # numerical failure: report, do not crash
+        return f"solver_error: {exc}", time.perf_counter() - t0, None
+    its = None
+    stats = problem.solver_stats
+    if stats is not None:
+        its = stats.num_iters
+    return str(problem.status), time.perf_counter() - t0, its
+
+
+def solve(prob: Problem, solver_opts: dict | None = None, verbose: bool = False) -> SolveResult:
+    """Build the batched SDP and minimise γ (then optionally back off, see ``solver.backoff``).
+
+    Returns
+    -------
+    SolveResult
+        ``status`` is cvxpy's status string ("optimal", "infeasible", …); ``x`` the decision vector.
+    """
+    import cvxpy as cp
+
+    opts = {"verbose": verbose}
+    if solver_opts:
+        opts.update(solver_opts)
+    t0 = time.perf_counter()
+    eps = prob.cfg.solver.epsilon
+    lay = prob.layout
+    A1, b1, shp1 = affine_map(prob, synthesis_lmi)  # F ≺ 0
+    A2, b2, shp2 = affine_map(prob, positivity)  # ≻ 0
+    m = shp1[-1]
+    n1 = int(np.prod(shp1[:-2]))
+    n2 = int(np.prod(shp2[:-2]))
+    x = cp.Variable(lay.nvar)
+    eye1 = np.tile(np.eye(m).reshape(-1), n1)
+    eye2 = np.tile(np.eye(N2).reshape(-1), n2)
+    S1 = cp.reshape(-(A1 @ x) - b1 - eps * eye1, (n1, m, m), order="C")
+    S2 = cp.reshape(A2 @ x + b2 - eps * eye2, (n2, N2, N2), order="C")
+    gidx = lay.offsets["gamma"]
+    cons = [S1 >> 0, S2 >> 0]
+    problem = cp.Problem(cp.Minimize(x[gidx]), cons)
+    build = time.perf_counter() - t0
+    status, t_solve, its = _run(problem, opts)
+    xval = None if x.value is None else np.array(x.value, dtype=float)
+    gamma = float(xval[gidx]) if xval is not None else float("nan")
+    if xval is not None and status == "optimal" and prob.cfg.solver.backoff > 0.0:
+        # Back-off: accept γ ≤ (1+β)γ* and minimise the size of X, Y (better-conditioned
+        # N = I − XY and controller matrices).
+        t = cp.Variable()
+        xb = lay.offsets["X"]
+        bx = lay.by_name["X"]
+        Xmats = positivity_x(prob, x, xb, bx)
+        ycons = _y_matrix(x, lay)
+        cons2 = [*cons, x[gidx] <= (1.0 + prob.cfg.solver.backoff) * gamma]
+        cons2 += [t * np.eye(N_STATE) - Xm >> 0 for Xm in Xmats]
+        cons2 += [t * np.eye(N_STATE) - ycons >> 0]
+        p2 = cp.Problem(cp.Minimize(t), cons2)
+        st2, t2, its2 = _run(p2, opts)
+        t_solve += t2
+        if st2 == "optimal" and x.value is not None:
+            xval = np.array(x.value, dtype=float)
+            gamma = float(xval[gidx])
+            its = (its or 0) + (its2 or 0)
+        else:
+            status = f"{status} (backoff: {st2}, kept optimum)"
+    return SolveResult(
+        status=status,
+        gamma=gamma,
+        x=xval,
+        solve_time_s=t_solve,
+        build_time_s=build,
+        iterations=its,
+        n_lmi=n1,
+        lmi_size=m,
+    )
+
+
+def _sym_expr(x, off: int, n: int):
+    import cvxpy as cp
+
+    iu = np.triu_indices(n)
+    k = len(iu[0])
+    rows, cols, idx = [], [], []
+    for t, (r, c) in enumerate(zip(iu[0], iu[1], strict=True)):
+        rows += [r * n + c]
+        idx += [off + t]
+        if r != c:
+            rows += [c * n + r]
+            idx += [off + t]
+    cols = idx
+    S = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n * n, x.shape[0]))
+    del k
+    return cp.reshape(S @ x, (n, n), order="C")
+
+
+def _y_matrix(x, lay: Layout):
+    return _sym_expr(x, lay.offsets["Y"], N_STATE)
+
+
+def positivity_x(prob: Problem, x, off: int, blk: Block) -> list:
+    """X(ρ) at every node as cvxpy expressions (for the back-off objective)."""
+    import cvxpy as cp
+
+    per = N_STATE * (N_STATE + 1) // 2
+    mats = [_sym_expr(x, off + b * per, N_STATE) for b in range(blk.nb)]
+    if blk.nb == 1:
+        return mats
+    out = []
+    for g in range(prob.weights.shape[0]):
+        out.append(cp.sum([prob.weights[g, b] * mats[b] for b in range(blk.nb)]))
+    return out
+
+
+def max_eig(prob: Problem, x: np.ndarray) -> tuple[float, float]:
+    """Largest eigenvalue of the synthesis LMI and smallest of the positivity set at a solution."""
+    vals = prob.layout.unpack(x[None, :])
+    F = synthesis_lmi(prob, vals)
+    Pm = positivity(prob, vals)
+    return float(np.linalg.eigvalsh(F).max()), float(np.linalg.eigvalsh(Pm).min())
