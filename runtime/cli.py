@@ -96,6 +96,12 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--signing-key", type=Path, help="32-byte key file (raw or 64 hex chars)")
     p.add_argument(
+        "--sched-faults",
+        choices=("advise", "hold"),
+        default="advise",
+        help="scheduling outside the design box / rate bounds: advisory alarm (default) or hold",
+    )
+    p.add_argument(
         "--stall-timeout",
         type=_positive("--stall-timeout", 3600.0),
         default=10.0,
@@ -334,7 +340,11 @@ def run_runtime(
             "patient_seed": peer.patient_seed,
             "sensor_noise_mmhg": float(peer.sensor_noise_mmhg),
         }
-        sup = Supervisor(supervisor_config_for(controller, peer.sensor_noise_mmhg))
+        sup = Supervisor(
+            supervisor_config_for(
+                controller, peer.sensor_noise_mmhg, sched_action=args.sched_faults
+            )
+        )
         rrd = args.rrd
         if rrd is not None:
             from runtime.recorder import Recorder
@@ -520,7 +530,8 @@ def _main_faults(argv: list[str]) -> int:
         print(f"  {kind:<{width}}  {text}")
     print(
         "Scheduling checks use the design box and rate bounds a generated controller declares"
-        " (RHO_MIN, RHO_MAX, RHO_RATE_MAX); the PI baseline is not scheduled."
+        " (GRID_LO, GRID_HI, RATE_BOUNDS); the PI baseline is not scheduled. Default for"
+        " pressor sil/run: advisory (--sched-faults advise)."
     )
     return 0
 

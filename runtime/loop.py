@@ -108,9 +108,9 @@ class LoopResult:
 def sched_limits_of(controller: Controller) -> tuple[Any, Any]:
     """The design box and rate bounds a generated controller declares, else ``(None, None)``.
 
-    Looked up on the instance, then on its module: ``RHO_MIN``/``RHO_MAX`` (3 values: K, T s,
-    τ s) and ``RHO_RATE_MAX`` (3 values per s). The PI baseline declares none (it is not
-    scheduled), so its scheduling inputs are not checked.
+    Looked up on the instance, then on its module: ``GRID_LO``/``GRID_HI`` (3 values: K, T s,
+    τ s) and ``RATE_BOUNDS`` (3 values per s) as ``codegen`` emits them. The PI baseline
+    declares none (it is not scheduled), so its scheduling inputs are not checked.
     """
     module = sys.modules.get(type(controller).__module__)
     sources = (controller, module)
@@ -121,7 +121,7 @@ def sched_limits_of(controller: Controller) -> tuple[Any, Any]:
                 return getattr(src, name)
         return None
 
-    lo, hi, rate = find("RHO_MIN"), find("RHO_MAX"), find("RHO_RATE_MAX")
+    lo, hi, rate = find("GRID_LO"), find("GRID_HI"), find("RATE_BOUNDS")
     box = None
     if lo is not None and hi is not None and len(lo) == 3 and len(hi) == 3:
         box = tuple((float(a), float(b)) for a, b in zip(lo, hi, strict=True))
@@ -136,7 +136,11 @@ def supervisor_config_for(
 
     Sample period and pump limit come from the controller; the scheduling box and rates from
     :func:`sched_limits_of`; the flatline check is on only when the sensor is noisy (a noise-free
-    simulated sensor legitimately repeats values). ``overrides`` replace any field.
+    simulated sensor legitimately repeats values). Leaving the design box or rate bounds is
+    advisory by default (``sched_action="advise"``): the generated controller clamps and
+    rate-limits ρ itself (DESIGN.md §2), and the simulated patients routinely leave the envelope
+    (paper-tracking seed 3: K down to 0.18 < 0.25; τ moving ~1 s/s against a 0.1 s/s bound), so
+    holding would stop LPV control of most patients. ``overrides`` replace any field.
     """
     box, rates = sched_limits_of(controller)
     cfg: dict[str, Any] = {
@@ -146,6 +150,7 @@ def supervisor_config_for(
         "sched_required": box is not None,
         "sched_box": box,
         "sched_rate_bounds": rates,
+        "sched_action": "advise",
         "stale_after_s": 3.5 * float(controller.sample_period_s),
     }
     cfg.update(overrides)
@@ -255,6 +260,13 @@ class Loop:
                     f"{old.name} -> {new.name}: {', '.join(event['faults']) or 'inputs good'}",
                     warn=new in (State.HOLD, State.FAILSAFE),
                 )
+        elif sup.new_faults and self.recorder is not None:  # advisory faults: log, no transition
+            self.recorder.event(
+                inp.tick,
+                inp.sim_time_s,
+                f"{state.name}: advisory {', '.join(fault_names(sup.new_faults))}",
+                warn=False,
+            )
         if self.recorder is not None:
             self._record(inp, raw_f, command, state, exec_s, lateness_s)
         return command

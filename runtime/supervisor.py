@@ -43,6 +43,9 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
 - ``SCHED_INVALID`` scheduling marked invalid or non-finite (when ``sched_required``);
 - ``SCHED_OUT_OF_BOX`` K, T or τ outside ``sched_box``;
 - ``SCHED_RATE`` |Δρ|/Δt above ``sched_rate_tolerance`` × ``sched_rate_bounds``;
+  with ``sched_action="advise"`` these two are advisory (flagged, counted, logged; the state and
+  the command are unchanged) — for a generated controller that clamps ρ to its box and limits its
+  rate itself (DESIGN.md §2), so that leaving the design envelope is reported, not fought;
 - ``TARGET_INVALID`` the MAP target is non-finite or outside the plausible MAP range;
 - ``COMMAND_INVALID`` the controller returned a non-finite command (held, → HOLD);
 - ``COMMAND_CLAMPED`` the controller returned a command outside [0, max] (clamped; an alarm, not a
@@ -90,8 +93,10 @@ class Fault(IntFlag):
     TARGET_INVALID = 1 << 12
 
 
-#: faults that do not change the state (the command is clamped and the event logged)
+#: faults that never change the state (the command is clamped and the event logged)
 ADVISORY = Fault.COMMAND_CLAMPED
+#: scheduling faults that are advisory when ``sched_action == "advise"``
+SCHED_ENVELOPE = Fault.SCHED_OUT_OF_BOX | Fault.SCHED_RATE
 
 
 def fault_names(faults: int) -> list[str]:
@@ -124,6 +129,7 @@ class SupervisorConfig:
     sched_box: tuple[tuple[float, float], ...] | None = None
     sched_rate_bounds: tuple[float, ...] | None = None
     sched_rate_tolerance: float = 1.5
+    sched_action: str = "hold"
     hold_max_s: float = 10.0
     safe_rate_ml_h: float | None = None
     failsafe_ramp_ml_h_per_s: float = 1.0
@@ -147,6 +153,7 @@ class SupervisorConfig:
         need("stale_after_s", self.stale_after_s > 0.0, "> 0 s")
         need("link_loss_after_s", self.link_loss_after_s > 0.0, "> 0 s")
         need("sched_rate_tolerance", self.sched_rate_tolerance >= 1.0, ">= 1")
+        need("sched_action", self.sched_action in ("hold", "advise"), "'hold' or 'advise'")
         need("hold_max_s", self.hold_max_s >= 0.0, ">= 0 s")
         need(
             "safe_rate_ml_h",
@@ -202,6 +209,15 @@ def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
         ("SCHED_INVALID", "scheduling marked invalid or non-finite; same tick"),
         ("SCHED_OUT_OF_BOX", box),
         ("SCHED_RATE", rates),
+        (
+            "sched action",
+            "SCHED_OUT_OF_BOX / SCHED_RATE "
+            + (
+                "advisory: flagged and logged, the controller clamps/rate-limits itself"
+                if cfg.sched_action == "advise"
+                else "hold like any other fault"
+            ),
+        ),
         ("TARGET_INVALID", "target non-finite or outside the MAP range; same tick"),
         ("COMMAND_INVALID", "controller returned a non-finite command; same tick, held"),
         ("COMMAND_CLAMPED", f"controller command outside [0, {cfg.max_rate_ml_h}] ml/h; clamped"),
@@ -244,12 +260,17 @@ class Supervisor:
         The last command output (ml/h), always in [0, max_rate_ml_h].
     transition
         ``(from_state, to_state, faults)`` if the last tick changed state, else ``None``.
+    new_faults
+        Fault bits that rose at the last tick (for event logs).
     detections
         Count of rising edges of each fault kind (by name) over the run.
     """
 
     def __init__(self, config: SupervisorConfig | None = None) -> None:
         self.config = config or SupervisorConfig()
+        self._advisory = ADVISORY | (
+            SCHED_ENVELOPE if self.config.sched_action == "advise" else Fault.NONE
+        )
         self.reset()
 
     def reset(self) -> None:
@@ -258,6 +279,7 @@ class Supervisor:
         self.faults = 0
         self.command_ml_h = 0.0
         self.transition: tuple[State, State, int] | None = None
+        self.new_faults = 0
         self.detections: dict[str, int] = {}
         self._prev_faults = 0
         self._prev_map: float | None = None
@@ -372,7 +394,7 @@ class Supervisor:
                 faults |= Fault.TARGET_INVALID
         self.faults = faults
         state = self.state
-        if faults:
+        if faults & ~self._advisory:
             self._good_since_s = None
             if self._fault_since_s is None:
                 self._fault_since_s = now_s
@@ -442,6 +464,7 @@ class Supervisor:
         if state != self._entry_state:
             self.transition = (self._entry_state, state, self.faults)
         rising = self.faults & ~self._prev_faults
+        self.new_faults = rising
         if rising:
             for name in fault_names(rising):
                 self.detections[name] = self.detections.get(name, 0) + 1

@@ -198,3 +198,24 @@ def test_realtime_watchdogs_flag_stale_sample_then_link_loss_and_failsafe():
     assert 10 <= hold_at <= 16 and 6 <= failsafe_at - hold_at <= 9
     assert res.timing["ticks"] == 25
     assert all(0.0 <= c <= 120.0 for c in res.trajectory["command_ml_h"])
+
+
+def test_supervisor_config_reads_design_envelope_from_generated_module_constants(tmp_path):
+    from runtime.controller_loader import load_generated_module
+
+    src = tmp_path / "fake_gen.py"
+    src.write_text(
+        "GRID_LO = (0.25, 100.0, 10.0)\n"
+        "GRID_HI = (1.0, 200.0, 45.0)\n"
+        "RATE_BOUNDS = (2e-4, 0.06, 0.1)\n"
+        "class Controller:\n"
+        "    sample_period_s = 0.1\n"
+        "    max_rate_ml_h = 120.0\n"
+    )
+    ctrl = load_generated_module(src).Controller()
+    cfg = supervisor_config_for(ctrl, sensor_noise_mmhg=2.0)
+    assert cfg.sched_box == ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
+    assert cfg.sched_rate_bounds == (2e-4, 0.06, 0.1)
+    assert cfg.sched_required and cfg.flatline_enabled and cfg.sched_action == "advise"
+    pi_cfg = supervisor_config_for(PIController(), sensor_noise_mmhg=0.0)
+    assert pi_cfg.sched_box is None and not pi_cfg.sched_required and not pi_cfg.flatline_enabled

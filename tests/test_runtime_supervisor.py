@@ -251,3 +251,15 @@ def test_command_is_always_finite_and_within_pump_limits(rows, safe_rate):
         out = sup.finalize(cmd if run else None)
         assert math.isfinite(out) and 0.0 <= out <= 120.0
         assert out == sup.command_ml_h
+
+
+def test_advisory_sched_action_flags_envelope_exit_but_keeps_auto_and_passes_command():
+    rig = Rig(sched_cfg(sched_action="advise"))
+    rig.ticks(5, controller_command=25.0)
+    out = rig.tick(controller_command=80.0, K=0.2)  # below the box
+    assert rig.sup.faults & Fault.SCHED_OUT_OF_BOX
+    assert rig.sup.new_faults & Fault.SCHED_OUT_OF_BOX
+    assert rig.sup.state == State.AUTO and out == 80.0
+    assert rig.sup.detections["SCHED_OUT_OF_BOX"] == 1
+    out = rig.tick(controller_command=81.0, sched_valid=False)  # invalid is never advisory
+    assert rig.sup.state == State.HOLD and out == 80.0
