@@ -4,7 +4,7 @@ Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:
 
 1. open the port (a pyserial URL or device path, e.g. the follower of the pty ``pressor sil``
    created, or one end of a ``socat`` pair), handshake: announce itself with a hello (scenario,
-   patient seed, sample period, sensor noise, number of ticks, link mode) every 0.2 s until the
+   patient seed, sample period, sensor noise, number of ticks, link mode) every 0.5 s until the
    runtime answers;
 2. per tick k (lockstep, PX4 SITL style): send tick k's scheduling parameters, target and MAP sample
    (plus a heartbeat once per simulated second), wait for the infusion command answering tick k,

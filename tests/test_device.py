@@ -195,3 +195,25 @@ def test_bad_device_input_exits_2_with_one_line_naming_the_option(args, needle, 
 def test_an_unopenable_port_exits_2(tmp_path, capsys):
     rc = device_main("device", ["--port", str(tmp_path / "missing-tty")])
     assert rc == 2 and "--port" in capsys.readouterr().err
+
+
+def test_realtime_device_paces_ticks_on_the_wall_clock_and_holds_the_rate_without_commands():
+    pair = PtyPair.open()
+    ep = LinkEndpoint(pair.leader_port(), "runtime")
+    statuses: list = []
+    ep.on_message = lambda m: statuses.append(m) if m.get_type() == "PUMP_STATUS" else None
+    proc = _spawn_device(pair, "--scenario", "paper-tracking", "--duration", "1.0", "--realtime")
+    peer = ep.handshake(Hello("pi"), timeout_s=30.0)
+    assert peer.link_mode == 1 and peer.n_ticks == 10
+    arrivals = []
+    while len(arrivals) < 10:
+        x = ep.wait_for_sample(2.0)
+        assert x is not None
+        arrivals.append((x.tick, time.monotonic()))
+        if x.tick < 5:  # then the runtime falls silent
+            ep.send_command(x.tick, 30.0)
+    assert _finish(proc, pair, ep) == 0
+    assert [k for k, _ in arrivals] == list(range(10))
+    assert arrivals[-1][1] - arrivals[0][1] >= 0.8  # 9 periods of 0.1 s, not as fast as possible
+    held = [s.delivered_ml_h for s in statuses if s.tick >= 7]
+    assert held and all(r == pytest.approx(30.0, rel=0.05) for r in held)
