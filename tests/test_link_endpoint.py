@@ -304,3 +304,21 @@ def test_a_retransmitted_tick_is_answered_again_with_the_same_command():
     assert cmd is not None and cmd.rate_ml_h == 12.0
     assert rt.counters.duplicates == 1 and rt.counters.retransmits == 1
     assert mavlink.MAVLINK_MSG_ID_INFUSION_COMMAND == 45005
+
+
+def test_a_signed_frame_with_a_corrupted_timestamp_does_not_lock_out_later_frames():
+    # the CRC does not cover the signature block; pymavlink alone would store the bogus (huge)
+    # timestamp and then refuse every genuine frame as a replay
+    a, b = loop_pair()
+    key = Signing.generate(seed=4)
+    dev = LinkEndpoint(a, "device", signing=key)
+    rt = LinkEndpoint(b, "runtime", signing=key)
+    got = _collect(rt)
+    frames = [dev.send(dev._mav.pressor_heartbeat_encode(k, 2, 1), flush=False) for k in range(4)]
+    dev._tx.clear()
+    bad = bytearray(frames[1])
+    bad[-7] ^= 0x80  # the top byte of the 48-bit signing timestamp
+    a.write(b"".join([frames[0], bytes(bad), *frames[2:]]))
+    _drain(rt)
+    assert [m.tick for m in got] == [0, 2, 3]
+    assert rt.counters.refused_bad_signature == 1

@@ -119,6 +119,9 @@ class LinkCounters:
         sent again after a timeout).
     stale
         Messages for a tick other than the one expected (ignored).
+    incomplete_ticks
+        Lockstep only: MAP samples dropped because the tick's scheduling or target frame was lost
+        (left unanswered, so the device sends the whole tick again).
     """
 
     frames_sent: int = 0
@@ -136,6 +139,7 @@ class LinkCounters:
     duplicates: int = 0
     retransmits: int = 0
     stale: int = 0
+    incomplete_ticks: int = 0
 
     def as_dict(self) -> dict[str, int]:
         """The counters as a plain dict (JSON-ready)."""
@@ -337,6 +341,12 @@ class LinkEndpoint:
         Log every sent and accepted frame with the run clock's timestamp.
     system_id, component_id
         MAVLink ids of this end (default: the role value, component 1).
+    complete_ticks
+        Runtime, lockstep peers only: deliver a MAP sample only together with its own tick's
+        scheduling parameters and target; a sample whose companions were lost is dropped and left
+        unanswered so the device retransmits the tick (the trajectory then stays identical to the
+        in-process simulation). With a real-time peer samples are always delivered and
+        ``TickInputs.sched_tick`` / ``target_tick`` tell the loop which values are stale.
     """
 
     def __init__(
@@ -349,11 +359,13 @@ class LinkEndpoint:
         tlog: TlogWriter | None = None,
         system_id: int | None = None,
         component_id: int = 1,
+        complete_ticks: bool = True,
     ) -> None:
         if role not in _ROLES:
             raise ValueError(f"role: {role!r}, allowed 'runtime' or 'device'")
         self.port = port
         self.role = role
+        self.complete_ticks = complete_ticks
         self._role_value = _ROLES[role]
         self.counters = LinkCounters()
         self._follow_samples = clock is None and role == "runtime"
@@ -588,10 +600,24 @@ class LinkEndpoint:
             if n - i < flen:
                 break
             frame = rx[i : i + flen]
+            if incompat & 1 and self.signing is not None:
+                # pymavlink records a stream's timestamp *before* checking the signature hash: a
+                # frame with a corrupted timestamp (the CRC does not cover the signature block)
+                # would make every later genuine frame look replayed. Undo that on failure.
+                stream = (frame[-13], frame[5], frame[6])
+                stamps = self._mav.signing.stream_timestamps
+                prev_stamp = stamps.get(stream)
+            else:
+                stream = None
             try:
                 msg = self._mav.decode(frame)
             except mavlink.MAVError as exc:
                 if "signature" in exc.message:
+                    if stream is not None:
+                        if prev_stamp is None:
+                            stamps.pop(stream, None)
+                        else:
+                            stamps[stream] = prev_stamp
                     # CRC was good, so the framing is right: skip the whole frame
                     if incompat & 1:
                         c.refused_bad_signature += 1
@@ -658,6 +684,9 @@ class LinkEndpoint:
 
     def _on_sample(self, msg: Any) -> None:
         tick = msg.tick
+        if self._samples and self._samples[-1].tick >= tick:
+            self.counters.duplicates += 1  # retransmitted before the loop took the first copy
+            return
         if tick <= self._last_sample_tick:
             # the device retransmitted a tick: answer again if we already did
             self.counters.duplicates += 1
@@ -666,6 +695,17 @@ class LinkEndpoint:
                 self.counters.retransmits += 1
                 self.send(self._mav.infusion_command_encode(*last))
             return
+        if self.complete_ticks:
+            peer = self.peer_hello
+            sched, target = self._sched, self._target
+            if (
+                peer is not None
+                and peer.link_mode == LINK_LOCKSTEP
+                and (sched is None or sched.tick != tick or target is None or target.tick != tick)
+            ):
+                # in lockstep a stale value would change the trajectory: wait for the resend
+                self.counters.incomplete_ticks += 1
+                return
         self._samples.append(msg)
 
     def _on_sched(self, msg: Any) -> None:
