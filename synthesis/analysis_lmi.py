@@ -16,6 +16,16 @@ vertex for both: tau is one of the scheduling parameters, so its rate is not an 
 vertex). Then the closed loop is asymptotically stable for all parameter trajectories with the
 rate bounds that stay in the gridded box (up to gridding) and its L2 gain w -> z is below g.
 
+Solved form: because A, Ad, B, C, Cd, D are data here (not unknowns as in the synthesis), the
+-R and the z blocks are removed by exact Schur complements, and P, Q, R, g are rescaled by g, which
+gives the equivalent, smaller (2n + n_w instead of 3n + n_w + n_z) LMI linear in (P, Q, R, mu = g^2)::
+
+    [ He(P A) + dP + Q - R   P Ad + R            P B   ]
+    [ *                      -(1 - dtau) Q - R   0     ] + taubar^2 Psi' R Psi + Gamma' Gamma < 0
+    [ *                      *                   -mu I ]
+
+with Psi = [A Ad B], Gamma = [C Cd D]; the reported gamma is sqrt(mu).
+
 Choices (this module is independent of the synthesis LMI in :mod:`synthesis.lmi`):
 
 * ``P(rho)`` constant or affine in the normalised parameters rho_hat in [-1, 1]^s; Q, R constant.
@@ -24,10 +34,11 @@ Choices (this module is independent of the synthesis LMI in :mod:`synthesis.lmi`
   balancing of the centre system (powers of two); both leave the L2 gain unchanged.
 * All LMIs are assembled as one sparse affine map (numpy + scipy.sparse, vectorised over points)
   and passed to cvxpy as a single batched PSD constraint; Clarabel solves it.
-* Strictness: every LMI <= -epsilon I and P(rho_k) >= epsilon I, Q, R >= epsilon I. Two solves:
-  minimise gamma, then (back-off) fix gamma a few percent above the optimum and maximise a common
-  margin t (LMI <= -t I, t <= 1). The solution is then re-evaluated in floating point; ``margins``
-  are the smallest ``-lambda_max`` per point over the rate vertices (scaled units).
+* Strictness: every LMI <= -epsilon I and P(rho_k) >= epsilon I, Q, R >= epsilon I. Minimise mu;
+  only if the re-check below fails, a back-off solve fixes mu a few percent above the optimum and
+  maximises a common margin t (LMI <= -t I, t <= 1). Clarabel's chordal decomposition is off (it
+  split the cones into many more variables and was slower and less robust here). The solution
+  is re-evaluated in floating point; ``margins`` are the smallest ``-lambda_max`` per point over the rate vertices (scaled units).
   ``certified`` means every re-evaluated LMI is negative definite and every P(rho_k) positive
   definite (the solver's own status is reported, but the re-check is the certificate).
 * ``gamma`` reported is the value the certificate holds for (the backed-off one).
@@ -40,6 +51,7 @@ import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -183,6 +195,7 @@ def analyse(
     time_scale_s: float | None = None,
     epsilon: float = 1e-6,
     backoff: float = 0.05,
+    solver_options: dict[str, Any] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> AnalysisResult:
     """Solve the Theorem-1 analysis LMI over a set of frozen closed loops.
@@ -205,6 +218,8 @@ def analyse(
         Time unit of the scaled problem (s); default taubar (or 1 s if taubar is 0).
     epsilon
         Strictness margin of every inequality (scaled units).
+    solver_options
+        Extra keyword arguments for Clarabel through cvxpy (e.g. ``direct_solve_method``).
     backoff
         If > 0, a second solve fixes gamma at (1 + backoff) times the optimum and maximises the
         strictness margin of every LMI (a better-centred certificate); 0 skips it.
@@ -236,7 +251,7 @@ def analyse(
     if float(np.sum(rate * np.abs(dtau))) >= 1.0:
         raise ValueError("the delay may change at >= 1 s/s: the functional needs |dtau/dt| < 1")
     ts = float(time_scale_s) if time_scale_s is not None else (tau_max if tau_max > 0 else 1.0)
-    n, nw, nz = systems[0].n, systems[0].B.shape[1], systems[0].C.shape[0]
+    n, nw = systems[0].n, systems[0].B.shape[1]
 
     sx = _balance(systems, ts)
     sxi = 1.0 / sx
@@ -267,20 +282,19 @@ def analyse(
     off_q, off_r = n_p * ns, (n_p + 1) * ns
     var_g = (n_p + 2) * ns
     nvar = var_g + 1
-    size = 3 * n + nw + nz
-    r1, r2, r3, r4, r5 = 0, n, 2 * n, 2 * n + nw, 2 * n + nw + nz
+    size = 2 * n + nw
+    r1, r2, r3 = 0, n, 2 * n
 
     if progress:
         progress(f"analysis LMI: assembling {kk} LMIs of size {size} ({m} points x {nv} vertices)")
     asm = _Assembler(kk, size, nvar)
     eye = np.broadcast_to(np.eye(n), (kk, n, n))
     ak, adk, bk, ck, cdk, dk = a[pt], ad[pt], b[pt], c[pt], cd[pt], d[pt]
-    a_t, ad_t, b_t = (np.swapaxes(x, 1, 2) for x in (ak, adk, bk))
     # P(rho) terms: weight 1 for P0, rho_hat_i for P_i
     for j in range(n_p):
         w = np.ones(kk) if j == 0 else rho_hat[pt, j - 1]
         asm.add_mvn(eye, ak, off_p[j], sym, r1, r1, w)  # P A
-        asm.add_mvn(a_t, eye, off_p[j], sym, r1, r1, w)  # A' P
+        asm.add_mvn(np.swapaxes(ak, 1, 2), eye, off_p[j], sym, r1, r1, w)  # A' P
         asm.add_mvn(eye, adk, off_p[j], sym, r1, r2, w)  # P Ad
         asm.add_mvn(eye, bk, off_p[j], sym, r1, r3, w)  # P B
         if j > 0:
@@ -292,16 +306,16 @@ def analyse(
     asm.add_mvn(eye, eye, off_r, sym, r1, r1, -1.0)
     asm.add_mvn(eye, eye, off_r, sym, r1, r2, 1.0)
     asm.add_mvn(eye, eye, off_r, sym, r2, r2, -1.0)
-    asm.add_mvn(a_t, eye, off_r, sym, r1, r5, tbar)
-    asm.add_mvn(ad_t, eye, off_r, sym, r2, r5, tbar)
-    asm.add_mvn(b_t, eye, off_r, sym, r3, r5, tbar)
-    asm.add_mvn(eye, eye, off_r, sym, r5, r5, -1.0)
-    # constant blocks and gamma
-    asm.add_const(np.swapaxes(ck, 1, 2), r1, r4)
-    asm.add_const(np.swapaxes(cdk, 1, 2), r2, r4)
-    asm.add_const(np.swapaxes(dk, 1, 2), r3, r4)
-    asm.add_var_diag(var_g, r3, nw, -1.0)
-    asm.add_var_diag(var_g, r4, nz, -1.0)
+    # taubar^2 Psi' R Psi and Gamma' Gamma with Psi = [A Ad B], Gamma = [C Cd D] (Schur
+    # complements of the printed -R and -gamma I blocks, exact because A.. are data here)
+    psi = (ak, adk, bk)
+    gam = (ck, cdk, dk)
+    rows = (r1, r2, r3)
+    for i in range(3):
+        for j in range(i, 3):
+            asm.add_mvn(np.swapaxes(psi[i], 1, 2), psi[j], off_r, sym, rows[i], rows[j], tbar**2)
+            asm.add_const(np.swapaxes(gam[i], 1, 2) @ gam[j], rows[i], rows[j])
+    asm.add_var_diag(var_g, r3, nw, -1.0)  # -gamma^2 I
     fmat = asm.matrix()
     const = asm.const + epsilon * np.eye(size)[None]
 
@@ -320,6 +334,22 @@ def analyse(
     qr.add_mvn(np.stack([np.zeros((n, n)), np.eye(n)]), np.stack([np.eye(n)] * 2), off_r, sym, 0, 0)
     cons.append(cp.PSD(cp.reshape(qr.matrix() @ x, (2, n, n), order="C") - epsilon * np.eye(n)))
     notes: list[str] = []
+    opts = {"chordal_decomposition_enable": False, **(solver_options or {})}
+    pmat = pasm.matrix()
+
+    def _gam(mu: float) -> float:
+        return float(np.sqrt(max(mu, 0.0)))
+
+    def _recheck(xv: Array) -> tuple[bool, Array, Array]:
+        # the certificate is the floating-point re-check, not the solver's word:
+        # "optimal_inaccurate" with every LMI negative definite and every P positive certifies
+        lmi_val = (fmat @ xv).reshape(kk, size, size) + asm.const
+        lmi_val = 0.5 * (lmi_val + np.swapaxes(lmi_val, 1, 2))
+        margins = -np.linalg.eigvalsh(lmi_val)[:, -1].reshape(m, nv).max(axis=1)
+        p_val = (pmat @ xv).reshape(m, n, n)
+        p_min = np.linalg.eigvalsh(0.5 * (p_val + np.swapaxes(p_val, 1, 2)))[:, 0]
+        tol = 1e-10 * max(1.0, float(np.max(np.abs(lmi_val))))
+        return bool(np.all(margins > tol) and np.all(p_min > 0)), margins, p_min
 
     def _solve(problem: cp.Problem) -> str:
         try:
@@ -327,7 +357,7 @@ def analyse(
                 # cvxpy's "no CPP backend" / "may be inaccurate" notes: the status and the
                 # floating-point re-check below say what matters
                 warnings.simplefilter("ignore", UserWarning)
-                problem.solve(solver=cp.CLARABEL)
+                problem.solve(solver=cp.CLARABEL, **opts)
             return str(problem.status)
         except cp.error.SolverError as exc:  # numerical breakdown: not certified, say why
             notes.append(str(exc).splitlines()[0])
@@ -336,15 +366,20 @@ def analyse(
     if progress:
         progress(f"analysis LMI: solving ({nvar} variables, {fmat.nnz} nonzeros) with Clarabel")
     status = _solve(cp.Problem(cp.Minimize(x[var_g]), cons))
-    gamma_opt = float(x.value[var_g]) if x.value is not None else None
-    if backoff > 0.0 and gamma_opt is not None and status in ("optimal", "optimal_inaccurate"):
+    mu_opt = float(x.value[var_g]) if x.value is not None else None
+    if (
+        backoff > 0.0
+        and mu_opt is not None
+        and status in ("optimal", "optimal_inaccurate")
+        and not _recheck(np.asarray(x.value))[0]
+    ):
         # second solve: gamma fixed a little above the optimum, maximise the strictness margin;
         # this moves the certificate off the boundary where the solver's tolerances live
         if progress:
-            progress(f"analysis LMI: back-off solve at gamma = {(1 + backoff) * gamma_opt:.4g}")
+            progress(f"analysis LMI: back-off solve at gamma = {_gam((1 + backoff) * mu_opt):.4g}")
         t = cp.Variable()
         shift = t * np.eye(size)[None]
-        cons2 = [cp.PSD(-lmi - shift), cons[1], cons[2], x[var_g] == (1 + backoff) * gamma_opt]
+        cons2 = [cp.PSD(-lmi - shift), cons[1], cons[2], x[var_g] == (1 + backoff) * mu_opt]
         cons2 += [t <= 1.0]
         x_first = np.array(x.value)
         status2 = _solve(cp.Problem(cp.Maximize(t), cons2))
@@ -353,6 +388,10 @@ def analyse(
             x.value = x_first
         else:
             status = status2
+            notes.append(
+                f"back-off: gamma {_gam(mu_opt):.6g} -> {_gam((1 + backoff) * mu_opt):.6g}, "
+                f"common margin t = {float(t.value):.3g}"
+            )
     elapsed = time.perf_counter() - t_start
     if x.value is None or status not in ("optimal", "optimal_inaccurate"):
         return AnalysisResult(
@@ -367,16 +406,7 @@ def analyse(
             notes,
         )
     xv = np.asarray(x.value)
-    lmi_val = (fmat @ xv).reshape(kk, size, size) + asm.const
-    lmi_val = 0.5 * (lmi_val + np.swapaxes(lmi_val, 1, 2))
-    lam_max = np.linalg.eigvalsh(lmi_val)[:, -1]
-    margins = -lam_max.reshape(m, nv).max(axis=1)
-    p_val = (pasm.matrix() @ xv).reshape(m, n, n)
-    p_min = np.linalg.eigvalsh(0.5 * (p_val + np.swapaxes(p_val, 1, 2)))[:, 0]
-    # the certificate is the floating-point re-check, not the solver's word: "optimal_inaccurate"
-    # with every LMI verified negative definite and every P positive still certifies
-    tol = 1e-10 * max(1.0, float(np.max(np.abs(lmi_val))))
-    certified = bool(np.all(margins > tol)) and bool(np.all(p_min > 0))
+    certified, margins, p_min = _recheck(xv)
     return AnalysisResult(
-        certified, status, float(xv[var_g]), margins, p_min, kk, elapsed, p_dependence, notes
+        certified, status, _gam(float(xv[var_g])), margins, p_min, kk, elapsed, p_dependence, notes
     )
