@@ -40,7 +40,12 @@ Runtime side (what the loop uses)
 sched_tick, target_tick`` (the last two differ from ``tick`` when those frames were lost and the
 values are stale). ``ep.peer_heartbeat`` is ``(tick, state)`` with ``STATE_FINISHED`` when the device
 reached the end of its run (it then closes the link: waits raise :class:`LinkClosedError`).
-``ep.clock`` is the run clock (by default it follows the samples' sim time; pass ``clock=`` to use
+After the last tick keep reading (``poll``) until that FINISHED heartbeat: a lost final command
+is retransmitted-for by the device and answered by the endpoint itself. In lockstep a sample whose
+scheduling/target frames were lost is withheld (``counters.incomplete_ticks``) until the device
+resends the tick. Real-time loops use ``ep.poll(0)`` then ``ep.newest_sample()`` (non-blocking;
+``next_sample()`` takes the oldest). Call ``PtyPair.close_follower()`` once the device process has
+opened the follower, or the leader never sees the device exit. ``ep.clock`` is the run clock (by default it follows the samples' sim time; pass ``clock=`` to use
 another, e.g. the monotonic clock in real-time mode). ``ep.poll(timeout_s)`` processes whatever
 arrived without waiting for a sample.
 
