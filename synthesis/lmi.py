@@ -110,6 +110,8 @@ class Layout:
             Block("Dk", 1, N_Y, False, nb),
             Block("gamma", 1, 1, False, 1),
         ]
+        # per-node performance levels γ_g ≤ γ (the guarantee is γ = max γ_g)
+        self.blocks.append(Block("gnode", 1, 1, False, max(n_nodes, 1)))
         if rate_terms == "bound":
             # node-local bounds Z_{g,i} ⪰ ±∂P̃/∂ρ̂_i (3 per node), see module docstring
             self.blocks.append(Block("Z", N2, N2, True, 3 * n_nodes))
@@ -120,6 +122,24 @@ class Layout:
             off += b.size
         self.nvar = off
         self.by_name = {b.name: b for b in self.blocks}
+
+    def free_mask(self, grid_points: tuple[int, int, int]) -> np.ndarray:
+        """Boolean mask of the identifiable decision entries on a grid.
+
+        The ½ρ̂i² coefficient (basis term 4 + i) of a parameter-dependent block other than P̃ is
+        fixed to zero when axis i has only two nodes.
+        """
+        mask = np.ones(self.nvar, dtype=bool)
+        for b in self.blocks:
+            # P̃ keeps them: its derivative P_i1 + ρ̂_i P_i2 still differs between the two nodes
+            if b.nb != basis.N_BASIS or b.name in ("P", "Z", "gnode"):
+                continue
+            per = b.size // b.nb
+            for i in range(3):
+                if grid_points[i] <= 2:
+                    start = self.offsets[b.name] + (4 + i) * per
+                    mask[start : start + per] = False
+        return mask
 
     def unpack(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Decision vectors (J, nvar) -> name -> (J, nb, rows, cols) coefficient arrays."""
@@ -267,7 +287,7 @@ def lmi_blocks(prob: Problem, vals: dict[str, np.ndarray]) -> dict[str, np.ndarr
         "dP": dP,
         "Q": Q,
         "R": R,
-        "gamma": vals["gamma"][:, 0, 0, 0],
+        "gamma": vals["gnode"][:, :, 0, 0],
     }
 
 
@@ -363,7 +383,7 @@ def synthesis_lmi(prob: Problem, vals: dict[str, np.ndarray]) -> np.ndarray:
 
     j, g = blk["V"].shape[:2]
     nv = verts.shape[0]
-    gam = np.broadcast_to(blk["gamma"][:, None, None], (j, g, nv))
+    gam = np.broadcast_to(blk["gamma"][:, :, None], (j, g, nv))
     td = np.broadcast_to(taudot[None, None, :], (j, g, nv))
     return assemble(
         e(blk["V"]),
@@ -445,12 +465,22 @@ class SolveResult:
     lmi_size: int
 
 
+#: Clarabel tolerances: slightly looser than its 1e-8 defaults, which end in "AlmostSolved" here;
+#: every LMI keeps the margin ``epsilon`` anyway and verification re-checks independently.
+DEFAULT_SOLVER_OPTS: dict = {"tol_gap_abs": 1e-7, "tol_gap_rel": 1e-6, "tol_feas": 1e-7}
+
+
 def _run(problem, solver_opts: dict) -> tuple[str, float, int | None]:
+    import warnings
+
     import cvxpy as cp
 
     t0 = time.perf_counter()
     try:
-        problem.solve(solver=cp.CLARABEL, **solver_opts)
+        with warnings.catch_warnings():
+            # batched (3-D) PSD expressions use cvxpy's SCIPY canonicalisation backend: expected
+            warnings.filterwarnings("ignore", message=".*dimension greater than 2.*")
+            problem.solve(solver=cp.CLARABEL, **solver_opts)
     except cp.error.SolverError as exc:  # numerical failure: report, do not crash
         return f"solver_error: {exc}", time.perf_counter() - t0, None
     its = None
@@ -470,7 +500,7 @@ def solve(prob: Problem, solver_opts: dict | None = None, verbose: bool = False)
     """
     import cvxpy as cp
 
-    opts = {"verbose": verbose}
+    opts = {"verbose": verbose, **DEFAULT_SOLVER_OPTS}
     if solver_opts:
         opts.update(solver_opts)
     t0 = time.perf_counter()
@@ -481,17 +511,27 @@ def solve(prob: Problem, solver_opts: dict | None = None, verbose: bool = False)
     m = shp1[-1]
     n1 = int(np.prod(shp1[:-2]))
     n2 = int(np.prod(shp2[:-2]))
-    x = cp.Variable(lay.nvar)
+    # Quadratic basis terms of an axis with only two nodes equal a constant on the grid (ρ̂² = 1):
+    # they are not identifiable and make the optimal face non-unique, so they are fixed to zero.
+    free = lay.free_mask(prob.cfg.grid_points)
+    E = sp.identity(lay.nvar, format="csr")[:, np.flatnonzero(free)]
+    xf = cp.Variable(int(free.sum()))
+    x = E @ xf
     eye1 = np.tile(np.eye(m).reshape(-1), n1)
     eye2 = np.tile(np.eye(N2).reshape(-1), n2)
     S1 = cp.reshape(-(A1 @ x) - b1 - eps * eye1, (n1, m, m), order="C")
     S2 = cp.reshape(A2 @ x + b2 - eps * eye2, (n2, N2, N2), order="C")
     gidx = lay.offsets["gamma"]
-    cons = [S1 >> 0, S2 >> 0]
-    problem = cp.Problem(cp.Minimize(x[gidx]), cons)
+    go = lay.offsets["gnode"]
+    gn = x[go : go + lay.by_name["gnode"].nb]
+    mu = prob.cfg.solver.mean_gamma_weight
+    # with μ = 0 the node levels are tied to γ (free γ_g below γ only blur the optimal face)
+    cons = [S1 >> 0, S2 >> 0, gn <= x[gidx] if mu > 0 else gn == x[gidx]]
+    objective = x[gidx] + mu * cp.sum(gn) / gn.shape[0] if mu > 0 else x[gidx]
+    problem = cp.Problem(cp.Minimize(objective), cons)
     build = time.perf_counter() - t0
     status, t_solve, its = _run(problem, opts)
-    xval = None if x.value is None else np.array(x.value, dtype=float)
+    xval = None if xf.value is None else E @ np.array(xf.value, dtype=float)
     gamma = float(xval[gidx]) if xval is not None else float("nan")
     if xval is not None and status == "optimal" and prob.cfg.solver.backoff > 0.0:
         # Back-off: accept γ ≤ (1+β)γ* and minimise the size of X, Y (better-conditioned
@@ -507,8 +547,8 @@ def solve(prob: Problem, solver_opts: dict | None = None, verbose: bool = False)
         p2 = cp.Problem(cp.Minimize(t), cons2)
         st2, t2, its2 = _run(p2, opts)
         t_solve += t2
-        if st2 == "optimal" and x.value is not None:
-            xval = np.array(x.value, dtype=float)
+        if st2 == "optimal" and xf.value is not None:
+            xval = E @ np.array(xf.value, dtype=float)
             gamma = float(xval[gidx])
             its = (its or 0) + (its2 or 0)
         else:
@@ -567,3 +607,80 @@ def max_eig(prob: Problem, x: np.ndarray) -> tuple[float, float]:
     F = synthesis_lmi(prob, vals)
     Pm = positivity(prob, vals)
     return float(np.linalg.eigvalsh(F).max()), float(np.linalg.eigvalsh(Pm).min())
+
+
+def closed_loop_analysis(
+    prob: Problem, coefs: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], g: int, gamma: float
+) -> np.ndarray:
+    """The 5-block *analysis* matrix of the closed loop (plant + controller) at node ``g``.
+
+    Independent of the change of variables: the closed-loop matrices are built from the plant and
+    the controller ``ctrl`` (scaled coordinates, as from :func:`synthesis.reconstruct.reconstruct_scaled`),
+    and the certificate is carried back by Π1 = [[Y, I], [I, 0]] (M = I):
+    ``P = Π1⁻ᵀP̃Π1⁻¹`` (likewise Q, R, Ṗ) and the slack ``𝒳 = Π2 Π1⁻¹`` with Π2 = [[I, X], [0, Nᵀ]].
+    Ṗ is taken at the 2³ true rate vertices (not the Z bound), so this is the paper's condition.
+
+    Returns
+    -------
+    numpy.ndarray
+        (8, m, m), one matrix per rate vertex; the closed loop is certified at the node if all are
+        negative definite.
+    """
+    from synthesis import basis as _basis
+
+    rh = prob.rho_hat[g : g + 1]
+    p = {k: v[g] for k, v in prob.plant.items()}
+    n = N_STATE
+    X = _basis.evaluate(coefs["X"], rh)[0]
+    Y = _basis.evaluate(coefs["Y"], rh)[0]
+    Pt = _basis.evaluate(coefs["P"], rh)[0]
+    dW = prob.dweights[g]  # (3, nb)
+    dPt = np.einsum("ib,brc->irc", dW, coefs["P"])
+    Qt, Rt = coefs["Q"][0], coefs["R"][0]
+    Ak, Adk, Bk = ctrl["Ak"], ctrl["Adk"], ctrl["Bk"]
+    Ck, Cdk, Dk = ctrl["Ck"], ctrl["Cdk"], ctrl["Dk"]
+    A, Ad, B1, B2 = p["A"], p["Ad"], p["B1"], p["B2"]
+    C1, C1d, C2, C2d = p["C1"], p["C1d"], p["C2"], p["C2d"]
+    D11, D12, D21 = p["D11"], p["D12"], p["D21"]
+    Acl = np.block([[A + B2 @ Dk @ C2, B2 @ Ck], [Bk @ C2, Ak]])
+    Adcl = np.block([[Ad + B2 @ Dk @ C2d, B2 @ Cdk], [Bk @ C2d, Adk]])
+    Bcl = np.vstack([B1 + B2 @ Dk @ D21, Bk @ D21])
+    Ccl = np.hstack([C1 + D12 @ Dk @ C2, D12 @ Ck])
+    Cdcl = np.hstack([C1d + D12 @ Dk @ C2d, D12 @ Cdk])
+    Dcl = D11 + D12 @ Dk @ D21
+    eye, zero = np.eye(n), np.zeros((n, n))
+    N = eye - X @ Y
+    Pi1 = np.block([[Y, eye], [eye, zero]])
+    Pi2 = np.block([[eye, X], [zero, N.T]])
+    Pi1i = np.linalg.inv(Pi1)
+    Xcl = Pi2 @ Pi1i
+    Xcl = 0.5 * (Xcl + Xcl.T)
+
+    def back(m: np.ndarray) -> np.ndarray:
+        return Pi1i.T @ m @ Pi1i
+
+    gam = float(gamma)
+    out = []
+    for s in prob.vertices:
+        pdot = back(np.einsum("i,irc->rc", s * prob.nu_hat, dPt))
+        out.append(
+            assemble(
+                Xcl,
+                back(Pt),
+                pdot,
+                back(Qt),
+                back(Rt),
+                Xcl @ Acl,
+                Xcl @ Adcl,
+                Xcl @ Bcl,
+                Ccl,
+                Cdcl,
+                Dcl,
+                np.array(gam),
+                np.array(s[2] * prob.nu_tau),
+                prob.tau_bar_hat,
+                prob.cfg.solver.lambda2,
+                prob.cfg.solver.lambda3,
+            )
+        )
+    return np.array(out)

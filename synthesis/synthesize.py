@@ -49,7 +49,10 @@ def solve_design(prob: lmi.Problem, solver_opts: dict | None = None) -> lmi.Solv
 def to_artifact(
     prob: lmi.Problem, res: lmi.SolveResult, extra: dict | None = None
 ) -> ControllerArtifact:
-    """Stage 3: coefficients + controller at the grid nodes + metadata -> artifact."""
+    """Stage 3: coefficients + controller at the grid nodes + metadata -> artifact.
+
+    Wall-clock figures are deliberately not stored, so the same command reproduces the same bytes.
+    """
     if res.x is None:
         raise SynthesisError(f"no solution to package (status {res.status})")
     cfg = prob.cfg
@@ -82,8 +85,6 @@ def to_artifact(
         "solver": {
             "name": "CLARABEL",
             "status": res.status,
-            "solve_time_s": round(res.solve_time_s, 3),
-            "build_time_s": round(res.build_time_s, 3),
             "iterations": res.iterations,
             "n_lmi": res.n_lmi,
             "lmi_size": res.lmi_size,

@@ -1,0 +1,162 @@
+"""``pressor synth``: synthesize, verify and write one controller artifact.
+
+::
+
+    pressor synth [--config FILE.toml] [--grid a,b,c] [--out PATH] [--lambda-search]
+                  [--lambda2 L2] [--lambda3 L3] [--backoff B] [--no-verify] [--quiet]
+
+Prints progress per λ point and per solve, then γ, solve time, solver status and the verification
+verdict (from :func:`synthesis.verify.verify_artifact` when that module is installed; the result
+is stored in the artifact's ``verification`` field). Exit codes: 0 ok, 1 the synthesis finished but
+the solver or the verification failed, 2 bad usage or a bad config value (one line naming file,
+field, value and allowed range).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import time
+from pathlib import Path
+
+DEFAULT_OUT = "design.npz"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="pressor synth",
+        description="Delay-dependent LPV output-feedback synthesis (Theorem 3, cvxpy + Clarabel).",
+    )
+    p.add_argument("--config", help="design TOML (default: the shipped default design)")
+    p.add_argument("--grid", help="synthesis grid nK,nT,ntau (each 2..15); overrides the config")
+    p.add_argument("--out", default=DEFAULT_OUT, help=f"artifact path (default {DEFAULT_OUT})")
+    p.add_argument(
+        "--lambda-search", action="store_true", help="line search over (lambda2, lambda3)"
+    )
+    p.add_argument("--lambda2", type=float, help="fixed lambda2 (overrides the config)")
+    p.add_argument("--lambda3", type=float, help="fixed lambda3 (overrides the config)")
+    p.add_argument("--backoff", type=float, help="accept gamma up to (1+B) gamma* (0..1)")
+    p.add_argument("--no-verify", action="store_true", help="skip the independent verification")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    return p
+
+
+def _parse_grid(text: str) -> tuple[int, int, int] | None:
+    parts = text.split(",")
+    if len(parts) != 3:
+        return None
+    try:
+        vals = tuple(int(v) for v in parts)
+    except ValueError:
+        return None
+    if not all(2 <= v <= 15 for v in vals):
+        return None
+    return vals  # type: ignore[return-value]
+
+
+def main(command: str, argv: list[str]) -> int:
+    """Entry point for ``pressor synth`` (see module docstring for exit codes)."""
+    parser = _parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return 0 if exc.code == 0 else 2
+
+    from dataclasses import replace
+
+    from synthesis.artifact import save_artifact, with_verification
+    from synthesis.config import ConfigError, load_config
+    from synthesis.synthesize import SynthesisError, synthesize
+
+    def say(msg: str) -> None:
+        if not args.quiet:
+            print(f"[synth {time.perf_counter() - t0:6.1f} s] {msg}", flush=True)
+
+    t0 = time.perf_counter()
+    try:
+        cfg = load_config(args.config)
+        if args.grid is not None:
+            g = _parse_grid(args.grid)
+            if g is None:
+                print(
+                    f"pressor synth: --grid: field 'grid' = {args.grid!r}: must be three integers "
+                    "nK,nT,ntau each in [2, 15]",
+                    file=sys.stderr,
+                )
+                return 2
+            cfg = cfg.with_grid(g)
+        if args.lambda2 is not None or args.lambda3 is not None:
+            cfg = cfg.with_lambdas(
+                cfg.solver.lambda2 if args.lambda2 is None else args.lambda2,
+                cfg.solver.lambda3 if args.lambda3 is None else args.lambda3,
+            )
+        if args.backoff is not None:
+            if not 0.0 <= args.backoff <= 1.0:
+                print(
+                    f"pressor synth: --backoff: field 'solver.backoff' = {args.backoff!r}: must be in [0, 1]",
+                    file=sys.stderr,
+                )
+                return 2
+            cfg = replace(cfg, solver=replace(cfg.solver, backoff=args.backoff))
+    except ConfigError as exc:
+        print(f"pressor synth: {exc}", file=sys.stderr)
+        return 2
+
+    out = Path(args.out)
+    say(f"config {cfg.source}; grid {cfg.grid_points}; box {cfg.model.box.tolist()}")
+    extra: dict = {}
+    if args.lambda_search:
+        from synthesis.line_search import search
+
+        best, pts = search(cfg, progress=say)
+        extra["line_search"] = [
+            {"lambda2": p.lambda2, "lambda3": p.lambda3, "status": p.status, "gamma": p.gamma}
+            for p in pts
+        ]
+        if best is None:
+            print(
+                "pressor synth: no (lambda2, lambda3) candidate reached 'optimal'", file=sys.stderr
+            )
+            return 1
+        say(f"lambda search: best lambda2={best[0]:g}, lambda3={best[1]:g}")
+        cfg = cfg.with_lambdas(*best)
+    try:
+        res = synthesize(cfg, progress=say, extra_meta=extra or None)
+    except SynthesisError as exc:
+        print(f"pressor synth: synthesis failed: {exc}", file=sys.stderr)
+        return 1
+    art = res.artifact
+    assert art is not None
+    print(f"gamma            {res.result.gamma:.6g}")
+    print(f"solver status    {res.result.status} ({res.result.iterations} iterations)")
+    print(f"build / solve    {res.result.build_time_s:.2f} s / {res.result.solve_time_s:.1f} s")
+    verdict_code = 0
+    if args.no_verify:
+        print("verification     skipped (--no-verify)")
+    else:
+        try:
+            verify = importlib.import_module("synthesis.verify")
+        except ModuleNotFoundError:
+            verify = None
+        if verify is None or not hasattr(verify, "verify_artifact"):
+            print(
+                "verification     not available (synthesis.verify is not installed yet); artifact unverified"
+            )
+        else:
+            say("verify: independent checks ...")
+            report = verify.verify_artifact(art, density=2, progress=say)
+            art = with_verification(art, report.to_dict())
+            print(f"verification     {'PASSED' if report.passed else 'FAILED'}")
+            verdict_code = 0 if report.passed else 1
+    try:
+        save_artifact(art, out)
+    except OSError as exc:
+        print(
+            f"pressor synth: --out: field 'out' = {str(out)!r}: cannot write ({exc.strerror})",
+            file=sys.stderr,
+        )
+        return 2
+    print(f"artifact         {out} (sha256 {art.sha256})")
+    print(f"wall time        {time.perf_counter() - t0:.1f} s")
+    return verdict_code

@@ -1,0 +1,51 @@
+"""``pressor synth``: exit codes, one-line errors, a real tiny run that writes a loadable artifact."""
+
+from __future__ import annotations
+
+import pytest
+
+from synthesis import cli
+from synthesis.artifact import load_artifact
+
+
+def test_bad_config_value_exits_2_with_one_line_naming_file_and_field(tmp_path, capsys):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text("[rates]\ntau_s_per_s = 2.0\n")
+    assert cli.main("synth", ["--config", str(cfg), "--out", str(tmp_path / "a.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert str(cfg) in err and "rates.tau_s_per_s" in err and "2.0" in err
+    assert not (tmp_path / "a.npz").exists()
+
+
+def test_missing_config_file_exits_2(tmp_path, capsys):
+    assert cli.main("synth", ["--config", str(tmp_path / "none.toml")]) == 2
+    assert "file not found" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("grid", ["3,3", "1,3,3", "a,b,c", "3,3,99"])
+def test_bad_grid_exits_2(grid, tmp_path, capsys):
+    assert cli.main("synth", ["--grid", grid, "--out", str(tmp_path / "a.npz")]) == 2
+    assert "grid" in capsys.readouterr().err
+
+
+def test_unknown_option_exits_2(capsys):
+    assert cli.main("synth", ["--no-such-option"]) == 2
+
+
+def test_backoff_out_of_range_exits_2(tmp_path, capsys):
+    assert cli.main("synth", ["--backoff", "3", "--out", str(tmp_path / "a.npz")]) == 2
+    assert "solver.backoff" in capsys.readouterr().err
+
+
+def test_tiny_synthesis_writes_exactly_the_requested_artifact(tmp_path, capsys):
+    out = tmp_path / "deep" / "tiny.npz"
+    code = cli.main("synth", ["--grid", "2,2,2", "--out", str(out), "--no-verify"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    art = load_artifact(out)
+    assert art.metadata["solver"]["status"] == "optimal"
+    assert [g.size for g in art.grid] == [2, 2, 2]
+    assert f"{art.gamma:.6g}" in text and "solver status" in text and "optimal" in text
+    assert "[synth" in text  # progress lines
+    assert sorted(p.name for p in out.parent.iterdir()) == ["tiny.npz"]
