@@ -163,9 +163,11 @@ def rightmost_roots(
     count
         How many rightmost roots to return (>= 1).
     degree
-        Chebyshev degree N of the discretisation; default ``ceil(3 (|A| + |Ad|) tau) + 10``
-        (spectral norms) clipped to [20, 60]: the rightmost roots converge spectrally fast and
-        roots far to the left are not needed (Newton then polishes the survivors).
+        Chebyshev degree N of the discretisation; default ``ceil(3 |Ad| tau) + 10`` (spectral
+        norm) clipped to [20, 40]. The delayed coupling sets how oscillatory the rightmost
+        roots are; |A| is left out on purpose: a fast, well-damped mode of A (e.g. a controller
+        pole at -70 1/s) lies far left and needs no resolution, and counting it made the
+        discretisation several times larger for nothing. Newton polishes the survivors.
 
     Returns
     -------
@@ -189,8 +191,8 @@ def rightmost_roots(
         roots = eig[order]
         return DelayRoots(roots, np.zeros(len(roots)), np.ones(len(roots), dtype=bool))
     if degree is None:
-        scale = float(np.linalg.norm(a, 2) + np.linalg.norm(ad, 2))
-        degree = int(min(60, max(20, np.ceil(3.0 * scale * tau) + 10)))
+        scale = float(np.linalg.norm(ad, 2))
+        degree = int(min(40, max(20, np.ceil(3.0 * scale * tau) + 10)))
     nodes, d = chebyshev_differentiation(degree)
     d = d * (2.0 / tau)  # theta = tau (x - 1) / 2 maps [-1, 1] onto [-tau, 0]
     size = n * (degree + 1)

@@ -1,0 +1,133 @@
+"""``pressor verify [ARTIFACT] [--json FILE] [--density N] [--p-dependence affine|constant]``.
+
+Runs :func:`synthesis.verify.verify_artifact` on ARTIFACT (default: the shipped
+``synthesis/data/default_design.npz``), prints one progress line per stage and a summary, and
+optionally writes the full report as JSON (``nominal_step.lpv`` / ``nominal_step.pi`` carry the
+DESIGN.md §3 metric names). Exit codes: 0 every check passed, 1 a check failed, 2 bad input (a
+missing, unreadable or corrupt artifact, a bad option value) with one line naming it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+DEFAULT_ARTIFACT = Path(__file__).resolve().parent / "data" / "default_design.npz"
+
+
+def _parser(command: str) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=f"pressor {command}",
+        description="Independent checks of a controller artifact on a grid denser than the "
+        "synthesis grid: analysis LMI, frozen delay-system stability, nominal step vs PI.",
+    )
+    p.add_argument("artifact", nargs="?", default=str(DEFAULT_ARTIFACT), help="artifact .npz")
+    p.add_argument("--json", metavar="FILE", help="write the full report as JSON to FILE")
+    p.add_argument(
+        "--density",
+        type=int,
+        default=2,
+        help="subdivisions of each synthesis-grid cell per axis (>= 2, default 2)",
+    )
+    p.add_argument(
+        "--p-dependence",
+        choices=("affine", "constant"),
+        default="affine",
+        help="Lyapunov matrix of the analysis LMI (default affine in rho)",
+    )
+    return p
+
+
+def _fmt(value: object, unit: str = "") -> str:
+    if value is None:
+        return "n/a"
+    if isinstance(value, float):
+        return f"{value:.4g}{unit}"
+    return f"{value}{unit}"
+
+
+def main(command: str, argv: list[str]) -> int:
+    """Entry point used by the ``pressor`` dispatcher; returns the exit code."""
+    try:
+        args = _parser(command).parse_args(argv)
+    except SystemExit as exc:  # argparse: --help -> 0, bad usage -> 2
+        return int(exc.code or 0)
+    if args.density < 2 or args.density > 16:
+        print(
+            f"pressor verify: --density {args.density} outside the allowed range 2..16",
+            file=sys.stderr,
+        )
+        return 2
+    path = Path(args.artifact)
+    if not path.is_file():
+        print(f"pressor verify: artifact {path}: file not found", file=sys.stderr)
+        return 2
+    if args.json:
+        out_dir = Path(args.json).resolve().parent
+        if not out_dir.is_dir():
+            print(
+                f"pressor verify: --json {args.json}: directory {out_dir} does not exist",
+                file=sys.stderr,
+            )
+            return 2
+
+    from synthesis.artifact import ArtifactError, load_artifact
+    from synthesis.verify import verify_artifact
+
+    try:
+        artifact = load_artifact(path)
+    except ArtifactError as exc:
+        print(f"pressor verify: {exc}", file=sys.stderr)
+        return 2
+    except (OSError, ValueError) as exc:
+        print(f"pressor verify: artifact {path}: unreadable ({exc})", file=sys.stderr)
+        return 2
+
+    t0 = time.perf_counter()
+
+    def progress(msg: str) -> None:
+        print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)
+
+    print(f"verifying {path} (sha256 {str(getattr(artifact, 'sha256', ''))[:16]}...)", flush=True)
+    report = verify_artifact(
+        artifact, density=args.density, progress=progress, p_dependence=args.p_dependence
+    )
+    d = report.to_dict()
+    lmi, stab, step, claim = (
+        d["analysis_lmi"],
+        d["delay_stability"],
+        d["nominal_step"],
+        d["paper_claim"],
+    )
+    ok = {True: "PASS", False: "FAIL"}
+    print(
+        f"(a) analysis LMI      {ok[lmi['certified']]}  gamma {_fmt(lmi['gamma'])} "
+        f"(synthesis {_fmt(lmi['synthesis_gamma'])}), {lmi['n_lmis']} LMIs, "
+        f"status {lmi['status']}, failed points {lmi['n_failed_points']}"
+    )
+    print(
+        f"(b) delay stability   {ok[stab['stable']]}  max Re(s) "
+        f"{_fmt(stab['max_real_part_per_s'], ' 1/s')} at rho {stab['worst_rho']}"
+    )
+    for name in ("lpv", "pi"):
+        m = step[name]
+        print(
+            f"(c) nominal step {name.upper():3s}  overshoot {_fmt(m['overshoot_pct'], ' %')}, "
+            f"rise {_fmt(m['rise_time_s'], ' s')}, settling {_fmt(m['settling_time_s'], ' s')}, "
+            f"max rate {_fmt(m['max_rate_ml_h'], ' ml/h')}"
+        )
+    print(
+        f"paper claim (LPV overshoot < 1 %, settling < 200 s): "
+        f"{'holds' if claim['holds'] else 'does not hold'}"
+    )
+    print(f"verification {ok[report.passed]}")
+    if args.json:
+        try:
+            Path(args.json).write_text(json.dumps(d, indent=2) + "\n")
+        except OSError as exc:
+            print(f"pressor verify: --json {args.json}: cannot write ({exc})", file=sys.stderr)
+            return 2
+    return 0 if report.passed else 1
