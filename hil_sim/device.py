@@ -19,6 +19,15 @@ Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:
 the command answering it is applied if it arrived before the next release, otherwise the pump keeps
 the previous rate (counted as a timeout).
 
+Faults (``--fault KIND[:ARGS]``, repeatable; see ``pressor faults`` and :mod:`runtime.faults`):
+sensor, pump and scheduling faults are injected in the world (:mod:`hil_sim.faults`); byte-level
+link faults by a wrapper of the port; ``link-stall`` / ``link-disconnect`` by this loop: during
+the window the device keeps simulating (the pump holds its last rate until its own watchdog trips)
+but sends nothing and waits for nothing, so the runtime sees a jump in sim time and runs its
+watchdogs over the silent ticks on its virtual clock. A disconnect also cuts the burst in flight
+mid-frame, loses what was queued or received, and reconnects as a new session (hello, sequence
+numbers from 0). The runtime learns of a fault only through what arrives on the link.
+
 Sim time comes from the device. The run clock used for signing timestamps and the .tlog is the
 world's sim time, so a lockstep run is byte-for-byte reproducible.
 
@@ -30,9 +39,11 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 #: default wall-clock timeouts (s)
@@ -76,6 +87,13 @@ def _parser(command: str) -> argparse.ArgumentParser:
     p.add_argument(
         "--handshake-timeout", type=float, default=HANDSHAKE_TIMEOUT_S, help="s to wait for hello"
     )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KIND[:ARGS]",
+        help="inject a fault (repeatable); 'pressor faults' lists kinds, arguments and defaults",
+    )
     return p
 
 
@@ -96,7 +114,8 @@ def main(command: str, argv: list[str]) -> int:
         _check_range("--patient-seed", args.patient_seed, 0, 2**32 - 1, "", lo_open=False)
         for opt in ("retransmit", "link_timeout", "handshake_timeout"):
             _check_range(f"--{opt.replace('_', '-')}", getattr(args, opt), 0.0, 3600.0, "s", True)
-        world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate)
+        faults = _parse_faults(args.fault)
+        world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate, faults)
         signing = _load_signing(args.signing_key)
     except _UsageError as exc:
         print(f"pressor {command}: {exc}", file=sys.stderr)
@@ -110,9 +129,16 @@ def main(command: str, argv: list[str]) -> int:
     except Exception as exc:  # pyserial raises SerialException / ValueError for bad URLs
         print(f"pressor {command}: --port: cannot open {args.port!r}: {exc}", file=sys.stderr)
         return 2
-    tlog = TlogWriter(args.tlog) if args.tlog else None
+    from hil_sim.faults import LinkFaultPort, LinkFaults
+
+    link_faults = LinkFaults(world.fault_specs, world.sample_period_s)
+    if link_faults.bytewise or link_faults.down:
+        port = LinkFaultPort(port, link_faults, lambda: world.tick)
+    tlog_tmp = _tmp_path(args.tlog) if args.tlog else None
+    tlog = TlogWriter(tlog_tmp) if tlog_tmp else None
     clock = ManualClock()
     ep = LinkEndpoint(port, "device", signing=signing, clock=clock, tlog=tlog)
+    ok = False
     try:
         result = run_device(
             ep,
@@ -123,9 +149,12 @@ def main(command: str, argv: list[str]) -> int:
             retransmit_s=args.retransmit,
             link_timeout_s=args.link_timeout,
             handshake_timeout_s=args.handshake_timeout,
+            link_faults=link_faults,
         )
+        ok = True
     except LinkClosedError:
         result = DeviceResult(world.tick, "runtime closed the link", ep.counters.as_dict())
+        ok = True
     except LinkError as exc:
         print(f"pressor {command}: {exc}", file=sys.stderr)
         return 1
@@ -133,16 +162,35 @@ def main(command: str, argv: list[str]) -> int:
         ep.close()
         if tlog is not None:
             tlog.close()
+            # temp file + rename: a failed run never clobbers an earlier .tlog
+            if ok:
+                os.replace(tlog_tmp, args.tlog)
+            else:
+                Path(tlog_tmp).unlink(missing_ok=True)
     print(f"pressor {command}: {result.ended} after {result.ticks} ticks", file=sys.stderr)
     return 0 if result.ended in ("completed", "runtime closed the link") else 1
 
 
-def _make_world(scenario: str, seed: int, period_s: float) -> Any:
+def _tmp_path(path: str) -> str:
+    p = Path(path)
+    return str(p.with_name(f".{p.name}.{os.getpid()}.tmp"))
+
+
+def _parse_faults(texts: list[str]) -> tuple:
+    from runtime.faults import FaultSpecError, parse_faults
+
+    try:
+        return tuple(parse_faults(texts))
+    except FaultSpecError as exc:
+        raise _UsageError(str(exc)) from exc
+
+
+def _make_world(scenario: str, seed: int, period_s: float, faults: tuple = ()) -> Any:
     from hil_sim.scenario import ScenarioError
     from hil_sim.world import World
 
     try:
-        return World(scenario, seed, period_s)
+        return World(scenario, seed, period_s, faults=faults)
     except ScenarioError as exc:
         raise _UsageError(str(exc)) from exc
     except ValueError as exc:
@@ -172,6 +220,7 @@ def run_device(
     retransmit_s: float = RETRANSMIT_S,
     link_timeout_s: float = LINK_TIMEOUT_S,
     handshake_timeout_s: float = HANDSHAKE_TIMEOUT_S,
+    link_faults: Any = None,
 ) -> DeviceResult:
     """Run ``world`` as the device end of the link ``ep`` (handshake included).
 
@@ -189,6 +238,9 @@ def run_device(
         Wall-clock mode instead of lockstep.
     retransmit_s, link_timeout_s, handshake_timeout_s
         Wall-clock timeouts (s), see the module docstring.
+    link_faults
+        :class:`hil_sim.faults.LinkFaults` whose stalls/disconnects this loop plays (the
+        byte-level ones live in the port wrapper).
 
     Returns
     -------
@@ -228,9 +280,20 @@ def run_device(
     send_obs, wait_cmd, send_status = ep.send_observation, ep.wait_for_command, ep.send_pump_status
     t0 = time.monotonic()
     rate = 0.0
+    down = link_faults.link_down if link_faults is not None and link_faults.down else None
     for k in range(n):
         clock.t = world.sim_time_s
         obs = observe()
+        if down is not None and _link_down_tick(ep, world, link_faults, k, obs, hello):
+            if realtime:
+                _sleep_until(ep, t0 + (k + 1) * ts)
+            status = advance()  # no command arrives: the pump keeps its rate and its watchdog
+            clock.t = world.sim_time_s
+            if link_faults.link_down(k + 1) is None:  # leaves with the first tick after the gap
+                send_status(
+                    status.tick, status.delivered_ml_h, status.volume_ml, status.alarms, flush=False
+                )
+            continue
         if k % hb_every == 0:
             ep.send_heartbeat(k, STATE_RUNNING, flush=False)
         if realtime:
@@ -261,6 +324,29 @@ def run_device(
         _sleep_until(ep, t0 + n * ts)
     ep.send_heartbeat(n, STATE_FINISHED)
     return DeviceResult(n, "completed", ep.counters.as_dict())
+
+
+def _link_down_tick(ep: Any, world: Any, faults: Any, k: int, obs: Any, hello: Any) -> bool:
+    """Play tick ``k`` of a stall/disconnect; return True if the link is down at ``k``.
+
+    On the first tick of a window what is queued is lost (a disconnect cuts the burst in flight
+    mid-frame); on the first tick after a disconnect the device reconnects as a new session.
+    """
+    spec = faults.link_down(k)
+    ended = faults.ends_at(k)
+    if spec is None:
+        if ended is not None and ended.kind == "link-disconnect":
+            ep.reset_session()  # what arrived while unplugged is gone; sequence from 0
+            ep.send_hello(hello, flush=False)
+        return False
+    if faults.starts_at(k) is spec:
+        if spec.kind == "link-disconnect" and hasattr(ep.port, "cut_next_write"):
+            ep.send_observation(obs, flush=False)
+            ep.port.cut_next_write = True
+            ep.flush()
+        else:
+            ep.discard_queued()  # the queued pump status never leaves
+    return True
 
 
 def _sleep_until(ep: Any, deadline: float) -> None:

@@ -11,6 +11,14 @@ alarms and has its own watchdog:
 - ``ALARM_INVALID_COMMAND``: the last command was not finite (ignored; does not feed the watchdog).
 - ``ALARM_OUT_OF_RANGE``: the last command was outside [0, max] and was clamped.
 
+Injected faults (``--fault pump-*``, set per tick by the world through :meth:`Pump.inject`):
+occlusion (nothing flows, ``ALARM_OCCLUSION``), empty reservoir (nothing flows,
+``ALARM_RESERVOIR_EMPTY`` until a new syringe at the end of the window), a delivery factor
+(delivered = factor × set rate; ``delivered_ml_h`` reports the measured delivery) and
+:meth:`Pump.feed_watchdog` for a pump that acknowledges commands without applying them.
+
+The alarm bit values are the link protocol's (:mod:`runtime.faults`), one definition for both ends.
+
 The delivered rate over a step may change inside it (latency not a multiple of the step, reservoir
 running dry): :meth:`Pump.advance` returns the exact mean rate over the step, which is what the
 patient's exact delay buffer consumes.
@@ -21,11 +29,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-ALARM_OCCLUSION = 1
-ALARM_RESERVOIR_EMPTY = 2
-ALARM_WATCHDOG = 4
-ALARM_INVALID_COMMAND = 8
-ALARM_OUT_OF_RANGE = 16
+from runtime.faults import PUMP_ALARM_INVALID_COMMAND as ALARM_INVALID_COMMAND
+from runtime.faults import PUMP_ALARM_OCCLUSION as ALARM_OCCLUSION
+from runtime.faults import PUMP_ALARM_OUT_OF_RANGE as ALARM_OUT_OF_RANGE
+from runtime.faults import PUMP_ALARM_RESERVOIR_EMPTY as ALARM_RESERVOIR_EMPTY
+from runtime.faults import PUMP_ALARM_WATCHDOG as ALARM_WATCHDOG
 
 
 @dataclass(frozen=True)
@@ -90,6 +98,20 @@ class Pump:
         self._pending: list[tuple[float, float]] = []  # (effective time s, rate ml/h)
         self._last_valid_s = 0.0
         self._watchdog = False
+        self._dry = False  # the real reservoir ran out (never refilled)
+        self._inj_occluded = False
+        self._inj_empty = False
+        self._inj_factor = 1.0
+
+    def inject(self, occluded: bool, empty: bool, factor: float) -> None:
+        """Set the injected fault state for the next :meth:`advance` (see the module docstring)."""
+        self._inj_occluded = occluded
+        self._inj_empty = empty
+        self._inj_factor = factor
+
+    def feed_watchdog(self) -> None:
+        """A command was received but not applied (injected ``pump-ignore``)."""
+        self._last_valid_s = self.time_s
 
     def command(self, rate_ml_h: float) -> float:
         """Receive a command at the current time; return the rate it will set (ml/h).
@@ -120,6 +142,8 @@ class Pump:
 
     def _flowing(self, t_s: float, rate: float) -> float:
         cfg = self.config
+        if self._inj_occluded:
+            return 0.0
         if cfg.occlusion_start_s is not None and (
             cfg.occlusion_start_s <= t_s < cfg.occlusion_start_s + cfg.occlusion_duration_s
         ):
@@ -148,15 +172,15 @@ class Pump:
                 for edge in (occ, occ + cfg.occlusion_duration_s):
                     if t < edge < seg_end:
                         seg_end = edge
-            flow = self._flowing(t, self.rate_ml_h)
-            if self.alarms & ALARM_RESERVOIR_EMPTY:
+            flow = self._flowing(t, self.rate_ml_h) * self._inj_factor
+            if self._dry or self._inj_empty:
                 flow = 0.0
             seg = seg_end - t
             left_ml = cfg.reservoir_ml - self.volume_ml
             if flow > 0.0 and flow * seg / 3600.0 >= left_ml:
                 seg = left_ml * 3600.0 / flow
                 seg_end = t + seg
-                self.alarms |= ALARM_RESERVOIR_EMPTY
+                self._dry = True
             volume_ml_h_s += flow * seg
             n_segments += 1
             full_flow = flow if (t == self.time_s and seg_end == t_end) else None
@@ -165,11 +189,15 @@ class Pump:
             while self._pending and self._pending[0][0] <= t + 1e-12:
                 self.rate_ml_h = self._pending.pop(0)[1]
         self.time_s = t_end
-        flow_now = self._flowing(t_end, self.rate_ml_h)
-        if self._flowing(t_end, 1.0) == 0.0:  # line occluded: the pump's pressure sensor trips
-            self.alarms |= ALARM_OCCLUSION
+        flow_now = self._flowing(t_end, self.rate_ml_h) * self._inj_factor
+        if self._inj_occluded or self._flowing(t_end, 1.0) == 0.0:
+            self.alarms |= ALARM_OCCLUSION  # line occluded: the pump's pressure sensor trips
         else:
             self.alarms &= ~ALARM_OCCLUSION
+        if self._dry or self._inj_empty:
+            self.alarms |= ALARM_RESERVOIR_EMPTY
+        else:
+            self.alarms &= ~ALARM_RESERVOIR_EMPTY  # a new syringe after an injected empty
         self.delivered_ml_h = 0.0 if self.alarms & ALARM_RESERVOIR_EMPTY else flow_now
         if n_segments == 1 and full_flow is not None:
             return full_flow  # one segment over the whole step: the rate itself, no round-off

@@ -30,6 +30,11 @@ A scenario file (``hil_sim/scenarios/NAME.toml``)::
     ramp_s = 300.0
     depth_mmhg = 10.0
 
+    [[faults]]                 # injected faults, as `--fault KIND:ARGS` (runtime.faults)
+    kind = "sensor-flush"
+    start_s = 600.0
+    duration_s = 4.0
+
 Every number is range-checked; unknown keys are errors. A bad file raises :class:`ScenarioError`
 whose message is one line naming the file, the field, the value and the allowed range.
 """
@@ -46,6 +51,7 @@ from hil_sim.disturbance import Bolus, Disturbance, Hemorrhage, Sinusoid
 from hil_sim.patient import FrozenParams
 from hil_sim.pump import PumpConfig
 from hil_sim.sensor import ARTIFACT_KINDS, Artifact, SensorConfig
+from runtime.faults import FaultSpec, FaultSpecError, parse_fault_table
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 _REQUIRED = object()
@@ -93,6 +99,7 @@ class Scenario:
     pump: PumpConfig
     sensor: SensorConfig
     disturbances: tuple[Disturbance, ...] = ()
+    faults: tuple[FaultSpec, ...] = ()
     source: str = field(default="<memory>", compare=False)
 
     @property
@@ -195,6 +202,7 @@ def _artifact(file: str, i: int, table: Any) -> Artifact:
         duration_s=r.num("duration_s", 0.0, _DAY_S, "s", lo_open=True),
         level_mmhg=r.num("level_mmhg", -50.0, 400.0, "mmHg", default=math.nan),
         time_const_s=r.num("time_const_s", 0.0, 600.0, "s", default=20.0, lo_open=True),
+        flag_after_s=r.num("flag_after_s", 0.0, _DAY_S, "s", default=math.inf),
     )
     r.done()
     return a
@@ -265,6 +273,14 @@ def parse_scenario(data: dict[str, Any], file: str = "<memory>") -> Scenario:
     if not isinstance(raw_dist, list):
         raise top.fail("disturbances", raw_dist, "must be an array of tables [[disturbances]]")
     disturbances = tuple(_disturbance(file, i, d) for i, d in enumerate(raw_dist))
+    top.used.add("faults")
+    raw_faults = data.get("faults", [])
+    if not isinstance(raw_faults, list):
+        raise top.fail("faults", raw_faults, "must be an array of tables [[faults]]")
+    try:
+        faults = tuple(parse_fault_table(f, file, i, i) for i, f in enumerate(raw_faults))
+    except FaultSpecError as exc:
+        raise ScenarioError(str(exc)) from None
     top.done()
     return Scenario(
         name=name,
@@ -278,6 +294,7 @@ def parse_scenario(data: dict[str, Any], file: str = "<memory>") -> Scenario:
         pump=pump,
         sensor=sensor,
         disturbances=disturbances,
+        faults=faults,
         source=file,
     )
 

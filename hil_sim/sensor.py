@@ -14,8 +14,21 @@ Artifacts, each switched on by the scenario for a time window:
 ``monitor_fault``
     The monitor reports no value: NaN with ``QUALITY_INVALID`` set.
 
+Injected faults (``--fault sensor-*``, :mod:`hil_sim.faults`) add three more kinds:
+
+``nan``
+    The reading is NaN *without* a quality flag (a corrupted value).
+``flatline``
+    The reading sticks at the last value output before the window (transducer / monitor frozen).
+``range``
+    The reading is ``level_mmhg`` (default 400), outside any physiological range.
+
 Only the monitor's own fault is flagged in ``quality``: a real monitor cannot tell a flush or a
-disconnection from physiology; the runtime's supervisor has to detect those.
+disconnection from physiology; the runtime's supervisor has to detect those. An artifact with a
+finite ``flag_after_s`` also sets ``QUALITY_WAVEFORM`` from ``start_s + flag_after_s`` on: the
+monitor's waveform check (a frozen or over-damped arterial trace loses its pulsatility, which the
+beat-by-beat monitor sees and a mean pressure alone does not). Shipped scenario artifacts leave
+it at ``inf`` (never flagged), as before.
 """
 
 from __future__ import annotations
@@ -27,7 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 
 QUALITY_INVALID = 1
-ARTIFACT_KINDS = ("flush", "damping", "disconnect", "monitor_fault")
+QUALITY_WAVEFORM = 2
+ARTIFACT_KINDS = ("flush", "damping", "disconnect", "monitor_fault", "nan", "flatline", "range")
 _NOISE_BLOCK = 4096
 
 
@@ -45,6 +59,9 @@ class Artifact:
         Reading for ``flush`` / ``disconnect`` (mmHg).
     time_const_s
         Lag of ``damping`` (s).
+    flag_after_s
+        Delay (s) after ``start_s`` from which the monitor flags ``QUALITY_WAVEFORM``; ``inf``:
+        never.
     """
 
     kind: str
@@ -52,12 +69,14 @@ class Artifact:
     duration_s: float
     level_mmhg: float = math.nan
     time_const_s: float = 20.0
+    flag_after_s: float = math.inf
 
     def __post_init__(self) -> None:
         if self.kind not in ARTIFACT_KINDS:
             raise ValueError(f"artifact kind {self.kind!r} not one of {ARTIFACT_KINDS}")
         if math.isnan(self.level_mmhg):
-            object.__setattr__(self, "level_mmhg", 300.0 if self.kind == "flush" else 0.0)
+            default = {"flush": 300.0, "range": 400.0}.get(self.kind, 0.0)
+            object.__setattr__(self, "level_mmhg", default)
 
     def active(self, t_s: float) -> bool:
         return self.start_s <= t_s < self.start_s + self.duration_s
@@ -93,6 +112,7 @@ class Sensor:
         self._held = (math.nan, QUALITY_INVALID)
         self._damped: float | None = None
         self._last_t: float | None = None
+        self._frozen: dict[int, float] = {}
         self._artifacts: Sequence[Artifact] = config.artifacts
         if config.noise_std_mmhg > 0.0 and rng is None:
             raise ValueError("a noisy sensor needs a seeded rng")
@@ -129,13 +149,27 @@ class Sensor:
         self._next_sample_s += cfg.period_s
         value = self._damped
         quality = 0
+        frozen: float | None = None
         for a in self._artifacts:
             if a.active(t_s):
+                if t_s >= a.start_s + a.flag_after_s:
+                    quality |= QUALITY_WAVEFORM
                 if a.kind == "monitor_fault":
                     self._held = (math.nan, QUALITY_INVALID)
                     return self._held
+                if a.kind == "nan":
+                    self._held = (math.nan, quality)
+                    return self._held
+                if a.kind == "range":
+                    self._held = (a.level_mmhg, quality)
+                    return self._held
+                if a.kind == "flatline":
+                    frozen = self._frozen.setdefault(id(a), self._held[0])
                 if a.kind in ("flush", "disconnect"):
                     value = a.level_mmhg
+        if frozen is not None:
+            self._held = (frozen, quality)
+            return self._held
         if cfg.noise_std_mmhg > 0.0:
             value += self._next_noise()
         if cfg.quantum_mmhg > 0.0:

@@ -14,18 +14,23 @@ see the same numbers and produce the same trajectory bit for bit. Scheduling par
 are the patient's truth (the paper's "parameter generation" block; an estimator replaces it later).
 Random numbers (sensor noise) come from the patient's own seeded stream, so a trajectory depends only
 on (scenario, patient_seed, sample period, commands).
+
+Faults (``faults=``, plus the scenario's own ``[[faults]]``) are injected here for the sensor, the
+pump and the scheduling parameters (:class:`hil_sim.faults.WorldFaults`); link faults belong to the
+device process. A world without faults behaves exactly as before.
 """
 
 from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from hil_sim.cohort import draw_patient, patient_rng
 from hil_sim.disturbance import DisturbanceSum
+from hil_sim.faults import WorldFaults
 from hil_sim.patient import FrozenParams, Patient, PatientParams
 from hil_sim.pump import Pump
 from hil_sim.scenario import Scenario, load_scenario
@@ -109,10 +114,16 @@ class World:
         frozen scenario.
     sample_period_s
         Loop period (s); a whole multiple of the scenario's internal patient step.
+    faults
+        Extra injected faults (:class:`runtime.faults.FaultSpec`), after the scenario's own.
     """
 
     def __init__(
-        self, scenario: Scenario | str, patient_seed: int, sample_period_s: float = 0.1
+        self,
+        scenario: Scenario | str,
+        patient_seed: int,
+        sample_period_s: float = 0.1,
+        faults: tuple = (),
     ) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         sc = self.scenario
@@ -133,7 +144,16 @@ class World:
         self._n_sub = n_sub
         self.patient = Patient(self.params, self._h)
         self.pump = Pump(sc.pump)
-        self.sensor = Sensor(sc.sensor, patient_rng(patient_seed, 1))
+        self.fault_specs = (*sc.faults, *faults)
+        self.faults = WorldFaults(self.fault_specs, self.sample_period_s)
+        sensor_cfg = sc.sensor
+        if self.faults.artifacts:
+            sensor_cfg = replace(
+                sensor_cfg, artifacts=(*sensor_cfg.artifacts, *self.faults.artifacts)
+            )
+        self._sched_faults = bool(self.faults.sched)
+        self._pump_faults = bool(self.faults.pump)
+        self.sensor = Sensor(sensor_cfg, patient_rng(patient_seed, 1))
         self.disturbance = DisturbanceSum(sc.disturbances)
         self.baseline_mmhg = self.params.baseline_mmhg
         self.tick = 0
@@ -168,16 +188,19 @@ class World:
         self._true_map = self.patient.map_mmhg + self.disturbance(t)
         reading, quality = self.sensor.read(t, self._true_map)
         p = self.patient
+        K, T_s, tau_s, valid = p.K, p.T_s, p.tau_s, True
+        if self._sched_faults:
+            K, T_s, tau_s, valid = self.faults.scheduling(self.tick, K, T_s, tau_s, valid)
         obs = Observation(
             self.tick,
             f32(t),
             f32(reading),
             quality,
             f32(self.target_at(t)),
-            f32(p.K),
-            f32(p.T_s),
-            f32(p.tau_s),
-            True,
+            f32(K),
+            f32(T_s),
+            f32(tau_s),
+            valid,
         )
         self._obs = obs
         return obs
@@ -188,13 +211,19 @@ class World:
             self.observe()  # the monitor samples every tick whether or not anyone asked
         cmd = f32(rate_ml_h)
         self.last_command_ml_h = cmd
-        self.pump.command(cmd)
+        if self._pump_faults and self.faults.pump_state(self.tick)[2]:
+            self.pump.feed_watchdog()  # pump-ignore: acknowledged, not applied
+        else:
+            self.pump.command(cmd)
 
     def advance(self) -> PumpStatus:
         """Integrate one sample period (pump, then patient, per internal step); tick k → k + 1."""
         if self._obs is None or self._obs.tick != self.tick:
             self.observe()
         pump, patient, h = self.pump, self.patient, self._h
+        if self._pump_faults:
+            occ, empty, _, factor = self.faults.pump_state(self.tick)
+            pump.inject(occ, empty, factor)
         total = 0.0
         for _ in range(self._n_sub):
             mean = pump.advance(h)

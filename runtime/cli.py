@@ -8,9 +8,21 @@ metric summary and the ``rerun FILE.rrd`` command to replay it.
 
 ``pressor run --port DEV`` is the runtime end alone (a device on a real cable or a ``socat`` pty).
 
-``pressor faults`` lists the fault kinds the supervisor detects, with their detection bounds and
-reactions. (Fault *injection*, ``--fault KIND``, belongs to the device side and is not part of
-this module.)
+``pressor faults`` lists the injectable fault kinds (``--fault KIND[:ARGS]``) with their arguments,
+defaults, detection bounds and safe states, then what the supervisor detects.
+
+Faults. ``pressor sil --fault KIND[:ARGS]`` (repeatable) passes each fault to the device process,
+which injects it (the runtime never imports ``hil_sim``; the control path learns of a fault only
+through its inputs). Faults a scenario file declares (``[[faults]]``) are injected by the device
+too and read here from the same file. After the run, the summary's ``faults`` list scores each
+scheduled fault from the supervisor's per-tick log (:func:`runtime.faults.fault_report`):
+``kind``, ``start_tick``, ``detected_tick``, ``latency_ticks`` and its documented bound,
+``safe_state_s``, ``max_reentry_step_ml_h``; ``commands_out_of_range`` counts commands outside
+[0, max] (always 0 - the run exits 1 otherwise). ``pressor run --fault ...`` scores a schedule
+injected by a device started by hand.
+
+Files. The ``.rrd``, ``.tlog``, ``--summary`` and ``--timing`` files are written to a hidden
+temporary name and renamed when the run succeeds; a failed run leaves earlier files untouched.
 
 Summary JSON (``--summary``): run identity, the §3 metrics (``runtime.metrics.run_metrics``) plus
 ``commands_out_of_range``, the supervisor's account and the link's error counts. It holds only
@@ -102,6 +114,13 @@ def _common(p: argparse.ArgumentParser) -> None:
         help="scheduling outside the design box / rate bounds: advisory alarm (default) or hold",
     )
     p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KIND[:ARGS]",
+        help="inject a fault (repeatable; 'pressor faults' lists kinds, arguments, defaults)",
+    )
+    p.add_argument(
         "--stall-timeout",
         type=_positive("--stall-timeout", 3600.0),
         default=10.0,
@@ -167,8 +186,15 @@ def _reachable(map_mmhg: np.ndarray, target: np.ndarray, cmd: np.ndarray, umax: 
     return not (at_limit and below)
 
 
-def build_summary(result: Any, identity: dict[str, Any], max_rate_ml_h: float, noisy: bool):
-    """The JSON-ready summary of a run: identity, §3 metrics, supervisor and link account."""
+def build_summary(
+    result: Any,
+    identity: dict[str, Any],
+    max_rate_ml_h: float,
+    noisy: bool,
+    faults: list[dict[str, Any]] | None = None,
+):
+    """The JSON-ready summary of a run: identity, §3 metrics, supervisor and link account, and
+    the scored fault list when faults were scheduled."""
     from runtime.metrics import run_metrics
 
     tr = result.trajectory
@@ -190,7 +216,12 @@ def build_summary(result: Any, identity: dict[str, Any], max_rate_ml_h: float, n
         )
     metrics["commands_out_of_range"] = result.commands_out_of_range
     link = result.link
+    extra: dict[str, Any] = {}
+    if faults is not None:
+        extra["faults"] = faults
     return {
+        **extra,
+        "commands_out_of_range": result.commands_out_of_range,
         **identity,
         "ticks": int(t.size),
         "ended": result.ended,
@@ -246,10 +277,39 @@ def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = No
     )
     errs = {k: v for k, v in summary["link_errors"].items() if v}
     print(f"link: {'clean' if not errs else errs}", file=out)
+    if summary.get("faults"):
+        print_fault_table(summary["faults"], summary["commands_out_of_range"], out)
+
+
+def print_fault_table(faults: list[dict[str, Any]], out_of_range: int, out: Any = None) -> None:
+    """The per-fault table: detection latency (ticks, bound), safe-state time, re-entry step."""
+    out = sys.stdout if out is None else out
+    print(
+        f"{'fault':<18} {'start':>6} {'detect':>6} {'lat':>4} {'bound':>5} {'ok':>3}"
+        f" {'safe_s':>7} {'reentry_ml_h':>12}  detected as",
+        file=out,
+    )
+    for f in faults:
+        if not f["applicable"]:
+            print(f"{f['kind']:<18} {f['start_tick']:>6}  n/a (controller not scheduled)", file=out)
+            continue
+        ok = {True: "yes", False: "NO", None: "-"}[f["within_bound"]]
+        print(
+            f"{f['kind']:<18} {f['start_tick']:>6} {_fmt(f['detected_tick']):>6}"
+            f" {_fmt(f['latency_ticks']):>4} {_fmt(f['bound_ticks']):>5} {ok:>3}"
+            f" {f['safe_state_s']:>7.1f} {f['max_reentry_step_ml_h']:>12.3f}"
+            f"  {','.join(f['detected_as']) or '-'}",
+            file=out,
+        )
+    print(f"commands out of [0, max]: {out_of_range}", file=out)
+
+
+def _tmp_name(path: Path) -> Path:
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
 
 
 def _write_json_atomic(path: Path, data: dict[str, Any]) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = _tmp_name(path)
     tmp.write_text(json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
     os.replace(tmp, path)
 
@@ -309,7 +369,9 @@ def run_runtime(
 
     period_s = 1.0 / args.rate
     controller = _load_controller(args.controller, period_s)
-    tlog = TlogWriter(args.tlog) if args.tlog is not None else None
+    tlog_tmp = _tmp_name(args.tlog) if args.tlog is not None else None
+    tlog = TlogWriter(tlog_tmp) if tlog_tmp is not None else None
+    ok = False
     ep = LinkEndpoint(port, "runtime", signing=signing, tlog=tlog)
     recorder = None
     try:
@@ -364,9 +426,28 @@ def run_runtime(
         if recorder is not None:
             recorder.close()
             recorder = None
+        specs = getattr(args, "fault_specs", None)
+        report = None
+        if specs:
+            from runtime.faults import fault_report
+            from runtime.loop import sched_limits_of
+            from runtime.supervisor import Fault
+
+            report = fault_report(
+                specs,
+                result.trajectory,
+                {f.name: int(f) for f in Fault if f.name},
+                period_s,
+                scheduled=sched_limits_of(controller)[0] is not None,
+            )
         summary = build_summary(
-            result, identity, controller.max_rate_ml_h, noisy=peer.sensor_noise_mmhg > 0.0
+            result,
+            identity,
+            controller.max_rate_ml_h,
+            noisy=peer.sensor_noise_mmhg > 0.0,
+            faults=report,
         )
+        ok = True
         return summary, result, rrd
     finally:
         if recorder is not None:
@@ -374,6 +455,10 @@ def run_runtime(
         ep.close()
         if tlog is not None:
             tlog.close()
+            if ok:
+                os.replace(tlog_tmp, args.tlog)
+            else:
+                tlog_tmp.unlink(missing_ok=True)
 
 
 def _finish(summary: dict[str, Any], result: Any, rrd: Path | None, args) -> int:
@@ -406,6 +491,8 @@ def _main_sil(argv: list[str]) -> int:
     _check_out_path("--summary", args.summary)
     _check_out_path("--timing", args.timing)
     _load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device starts
+    args.fault_specs = _fault_specs(args.fault)
+    args.fault_specs += _scenario_faults(args.scenario, len(args.fault_specs))
     signing = _signing(args, allow_generate=True)
     identity = {
         "controller": args.controller,
@@ -443,6 +530,10 @@ def _main_sil(argv: list[str]) -> int:
         ]
         if args.realtime:
             cmd.append("--realtime")
+        for text in args.fault:
+            cmd += ["--fault", text]
+        if any(f.info.group == "link" for f in args.fault_specs):
+            cmd += ["--retransmit", "0.05"]  # wall-clock resend of lost ticks; trajectory-neutral
         if signing is not None:
             cmd += ["--signing-key", str(signing.write(Path(tmp) / "signing.key"))]
         device_log = Path(tmp) / "device.log"
@@ -476,6 +567,31 @@ def _main_sil(argv: list[str]) -> int:
     return status
 
 
+def _fault_specs(texts: list[str]) -> list[Any]:
+    from runtime.faults import FaultSpecError, parse_faults
+
+    try:
+        return parse_faults(texts)
+    except FaultSpecError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _scenario_faults(scenario: str, first_index: int) -> list[Any]:
+    """The ``[[faults]]`` the device will inject from its scenario file (read, not imported)."""
+    from runtime.faults import FaultSpecError, scenario_file_faults
+
+    if scenario.endswith(".toml") or "/" in scenario:
+        path = Path(scenario)
+    else:
+        path = Path(__file__).resolve().parents[1] / "hil_sim" / "scenarios" / f"{scenario}.toml"
+    if not path.is_file():
+        return []
+    try:
+        return scenario_file_faults(path, first_index)
+    except FaultSpecError as exc:
+        raise UsageError(str(exc)) from None
+
+
 def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:
     """Wait for our device process; terminate it (by its pid) if it does not exit in time."""
     try:
@@ -498,6 +614,7 @@ def _main_run(argv: list[str]) -> int:
     _check_out_path("--summary", args.summary)
     _check_out_path("--timing", args.timing)
     _load_controller(args.controller, 1.0 / args.rate)
+    args.fault_specs = _fault_specs(args.fault)
     signing = _signing(args, allow_generate=False)
     from runtime.link.transport import open_port
 
@@ -517,12 +634,21 @@ def _main_run(argv: list[str]) -> int:
 
 
 def _main_faults(argv: list[str]) -> int:
+    from runtime.faults import catalogue_rows
     from runtime.supervisor import SupervisorConfig, detection_bounds
 
     p = _Parser(prog="pressor faults", description="fault kinds the supervisor detects")
     p.add_argument("--rate", type=_positive("--rate", 1000.0), default=DEFAULT_RATE_HZ)
     args = p.parse_args(argv)
     cfg = SupervisorConfig(sample_period_s=1.0 / args.rate, stale_after_s=3.5 / args.rate)
+    print(
+        "Injectable faults: --fault KIND[:key=value,...] on pressor sil / device (bare numbers"
+        " = start_s, duration_s; s of sim time). Bounds are ticks at 10 Hz after the first"
+        " fault tick; watchdog period = link_loss_after_s = 1 s."
+    )
+    for kind, fargs, bound, safe in catalogue_rows():
+        print(f"  {kind}\n      args:   {fargs}\n      detect: {bound}\n      safe:   {safe}")
+    print()
     print(f"Faults the runtime supervisor detects (defaults at {args.rate:g} Hz):")
     rows = detection_bounds(cfg)
     width = max(len(k) for k, _ in rows)

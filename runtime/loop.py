@@ -12,8 +12,17 @@ Lockstep (default in ``pressor sil``)
     in-process simulator's (observe → step → apply → advance), so with a clean link the serial run
     reproduces it sample for sample. A device that sends nothing for ``stall_timeout_s`` of *wall*
     time ends the run with :class:`DeviceStalled`: in lockstep sim time stands still while the
-    device is silent, so the supervisor's time-based link watchdog cannot fire, and declaring link
-    loss from wall time would make the trajectory depend on host load.
+    device is silent, and declaring link loss from wall time would make the trajectory depend on
+    host load.
+
+    Link stalls in virtual time. The device is the clock: a stalled or disconnected link is
+    simulated by a device that keeps simulating without exchanging frames (``link-stall``,
+    ``link-disconnect``), so the next sample that arrives is tick k > last + 1. The loop then runs
+    the silent ticks last+1 … k−1 through the supervisor on the virtual clock (sample age and
+    link silence growing by one period per tick, the newest sample being the last one received),
+    recording each of them - with MAP NaN, nothing was measured - but sending nothing: nobody
+    would receive it. So STALE_SAMPLE (HOLD) and LINK_LOSS (FAILSAFE) are logged at exactly the
+    ticks a wall-clock runtime would have logged them, and tick k resumes from the safe state.
 
 Real time (``--realtime``)
     The :class:`~runtime.clock.MonotonicClock` releases a tick at each absolute deadline
@@ -29,7 +38,7 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -62,14 +71,22 @@ class Trajectory:
 
     Attributes (after :meth:`arrays`): ``tick``, ``sim_time_s``, ``map_mmhg`` (as measured),
     ``target_mmhg``, ``command_ml_h`` (sent to the pump), ``controller_ml_h`` (the controller's raw
-    output, NaN when it did not run), ``state`` (supervisor state).
+    output, NaN when it did not run), ``faults`` (supervisor fault bits), ``state``.
     """
 
     capacity: int = 1 << 14
     n: int = 0
     data: np.ndarray = field(init=False)
 
-    FIELDS = ("tick", "sim_time_s", "map_mmhg", "target_mmhg", "command_ml_h", "controller_ml_h")
+    FIELDS = (
+        "tick",
+        "sim_time_s",
+        "map_mmhg",
+        "target_mmhg",
+        "command_ml_h",
+        "controller_ml_h",
+        "faults",
+    )
 
     def __post_init__(self) -> None:
         self.data = np.empty((self.capacity, len(self.FIELDS) + 1), dtype=np.float64)
@@ -86,6 +103,7 @@ class Trajectory:
         d = self.data[: self.n]
         out = {name: d[:, i].copy() for i, name in enumerate(self.FIELDS)}
         out["tick"] = out["tick"].astype(np.int64)
+        out["faults"] = out["faults"].astype(np.int64)
         out["state"] = d[:, -1].astype(np.int64)
         return out
 
@@ -196,6 +214,7 @@ class Loop:
         self._row = [_NAN] * len(CHANNELS)
         self._count = 0
         self._wall0 = perf_counter_s()
+        self._link_errors_seen = 0
 
     # ------------------------------------------------------------------ one tick
     def tick(
@@ -208,9 +227,18 @@ class Loop:
         link_silence_s: float = 0.0,
         lateness_s: float = 0.0,
         skipped: int = 0,
+        send: bool = True,
+        measured: bool = True,
     ) -> float:
-        """Supervise, step, send and record one tick; return the command sent (ml/h)."""
+        """Supervise, step, send and record one tick; return the command (ml/h).
+
+        ``send=False`` (a silent tick of a stalled link, see the module docstring) skips the
+        link; ``measured=False`` records MAP as NaN (no sample arrived for this tick).
+        """
         sup = self.sup
+        errors = self._link_errors()
+        pump = self.ep.pump_status
+        fresh = send and pump is not None and pump.tick == inp.tick
         run = sup.assess(
             now_s,
             inp.map_mmhg,
@@ -222,6 +250,9 @@ class Loop:
             sample_age_s,
             link_silence_s,
             inp.target_mmhg,
+            errors,
+            pump.delivered_ml_h if fresh else _NAN,
+            pump.alarms if fresh else 0,
         )
         raw = (
             self.controller.step(inp.map_mmhg, inp.target_mmhg, inp.K, inp.T_s, inp.tau_s)
@@ -230,9 +261,10 @@ class Loop:
         )
         command = sup.finalize(raw)
         state = sup.state
-        if self._count % self.heartbeat_every == 0:
-            self.ep.send_heartbeat(inp.tick, STATE_RUNNING, flush=False)
-        self.ep.send_command(inp.tick, command, MODE_AUTO if state == State.AUTO else MODE_SAFE)
+        if send:
+            if self._count % self.heartbeat_every == 0:
+                self.ep.send_heartbeat(inp.tick, STATE_RUNNING, flush=False)
+            self.ep.send_command(inp.tick, command, MODE_AUTO if state == State.AUTO else MODE_SAFE)
         exec_s = perf_counter_s() - release_wall_s
         self._count += 1
         self.timing.record(exec_s, lateness_s, skipped)
@@ -240,8 +272,9 @@ class Loop:
             self.out_of_range += 1
         self.ticks_in_state[state] += 1
         raw_f = _NAN if raw is None else raw
+        map_rec = inp.map_mmhg if measured else _NAN
         self.trajectory.append(
-            (inp.tick, inp.sim_time_s, inp.map_mmhg, inp.target_mmhg, command, raw_f, state)
+            (inp.tick, inp.sim_time_s, map_rec, inp.target_mmhg, command, raw_f, sup.faults, state)
         )
         if sup.transition is not None:
             old, new, faults = sup.transition
@@ -268,8 +301,24 @@ class Loop:
                 warn=False,
             )
         if self.recorder is not None:
-            self._record(inp, raw_f, command, state, exec_s, lateness_s)
+            self._record(inp, raw_f, command, state, exec_s, lateness_s, map_rec)
         return command
+
+    def _link_errors(self) -> int:
+        """Frames the link layer discarded since the previous tick."""
+        c = self.ep.counters
+        total = (
+            c.bad_crc
+            + c.junk_bytes
+            + c.resyncs
+            + c.seq_gaps
+            + c.incomplete_ticks
+            + c.refused_unsigned
+            + c.refused_bad_signature
+        )
+        new = total - self._link_errors_seen
+        self._link_errors_seen = total
+        return new
 
     def _record(
         self,
@@ -279,12 +328,13 @@ class Loop:
         state: State,
         exec_s: float,
         lateness_s: float,
+        map_mmhg: float,
     ) -> None:
         row = self._row
         ix = CHANNEL_INDEX
         pump = self.ep.pump_status
         c = self.ep.counters
-        row[ix["/patient/map_mmhg"]] = inp.map_mmhg
+        row[ix["/patient/map_mmhg"]] = map_mmhg
         row[ix["/controller/target_mmhg"]] = inp.target_mmhg
         row[ix["/controller/command_ml_h"]] = raw
         row[ix["/pump/command_ml_h"]] = command
@@ -316,7 +366,9 @@ class Loop:
         clock = VirtualClock()
         ep = self.ep
         self._wall0 = perf_counter_s()
+        self._link_errors()  # what the handshake saw is not a fault of tick 0
         answered = 0
+        last: TickInputs | None = None
         ended = "completed"
         poll_s = min(0.5, stall_timeout_s)
         while n_ticks == 0 or answered < n_ticks:
@@ -340,12 +392,33 @@ class Loop:
             if inp is None:
                 ended = "device finished"
                 break
+            if last is not None and inp.tick > last.tick + 1:
+                self._silent_ticks(last, inp.tick, clock)
             release = perf_counter_s()
             clock.advance_to(inp.sim_time_s)
             self.tick(inp, clock.now_s(), release)
+            last = inp
             answered += 1
         self._finish()
         return self.result(ended)
+
+    def _silent_ticks(self, last: TickInputs, resume_tick: int, clock: VirtualClock) -> None:
+        """Run ticks last.tick+1 … resume_tick−1 (nothing arrived) on the virtual clock."""
+        ts = self.period_s
+        for j in range(last.tick + 1, resume_tick):
+            now = j * ts
+            age = now - last.sim_time_s
+            clock.advance_to(now)
+            silent = replace(last, tick=j, sim_time_s=now)
+            self.tick(
+                silent,
+                clock.now_s(),
+                perf_counter_s(),
+                sample_age_s=age,
+                link_silence_s=age,
+                send=False,
+                measured=False,
+            )
 
     def run_realtime(
         self,

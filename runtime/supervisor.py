@@ -49,7 +49,19 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
 - ``TARGET_INVALID`` the MAP target is non-finite or outside the plausible MAP range;
 - ``COMMAND_INVALID`` the controller returned a non-finite command (held, → HOLD);
 - ``COMMAND_CLAMPED`` the controller returned a command outside [0, max] (clamped; an alarm, not a
-  state change).
+  state change);
+- ``LINK_ERRORS`` the link layer discarded something since the last tick (bad CRC, junk bytes,
+  sequence gaps, abandoned partial frames, incomplete ticks, refused signatures) - advisory:
+  what got through passed its CRC (and signature), lockstep resends lost ticks; same tick;
+- ``PUMP_ALARM`` the pump reports occlusion, empty reservoir or its own watchdog
+  (``pump_alarm_mask``) - on the tick its status arrives (the status of tick k follows the
+  advance to k, one tick after the cause). After a pump watchdog trip the held command is re-based
+  on the pump's delivered (safe) rate, so re-entry slews from what the pump actually does;
+- ``PUMP_MISMATCH`` the delivered rate differs from the command sent one tick earlier by more than
+  max(``pump_mismatch_abs_ml_h``, ``pump_mismatch_rel`` × command) for ``pump_mismatch_s``.
+
+The pump checks need a pump status of this tick (``pump_delivered_ml_h`` not NaN); a missing one is
+not a fault (the link watchdogs cover silence).
 
 Deviation from the paper: the paper has no supervisor; this is the IEC 60601-1-10 shell around it.
 """
@@ -91,10 +103,16 @@ class Fault(IntFlag):
     COMMAND_INVALID = 1 << 10
     COMMAND_CLAMPED = 1 << 11
     TARGET_INVALID = 1 << 12
+    LINK_ERRORS = 1 << 13
+    PUMP_ALARM = 1 << 14
+    PUMP_MISMATCH = 1 << 15
 
 
 #: faults that never change the state (the command is clamped and the event logged)
-ADVISORY = Fault.COMMAND_CLAMPED
+ADVISORY = Fault.COMMAND_CLAMPED | Fault.LINK_ERRORS
+#: pump alarm bits that count as a pump fault (runtime.faults: occlusion, empty, watchdog)
+PUMP_ALARM_MASK = 1 | 2 | 4
+_PUMP_WATCHDOG = 4
 #: scheduling faults that are advisory when ``sched_action == "advise"``
 SCHED_ENVELOPE = Fault.SCHED_OUT_OF_BOX | Fault.SCHED_RATE
 
@@ -135,6 +153,10 @@ class SupervisorConfig:
     failsafe_ramp_ml_h_per_s: float = 1.0
     recover_after_s: float = 5.0
     reentry_step_ml_h: float = 0.5
+    pump_alarm_mask: int = PUMP_ALARM_MASK
+    pump_mismatch_s: float = 1.0
+    pump_mismatch_abs_ml_h: float = 1.0
+    pump_mismatch_rel: float = 0.05
 
     def __post_init__(self) -> None:
         def need(name: str, ok: bool, allowed: str) -> None:
@@ -163,6 +185,9 @@ class SupervisorConfig:
         need("failsafe_ramp_ml_h_per_s", self.failsafe_ramp_ml_h_per_s > 0.0, "> 0 ml/h/s")
         need("recover_after_s", self.recover_after_s >= 0.0, ">= 0 s")
         need("reentry_step_ml_h", self.reentry_step_ml_h > 0.0, "> 0 ml/h per tick")
+        need("pump_mismatch_s", self.pump_mismatch_s >= 0.0, ">= 0 s")
+        need("pump_mismatch_abs_ml_h", self.pump_mismatch_abs_ml_h > 0.0, "> 0 ml/h")
+        need("pump_mismatch_rel", 0.0 <= self.pump_mismatch_rel <= 1.0, "[0, 1]")
         if self.sched_box is not None:
             need(
                 "sched_box",
@@ -221,6 +246,21 @@ def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
         ("TARGET_INVALID", "target non-finite or outside the MAP range; same tick"),
         ("COMMAND_INVALID", "controller returned a non-finite command; same tick, held"),
         ("COMMAND_CLAMPED", f"controller command outside [0, {cfg.max_rate_ml_h}] ml/h; clamped"),
+        (
+            "LINK_ERRORS",
+            "bad CRC / junk / sequence gap / incomplete tick / refused signature since the last"
+            " tick; same tick; advisory (bad frames are discarded, lost ticks resent)",
+        ),
+        (
+            "PUMP_ALARM",
+            "pump status reports occlusion, empty reservoir or pump watchdog; the tick the status"
+            " arrives (1 tick after the cause)",
+        ),
+        (
+            "PUMP_MISMATCH",
+            f"|delivered - command| > max({cfg.pump_mismatch_abs_ml_h} ml/h,"
+            f" {cfg.pump_mismatch_rel:g} x command) for {cfg.pump_mismatch_s} s",
+        ),
         (
             "reaction",
             f"HOLD last command (alarm); FAILSAFE after {cfg.hold_max_s} s, ramping"
@@ -292,11 +332,14 @@ class Supervisor:
         self._now_s = 0.0
         self._run_controller = False
         self._entry_state = State.STARTUP
+        self._mismatch_since_s: float | None = None
 
     @property
     def alarm(self) -> bool:
         """True while the supervisor is not in normal automatic control or a fault is present."""
-        return self.state in (State.HOLD, State.FAILSAFE) or bool(self.faults & ~ADVISORY)
+        return self.state in (State.HOLD, State.FAILSAFE) or bool(
+            self.faults & ~Fault.COMMAND_CLAMPED
+        )
 
     # -- input checks ---------------------------------------------------------------------------
     def _check_map(self, now_s: float, map_mmhg: float, quality: int) -> int:
@@ -347,6 +390,28 @@ class Supervisor:
             self._prev_sched_s = now_s
         return faults
 
+    def _check_pump(self, now_s: float, delivered: float, alarms: int) -> int:
+        cfg = self.config
+        if delivered != delivered:  # no fresh status: neither fault nor evidence of health
+            return 0
+        faults = 0
+        if alarms & cfg.pump_alarm_mask:
+            faults |= Fault.PUMP_ALARM
+            if alarms & _PUMP_WATCHDOG:
+                # the pump fell back to its own safe rate: hold *that*, re-enter from it
+                self.command_ml_h = _clamp(delivered, cfg.max_rate_ml_h)
+        sent = self.command_ml_h
+        if alarms & cfg.pump_alarm_mask or abs(delivered - sent) <= max(
+            cfg.pump_mismatch_abs_ml_h, cfg.pump_mismatch_rel * abs(sent)
+        ):
+            self._mismatch_since_s = None
+        else:
+            if self._mismatch_since_s is None:
+                self._mismatch_since_s = now_s
+            if now_s - self._mismatch_since_s >= cfg.pump_mismatch_s - _EPS_S:
+                faults |= Fault.PUMP_MISMATCH
+        return faults
+
     # -- the two phases of a tick -----------------------------------------------------------------
     def assess(
         self,
@@ -360,6 +425,9 @@ class Supervisor:
         sample_age_s: float = 0.0,
         link_silence_s: float = 0.0,
         target_mmhg: float = 80.0,
+        link_errors: int = 0,
+        pump_delivered_ml_h: float = math.nan,
+        pump_alarms: int = 0,
     ) -> bool:
         """Check this tick's inputs and update the state; return True if the controller is to run.
 
@@ -377,6 +445,10 @@ class Supervisor:
             Time (s) since any frame was received from the device.
         target_mmhg
             The MAP target (mmHg) the controller will be given.
+        link_errors
+            Frames the link layer discarded since the last tick (advisory ``LINK_ERRORS``).
+        pump_delivered_ml_h, pump_alarms
+            This tick's pump status (delivered ml/h, alarm bits); NaN: no fresh status.
         """
         cfg = self.config
         self._now_s = now_s
@@ -392,6 +464,9 @@ class Supervisor:
             faults |= self._check_sched(now_s, K, T_s, tau_s, sched_valid)
             if not cfg.map_min_mmhg <= target_mmhg <= cfg.map_max_mmhg:  # False for NaN too
                 faults |= Fault.TARGET_INVALID
+        if link_errors:
+            faults |= Fault.LINK_ERRORS
+        faults |= self._check_pump(now_s, pump_delivered_ml_h, pump_alarms)
         self.faults = faults
         state = self.state
         if faults & ~self._advisory:

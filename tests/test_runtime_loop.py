@@ -69,7 +69,9 @@ def reference(n_ticks, nan_ticks=()):
     return out
 
 
-def run_runtime(port, signing=None, stall_timeout_s=10.0, **sup_overrides):
+def run_runtime(port, signing=None, stall_timeout_s=10.0, device=None, **sup_overrides):
+    """Run the loop; with ``device`` (its thread) wait for it before closing the port, so a
+    closing leader never discards the last command before the device has read it."""
     ep = LinkEndpoint(port, "runtime", signing=signing)
     peer = ep.handshake(Hello("pi", link_mode=LINK_LOCKSTEP), timeout_s=10.0)
     pi = PIController(sample_period_s=peer.sample_period_s)
@@ -78,6 +80,8 @@ def run_runtime(port, signing=None, stall_timeout_s=10.0, **sup_overrides):
     try:
         return peer, loop.run_lockstep(peer.n_ticks, stall_timeout_s=stall_timeout_s)
     finally:
+        if device is not None:
+            device.join(10)
         ep.close()
 
 
@@ -102,8 +106,7 @@ def test_lockstep_over_pty_reproduces_in_process_loop_sample_for_sample():
     n = 300
     pair, th, device_log = with_pty_device(n)
     port = pair.leader_port()
-    peer, res = run_runtime(port)
-    th.join(10)
+    peer, res = run_runtime(port, device=th)
     assert peer.name == "test-plant" and peer.patient_seed == 7 and peer.n_ticks == n
     assert res.ended == "completed"
     assert list(res.trajectory["tick"]) == list(range(n))

@@ -444,6 +444,17 @@ class LinkEndpoint:
                 self.closed = True
                 raise LinkClosedError(str(exc)) from exc
 
+    def discard_queued(self) -> None:
+        """Drop frames queued by ``flush=False`` sends (a simulated link that went down)."""
+        self._tx.clear()
+
+    def reset_session(self) -> None:
+        """Forget received bytes and pending commands and number frames from 0 again (a simulated
+        reconnection; the peer sees a sequence gap)."""
+        self._rx.clear()
+        self._commands.clear()
+        self._mav.seq = 0
+
     def send_hello(self, hello: Hello, *, flush: bool = True) -> None:
         """Announce this end (scenario / controller, seed, period, noise, length, mode)."""
         self._hello = hello
