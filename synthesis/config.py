@@ -120,7 +120,8 @@ class SolverConfig:
         Strictness margin of every LMI (scaled units).
     xy_dependence
         "x": X(rho) in the basis, Y constant (rigorous with M = I, see :mod:`synthesis.lmi`);
-        "constant": X and Y constant.
+        "constant": X and Y constant; "xy": both in the basis (the paper's choice: the congruence
+        step of the proof then does not hold, so only the independent verification certifies it).
     time_scale_s
         Time unit of the scaled problem (s).
     rate_terms
@@ -320,8 +321,8 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         source, "solver.epsilon", _get(table, "solver", "epsilon", default), 0.0, 1e-2
     )
     xy = _get(table, "solver", "xy_dependence", default)
-    if xy not in ("constant", "x"):
-        raise _fail(source, "solver.xy_dependence", xy, "one of 'constant', 'x'")
+    if xy not in ("constant", "x", "xy"):
+        raise _fail(source, "solver.xy_dependence", xy, "one of 'constant', 'x', 'xy'")
     ts = _check_pos(
         source, "solver.time_scale_s", _get(table, "solver", "time_scale_s", default), 1e4
     )

@@ -53,12 +53,12 @@ def naive_lmis(prob: Problem, nv: NaiveVariables) -> tuple[list, list]:
     n = N_STATE
     eye = np.eye(n)
     Fs, Ps = [], []
-    Q, R, Y = nv.vars["Q"][0], nv.vars["R"][0], nv.vars["Y"][0]
+    Q, R = nv.vars["Q"][0], nv.vars["R"][0]
     for g in range(prob.rho.shape[0]):
         gam = nv.vars["gnode"][g]
         w = prob.weights[g]
         p = {k: v[g] for k, v in prob.plant.items()}
-        X = nv.at("X", w)
+        X, Y = nv.at("X", w), nv.at("Y", w)
         Ah, Adh, Bh = nv.at("Ah", w), nv.at("Adh", w), nv.at("Bh", w)
         Ch, Cdh, Dk = nv.at("Ch", w), nv.at("Cdh", w), nv.at("Dk", w)
         P = nv.at("P", w)

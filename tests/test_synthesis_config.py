@@ -69,7 +69,7 @@ def test_grid_needs_three_integers_of_at_least_two(tmp_path):
 
 def test_unknown_xy_dependence_is_rejected(tmp_path):
     with pytest.raises(ConfigError, match=r"solver\.xy_dependence"):
-        load_config(_write(tmp_path, '[solver]\nxy_dependence = "both"\n'))
+        load_config(_write(tmp_path, '[solver]\nxy_dependence = "neither"\n'))
 
 
 def test_invalid_toml_names_the_file(tmp_path):
