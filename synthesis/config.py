@@ -8,8 +8,9 @@ A design is described by a TOML file with the sections below (all physical units
     [weights]    phi (1/(mmHg·s)) on x_e,  xi on u_a,  eta_xe (mmHg·s) x_e measurement-noise weight
     [grid]       points = [nK, nT, ntau]              synthesis grid (each >= 2)
     [solver]     lambda2, lambda3 (scaled-time slack multipliers), backoff (fraction, >= 0),
-                 epsilon (strictness margin), xy_dependence ("constant" | "x"),
-                 time_scale_s (the time unit of the scaled problem)
+                 epsilon (strictness margin), xy_dependence ("constant" | "x" | "xy"),
+                 time_scale_s (the time unit of the scaled problem), rate_terms
+                 ("vertices" | "bound"), mean_gamma_weight
     [line_search] lambda2 = [...], lambda3 = [...]   candidate values for ``--lambda-search``
     [pump]       max_rate_ml_h
 

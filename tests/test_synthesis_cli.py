@@ -49,3 +49,17 @@ def test_tiny_synthesis_writes_exactly_the_requested_artifact(tmp_path, capsys):
     assert f"{art.gamma:.6g}" in text and "solver status" in text and "optimal" in text
     assert "[synth" in text  # progress lines
     assert sorted(p.name for p in out.parent.iterdir()) == ["tiny.npz"]
+
+
+def test_wall_clock_entries_are_dropped_but_step_metrics_kept():
+    report = {
+        "analysis_lmi": {"solve_time_s": 55.4, "gamma": 3.0},
+        "nominal_step": {"lpv": {"settling_time_s": 227.0, "rise_time_s": 118.0}},
+        "list": [{"build_time_s": 1.0, "x": 1}],
+    }
+    out = cli._without_wall_times(report)
+    assert out == {
+        "analysis_lmi": {"gamma": 3.0},
+        "nominal_step": {"lpv": {"settling_time_s": 227.0, "rise_time_s": 118.0}},
+        "list": [{"x": 1}],
+    }
