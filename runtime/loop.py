@@ -76,6 +76,7 @@ class Trajectory:
 
     capacity: int = 1 << 14
     n: int = 0
+    ring: bool = False
     data: np.ndarray = field(init=False)
 
     FIELDS = (
@@ -89,18 +90,29 @@ class Trajectory:
     )
 
     def __post_init__(self) -> None:
-        self.data = np.empty((self.capacity, len(self.FIELDS) + 1), dtype=np.float64)
+        shape = (self.capacity, len(self.FIELDS) + 1)
+        # a ring is written to once up front, so its pages count in RSS from the start
+        self.data = np.full(shape, np.nan) if self.ring else np.empty(shape, dtype=np.float64)
 
     def append(self, row: tuple[float, ...]) -> None:
-        """Store one tick (FIELDS order, then the state)."""
-        if self.n == self.data.shape[0]:
+        """Store one tick (FIELDS order, then the state); a ring keeps the last ``capacity``."""
+        cap = self.data.shape[0]
+        if self.n >= cap:
+            if self.ring:
+                self.data[self.n % cap] = row
+                self.n += 1
+                return
             self.data = np.concatenate([self.data, np.empty_like(self.data)])
         self.data[self.n] = row
         self.n += 1
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Copies of the recorded columns by name."""
-        d = self.data[: self.n]
+        """Copies of the recorded columns by name (a ring: the last ``capacity`` ticks)."""
+        if self.ring and self.n > self.capacity:
+            i = self.n % self.capacity
+            d = np.concatenate([self.data[i:], self.data[:i]])
+        else:
+            d = self.data[: self.n]
         out = {name: d[:, i].copy() for i, name in enumerate(self.FIELDS)}
         out["tick"] = out["tick"].astype(np.int64)
         out["faults"] = out["faults"].astype(np.int64)
@@ -190,6 +202,12 @@ class Loop:
         Optional rerun recorder (closed by the caller).
     heartbeat_every
         Ticks between runtime heartbeats (about 1 s of run time at the default).
+    history_ticks
+        Keep only the last this-many ticks of the trajectory (a ring: bounded memory for soak
+        runs); ``None`` keeps every tick.
+    on_tick
+        Called after every tick with ``(tick, state, fault bits, command ml/h)`` (e.g. a
+        :class:`runtime.faults.FaultScorer`'s ``update``).
     """
 
     def __init__(
@@ -199,6 +217,8 @@ class Loop:
         endpoint: LinkEndpoint,
         recorder: Recorder | None = None,
         heartbeat_every: int = 10,
+        history_ticks: int | None = None,
+        on_tick: Any = None,
     ) -> None:
         self.controller = controller
         self.sup = supervisor
@@ -206,7 +226,10 @@ class Loop:
         self.recorder = recorder
         self.period_s = float(controller.sample_period_s)
         self.timing = TimingStats(self.period_s)
-        self.trajectory = Trajectory()
+        self.trajectory = (
+            Trajectory() if history_ticks is None else Trajectory(int(history_ticks), ring=True)
+        )
+        self.on_tick = on_tick
         self.heartbeat_every = max(1, int(heartbeat_every))
         self.ticks_in_state = [0] * len(State)
         self.transitions: list[dict[str, Any]] = []
@@ -302,6 +325,8 @@ class Loop:
             )
         if self.recorder is not None:
             self._record(inp, raw_f, command, state, exec_s, lateness_s, map_rec)
+        if self.on_tick is not None:
+            self.on_tick(inp.tick, int(state), int(sup.faults), command)
         return command
 
     def _link_errors(self) -> int:
@@ -394,6 +419,7 @@ class Loop:
                 break
             if last is not None and inp.tick > last.tick + 1:
                 self._silent_ticks(last, inp.tick, clock)
+                answered += inp.tick - last.tick - 1
             release = perf_counter_s()
             clock.advance_to(inp.sim_time_s)
             self.tick(inp, clock.now_s(), release)
@@ -407,7 +433,7 @@ class Loop:
         ts = self.period_s
         for j in range(last.tick + 1, resume_tick):
             now = j * ts
-            age = now - last.sim_time_s
+            age = (j - last.tick) * ts  # whole ticks: sim time on the wire is float32
             clock.advance_to(now)
             silent = replace(last, tick=j, sim_time_s=now)
             self.tick(
@@ -479,7 +505,8 @@ class Loop:
 
     def _finish(self) -> None:
         try:
-            last = int(self.trajectory.data[self.trajectory.n - 1, 0]) if self.trajectory.n else 0
+            tr = self.trajectory
+            last = int(tr.data[(tr.n - 1) % tr.data.shape[0], 0]) if tr.n else 0
             self.ep.send_heartbeat(last, STATE_FINISHED)
         except LinkClosedError:
             pass

@@ -455,7 +455,7 @@ class Supervisor:
         self.transition = None
         self._entry_state = self.state
         faults = 0
-        if link_silence_s >= cfg.link_loss_after_s:
+        if link_silence_s >= cfg.link_loss_after_s - _EPS_S:
             faults |= Fault.LINK_LOSS
         if sample_age_s > cfg.stale_after_s:
             faults |= Fault.STALE_SAMPLE
