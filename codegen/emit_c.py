@@ -19,7 +19,7 @@ from codegen.emit_python import (
     derived_constants,
     nonzero_entries,
 )
-from codegen.fixed_point import GRID_FRAC_BITS, FixedPointPlan
+from codegen.fixed_point import FixedPointPlan
 
 __all__ = ["emit_c"]
 
@@ -74,8 +74,9 @@ def emit_c(
         f"{spec.max_rate_ml_h} ml/h,\n"
         f" * grid {spec.counts[0]}x{spec.counts[1]}x{spec.counts[2]} over K [{spec.lo[0]}, "
         f"{spec.hi[0]}] mmHg/(ml/h), T [{spec.lo[1]}, {spec.hi[1]}] s, tau [{spec.lo[2]}, "
-        f"{spec.hi[2]}] s.\n"
-        f" * Q-formats: states/e/x_d Q0.31 int32 (saturating), grid Q11.20, weights "
+        f"{spec.hi[2]}] s (non-uniform nodes in physical rho, bounded binary search,\n"
+        f" * stored reciprocal widths; clamp and rate limit on physical rho, in double).\n"
+        f" * Q-formats: states/e/x_d Q0.31 int32 (saturating), weights "
         f"Q{31 - W}.{W}, coefficients\n"
         f" * |q| <= 2^{plan.coef_bits}-1 with row shifts {plan.row_shift.tolist()}, int64 "
         f"accumulators, arithmetic >>.\n"
@@ -99,7 +100,7 @@ def emit_c(
         "typedef struct {\n"
         f"    {P}scalar_t z[{PU}N_Z];            /* x_k..., u, x_e (scaled) */\n"
         f"    {P}scalar_t buf[{PU}N_K][{PU}NBUF]; /* past x_k (ring buffer) */\n"
-        f"    {'double' if float_mode else 'int32_t'} g[3];              /* rho in grid coordinates */\n"
+        "    double r[3];                     /* scheduled rho (K, T, tau), clamped, rate-limited */\n"
         "    int32_t head;\n"
         "    int32_t started;\n"
         "    double out;                      /* last command, ml/h */\n"
@@ -141,6 +142,11 @@ def emit_c(
     src.append(f"static const uint8_t {P}row[{PU}NENT] = {{{rows_idx}}};")
     src.append(f"static const uint8_t {P}col[{PU}NENT] = {{{cols_idx}}};")
     src.append(f"static const int32_t {P}corner[8] = {{{', '.join(str(o) for o in offs)}}};")
+    for i in range(3):
+        nodes = ", ".join(c_double(x) for x in spec.nodes[i])
+        invw = ", ".join(c_double(x) for x in spec.inv_widths(i))
+        src.append(f"static const double {P}nodes{i}[{spec.counts[i]}] = {{{nodes}}};")
+        src.append(f"static const double {P}invw{i}[{spec.counts[i] - 1}] = {{{invw}}};")
     if float_mode:
         src.append(_table(f"{P}tab", "double", plan.scaled_tables, entries, c_double))
     else:
@@ -165,7 +171,7 @@ void {P}reset({P}state_t *s)
     for (i = 0; i < {PU}N_Z; ++i) s->z[i] = 0;
     for (i = 0; i < {PU}N_K; ++i)
         for (j = 0; j < {PU}NBUF; ++j) s->buf[i][j] = 0;
-    s->g[0] = s->g[1] = s->g[2] = 0;
+    s->r[0] = s->r[1] = s->r[2] = 0.0;
     s->head = 0;
     s->started = 0;
     s->out = 0.0;
@@ -175,33 +181,34 @@ void {P}reset({P}state_t *s)
 
 
 def _rho_c(fixed: bool) -> str:
+    """Clamp and rate-limit physical rho (double), bounded binary search, fractions fr[0..2]."""
     L = []
     for i, name in enumerate(("K", "T", "tau")):
-        L.append(f"    x = ({name} - {PU}LO{i}) * {PU}INV{i};")
-        L.append("    if (x < 0.0) { x = 0.0; clamped = 1; }")
-        L.append(f"    else if (x > {PU}NMAX{i}) {{ x = {PU}NMAX{i}; clamped = 1; }}")
+        L.append(f"    x = {name};")
+        L.append(f"    if (x < {PU}LO{i}) {{ x = {PU}LO{i}; clamped = 1; }}")
+        L.append(f"    else if (x > {PU}HI{i}) {{ x = {PU}HI{i}; clamped = 1; }}")
+        L.append("    if (s->started) {")
+        L.append(
+            f"        if (x > s->r[{i}] + {PU}RSTEP{i}) {{ x = s->r[{i}] + {PU}RSTEP{i}; limited = 1; }}"
+        )
+        L.append(
+            f"        else if (x < s->r[{i}] - {PU}RSTEP{i}) {{ x = s->r[{i}] - {PU}RSTEP{i}; limited = 1; }}"
+        )
+        L.append("    }")
+        L.append(f"    s->r[{i}] = x;")
+        L.append(f"    lo = 0; hi = {PU}N{i} - 1;")
+        L.append("    while (hi - lo > 1) {")
+        L.append("        mid = (lo + hi) >> 1;")
+        L.append(f"        if (x >= {P}nodes{i}[mid]) lo = mid; else hi = mid;")
+        L.append("    }")
+        L.append(f"    idx[{i}] = lo;")
+        L.append(f"    f = (x - {P}nodes{i}[lo]) * {P}invw{i}[lo];")
+        L.append("    if (f > 1.0) f = 1.0;")
+        L.append("    else if (f < 0.0) f = 0.0;")
         if fixed:
-            L.append(f"    gi = (int32_t)(x * {c_double(float(1 << GRID_FRAC_BITS))});")
-            L.append("    if (s->started) {")
-            L.append(
-                f"        if (gi > s->g[{i}] + {PU}DMAXQ{i}) {{ gi = s->g[{i}] + {PU}DMAXQ{i}; limited = 1; }}"
-            )
-            L.append(
-                f"        else if (gi < s->g[{i}] - {PU}DMAXQ{i}) {{ gi = s->g[{i}] - {PU}DMAXQ{i}; limited = 1; }}"
-            )
-            L.append("    }")
-            L.append(f"    g[{i}] = gi;")
+            L.append(f"    fr[{i}] = (int32_t)(f * {PU}WONE);")
         else:
-            L.append("    if (s->started) {")
-            L.append(
-                f"        if (x > s->g[{i}] + {PU}DMAX{i}) {{ x = s->g[{i}] + {PU}DMAX{i}; limited = 1; }}"
-            )
-            L.append(
-                f"        else if (x < s->g[{i}] - {PU}DMAX{i}) {{ x = s->g[{i}] - {PU}DMAX{i}; limited = 1; }}"
-            )
-            L.append("    }")
-            L.append(f"    g[{i}] = x;")
-    L.append("    s->g[0] = g[0]; s->g[1] = g[1]; s->g[2] = g[2];")
+            L.append(f"    fr[{i}] = f;")
     L.append("    s->started = 1;")
     return "\n".join(L)
 
@@ -233,18 +240,13 @@ def _output_c(fixed: bool, nk: int) -> str:
 
 
 def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) -> str:
-    def to_w(name: str) -> str:
-        if W >= GRID_FRAC_BITS:
-            return f"{name} << {W - GRID_FRAC_BITS}"
-        return f"{name} >> {GRID_FRAC_BITS - W}"
-
     nt, na = spec.counts[1], spec.counts[2]
     ctype = "int16_t" if plan.coef_bits <= 15 else "int32_t"
     return f"""double {P}step({P}state_t *s, double map_mmhg, double target_mmhg, double K, double T,
                   double tau)
 {{
-    double e, x, out;
-    int32_t g[3], gi, idx[3], fr[3], one, t00, t01, t10, t11, w[8], ve, d, n, fd, h, i, j, k;
+    double e, x, f, out, dd;
+    int32_t idx[3], fr[3], one, t00, t01, t10, t11, w[8], ve, n, fd, h, i, j, k, lo, hi, mid;
     int32_t v[{2 * nk + 3}], m[{PU}NENT], b;
     int64_t acc, dz[{nz - 1}], un, dxe, xs;
     const {ctype} *cp[8];
@@ -255,14 +257,6 @@ def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) 
     else if (x < -2147483647.0) x = -2147483647.0;
     ve = (int32_t)x;
 {_rho_c(True)}
-    for (k = 0; k < 3; ++k) {{
-        idx[k] = g[k] >> {GRID_FRAC_BITS};
-        fr[k] = g[k] - (idx[k] << {GRID_FRAC_BITS});
-        fr[k] = {to_w("fr[k]")};
-    }}
-    if (idx[0] > {PU}CMAX0) {{ idx[0] = {PU}CMAX0; fr[0] = g[0] - (idx[0] << {GRID_FRAC_BITS}); fr[0] = {to_w("fr[0]")}; }}
-    if (idx[1] > {PU}CMAX1) {{ idx[1] = {PU}CMAX1; fr[1] = g[1] - (idx[1] << {GRID_FRAC_BITS}); fr[1] = {to_w("fr[1]")}; }}
-    if (idx[2] > {PU}CMAX2) {{ idx[2] = {PU}CMAX2; fr[2] = g[2] - (idx[2] << {GRID_FRAC_BITS}); fr[2] = {to_w("fr[2]")}; }}
     one = INT32_C(1) << {W};
     t00 = (int32_t)(((int64_t)(one - fr[0]) * (one - fr[1])) >> {W});
     t01 = (int32_t)(((int64_t)(one - fr[0]) * fr[1]) >> {W});
@@ -276,12 +270,11 @@ def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) 
     w[5] = (int32_t)(((int64_t)t10 * fr[2]) >> {W});
     w[6] = (int32_t)(((int64_t)t11 * (one - fr[2])) >> {W});
     w[7] = (int32_t)(((int64_t)t11 * fr[2]) >> {W});
-    /* delay D = tau / Ts in Q.20 samples */
-    d = {PU}TAU0_Q + (int32_t)(((int64_t)g[2] * {PU}TAU_STEP_Q16) >> 16);
-    if (d > {PU}DMAX_Q) d = {PU}DMAX_Q;
-    n = d >> {GRID_FRAC_BITS};
-    fd = d - (n << {GRID_FRAC_BITS});
-    fd = {to_w("fd")};
+    /* delay D = tau / Ts samples (scheduled tau), fraction in the weight format */
+    dd = s->r[2] * {PU}INV_TS;
+    if (dd > {PU}DMAX_SAMPLES) dd = {PU}DMAX_SAMPLES;
+    n = (int32_t)dd;
+    fd = (int32_t)((dd - n) * {PU}WONE);
     h = s->head;
     i = h - n;
     if (i < 0) i += {PU}NBUF;
@@ -331,18 +324,14 @@ def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
     return f"""double {P}step({P}state_t *s, double map_mmhg, double target_mmhg, double K, double T,
                   double tau)
 {{
-    double e, x, out, g[3], fr[3], w[8], t00, t01, t10, t11, ve, d, fd, v[{2 * nk + 3}];
+    double e, x, f, out, fr[3], w[8], t00, t01, t10, t11, ve, d, fd, v[{2 * nk + 3}];
     double dz[{nz - 1}], part[{nz - 1}], un, xs;
-    int32_t idx[3], n, h, i, j, k, c, b;
+    int32_t idx[3], n, h, i, j, k, c, b, lo, hi, mid;
     const double *cp;
     uint8_t clamped = 0, limited = 0, freeze = 0;
 {_input_c()}
     ve = e * {PU}E_TO_S;
 {_rho_c(False)}
-    idx[0] = (int32_t)g[0]; if (idx[0] > {PU}CMAX0) idx[0] = {PU}CMAX0;
-    idx[1] = (int32_t)g[1]; if (idx[1] > {PU}CMAX1) idx[1] = {PU}CMAX1;
-    idx[2] = (int32_t)g[2]; if (idx[2] > {PU}CMAX2) idx[2] = {PU}CMAX2;
-    for (k = 0; k < 3; ++k) fr[k] = g[k] - idx[k];
     t00 = (1.0 - fr[0]) * (1.0 - fr[1]);
     t01 = (1.0 - fr[0]) * fr[1];
     t10 = fr[0] * (1.0 - fr[1]);
@@ -351,7 +340,7 @@ def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
     w[2] = t01 * (1.0 - fr[2]); w[3] = t01 * fr[2];
     w[4] = t10 * (1.0 - fr[2]); w[5] = t10 * fr[2];
     w[6] = t11 * (1.0 - fr[2]); w[7] = t11 * fr[2];
-    d = {PU}TAU0_SAMPLES + g[2] * {PU}TAU_STEP_SAMPLES;
+    d = s->r[2] * {PU}INV_TS;
     if (d > {PU}DMAX_SAMPLES) d = {PU}DMAX_SAMPLES;
     n = (int32_t)d;
     fd = d - n;

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from codegen.fixed_point import GRID_FRAC_BITS, FixedPointPlan
+from codegen.fixed_point import FixedPointPlan
 
 __all__ = ["EmitSpec", "emit_python", "py_float"]
 
@@ -37,8 +37,9 @@ class EmitSpec:
 
     Attributes
     ----------
-    lo, hi, counts
-        Tabulation grid (physical units: K mmHg/(ml/h), T s, tau s).
+    nodes
+        Tabulation grid nodes per axis, sorted, possibly non-uniform (physical units: K
+        mmHg/(ml/h), T s, tau s).
     rate_bounds
         |dK/dt| (1/s units of K), |dT/dt| (s/s), |dtau/dt| (s/s).
     sample_period_s, max_rate_ml_h
@@ -51,9 +52,7 @@ class EmitSpec:
         Name -> (value, description) error budgets stated in the header.
     """
 
-    lo: tuple[float, float, float]
-    hi: tuple[float, float, float]
-    counts: tuple[int, int, int]
+    nodes: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
     rate_bounds: tuple[float, float, float]
     sample_period_s: float
     max_rate_ml_h: float
@@ -62,6 +61,26 @@ class EmitSpec:
     content_hash: str
     command: str
     budgets: dict[str, tuple[float, str]]
+
+    @property
+    def lo(self) -> tuple[float, float, float]:
+        """Lower box corner."""
+        return tuple(ax[0] for ax in self.nodes)  # type: ignore[return-value]
+
+    @property
+    def hi(self) -> tuple[float, float, float]:
+        """Upper box corner."""
+        return tuple(ax[-1] for ax in self.nodes)  # type: ignore[return-value]
+
+    @property
+    def counts(self) -> tuple[int, int, int]:
+        """Nodes per axis."""
+        return tuple(len(ax) for ax in self.nodes)  # type: ignore[return-value]
+
+    def inv_widths(self, axis: int) -> list[float]:
+        """Reciprocal cell widths of ``axis`` (computed once, offline)."""
+        ax = self.nodes[axis]
+        return [1.0 / (ax[j + 1] - ax[j]) for j in range(len(ax) - 1)]
 
 
 def py_float(x: float) -> str:
@@ -72,18 +91,11 @@ def py_float(x: float) -> str:
 def derived_constants(spec: EmitSpec, plan: FixedPointPlan) -> dict[str, float | int]:
     """Constants shared by both emitters (so Python and C compute with the same numbers)."""
     ts = spec.sample_period_s
-    inv = [(spec.counts[i] - 1) / (spec.hi[i] - spec.lo[i]) for i in range(3)]
-    h_tau = (spec.hi[2] - spec.lo[2]) / (spec.counts[2] - 1)
-    one_g = 1 << GRID_FRAC_BITS
     nz = spec.n_k + 2
     c: dict[str, float | int] = {
         "NBUF": int(math.ceil(spec.hi[2] / ts - 1e-9)) + 1,
-        "TAU0_SAMPLES": spec.lo[2] / ts,
-        "TAU_STEP_SAMPLES": h_tau / ts,
+        "INV_TS": 1.0 / ts,
         "DMAX_SAMPLES": spec.hi[2] / ts,
-        "TAU0_Q": int(round(spec.lo[2] / ts * one_g)),
-        "TAU_STEP_Q16": int(round(h_tau / ts * 65536.0)),
-        "DMAX_Q": int(math.floor(spec.hi[2] / ts * one_g)),
         "E_LIM": plan.e_scale,
         "E_TO_S": 1.0 / plan.e_scale,
         "E_TO_Q": 2.0**31 / plan.e_scale,
@@ -95,17 +107,13 @@ def derived_constants(spec: EmitSpec, plan: FixedPointPlan) -> dict[str, float |
         "XE_Q": plan.xe_q,
         "XE_SHIFT": plan.xe_shift,
         "W": plan.weight_bits,
-        "GONE_Q": one_g,
+        "WONE": float(1 << plan.weight_bits),
     }
     for i in range(3):
         c[f"LO{i}"] = float(spec.lo[i])
         c[f"HI{i}"] = float(spec.hi[i])
-        c[f"INV{i}"] = float(inv[i])
-        c[f"NMAX{i}"] = float(spec.counts[i] - 1)
-        c[f"CMAX{i}"] = int(spec.counts[i] - 2)
-        dmax = spec.rate_bounds[i] * ts * inv[i]
-        c[f"DMAX{i}"] = float(dmax)
-        c[f"DMAXQ{i}"] = max(1, int(math.floor(dmax * one_g)))
+        c[f"N{i}"] = int(spec.counts[i])
+        c[f"RSTEP{i}"] = float(spec.rate_bounds[i] * ts)
     for i in range(nz - 1):
         c[f"F{i}"] = int(plan.row_shift[i])
     return c
@@ -151,6 +159,14 @@ runs the bit-exact integer ({plan.fmt}) data path of the generated C. Sample per
 [{spec.lo[0]}, {spec.hi[0]}] mmHg/(ml/h), T [{spec.lo[1]}, {spec.hi[1]}] s, tau [{spec.lo[2]},
 {spec.hi[2]}] s (clamped, never extrapolated; rates limited to {list(spec.rate_bounds)} per s).
 
+Scheduling (GRID_NODES): a non-uniform tensor grid in *physical* rho. The K nodes start geometric
+(uniform in log K: the controller inverts the plant gain and varies roughly like 1/K) and every
+axis interval is bisected where interpolation was too inaccurate or a frozen loop unstable. Per
+step, in double in both modes: clamp rho to the box, limit its change to RATE_BOUNDS * Ts (physical
+units), find the cell by a bounded binary search (<= ceil(log2(n - 1)) compares per axis), fraction
+= (rho - node) * stored reciprocal width (no division); multilinear weights over the 2^3 corners.
+The integer mode quantises the fractions to the weight format; the controller data path is integer.
+
 Controller: z = [x_k, u (ml/h), x_e (mmHg*s)], z[k+1] = z[k] + M(rho) [z; x_k(t - tau); e],
 M = [Phi - I, Gamma] the exact ZOH discretisation at each node (increment / delta form), x_k(t - tau)
 from a ring buffer of NBUF samples with linear interpolation, anti-windup by conditional
@@ -189,7 +205,14 @@ def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
     add(f"GRID_LO = ({', '.join(py_float(x) for x in spec.lo)})  # K mmHg/(ml/h), T s, tau s")
     add(f"GRID_HI = ({', '.join(py_float(x) for x in spec.hi)})")
     add(f"GRID_COUNTS = {tuple(int(x) for x in spec.counts)!r}")
-    add(f"GRID_INV_SPACING = ({', '.join(py_float(c[f'INV{i}']) for i in range(3))})")
+    add(
+        "GRID_NODES = ("
+        + ", ".join("(" + ", ".join(py_float(x) for x in ax) + ",)" for ax in spec.nodes)
+        + ")  # physical K, T, tau nodes"
+    )
+    for i in range(3):
+        add(f"_NODES{i} = GRID_NODES[{i}]")
+        add(f"_INVW{i} = ({', '.join(py_float(x) for x in spec.inv_widths(i))},)  # 1/width")
     add(f"RATE_BOUNDS = ({', '.join(py_float(x) for x in spec.rate_bounds)})  # per s")
     add(f"DELAY_BUFFER_LEN = {c['NBUF']}")
     add(f"N_K = {nk}")
@@ -197,7 +220,7 @@ def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
     add(f"STATE_SCALE = ({', '.join(py_float(x) for x in plan.state_scale)},)")
     add(
         "Q_FORMATS = {"
-        f"'format': {plan.fmt!r}, 'state': 'Q0.31', 'grid': 'Q11.20', "
+        f"'format': {plan.fmt!r}, 'state': 'Q0.31', 'grid': 'double (clamp, rate limit, cell search)', "
         f"'weight': 'Q{31 - W}.{W}', 'coef_bits': {plan.coef_bits}, "
         f"'row_shift': {tuple(int(x) for x in plan.row_shift)!r}, 'xe_shift': {plan.xe_shift}, "
         "'accumulator': 'int64'}"
@@ -266,15 +289,15 @@ class Controller:
         + '''
         self._buf = [[zero] * _NBUF for _ in range(N_K)]
         self._head = 0
-        self._g = [zero, zero, zero]
+        self._r = [0.0, 0.0, 0.0]
         self._started = False
         self._out = 0.0
         st = self._status
         st.saturated = st.rho_clamped = st.rho_rate_limited = st.input_invalid = False
 
     def state(self):
-        """Internal state as a tuple (z..., grid coordinates...) for tests and logging."""
-        return tuple(self._z) + tuple(self._g)
+        """Internal state as a tuple (z..., scheduled rho K, T, tau) for tests and logging."""
+        return tuple(self._z) + tuple(self._r)
 '''
     )
     add(_float_step(spec, plan, entries, offs, nk, nz, ncol))
@@ -283,36 +306,49 @@ class Controller:
 
 
 def _rho_block(fixed: bool) -> list[str]:
-    """Clamp to the grid and rate-limit; leaves g0, g1, g2 (grid coordinates)."""
+    """Clamp and rate-limit physical rho, locate the cell; leaves i0..i2 and fa, fb, fc, and x2 = tau
+    (fractions in [0, 1] as floats, or quantised to the weight format in integer mode)."""
     L = []
     L.append("        clamped = False")
     L.append("        limited = False")
-    L.append("        g = self._g")
-    for i, name in enumerate(("K", "T", "tau")):
-        L.append(f"        x = ({name} - _LO{i}) * _INV{i}")
-        L.append("        if x < 0.0:")
-        L.append("            x = 0.0")
+    L.append("        r = self._r")
+    L.append("        started = self._started")
+    for i, (name, fr) in enumerate((("K", "fa"), ("T", "fb"), ("tau", "fc"))):
+        L.append(f"        x = {name}")
+        L.append(f"        if x < _LO{i}:")
+        L.append(f"            x = _LO{i}")
         L.append("            clamped = True")
-        L.append(f"        elif x > _NMAX{i}:")
-        L.append(f"            x = _NMAX{i}")
+        L.append(f"        elif x > _HI{i}:")
+        L.append(f"            x = _HI{i}")
         L.append("            clamped = True")
+        L.append("        if started:")
+        L.append(f"            p = r[{i}]")
+        L.append(f"            if x > p + _RSTEP{i}:")
+        L.append(f"                x = p + _RSTEP{i}")
+        L.append("                limited = True")
+        L.append(f"            elif x < p - _RSTEP{i}:")
+        L.append(f"                x = p - _RSTEP{i}")
+        L.append("                limited = True")
+        L.append(f"        r[{i}] = x")
+        L.append("        lo = 0")
+        L.append(f"        hi = _N{i} - 1")
+        L.append(f"        nodes = _NODES{i}")
+        L.append("        while hi - lo > 1:")
+        L.append("            mid = (lo + hi) >> 1")
+        L.append("            if x >= nodes[mid]:")
+        L.append("                lo = mid")
+        L.append("            else:")
+        L.append("                hi = mid")
+        L.append(f"        i{i} = lo")
+        L.append(f"        {fr} = (x - nodes[lo]) * _INVW{i}[lo]")
+        L.append(f"        if {fr} > 1.0:")
+        L.append(f"            {fr} = 1.0")
+        L.append(f"        elif {fr} < 0.0:")
+        L.append(f"            {fr} = 0.0")
         if fixed:
-            L.append(f"        x = int(x * {float(1 << GRID_FRAC_BITS)!r})")
-            dm = f"_DMAXQ{i}"
-        else:
-            dm = f"_DMAX{i}"
-        L.append("        if self._started:")
-        L.append(f"            p = g[{i}]")
-        L.append(f"            if x > p + {dm}:")
-        L.append(f"                x = p + {dm}")
-        L.append("                limited = True")
-        L.append(f"            elif x < p - {dm}:")
-        L.append(f"                x = p - {dm}")
-        L.append("                limited = True")
-        L.append(f"        g{i} = x")
-    L.append("        g[0] = g0")
-    L.append("        g[1] = g1")
-    L.append("        g[2] = g2")
+            L.append(f"        {fr} = int({fr} * _WONE)")
+        if i == 2:
+            L.append("        x2 = x")
     L.append("        self._started = True")
     return L
 
@@ -344,42 +380,21 @@ def _common_head(fixed: bool, nk: int) -> list[str]:
     return L
 
 
-def _to_weight(name: str, w_bits: int) -> str:
-    """Convert a Q.20 fraction to the weight format (shift left or right by a constant)."""
-    if w_bits >= GRID_FRAC_BITS:
-        return f"{name} << {w_bits - GRID_FRAC_BITS}"
-    return f"{name} >> {GRID_FRAC_BITS - w_bits}"
-
-
-def _corner_lines(offs: list[int], fixed: bool, w_bits: int = 0) -> list[str]:
+def _corner_lines(fixed: bool) -> list[str]:
+    """2^3 multilinear weights w0..w7 (corner c = (cK, cT, ctau) as bits 2, 1, 0)."""
     L = []
-    one = "(1 << _W)" if fixed else "1.0"
     if fixed:
-        sh = GRID_FRAC_BITS - 0
-        for i, nm in enumerate("abc"):
-            L.append(f"        i{i} = g{i} >> {sh}")
-            L.append(f"        if i{i} > _CMAX{i}:")
-            L.append(f"            i{i} = _CMAX{i}")
-            L.append(f"        f{nm} = g{i} - (i{i} << {sh})")
-            L.append(f"        f{nm} = {_to_weight(f'f{nm}', w_bits)}")
-        L.append(f"        ga = {one} - fa")
-        L.append(f"        gb = {one} - fb")
-        L.append(f"        gc = {one} - fc")
+        L.append("        ga = (1 << _W) - fa")
+        L.append("        gb = (1 << _W) - fb")
+        L.append("        gc = (1 << _W) - fc")
         L.append("        t00 = (ga * gb) >> _W")
         L.append("        t01 = (ga * fb) >> _W")
         L.append("        t10 = (fa * gb) >> _W")
         L.append("        t11 = (fa * fb) >> _W")
         pairs = ["t00", "t01", "t10", "t11"]
         for c in range(8):
-            ab = pairs[c >> 1]
-            cc = "fc" if c & 1 else "gc"
-            L.append(f"        w{c} = ({ab} * {cc}) >> _W")
+            L.append(f"        w{c} = ({pairs[c >> 1]} * {'fc' if c & 1 else 'gc'}) >> _W")
     else:
-        for i, nm in enumerate("abc"):
-            L.append(f"        i{i} = int(g{i})")
-            L.append(f"        if i{i} > _CMAX{i}:")
-            L.append(f"            i{i} = _CMAX{i}")
-            L.append(f"        f{nm} = g{i} - i{i}")
         L.append("        ga = 1.0 - fa")
         L.append("        gb = 1.0 - fb")
         L.append("        gc = 1.0 - fc")
@@ -393,20 +408,16 @@ def _corner_lines(offs: list[int], fixed: bool, w_bits: int = 0) -> list[str]:
     return L
 
 
-def _delay_lines(fixed: bool, nk: int, w_bits: int = 0) -> list[str]:
+def _delay_lines(fixed: bool, nk: int) -> list[str]:
+    """Ring-buffer write and fractional-delay read of x_k(t - tau), tau the scheduled value."""
     L = []
+    L.append("        d = x2 * _INV_TS")
+    L.append("        if d > _DMAX_SAMPLES:")
+    L.append("            d = _DMAX_SAMPLES")
+    L.append("        n = int(d)")
     if fixed:
-        L.append("        d = _TAU0_Q + ((g2 * _TAU_STEP_Q16) >> 16)")
-        L.append("        if d > _DMAX_Q:")
-        L.append("            d = _DMAX_Q")
-        L.append(f"        n = d >> {GRID_FRAC_BITS}")
-        L.append(f"        fd = d - (n << {GRID_FRAC_BITS})")
-        L.append(f"        fd = {_to_weight('fd', w_bits)}")
+        L.append("        fd = int((d - n) * _WONE)")
     else:
-        L.append("        d = _TAU0_SAMPLES + g2 * _TAU_STEP_SAMPLES")
-        L.append("        if d > _DMAX_SAMPLES:")
-        L.append("            d = _DMAX_SAMPLES")
-        L.append("        n = int(d)")
         L.append("        fd = d - n")
     L.append("        z = self._z")
     L.append("        buf = self._buf")
@@ -483,7 +494,7 @@ def _float_step(spec, plan, entries, offs, nk, nz, ncol) -> str:
     L = _common_head(False, nk)
     L.append("        v_e = e * _E_TO_S")
     L += _rho_block(False)
-    L += _corner_lines(offs, False)
+    L += _corner_lines(False)
     L += _delay_lines(False, nk)
     # v0..v{nz-1} are z, v{nz}.. x_d, v{nz+nk} = e; z_s for s < nk already bound above.
     for s in range(nk, nz):
@@ -515,8 +526,8 @@ def _fixed_step(spec, plan, entries, offs, nk, nz, ncol) -> str:
     L.append("        elif v_e < -_QMAX:")
     L.append("            v_e = -_QMAX")
     L += _rho_block(True)
-    L += _corner_lines(offs, True, plan.weight_bits)
-    L += _delay_lines(True, nk, plan.weight_bits)
+    L += _corner_lines(True)
+    L += _delay_lines(True, nk)
     for s in range(nk, nz):
         L.append(f"        v{s} = z[{s}]")
     for s in range(nk):

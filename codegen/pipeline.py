@@ -41,6 +41,8 @@ DEFAULT_ARTIFACT = REPO_ROOT / "synthesis" / "data" / "default_design.npz"
 SAMPLE_PERIOD_S = 0.1
 #: Interpolation error bound enforced at every cell midpoint / random point (row-wise relative).
 OFFGRID_REL_TOL = 0.02
+#: Node counts (K, T, tau) the adaptive tabulation search starts from.
+TABULATION_START_COUNTS = (3, 2, 2)
 
 #: Error budgets stated in every generated header and asserted by the tests.
 BUDGETS: dict[str, tuple[float, str]] = {
@@ -176,11 +178,15 @@ def load_design(path: str | Path) -> LoadedDesign:
 
 
 def tabulate(design: LoadedDesign, sample_period_s: float = SAMPLE_PERIOD_S) -> TabulationProof:
-    """Stage 2: discretise every node and choose/prove the tabulation grid."""
+    """Stage 2: discretise every node and choose/prove the tabulation grid.
+
+    The search starts from ``TABULATION_START_COUNTS`` (3 geometric K nodes, the box corners in T
+    and tau), not from the synthesis grid: adaptive bisection adds nodes only where they are needed.
+    """
     return choose_grid(
         design.controller_fn,
         design.box,
-        design.synthesis_counts,
+        TABULATION_START_COUNTS,
         design.omega,
         design.lambda_,
         sample_period_s,
@@ -226,9 +232,7 @@ def emit(
         design.sha256, target + ("-float" if c_float else ""), plan.fmt, sample_period_s
     )
     spec = EmitSpec(
-        lo=tuple(float(x) for x in proof.grid.lo),  # type: ignore[arg-type]
-        hi=tuple(float(x) for x in proof.grid.hi),  # type: ignore[arg-type]
-        counts=proof.grid.counts,
+        nodes=proof.grid.nodes_per_axis,
         rate_bounds=tuple(float(x) for x in design.rate_bounds),  # type: ignore[arg-type]
         sample_period_s=sample_period_s,
         max_rate_ml_h=design.max_rate_ml_h,
