@@ -20,6 +20,7 @@ the same algorithm (see :mod:`codegen.fixed_point` for the integer formats):
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -28,7 +29,25 @@ import numpy as np
 
 from codegen.fixed_point import FixedPointPlan
 
-__all__ = ["EmitSpec", "emit_python", "py_float"]
+__all__ = ["EmitSpec", "emit_python", "module_sha256", "py_float"]
+
+#: Prefix of the self-hash line; its value is blanked ('') before hashing the module text.
+MODULE_SHA_PREFIX = "MODULE_SHA256 = "
+
+
+def module_sha256(text: str) -> str:
+    """sha256 of a generated module's text with the ``MODULE_SHA256`` value blanked.
+
+    The generated module records this value in its own ``MODULE_SHA256`` line, so any edit,
+    truncation or appended code changes the recomputed hash (``runtime.controller_loader`` checks
+    it before importing).
+    """
+    lines = text.split("\n")
+    for k, line in enumerate(lines):
+        if line.startswith(MODULE_SHA_PREFIX):
+            lines[k] = MODULE_SHA_PREFIX + "''"
+            break
+    return hashlib.sha256("\n".join(lines).encode("utf-8")).hexdigest()
 
 
 @dataclass(frozen=True)
@@ -196,6 +215,7 @@ def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
     W = plan.weight_bits
     out: list[str] = [_header(spec, plan)]
     add = out.append
+    add(MODULE_SHA_PREFIX + "''  # sha256 of this file with this value blanked (tamper check)")
     add(f"ARTIFACT_SHA256 = {spec.artifact_sha256!r}")
     add(f"CONTENT_HASH = {spec.content_hash!r}")
     add(f"TABLES_SHA256 = {tables_hash!r}")
@@ -302,7 +322,9 @@ class Controller:
     )
     add(_float_step(spec, plan, entries, offs, nk, nz, ncol))
     add(_fixed_step(spec, plan, entries, offs, nk, nz, ncol))
-    return "\n".join(out) + "\n"
+    text = "\n".join(out) + "\n"
+    digest = module_sha256(text)
+    return text.replace(MODULE_SHA_PREFIX + "''", f"{MODULE_SHA_PREFIX}{digest!r}", 1)
 
 
 def _rho_block(fixed: bool) -> list[str]:

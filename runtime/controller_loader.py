@@ -4,11 +4,19 @@
 ``runtime/generated/lpv_map_controller.py``; a path names any module written by ``pressor codegen``
 (``--target python``). Loading a generated module imports it from its file: it must be the standard
 library-only module codegen writes, exposing a ``Controller`` class.
+
+Integrity: before anything is executed, the file's ``MODULE_SHA256`` line must equal the sha256 of
+the file's text with that value blanked (codegen writes it), so an edited, truncated or appended
+module is refused with :class:`ControllerSpecError` naming the file. When the path of the artifact
+the module was generated from is given, its stored sha256 must equal the module's
+``ARTIFACT_SHA256`` (a stale module for a replaced design is refused too).
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
+import re
 import sys
 from pathlib import Path
 from types import ModuleType
@@ -19,21 +27,83 @@ from runtime.pi_controller import PIController
 DEFAULT_LPV_MODULE = Path(__file__).resolve().parent / "generated" / "lpv_map_controller.py"
 
 
+MODULE_SHA_PREFIX = "MODULE_SHA256 = "
+_SHA_LINE = re.compile(r"^MODULE_SHA256 = '([0-9a-f]{64})'", re.MULTILINE)
+_ART_LINE = re.compile(r"^ARTIFACT_SHA256 = '([0-9a-f]{64})'", re.MULTILINE)
+
+
 class ControllerSpecError(ValueError):
     """A ``--controller`` value that names no loadable controller (message names spec and choices)."""
 
 
-def load_generated_module(path: Path) -> ModuleType:
-    """Import a generated controller module from ``path`` under a name unique to that file.
+def module_text_sha256(text: str) -> str:
+    """sha256 of a generated module's text with its ``MODULE_SHA256`` value blanked.
+
+    Mirrors ``codegen.emit_python.module_sha256`` (kept here so the runtime needs no codegen/numpy).
+    """
+    lines = text.split("\n")
+    for k, line in enumerate(lines):
+        if line.startswith(MODULE_SHA_PREFIX):
+            lines[k] = MODULE_SHA_PREFIX + "''"
+            break
+    return hashlib.sha256("\n".join(lines).encode("utf-8")).hexdigest()
+
+
+def verify_module_file(path: Path, artifact_path: Path | None = None) -> str:
+    """Check a generated module's self-hash (and artifact sha256); return its text.
 
     Raises
     ------
     ControllerSpecError
-        If the file is missing, fails to import, or has no ``Controller`` class.
+        Unreadable file, missing or mismatching ``MODULE_SHA256``, or (with ``artifact_path``) an
+        ``ARTIFACT_SHA256`` that differs from the artifact's stored sha256.
+    """
+    try:
+        text = Path(path).read_bytes().decode("utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ControllerSpecError(f"{path}: cannot read generated controller ({exc})") from exc
+    m = _SHA_LINE.search(text)
+    if m is None:
+        raise ControllerSpecError(
+            f"{path}: field 'MODULE_SHA256' missing; not an intact pressor codegen module"
+        )
+    actual = module_text_sha256(text)
+    if actual != m.group(1):
+        raise ControllerSpecError(
+            f"{path}: field 'MODULE_SHA256' = {m.group(1)[:12]}... but the file hashes to "
+            f"{actual[:12]}...; the module was modified or truncated, regenerate it with "
+            "pressor codegen"
+        )
+    if artifact_path is not None:
+        a = _ART_LINE.search(text)
+        from synthesis.artifact import load_artifact  # only when an artifact is named
+
+        try:
+            art_sha = str(load_artifact(Path(artifact_path)).sha256)
+        except Exception as exc:
+            raise ControllerSpecError(f"{artifact_path}: cannot load artifact ({exc})") from exc
+        if a is None or a.group(1) != art_sha:
+            got = a.group(1)[:12] if a else "missing"
+            raise ControllerSpecError(
+                f"{path}: field 'ARTIFACT_SHA256' = {got} but {artifact_path} has sha256 "
+                f"{art_sha[:12]}...; regenerate with pressor codegen"
+            )
+    return text
+
+
+def load_generated_module(path: Path, artifact_path: Path | None = None) -> ModuleType:
+    """Verify (:func:`verify_module_file`) and import a generated controller module from ``path``.
+
+    Raises
+    ------
+    ControllerSpecError
+        If the file is missing, fails the integrity check, fails to import, or has no
+        ``Controller`` class.
     """
     path = Path(path).resolve()
     if not path.is_file():
         raise ControllerSpecError(f"{path}: controller module not found")
+    verify_module_file(path, artifact_path)
     name = f"_pressor_generated_{abs(hash(str(path))):x}"
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
@@ -51,7 +121,9 @@ def load_generated_module(path: Path) -> ModuleType:
     return module
 
 
-def load_controller(spec: str, sample_period_s: float = 0.1) -> Controller:
+def load_controller(
+    spec: str, sample_period_s: float = 0.1, artifact_path: Path | None = None
+) -> Controller:
     """Return a fresh controller for ``spec``.
 
     Parameters
@@ -61,11 +133,14 @@ def load_controller(spec: str, sample_period_s: float = 0.1) -> Controller:
         a generated ``.py`` module.
     sample_period_s
         Loop period (s). A generated module is discretised for one period; a mismatch is an error.
+    artifact_path
+        Optional artifact the module must have been generated from (its sha256 is checked).
 
     Raises
     ------
     ControllerSpecError
-        Unknown spec, missing or broken module, or a sample-period mismatch.
+        Unknown spec, missing, tampered or broken module, artifact mismatch, or a sample-period
+        mismatch.
     """
     if spec == "pi":
         return PIController(sample_period_s=sample_period_s)
@@ -74,7 +149,7 @@ def load_controller(spec: str, sample_period_s: float = 0.1) -> Controller:
         raise ControllerSpecError(
             f"--controller {spec!r}: expected 'pi', 'lpv' or a path to a generated .py module"
         )
-    module = load_generated_module(path)
+    module = load_generated_module(path, artifact_path)
     controller = module.Controller()
     period = float(getattr(controller, "sample_period_s", float("nan")))
     if abs(period - sample_period_s) > 1e-12:

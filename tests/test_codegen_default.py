@@ -1,16 +1,28 @@
-"""The committed generated module for the shipped default design is current and works."""
+"""Codegen on the SHIPPED design (whatever synthesis/data/default_design.npz holds): the committed
+module is current and intact, and the generated Python/C agree with each other, with the float
+reference and with the exactly reconstructed controller. Also tamper detection and CLI errors."""
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import math
+import shutil
+import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from codegen import pipeline as pl
+from codegen.discretise import discretise_node
+from codegen.emit_python import module_sha256
+from codegen.tables import frozen_loop_matrices, interpolate, unstable_root_count
+from runtime.controller_loader import ControllerSpecError, load_controller, module_text_sha256
+from tests.test_codegen_core import CController, fopdt_closed_loop, random_inputs
 
 COMMITTED = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
+pytestmark = pytest.mark.skipif(not pl.DEFAULT_ARTIFACT.is_file(), reason="no shipped design")
 
 
 def _load(path: Path):
@@ -20,31 +32,135 @@ def _load(path: Path):
     return mod
 
 
-@pytest.mark.skipif(not pl.DEFAULT_ARTIFACT.is_file(), reason="no shipped default design")
+@pytest.fixture(scope="module")
+def shipped(tmp_path_factory):
+    """The shipped artifact through every stage once: proof, q31 module, q31 C library."""
+    design = pl.load_design(pl.DEFAULT_ARTIFACT)
+    proof = pl.tabulate(design)
+    plan = pl.quantise(design, proof, "q31")
+    root = tmp_path_factory.mktemp("shipped")
+    src = pl.emit(design, proof, plan, "python").files["lpv_map_controller.py"]
+    (root / "lpv_map_controller.py").write_text(src, encoding="utf-8")
+    out = {"design": design, "proof": proof, "mod": _load(root / "lpv_map_controller.py"),
+           "src": src, "root": root}  # fmt: skip
+    gcc = shutil.which("gcc")
+    if gcc:
+        for name, text in pl.emit(design, proof, plan, "c").files.items():
+            (root / name).write_text(text)
+        lib = root / "libctl.so"
+        subprocess.run(
+            [gcc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-shared",
+             "-fPIC", "-o", str(lib), str(root / "lpv_map_controller.c")],
+            check=True, capture_output=True, text=True,
+        )  # fmt: skip
+        out["lib"] = lib
+    return out
+
+
+def test_committed_module_is_current_for_shipped_artifact_and_codegen_sources():
+    text = COMMITTED.read_text(encoding="utf-8")
+    design = pl.load_design(pl.DEFAULT_ARTIFACT)
+    assert f"Artifact sha256:  {design.sha256}" in text
+    assert pl.recorded_hash(COMMITTED) == pl.content_hash(design.sha256, "python", "q31", 0.1)
+
+
+def test_committed_module_self_hash_matches_its_text():
+    text = COMMITTED.read_text(encoding="utf-8")
+    assert module_sha256(text) == module_text_sha256(text)
+    assert f"MODULE_SHA256 = '{module_sha256(text)}'" in text
+
+
+@pytest.mark.slow
 def test_regenerating_default_module_gives_identical_bytes(tmp_path):
     paths, skipped = pl.generate(pl.DEFAULT_ARTIFACT, "python", tmp_path)
     assert not skipped
     assert paths[0].read_bytes() == COMMITTED.read_bytes()
-    # a second run sees the recorded hash and writes nothing
     mtime = paths[0].stat().st_mtime_ns
     _, skipped_again = pl.generate(pl.DEFAULT_ARTIFACT, "python", tmp_path)
     assert skipped_again and paths[0].stat().st_mtime_ns == mtime
 
 
-def test_committed_module_records_the_shipped_artifact_and_tracks_a_target():
-    mod = _load(COMMITTED)
-    from synthesis.artifact import load_artifact
+def test_loader_accepts_intact_module_and_checks_artifact_sha(tmp_path):
+    c = load_controller("lpv", artifact_path=pl.DEFAULT_ARTIFACT)
+    assert 0.0 <= c.step(80.0, 90.0, 0.5, 150.0, 30.0) <= c.max_rate_ml_h
 
-    assert mod.ARTIFACT_SHA256 == load_artifact(pl.DEFAULT_ARTIFACT).sha256
-    for fixed in (False, True):
-        c = mod.Controller(fixed_point=fixed)
-        dmap = 0.0
-        hist = [0.0] * 400
-        for k in range(24000):  # 40 min, nominal patient, +20 mmHg target
-            u = c.step(70.0 + dmap, 90.0, 0.55, 150.0, 40.0)
-            hist[k % 400] = u
-            ud = hist[(k - 400 + 1) % 400] if k >= 400 else 0.0
-            a = math.exp(-0.1 / 150.0)
-            dmap = a * dmap + 0.55 * (1 - a) * ud
-            assert 0.0 <= u <= mod.MAX_RATE_ML_H
-        assert abs(dmap - 20.0) < 0.5
+
+@pytest.mark.parametrize("how", ["edit", "truncate", "append"])
+def test_loader_refuses_tampered_module_naming_the_file(tmp_path, how):
+    text = COMMITTED.read_text(encoding="utf-8")
+    bad = tmp_path / "lpv_map_controller.py"
+    if how == "edit":  # one coefficient digit changed
+        k = text.index("_TQ = (") + 20
+        d = text[k]
+        text = text[:k] + ("1" if d != "1" else "2") + text[k + 1 :]
+    elif how == "truncate":
+        text = text[: len(text) // 2]
+    else:
+        text += "\nMAX_RATE_ML_H = 1e9\n"
+    bad.write_text(text, encoding="utf-8")
+    with pytest.raises(ControllerSpecError, match=str(bad.name)) as exc:
+        load_controller(str(bad))
+    assert "MODULE_SHA256" in str(exc.value)
+
+
+def test_loader_refuses_module_for_another_artifact(tmp_path):
+    text = COMMITTED.read_text(encoding="utf-8")
+    old = text.split("ARTIFACT_SHA256 = '")[1][:64]
+    other = text.replace(old, hashlib.sha256(b"other").hexdigest())
+    other = other.replace(module_sha256(text), module_sha256(other))
+    p = tmp_path / "m.py"
+    p.write_text(other, encoding="utf-8")
+    load_controller(str(p))  # intact, so it loads without an artifact to compare with
+    with pytest.raises(ControllerSpecError, match="ARTIFACT_SHA256"):
+        load_controller(str(p), artifact_path=pl.DEFAULT_ARTIFACT)
+
+
+def test_shipped_integer_python_matches_compiled_c_bit_exact(shipped):
+    if "lib" not in shipped:
+        pytest.skip("no gcc")
+    py = shipped["mod"].Controller(fixed_point=True)
+    c = CController(shipped["lib"])
+    for args in random_inputs(21, 6000):
+        a, b = py.step(*args), c.step(*args)
+        assert a == b, (args, a, b)
+
+
+def test_shipped_fixed_point_within_stated_budget_of_float_over_1h_closed_loop(shipped):
+    mod = shipped["mod"]
+    uf = fopdt_closed_loop(mod.Controller(), 3600.0, seed=2)
+    uq = fopdt_closed_loop(mod.Controller(fixed_point=True), 3600.0, seed=2)
+    err = max(abs(a - b) for a, b in zip(uf, uq, strict=True))
+    assert err <= mod.FIXED_VS_FLOAT_BUDGET_ML_H, err
+    assert max(uf) > 5.0
+
+
+def test_shipped_offgrid_midpoints_within_bound_and_frozen_loops_stable(shipped):
+    """Recomputed here (not read from the proof): every 7th cell midpoint plus seeded points."""
+    design, proof = shipped["design"], shipped["proof"]
+    mids = proof.grid.cell_midpoints()[::7]
+    rng = np.random.default_rng(99)
+    pts = np.vstack([mids, design.box[:, 0] + rng.random((4, 3)) * np.ptp(design.box, 1)])
+    for rho in pts:
+        exact = discretise_node(design.controller_fn(rho), design.omega, design.lambda_, 0.1)
+        approx = interpolate(proof.tables, proof.grid, rho)
+        num = np.linalg.norm(approx - exact, axis=1)
+        den = np.maximum(np.linalg.norm(exact, axis=1), 1e-300)
+        assert float(np.max(num / den)) <= pl.OFFGRID_REL_TOL, rho
+        assert unstable_root_count(frozen_loop_matrices(approx, rho, 0.1)) == 0, rho
+
+
+def test_shipped_time_varying_loop_at_rate_bounds_stays_bounded_and_settles(shipped):
+    mod, box, rates = shipped["mod"], shipped["design"].box, shipped["design"].rate_bounds
+
+    def tri(t, lo, hi, rate):
+        span = hi - lo
+        p = (t * rate) % (2 * span)
+        return lo + (p if p < span else 2 * span - p)
+
+    def rho(t):
+        return tuple(tri(t, box[i, 0], box[i, 1], rates[i]) for i in range(3))
+
+    cmds = fopdt_closed_loop(mod.Controller(), 3600.0, seed=8, rho_fn=rho)
+    tail = cmds[-3000:]
+    assert all(math.isfinite(u) and 0.0 <= u <= mod.MAX_RATE_ML_H for u in cmds)
+    assert max(tail) - min(tail) < 30.0
