@@ -122,10 +122,10 @@ def main(command: str, argv: list[str]) -> int:
         return 2
 
     from runtime.link import LinkClosedError, LinkEndpoint, LinkError, ManualClock, TlogWriter
-    from runtime.link.transport import open_port
+    from runtime.link.transport import fast_port, open_port
 
     try:
-        port = open_port(args.port)
+        port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises SerialException / ValueError for bad URLs
         print(f"pressor {command}: --port: cannot open {args.port!r}: {exc}", file=sys.stderr)
         return 2

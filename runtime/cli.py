@@ -616,10 +616,10 @@ def _main_run(argv: list[str]) -> int:
     _load_controller(args.controller, 1.0 / args.rate)
     args.fault_specs = _fault_specs(args.fault)
     signing = _signing(args, allow_generate=False)
-    from runtime.link.transport import open_port
+    from runtime.link.transport import fast_port, open_port
 
     try:
-        port = open_port(args.port)
+        port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises several types for a bad path/URL
         raise UsageError(f"--port {args.port}: cannot open: {exc}") from None
     identity = {

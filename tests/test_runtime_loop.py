@@ -204,16 +204,25 @@ def test_realtime_watchdogs_flag_stale_sample_then_link_loss_and_failsafe():
 
 
 def test_supervisor_config_reads_design_envelope_from_generated_module_constants(tmp_path):
-    from runtime.controller_loader import load_generated_module
+    from runtime.controller_loader import (
+        MODULE_SHA_PREFIX,
+        load_generated_module,
+        module_text_sha256,
+    )
 
     src = tmp_path / "fake_gen.py"
-    src.write_text(
+    text = (
         "GRID_LO = (0.25, 100.0, 10.0)\n"
         "GRID_HI = (1.0, 200.0, 45.0)\n"
         "RATE_BOUNDS = (2e-4, 0.06, 0.1)\n"
         "class Controller:\n"
         "    sample_period_s = 0.1\n"
         "    max_rate_ml_h = 120.0\n"
+        f"{MODULE_SHA_PREFIX}''\n"
+    )
+    # the loader refuses modules without an intact self-hash (codegen's integrity line)
+    src.write_text(
+        text.replace(f"{MODULE_SHA_PREFIX}''", f"{MODULE_SHA_PREFIX}'{module_text_sha256(text)}'")
     )
     ctrl = load_generated_module(src).Controller()
     cfg = supervisor_config_for(ctrl, sensor_noise_mmhg=2.0)

@@ -381,6 +381,8 @@ class LinkEndpoint:
                 mav.signing.allow_unsigned_callback = lambda _mav, _msgid: True
         self._mav = mav
         self._maxlen = _max_payload_lengths()
+        #: the port's one-syscall read (``transport.FdPort`` / ``FastPort``), if it has one
+        self._read_some: Callable[[float], bytes] | None = getattr(port, "read_some", None)
         self._rx = bytearray()
         self._tx = bytearray()
         self._last_seq: dict[tuple[int, int], int] = {}
@@ -532,23 +534,29 @@ class LinkEndpoint:
         Returns the number of frames accepted.
         """
         before = self.counters.frames_received
-        deadline = time.monotonic() + timeout_s
+        now = time.monotonic()
+        deadline = now + timeout_s
         while True:
-            if self._read_once(block=timeout_s > 0):
+            if self._read_once(timeout_s > 0, deadline - now):
                 return self.counters.frames_received - before
-            if time.monotonic() >= deadline:
+            if (now := time.monotonic()) >= deadline:
                 return self.counters.frames_received - before
 
-    def _read_once(self, block: bool) -> bool:
+    def _read_once(self, block: bool, timeout_s: float | None = None) -> bool:
         port = self.port
         try:
-            n = port.in_waiting
-            if n:
-                data = port.read(n)
-            elif block:
-                data = port.read(1)
+            if self._read_some is not None:  # tty hot path: one read for all that is there
+                if timeout_s is None:
+                    timeout_s = (port.timeout or 0.0) if block else 0.0
+                data = self._read_some(timeout_s if block else 0.0)
             else:
-                return False
+                n = port.in_waiting
+                if n:
+                    data = port.read(n)
+                elif block:
+                    data = port.read(1)
+                else:
+                    return False
         except (serial.SerialException, OSError) as exc:
             self.closed = True
             raise LinkClosedError(str(exc)) from exc
@@ -561,13 +569,14 @@ class LinkEndpoint:
         result = ready()
         if result is not None:
             return result
-        deadline = time.monotonic() + timeout_s
+        now = time.monotonic()
+        deadline = now + timeout_s
         while True:
-            if self._read_once(block=True):
+            if self._read_once(True, deadline - now):
                 result = ready()
                 if result is not None:
                     return result
-            elif time.monotonic() >= deadline:
+            elif (now := time.monotonic()) >= deadline:
                 self.counters.timeouts += 1
                 self._resync_partial()
                 return ready()
