@@ -13,12 +13,18 @@ import importlib.util
 import random
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 import tracemalloc
 from pathlib import Path
 
-from codegen import pipeline as pl
+# benchmarks/synthesis.py would shadow the synthesis package when run as a script: repo root first.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+if sys.path[1:2] == [str(Path(__file__).resolve().parent)]:
+    del sys.path[1]
+
+from codegen import pipeline as pl  # noqa: E402
 
 MODULE = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
 
