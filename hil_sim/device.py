@@ -88,6 +88,12 @@ def _parser(command: str) -> argparse.ArgumentParser:
         "--handshake-timeout", type=float, default=HANDSHAKE_TIMEOUT_S, help="s to wait for hello"
     )
     p.add_argument(
+        "--cpu",
+        type=int,
+        default=None,
+        help="run on this CPU only (pressor sil pins both lockstep ends to one CPU)",
+    )
+    p.add_argument(
         "--fault",
         action="append",
         default=[],
@@ -115,6 +121,7 @@ def main(command: str, argv: list[str]) -> int:
         for opt in ("retransmit", "link_timeout", "handshake_timeout"):
             _check_range(f"--{opt.replace('_', '-')}", getattr(args, opt), 0.0, 3600.0, "s", True)
         faults = _parse_faults(args.fault)
+        _pin(args.cpu)
         world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate, faults)
         signing = _load_signing(args.signing_key)
     except _UsageError as exc:
@@ -169,6 +176,16 @@ def main(command: str, argv: list[str]) -> int:
                 Path(tlog_tmp).unlink(missing_ok=True)
     print(f"pressor {command}: {result.ended} after {result.ticks} ticks", file=sys.stderr)
     return 0 if result.ended in ("completed", "runtime closed the link") else 1
+
+
+def _pin(cpu: int | None) -> None:
+    """Restrict this process to ``cpu`` (see ``runtime.cli.lockstep_cpu`` for why)."""
+    if cpu is None:
+        return
+    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    if cpu not in allowed:
+        raise _UsageError(f"--cpu: value {cpu} not one of the allowed CPUs {allowed}")
+    os.sched_setaffinity(0, {cpu})
 
 
 def _tmp_path(path: str) -> str:

@@ -141,7 +141,78 @@ def _sil_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--link", default="pty", help="pty (default) or a pyserial URL / device path")
     p.add_argument("--no-signing", action="store_true", help="run the link unsigned")
+    p.add_argument(
+        "--cpu",
+        type=_cpu,
+        default="auto",
+        help="lockstep: run the device and the loop thread on this one CPU (auto: the CPU this"
+        " process is on; none: let the scheduler place them). Ignored with --realtime",
+    )
     return p
+
+
+def _cpu(text: str) -> str | int:
+    if text in ("auto", "none"):
+        return text
+    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--cpu {text!r}: allowed auto, none or a CPU number"
+        ) from None
+    if value not in allowed:
+        raise argparse.ArgumentTypeError(f"--cpu {text!r}: allowed auto, none or one of {allowed}")
+    return value
+
+
+def lockstep_cpu(choice: str | int, realtime: bool) -> int | None:
+    """The CPU both lockstep ends run on, or ``None`` (no pinning).
+
+    Why pin: in lockstep the two processes never run at the same time (each waits for the other's
+    frames), so they lose nothing by sharing a CPU, and every hand-over becomes a local wake-up.
+    Across CPUs each hand-over wakes an idle (virtual) CPU: a bare pty ping-pong between two
+    processes costs ~120-200 µs per round trip across the two vCPUs of the development VM and
+    ~18 µs on one (``benchmarks/sil.py`` measures both). Only the loop thread is pinned; the
+    recorder's rerun threads stay free to use the other CPUs.
+    """
+    if choice == "none" or realtime or not hasattr(os, "sched_setaffinity"):
+        return None
+    allowed = os.sched_getaffinity(0)
+    if isinstance(choice, int):
+        return choice
+    if len(allowed) < 2:
+        return None
+    return _current_cpu(allowed)
+
+
+def _current_cpu(allowed: set[int]) -> int:
+    """The CPU this thread last ran on (``/proc/thread-self/stat`` field 39), else the lowest."""
+    try:
+        text = Path("/proc/thread-self/stat").read_text()
+        cpu = int(text[text.rindex(")") + 2 :].split()[36])
+        if cpu in allowed:
+            return cpu
+    except (OSError, ValueError, IndexError):
+        pass
+    return min(allowed)
+
+
+class _Pinned:
+    """Run the calling thread on ``cpu`` inside the block (``None``: no change)."""
+
+    def __init__(self, cpu: int | None) -> None:
+        self.cpu = cpu
+        self._saved: set[int] | None = None
+
+    def __enter__(self) -> None:
+        if self.cpu is not None:
+            self._saved = os.sched_getaffinity(0)
+            os.sched_setaffinity(0, {self.cpu})
+
+    def __exit__(self, *exc: object) -> None:
+        if self._saved is not None:
+            os.sched_setaffinity(0, self._saved)
 
 
 def _run_parser() -> argparse.ArgumentParser:
@@ -422,7 +493,8 @@ def run_runtime(
             result = loop.run_realtime(n)
         else:
             n = getattr(args, "ticks", 0) or peer.n_ticks
-            result = loop.run_lockstep(n, stall_timeout_s=args.stall_timeout)
+            with _Pinned(getattr(args, "pin_cpu", None)):  # rerun's threads exist already
+                result = loop.run_lockstep(n, stall_timeout_s=args.stall_timeout)
         if recorder is not None:
             recorder.close()
             recorder = None
@@ -530,6 +602,9 @@ def _main_sil(argv: list[str]) -> int:
         ]
         if args.realtime:
             cmd.append("--realtime")
+        args.pin_cpu = lockstep_cpu(args.cpu, args.realtime)
+        if args.pin_cpu is not None:
+            cmd += ["--cpu", str(args.pin_cpu)]
         for text in args.fault:
             cmd += ["--fault", text]
         if any(f.info.group == "link" for f in args.fault_specs):

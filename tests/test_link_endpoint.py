@@ -322,3 +322,72 @@ def test_a_signed_frame_with_a_corrupted_timestamp_does_not_lock_out_later_frame
     _drain(rt)
     assert [m.tick for m in got] == [0, 2, 3]
     assert rt.counters.refused_bad_signature == 1
+
+
+class _Sink:
+    """A port that keeps what is written (no reads): frames as the endpoint emits them."""
+
+    timeout = 0.01
+    in_waiting = 0
+
+    def __init__(self) -> None:
+        self.data = bytearray()
+
+    def write(self, data: bytes) -> int:
+        self.data += data
+        return len(data)
+
+    def read(self, size: int = 1) -> bytes:
+        return b""
+
+    def close(self) -> None:
+        pass
+
+
+_FAST_CASES = [
+    ("pressor_heartbeat_encode", (7, 2, 1)),
+    ("scheduling_params_encode", (7, 0.5, 150.25, 20.0, 1)),
+    ("map_target_encode", (7, 75.0)),
+    ("map_sample_encode", (0.7, 7, 71.5, 0)),
+    ("map_sample_encode", (0.0, 0, 0.0, 0)),  # all-zero payload: truncated to one byte
+    ("infusion_command_encode", (7, 12.5, MODE_SAFE)),
+    ("pump_status_encode", (7, 12.5, 3.25, 4)),
+]
+
+
+@pytest.mark.parametrize("signed", [False, True])
+def test_fast_codec_frames_are_byte_identical_to_pymavlink_pack_and_decode(signed):
+    sig = Signing.generate(5) if signed else None
+    fast = LinkEndpoint(_Sink(), "device", signing=sig, clock=ManualClock(12.5))
+    slow = LinkEndpoint(_Sink(), "device", signing=sig, clock=ManualClock(12.5))
+    rx = LinkEndpoint(_Sink(), "runtime", signing=sig)
+    got = _collect(rx)
+    for name, args in _FAST_CASES:
+        msg = getattr(slow._mav, name)(*args)
+        want = slow.send(msg)
+        assert fast.send_fields(msg.id, *args) == want, name
+        ref = mavlink.MAVLink(None, 1, 1)
+        if sig is not None:
+            ref.signing.secret_key = sig.key
+        decoded = ref.decode(bytearray(want))
+        rx.feed(want)
+        assert got[-1].get_type() == decoded.get_type()
+        assert got[-1].to_dict() == decoded.to_dict(), name
+    assert rx.counters.frames_received == len(_FAST_CASES)
+
+
+def test_fast_decoder_refuses_forged_and_unsigned_frames_like_pymavlink():
+    key = Signing.generate(1)
+    rx = LinkEndpoint(_Sink(), "device", signing=key)
+    forger = LinkEndpoint(_Sink(), "runtime", signing=Signing.generate(2))
+    plain = LinkEndpoint(_Sink(), "runtime")
+    good = LinkEndpoint(_Sink(), "runtime", signing=key)
+    rx.feed(forger.send_fields(mavlink.MAVLINK_MSG_ID_INFUSION_COMMAND, 0, 50.0, MODE_AUTO))
+    rx.feed(plain.send_fields(mavlink.MAVLINK_MSG_ID_INFUSION_COMMAND, 0, 50.0, MODE_AUTO))
+    frame = bytearray(good.send_fields(mavlink.MAVLINK_MSG_ID_INFUSION_COMMAND, 0, 5.0, MODE_AUTO))
+    frame[12] ^= 0x40  # payload bit flipped: CRC fails
+    rx.feed(bytes(frame))
+    rx.feed(good.send_fields(mavlink.MAVLINK_MSG_ID_INFUSION_COMMAND, 0, 5.0, MODE_AUTO))
+    c = rx.counters
+    assert (c.refused_bad_signature, c.refused_unsigned, c.bad_crc) == (1, 1, 1)
+    assert rx.wait_for_command(0, 0.0).rate_ml_h == 5.0

@@ -42,6 +42,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import struct
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
@@ -80,6 +81,38 @@ SIGNING_KEY_BYTES = 32
 _MARKER = 0xFD
 _HEADER = 10
 _SIG = 13
+_HDR = struct.Struct("<BBBBBBBHB")
+_CRC = struct.Struct("<H")
+_SIGN_STAMP = struct.Struct("<BQ")
+_sha256 = hashlib.sha256
+#: the generated module's C CRC-16/MCRF4XX (``fastcrc``), or None (then no fast codec)
+_mcrf4xx = getattr(mavlink, "mcrf4xx", None)
+
+
+def _fast_codecs() -> dict[int, tuple[Any, struct.Struct, bytes, tuple[int, ...], tuple[int, ...]]]:
+    """Per message id without arrays or strings: (class, struct, crc_extra byte, XML→wire
+    permutation, wire→XML order). Those messages are packed and decoded here, byte-identical to
+    pymavlink's ``pack``/``decode`` but without its per-frame objects (tests compare both)."""
+    out = {}
+    if _mcrf4xx is None:
+        return out
+    for mid, cls in mavlink.mavlink_map.items():
+        if any(n != 1 for n in cls.lengths) or any(t.startswith("char") for t in cls.fieldtypes):
+            continue
+        to_wire = tuple(cls.fieldnames.index(n) for n in cls.ordered_fieldnames)
+        out[mid] = (cls, cls.unpacker, bytes([cls.crc_extra]), to_wire, tuple(cls.orders))
+    return out
+
+
+_FAST = _fast_codecs()
+
+
+_ID_HEARTBEAT = mavlink.MAVLINK_MSG_ID_PRESSOR_HEARTBEAT
+_ID_SCHED = mavlink.MAVLINK_MSG_ID_SCHEDULING_PARAMS
+_ID_TARGET = mavlink.MAVLINK_MSG_ID_MAP_TARGET
+_ID_SAMPLE = mavlink.MAVLINK_MSG_ID_MAP_SAMPLE
+_ID_COMMAND = mavlink.MAVLINK_MSG_ID_INFUSION_COMMAND
+_ID_STATUS = mavlink.MAVLINK_MSG_ID_PUMP_STATUS
 
 
 class LinkError(RuntimeError):
@@ -435,6 +468,54 @@ class LinkEndpoint:
             self.flush()
         return frame
 
+    def send_fields(self, msgid: int, *values: Any, flush: bool = True) -> bytes:
+        """Pack (and sign) message ``msgid`` from its field values in XML order, queue it, and
+        write the queue if ``flush``; byte-identical to :meth:`send` of the generated message.
+
+        The hot path of every tick: no message object, one struct pack, the C CRC, one sha256.
+        Messages with arrays or strings (the hello) go through :meth:`send`.
+        """
+        codec = _FAST.get(msgid)
+        if codec is None:
+            cls = mavlink.mavlink_map[msgid]
+            return self.send(cls(*values), flush=flush)
+        _cls, st, extra, to_wire, _ = codec
+        payload = st.pack(*[values[j] for j in to_wire])
+        payload = payload.rstrip(b"\x00") or payload[:1]  # MAVLink 2 trailing-zero truncation
+        mav = self._mav
+        signing = self.signing
+        head = _HDR.pack(
+            _MARKER,
+            len(payload),
+            1 if signing is not None else 0,
+            0,
+            mav.seq,
+            mav.srcSystem,
+            mav.srcComponent,
+            msgid & 0xFFFF,
+            msgid >> 16,
+        )
+        body = head[1:] + payload
+        frame = head + payload + _CRC.pack(_mcrf4xx(body + extra, 0xFFFF))
+        if signing is not None:
+            sg = mav.signing
+            ts = int(self.clock() * 100_000.0)  # run-clock timestamp, see send()
+            if ts > sg.timestamp:
+                sg.timestamp = ts
+            frame += _SIGN_STAMP.pack(sg.link_id, sg.timestamp)[:7]
+            frame += _sha256(sg.secret_key + frame).digest()[:6]
+            sg.timestamp += 1
+        mav.seq = (mav.seq + 1) & 0xFF
+        self._tx += frame
+        c = self.counters
+        c.frames_sent += 1
+        c.bytes_sent += len(frame)
+        if self.tlog is not None:
+            self.tlog.write(frame, self.clock())
+        if flush:
+            self.flush()
+        return frame
+
     def flush(self) -> None:
         """Write queued frames to the port in one write (one syscall, one pty wake-up)."""
         if self._tx:
@@ -477,12 +558,12 @@ class LinkEndpoint:
 
     def send_heartbeat(self, tick: int, state: int, *, flush: bool = True) -> None:
         """Send a heartbeat (last tick handled, ``STATE_*``)."""
-        self.send(self._mav.pressor_heartbeat_encode(tick, self._role_value, state), flush=flush)
+        self.send_fields(_ID_HEARTBEAT, tick, self._role_value, state, flush=flush)
 
     def send_command(self, tick: int, rate_ml_h: float, mode: int = MODE_AUTO) -> None:
         """Runtime: send the infusion command answering ``tick`` (ml/h) and flush."""
         self._last_command = (tick, rate_ml_h, mode)
-        self.send(self._mav.infusion_command_encode(tick, rate_ml_h, mode))
+        self.send_fields(_ID_COMMAND, tick, rate_ml_h, mode)
 
     def send_tick(
         self,
@@ -499,10 +580,10 @@ class LinkEndpoint:
         flush: bool = True,
     ) -> None:
         """Device: send tick k's scheduling parameters, target and MAP sample (in that order)."""
-        mav = self._mav
-        self.send(mav.scheduling_params_encode(tick, K, T_s, tau_s, int(sched_valid)), flush=False)
-        self.send(mav.map_target_encode(tick, target_mmhg), flush=False)
-        self.send(mav.map_sample_encode(sim_time_s, tick, map_mmhg, quality), flush=flush)
+        send = self.send_fields
+        send(_ID_SCHED, tick, K, T_s, tau_s, int(sched_valid), flush=False)
+        send(_ID_TARGET, tick, target_mmhg, flush=False)
+        send(_ID_SAMPLE, sim_time_s, tick, map_mmhg, quality, flush=flush)
 
     def send_observation(self, obs: Any, *, flush: bool = True) -> None:
         """Device: :meth:`send_tick` from a ``hil_sim.world.Observation``-like object."""
@@ -523,9 +604,7 @@ class LinkEndpoint:
         self, tick: int, delivered_ml_h: float, volume_ml: float, alarms: int, *, flush: bool = True
     ) -> None:
         """Device: send the pump status (ml/h, ml, alarm flags) for ``tick``."""
-        self.send(
-            self._mav.pump_status_encode(tick, delivered_ml_h, volume_ml, alarms), flush=flush
-        )
+        self.send_fields(_ID_STATUS, tick, delivered_ml_h, volume_ml, alarms, flush=flush)
 
     # ---------------------------------------------------------------- receiving
     def poll(self, timeout_s: float = 0.0) -> int:
@@ -598,6 +677,7 @@ class LinkEndpoint:
         n = len(rx)
         i = 0
         maxlen = self._maxlen
+        fast = _FAST
         while True:
             j = rx.find(_MARKER, i)
             if j < 0:
@@ -630,7 +710,8 @@ class LinkEndpoint:
             else:
                 stream = None
             try:
-                msg = self._mav.decode(frame)
+                codec = fast.get(rx[i + 7] | (rx[i + 8] << 8) | (rx[i + 9] << 16))
+                msg = self._mav.decode(frame) if codec is None else self._decode(frame, codec)
             except mavlink.MAVError as exc:
                 if "signature" in exc.message:
                     if stream is not None:
@@ -674,6 +755,36 @@ class LinkEndpoint:
             assert self._hello is not None
             self.send_hello(self._hello)
 
+    def _decode(self, frame: bytearray, codec: tuple) -> Any:
+        """``MAVLink.decode`` for a framed message without arrays or strings: the same checks
+        (CRC with crc_extra, signature via pymavlink's own ``check_signature``, unsigned frames
+        refused when a key is required), the same message object, no header objects.
+
+        Raises
+        ------
+        mavlink.MAVError
+            Bad CRC, or "Invalid signature" (the caller tells the two apart by the message).
+        """
+        cls, st, extra, _, orders = codec
+        plen = frame[1]
+        signed = frame[2] & 1
+        end = _HEADER + plen
+        if _mcrf4xx(bytes(frame[1:end]) + extra, 0xFFFF) != frame[end] | (frame[end + 1] << 8):
+            raise mavlink.MAVError("invalid MAVLink CRC")
+        mav = self._mav
+        if mav.signing.secret_key is not None:
+            ok = signed and mav.check_signature(frame, frame[5], frame[6])
+            if not ok:
+                cb = mav.signing.allow_unsigned_callback
+                if cb is None or not cb(mav, cls.id):
+                    raise mavlink.MAVError("Invalid signature")
+        size = st.size
+        payload = bytes(frame[_HEADER:end])
+        if plen < size:
+            payload += bytes(size - plen)
+        t = st.unpack(payload)
+        return cls(*[t[j] for j in orders])
+
     # ------------------------------------------------------------- dispatching
     def _on_heartbeat(self, msg: Any) -> None:
         self.peer_heartbeat = (msg.tick, msg.state)
@@ -713,7 +824,7 @@ class LinkEndpoint:
             last = self._last_command
             if last is not None and last[0] == tick:
                 self.counters.retransmits += 1
-                self.send(self._mav.infusion_command_encode(*last))
+                self.send_fields(_ID_COMMAND, *last)
             return
         if self.complete_ticks:
             peer = self.peer_hello
