@@ -32,9 +32,11 @@ sample - the sample last, so its arrival means the tick is complete), :meth:`wai
 :meth:`send_command`. When a device retransmits a tick the runtime has already answered (the
 command was lost), the runtime endpoint re-sends the same command by itself and counts it.
 
-Per-frame cost on the development machine (unsigned): pack ~5 µs, frame + decode ~8 µs; a lockstep
-tick (device: 3-4 frames out, 1 in; runtime: the reverse) over a pty costs ~130 µs of Python for
-both ends together (~160 µs signed).
+Hot path. Messages without arrays or strings (all but the hello) are packed by
+:meth:`LinkEndpoint.send_fields` and decoded by ``_decode``: byte-identical to pymavlink's
+``pack``/``decode`` (a test compares them) but without its per-frame header objects. Measured on
+the development VM, signed: packing a tick's 5 device frames 15 µs (pymavlink: 53 µs); decoding
+them and packing the command 43 µs (98 µs).
 """
 
 from __future__ import annotations
