@@ -296,7 +296,6 @@ def run_device(
     observe, apply_command, advance = world.observe, world.apply_command, world.advance
     send_obs, wait_cmd, send_status = ep.send_observation, ep.wait_for_command, ep.send_pump_status
     t0 = time.monotonic()
-    rate = 0.0
     down = link_faults.link_down if link_faults is not None and link_faults.down else None
     for k in range(n):
         clock.t = world.sim_time_s
@@ -329,9 +328,10 @@ def run_device(
                 send_obs(obs)
                 cmd = wait_cmd(k, retransmit_s)
                 waited += retransmit_s
+        # Only a command that arrived reaches the pump: re-applying the last one on a silent tick
+        # would feed the pump's own watchdog and defeat it (defence in depth, real-time mode).
         if cmd is not None:
-            rate = 0.0 if cmd.mode == MODE_STOP else cmd.rate_ml_h
-        apply_command(rate)
+            apply_command(0.0 if cmd.mode == MODE_STOP else cmd.rate_ml_h)
         status = advance()
         clock.t = world.sim_time_s
         send_status(
