@@ -60,7 +60,15 @@ from numpy.typing import NDArray
 
 from synthesis.closed_loop import DelaySystem
 
-__all__ = ["AnalysisResult", "analyse"]
+__all__ = [
+    "P_DEPENDENCES",
+    "AnalysisResult",
+    "analyse",
+    "conditioning_transform",
+    "whitening_transform",
+]
+
+P_DEPENDENCES = ("constant", "affine", "quadratic")
 
 Array = NDArray[np.float64]
 
@@ -86,7 +94,11 @@ class AnalysisResult:
     solve_time_s
         Wall time of assembly + solve (s).
     p_dependence
-        "constant" or "affine".
+        "constant", "affine" or "quadratic".
+    p0_phys
+        The constant term P0 of the certificate mapped back to the original (unscaled, untransformed)
+        state coordinates, up to a positive factor (None when the solve failed); used to whiten
+        the state for a better-conditioned second solve (:func:`whitening_transform`).
     """
 
     certified: bool
@@ -98,6 +110,7 @@ class AnalysisResult:
     solve_time_s: float
     p_dependence: str
     notes: list[str] = field(default_factory=list)
+    p0_phys: Array | None = None
 
 
 def _sym_index(n: int) -> tuple[NDArray[np.int64], int]:
@@ -197,6 +210,8 @@ def analyse(
     backoff: float = 0.05,
     solver_options: dict[str, Any] | None = None,
     progress: Callable[[str], None] | None = None,
+    state_transform: Array | None = None,
+    gamma_cap: float | None = None,
 ) -> AnalysisResult:
     """Solve the Theorem-1 analysis LMI over a set of frozen closed loops.
 
@@ -225,6 +240,13 @@ def analyse(
         strictness margin of every LMI (a better-centred certificate); 0 skips it.
     progress
         Called with a short message before assembly and before each solve.
+    state_transform
+        Constant invertible T (n x n) with x = T x_new applied to every system before the solve
+        (a congruence: feasibility and gamma are unchanged, conditioning is not). Default: a
+        diagonal power-of-two balancing of the centre system.
+    gamma_cap
+        If given, solve the feasibility form instead: gamma <= gamma_cap, maximise a common
+        strictness margin (no back-off); the reported gamma is the solution's own bound.
 
     Returns
     -------
@@ -233,8 +255,8 @@ def analyse(
     import cvxpy as cp
 
     t_start = time.perf_counter()
-    if p_dependence not in ("constant", "affine"):
-        raise ValueError(f"p_dependence={p_dependence!r} must be 'constant' or 'affine'")
+    if p_dependence not in P_DEPENDENCES:
+        raise ValueError(f"p_dependence={p_dependence!r} must be one of {P_DEPENDENCES}")
     m = len(systems)
     rho_hat = np.atleast_2d(np.asarray(rho_hat, dtype=float))
     if m == 0 or rho_hat.shape[0] != m:
@@ -253,19 +275,24 @@ def analyse(
     ts = float(time_scale_s) if time_scale_s is not None else (tau_max if tau_max > 0 else 1.0)
     n, nw = systems[0].n, systems[0].B.shape[1]
 
-    sx = _balance(systems, ts)
-    sxi = 1.0 / sx
-    a = np.stack([ts * sxi[:, None] * q.A * sx[None, :] for q in systems])
-    ad = np.stack([ts * sxi[:, None] * q.Ad * sx[None, :] for q in systems])
-    b = np.stack([ts * sxi[:, None] * q.B for q in systems])
-    c = np.stack([q.C * sx[None, :] for q in systems])
-    cd = np.stack([q.Cd * sx[None, :] for q in systems])
+    if state_transform is None:
+        tx = np.diag(_balance(systems, ts))
+    else:
+        tx = np.asarray(state_transform, dtype=float)
+        if tx.shape != (n, n) or not np.all(np.isfinite(tx)) or np.linalg.cond(tx) > 1e12:
+            raise ValueError(f"state_transform must be a finite, invertible {n}x{n} matrix")
+    txi = np.linalg.inv(tx)
+    a = np.stack([ts * txi @ q.A @ tx for q in systems])
+    ad = np.stack([ts * txi @ q.Ad @ tx for q in systems])
+    b = np.stack([ts * txi @ q.B for q in systems])
+    c = np.stack([q.C @ tx for q in systems])
+    cd = np.stack([q.Cd @ tx for q in systems])
     d = np.stack([q.D for q in systems])
     tbar = tau_max / ts
     rate_s = rate * ts  # |d rho_hat / d t_hat|
 
     # rate vertices: only parameters that move and matter (P affine, or the delay depends on them)
-    moving = [i for i in range(s) if rate[i] > 0 and (p_dependence == "affine" or dtau[i] != 0.0)]
+    moving = [i for i in range(s) if rate[i] > 0 and (p_dependence != "constant" or dtau[i] != 0.0)]
     vertices = [
         np.array([dict(zip(moving, sig, strict=True)).get(i, 0.0) for i in range(s)])
         for sig in itertools.product((-1.0, 1.0), repeat=len(moving))
@@ -277,7 +304,15 @@ def analyse(
     sig = np.array(vertices)[vt]  # (K, s)
 
     sym, ns = _sym_index(n)
-    n_p = 1 + (s if p_dependence == "affine" else 0)
+    # P(rho) = P0 + sum_i rho_i P_i1 (+ 1/2 sum_i rho_i^2 P_i2): value and d/drho_i weights
+    p_terms = [(lambda r: np.ones(r.shape[0]), None)]
+    if p_dependence != "constant":
+        p_terms += [(lambda r, i=i: r[:, i], (i, lambda r: np.ones(r.shape[0]))) for i in range(s)]
+    if p_dependence == "quadratic":
+        p_terms += [
+            (lambda r, i=i: 0.5 * r[:, i] ** 2, (i, lambda r, i=i: r[:, i])) for i in range(s)
+        ]
+    n_p = len(p_terms)
     off_p = [j * ns for j in range(n_p)]
     off_q, off_r = n_p * ns, (n_p + 1) * ns
     var_g = (n_p + 2) * ns
@@ -291,14 +326,16 @@ def analyse(
     eye = np.broadcast_to(np.eye(n), (kk, n, n))
     ak, adk, bk, ck, cdk, dk = a[pt], ad[pt], b[pt], c[pt], cd[pt], d[pt]
     # P(rho) terms: weight 1 for P0, rho_hat_i for P_i
-    for j in range(n_p):
-        w = np.ones(kk) if j == 0 else rho_hat[pt, j - 1]
+    rho_k = rho_hat[pt]
+    for j, (wfun, dfun) in enumerate(p_terms):
+        w = wfun(rho_k)
         asm.add_mvn(eye, ak, off_p[j], sym, r1, r1, w)  # P A
         asm.add_mvn(np.swapaxes(ak, 1, 2), eye, off_p[j], sym, r1, r1, w)  # A' P
         asm.add_mvn(eye, adk, off_p[j], sym, r1, r2, w)  # P Ad
         asm.add_mvn(eye, bk, off_p[j], sym, r1, r3, w)  # P B
-        if j > 0:
-            asm.add_mvn(eye, eye, off_p[j], sym, r1, r1, sig[:, j - 1] * rate_s[j - 1])  # dP
+        if dfun is not None:  # dP/dt = sum_i (d P / d rho_i) * rho_i-dot at this rate vertex
+            i, dw = dfun
+            asm.add_mvn(eye, eye, off_p[j], sym, r1, r1, dw(rho_k) * sig[:, i] * rate_s[i])
     # Q, R terms
     dtau_k = sig @ (rate * dtau)  # d tau / dt at each vertex (s/s, scale-free)
     asm.add_mvn(eye, eye, off_q, sym, r1, r1, 1.0)
@@ -325,8 +362,8 @@ def analyse(
     # P(rho_k) >= eps I at every point, Q, R >= eps I
     pasm = _Assembler(m, n, nvar)
     eye_m = np.broadcast_to(np.eye(n), (m, n, n))
-    for j in range(n_p):
-        w = np.ones(m) if j == 0 else rho_hat[:, j - 1]
+    for j, (wfun, _d) in enumerate(p_terms):
+        w = wfun(rho_hat)
         pasm.add_mvn(eye_m, eye_m, off_p[j], sym, 0, 0, w)
     cons.append(cp.PSD(cp.reshape(pasm.matrix() @ x, (m, n, n), order="C") - epsilon * eye_m))
     qr = _Assembler(2, n, nvar)
@@ -365,10 +402,23 @@ def analyse(
 
     if progress:
         progress(f"analysis LMI: solving ({nvar} variables, {fmat.nnz} nonzeros) with Clarabel")
-    status = _solve(cp.Problem(cp.Minimize(x[var_g]), cons))
+    if gamma_cap is not None:
+        # feasibility form: gamma bounded, maximise a common strictness margin t (<= 1); measured
+        # more robust than minimising gamma when the points differ widely in scale
+        t_f = cp.Variable()
+        cons_f = [cp.PSD(-lmi - t_f * np.eye(size)[None]), cons[1], cons[2]]
+        cons_f += [x[var_g] <= float(gamma_cap) ** 2, t_f <= 1.0]
+        status = _solve(cp.Problem(cp.Maximize(t_f), cons_f))
+        if t_f.value is not None:
+            notes.append(
+                f"feasibility form: gamma <= {float(gamma_cap):.4g}, margin t = {float(t_f.value):.3g}"
+            )
+    else:
+        status = _solve(cp.Problem(cp.Minimize(x[var_g]), cons))
     mu_opt = float(x.value[var_g]) if x.value is not None else None
     if (
-        backoff > 0.0
+        gamma_cap is None
+        and backoff > 0.0
         and mu_opt is not None
         and status in ("optimal", "optimal_inaccurate")
         and not _recheck(np.asarray(x.value))[0]
@@ -407,6 +457,60 @@ def analyse(
         )
     xv = np.asarray(x.value)
     certified, margins, p_min = _recheck(xv)
+    p0 = xv[sym[np.triu_indices(n)[0], np.triu_indices(n)[1]] + off_p[0]]
+    p0m = np.zeros((n, n))
+    p0m[np.triu_indices(n)] = p0
+    p0m = p0m + np.triu(p0m, 1).T
     return AnalysisResult(
-        certified, status, _gam(float(xv[var_g])), margins, p_min, kk, elapsed, p_dependence, notes
+        certified,
+        status,
+        _gam(float(xv[var_g])),
+        margins,
+        p_min,
+        kk,
+        elapsed,
+        p_dependence,
+        notes,
+        txi.T @ p0m @ txi,
     )
+
+
+def whitening_transform(p_phys: Array) -> Array:
+    """``T = P^(-1/2)`` (symmetric), so that ``T' P T = I``: the state coordinates in which a
+    known Lyapunov matrix P is the identity (well-conditioned starting point for the solver).
+
+    Parameters
+    ----------
+    p_phys
+        Symmetric positive definite n x n matrix (e.g. :attr:`AnalysisResult.p0_phys`).
+    """
+    p = 0.5 * (np.asarray(p_phys, dtype=float) + np.asarray(p_phys, dtype=float).T)
+    w, v = np.linalg.eigh(p)
+    if not np.all(np.isfinite(w)) or w[0] <= 0:
+        raise ValueError("whitening_transform needs a positive definite matrix")
+    return (v / np.sqrt(w)) @ v.T
+
+
+def conditioning_transform(p_phys: Array, system: DelaySystem, time_scale_s: float) -> Array:
+    """Whitening by a known Lyapunov matrix, then a diagonal power-of-two balancing of the system.
+
+    ``T = P^(-1/2) D`` with D from ``scipy.linalg.matrix_balance`` of ``|ts T0^-1 A T0| +
+    |ts T0^-1 Ad T0|`` (T0 = P^(-1/2)). Measured on the shipped design (27 corner/centre points, P
+    quadratic): the default diagonal balancing gave a bogus "optimal" (re-check margin -64),
+    whitening alone a Clarabel NumericalError, whitening + balancing a certificate.
+
+    Parameters
+    ----------
+    p_phys
+        Lyapunov matrix of a representative point (e.g. the centre), original coordinates.
+    system
+        The closed loop at that point.
+    time_scale_s
+        Time unit of the scaled problem (s).
+    """
+    t0 = whitening_transform(p_phys)
+    t0i = np.linalg.inv(t0)
+    mag = time_scale_s * (np.abs(t0i @ system.A @ t0) + np.abs(t0i @ system.Ad @ t0))
+    mag = mag + 1e-12 * np.eye(system.n)
+    _, (scale, _perm) = scipy.linalg.matrix_balance(mag, permute=False, separate=True)
+    return t0 @ np.diag(np.asarray(scale, dtype=float))

@@ -7,8 +7,10 @@ each cell of the synthesis grid ``density`` times and always contains the cell m
 the synthesis never saw), then:
 
 (a) ``analysis_lmi`` — the delay-dependent analysis LMI of :mod:`synthesis.analysis_lmi` (Theorem 1,
-    P affine in rho, Q, R constant, all rate vertices) over the whole dense grid in one solve: a
-    certified L2-gain bound and per-point margins;
+    P quadratic in rho in the synthesis basis, Q, R constant, all rate vertices) over the whole
+    dense grid in one solve, in state coordinates whitened by the centre point's own Lyapunov
+    matrix and then balanced (a constant congruence: it changes conditioning, not feasibility);
+    certified = every LMI and P(rho_k) re-evaluated in floating point is definite;
 (b) ``delay_stability`` — the rightmost characteristic roots of the frozen closed-loop delay system
     at every dense point (delays up to tau_max are on the grid), by the spectral method of
     :mod:`synthesis.delay_stability`;
@@ -29,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.analysis_lmi import analyse
+from synthesis.analysis_lmi import analyse, conditioning_transform
 from synthesis.closed_loop import DelaySystem, close_loop
 from synthesis.delay_stability import rightmost_roots
 from synthesis.pi_baseline import PIBaseline
@@ -156,7 +158,7 @@ def verify_artifact(
     artifact: Any,
     density: int = 2,
     progress: Progress | None = None,
-    p_dependence: str = "affine",
+    p_dependence: str = "quadratic",
 ) -> VerificationReport:
     """Run the independent checks (a), (b), (c) on an artifact.
 
@@ -169,7 +171,8 @@ def verify_artifact(
     progress
         Called with one line per stage.
     p_dependence
-        Lyapunov matrix P of the analysis LMI: "affine" in rho (default) or "constant".
+        Lyapunov matrix P of the analysis LMI: "quadratic" in rho (default, the synthesis basis
+        P0 + sum rho_i P_i1 + 1/2 sum rho_i^2 P_i2), "affine" or "constant".
 
     Returns
     -------
@@ -222,6 +225,27 @@ def verify_artifact(
     # (a) analysis LMI over the dense grid
     center, half = box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0])
     rho_hat = (mesh - center) / half
+    ts = _time_scale(artifact)
+    # conditioning: whiten the state by the centre point's own Lyapunov matrix (a constant
+    # congruence, so feasibility and gamma are unchanged), then balance; see analysis_lmi
+    ic = int(np.argmin(np.sum(rho_hat**2, axis=1)))
+    centre = analyse(
+        [systems[ic]],
+        rho_hat[ic : ic + 1],
+        rates / half,
+        np.array([0.0, 0.0, half[2]]),
+        float(box[2, 1]),
+        p_dependence="constant",
+        time_scale_s=ts,
+        backoff=0.0,
+    )
+    transform = None
+    if centre.p0_phys is not None and centre.status in ("optimal", "optimal_inaccurate"):
+        try:
+            transform = conditioning_transform(centre.p0_phys, systems[ic], ts)
+        except ValueError:
+            transform = None
+    say(f"analysis LMI: conditioning transform from the centre point ({transform is not None})")
     res = analyse(
         systems,
         rho_hat,
@@ -229,8 +253,9 @@ def verify_artifact(
         np.array([0.0, 0.0, half[2]]),
         float(box[2, 1]),
         p_dependence=p_dependence,
-        time_scale_s=_time_scale(artifact),
+        time_scale_s=ts,
         progress=say,
+        state_transform=transform,
     )
     finite = np.isfinite(res.margins)
     worst_lmi = int(np.nanargmin(res.margins)) if finite.any() else None

@@ -34,9 +34,9 @@ def _parser(command: str) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--p-dependence",
-        choices=("affine", "constant"),
-        default="affine",
-        help="Lyapunov matrix of the analysis LMI (default affine in rho)",
+        choices=("quadratic", "affine", "constant"),
+        default="quadratic",
+        help="Lyapunov matrix of the analysis LMI (default quadratic in rho, the synthesis basis)",
     )
     return p
 

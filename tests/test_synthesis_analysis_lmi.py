@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthesis.analysis_lmi import analyse
+from synthesis.analysis_lmi import analyse, conditioning_transform, whitening_transform
 from synthesis.closed_loop import DelaySystem
 from synthesis.pi_baseline import PIBaseline
 
@@ -63,3 +63,39 @@ def test_delay_rate_of_one_or_more_is_rejected() -> None:
 def test_delay_above_tau_max_is_rejected() -> None:
     with pytest.raises(ValueError, match="tau_max_s"):
         analyse([_scalar(-1.0, 0.1, 2.0)], np.zeros((1, 1)), np.zeros(1), np.zeros(1), 1.0)
+
+
+def test_quadratic_p_certifies_what_affine_does_with_no_larger_gamma() -> None:
+    # P quadratic in rho contains the affine family, so its optimal gamma cannot be larger
+    rho = np.linspace(-1.0, 1.0, 5)[:, None]
+    systems = [_scalar(-(1.0 + 0.5 * r * r), 0.2, 0.5 + 0.25 * r) for r in rho[:, 0]]
+    args = (systems, rho, np.array([0.1]), np.array([0.25]), 0.75)
+    aff = analyse(*args, p_dependence="affine", backoff=0.0)
+    quad = analyse(*args, p_dependence="quadratic", backoff=0.0)
+    assert aff.certified and quad.certified
+    assert quad.gamma <= aff.gamma * (1 + 1e-4)
+
+
+def test_whitening_maps_the_lyapunov_matrix_to_identity() -> None:
+    p = np.array([[4.0, 1.0], [1.0, 1e-3 + 0.25]])
+    t = whitening_transform(p)
+    assert np.allclose(t.T @ p @ t, np.eye(2), atol=1e-9)
+    with pytest.raises(ValueError, match="positive definite"):
+        whitening_transform(-p)
+
+
+def test_conditioning_transform_keeps_the_certificate_of_the_pi_loop() -> None:
+    # a constant congruence changes conditioning, not feasibility
+    cl = PIBaseline().closed_loop(0.55, 150.0, 40.0)
+    first = _single(cl, p_dependence="constant")
+    t = conditioning_transform(first.p0_phys, cl, 40.0)
+    again = _single(cl, p_dependence="constant", state_transform=t)
+    assert again.certified
+    assert again.gamma == pytest.approx(first.gamma, rel=2e-2)
+
+
+def test_feasibility_form_with_gamma_cap_below_the_true_gain_is_not_certified() -> None:
+    # exact L2 gain 1/0.9 = 1.11: a cap of 1.0 cannot be met, a cap of 2.0 can
+    assert not _single(_scalar(-1.0, 0.1, 1.0), gamma_cap=1.0).certified
+    ok = _single(_scalar(-1.0, 0.1, 1.0), gamma_cap=2.0)
+    assert ok.certified and ok.gamma <= 2.0 + 1e-6
