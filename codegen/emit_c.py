@@ -302,8 +302,8 @@ def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) 
     for (k = 0; k < {PU}NENT; ++k) dz[{P}row[k]] += (int64_t)m[k] * v[{P}col[k]];
     for (k = 0; k < {nz - 1}; ++k) dz[k] = (dz[k] + (INT64_C(1) << ({P}rshift[k] - 1))) >> {P}rshift[k];
     un = (int64_t)s->z[{nk}] + dz[{nk}];
-    if (un > {PU}U_MAX_Q) {{ un = {PU}U_MAX_Q; freeze = dz[{nk}] > 0; s->saturated = 1; }}
-    else if (un < 0) {{ un = 0; freeze = dz[{nk}] < 0; s->saturated = 1; }}
+    if (un > {PU}U_MAX_Q) {{ un = {PU}U_MAX_Q; freeze = ve > 0; s->saturated = 1; }}
+    else if (un < 0) {{ un = 0; freeze = ve < 0; s->saturated = 1; }}
     else s->saturated = 0;
     s->z[{nk}] = (int32_t)un;
     if (!freeze) {{
@@ -369,8 +369,8 @@ def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
         for (k = 0; k < {nz - 1}; ++k) dz[k] += w[c] * part[k];
     }}
     un = s->z[{nk}] + dz[{nk}];
-    if (un > {PU}U_MAX_S) {{ un = {PU}U_MAX_S; freeze = dz[{nk}] > 0.0; s->saturated = 1; }}
-    else if (un < 0.0) {{ un = 0.0; freeze = dz[{nk}] < 0.0; s->saturated = 1; }}
+    if (un > {PU}U_MAX_S) {{ un = {PU}U_MAX_S; freeze = ve > 0.0; s->saturated = 1; }}
+    else if (un < 0.0) {{ un = 0.0; freeze = ve < 0.0; s->saturated = 1; }}
     else s->saturated = 0;
     s->z[{nk}] = un;
     if (!freeze) {{

@@ -12,9 +12,11 @@ the same algorithm (see :mod:`codegen.fixed_point` for the integer formats):
 4. The current x_k is written into the ring buffer (length ceil(tau_max/Ts) + 1); x_d = x_k(t - tau)
    is read D = tau/Ts samples back, linearly interpolated between the two neighbouring samples.
 5. Increment dz = M(rho) [z; x_d; e] with M interpolated over the 8 corners.
-6. Anti-windup: u + du is clamped to [0, max_rate]; if it hit a limit and du pushes further into
-   it, the controller states (x_k, x_e) are frozen this step (conditional integration); states are
-   saturated to their Q0.31 range in both modes.
+6. Anti-windup: u + du is clamped to [0, max_rate]; while u sits at a limit and the error drives
+   further into it (e > 0 at the upper limit, e < 0 at zero), the controller states (x_k, x_e) are
+   frozen this step (conditional integration); states are saturated to their Q0.31 range in both
+   modes. The freeze is keyed on the sign of e, not of du: keyed on du, a design whose u_a starts
+   negative after a target step (u pinned at 0, du < 0) froze x_e for good and never infused.
 7. Return u (ml/h), clamped once more to [0, max_rate] after the unit conversion.
 """
 
@@ -475,11 +477,11 @@ def _update_lines(fixed: bool, nk: int, nz: int) -> list[str]:
     L.append("        freeze = False")
     L.append(f"        if un > {umax}:")
     L.append(f"            un = {umax}")
-    L.append(f"            freeze = d{nk} > {zero}")
+    L.append(f"            freeze = v_e > {zero}")
     L.append("            st.saturated = True")
     L.append(f"        elif un < {zero}:")
     L.append(f"            un = {zero}")
-    L.append(f"            freeze = d{nk} < {zero}")
+    L.append(f"            freeze = v_e < {zero}")
     L.append("            st.saturated = True")
     L.append("        else:")
     L.append("            st.saturated = False")

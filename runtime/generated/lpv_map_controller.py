@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  5957b5eeb1f0069ec2ce2130a83d5dfe77ee01f675e4dc795aba0340fea0c6c5
-Content hash:     190324d23cfd422c89d73fbd12b07408b0bb6476898ab596be8486f57deccf6c
+Content hash:     f3247a675324a9d8c3f52b537dffb3a44acbde4bf0835b0d081235059235c2b2
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -37,9 +37,9 @@ Error budgets (asserted by tests/test_codegen_*.py):
     OFFGRID_REL_BOUND = 0.02: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '545b4f1f1fc0d78e252a1041799633c9eb292ba780d7340a4d9f0a03637b756f'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'e6c95dd53be23ee21dd54f1c6302c3d341b01f2ccce0a3ad9dda2bd8553baf62'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = '5957b5eeb1f0069ec2ce2130a83d5dfe77ee01f675e4dc795aba0340fea0c6c5'
-CONTENT_HASH = '190324d23cfd422c89d73fbd12b07408b0bb6476898ab596be8486f57deccf6c'
+CONTENT_HASH = 'f3247a675324a9d8c3f52b537dffb3a44acbde4bf0835b0d081235059235c2b2'
 TABLES_SHA256 = '88a331e86055b66db3750ad247f4dc922a7cc6130a03df1c193dc57dd181f11c'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
@@ -1023,11 +1023,11 @@ class Controller:
         freeze = False
         if un > _U_MAX_S:
             un = _U_MAX_S
-            freeze = d3 > 0.0
+            freeze = v_e > 0.0
             st.saturated = True
         elif un < 0.0:
             un = 0.0
-            freeze = d3 < 0.0
+            freeze = v_e < 0.0
             st.saturated = True
         else:
             st.saturated = False
@@ -1322,11 +1322,11 @@ class Controller:
         freeze = False
         if un > _U_MAX_Q:
             un = _U_MAX_Q
-            freeze = d3 > 0
+            freeze = v_e > 0
             st.saturated = True
         elif un < 0:
             un = 0
-            freeze = d3 < 0
+            freeze = v_e < 0
             st.saturated = True
         else:
             st.saturated = False
