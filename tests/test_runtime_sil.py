@@ -136,3 +136,29 @@ def test_faults_lists_each_detected_kind_with_its_bound(tmp_path):
     for kind in ("MAP_NAN", "MAP_RANGE", "MAP_SPIKE", "MAP_FLATLINE", "STALE_SAMPLE", "LINK_LOSS"):
         assert kind in proc.stdout
     assert "0.35 s" in proc.stdout  # stale bound at 10 Hz
+
+
+def test_sil_with_shipped_lpv_over_30_min_equals_in_process_simulator(tmp_path):
+    """The issue's done-when run: lpv, paper-tracking, patient seed 3, 1800 s, over a pty."""
+    from hil_sim.closed_loop import simulate
+    from hil_sim.world import World
+    from runtime.controller_loader import load_controller
+
+    rrd, summary = tmp_path / "lpv.rrd", tmp_path / "lpv.json"
+    proc = pressor(
+        "sil",
+        *("--scenario", "paper-tracking", "--patient-seed", str(SEED), "--duration", "1800"),
+        *("--rrd", str(rrd), "--summary", str(summary)),
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(summary.read_text())["controller"].endswith("lpv")
+    ref = simulate(World("paper-tracking", SEED, 0.1), load_controller("lpv"), 1800.0)
+    cols = rrd_columns(rrd)
+    n = ref.t_s.size
+    assert sorted(cols["/pump/command_ml_h"]) == list(range(n))
+    sil_map = np.array([cols["/patient/map_mmhg"][k] for k in range(n)])
+    sil_cmd = np.array([cols["/pump/command_ml_h"][k] for k in range(n)], dtype=np.float32)
+    np.testing.assert_array_equal(sil_map, ref.map_mmhg)
+    np.testing.assert_array_equal(sil_cmd.astype(np.float64), ref.command_ml_h)
+    assert sil_cmd.max() > 10.0
