@@ -199,9 +199,18 @@ def test_fixed_point_within_stated_budget_of_float_over_1h_closed_loop(built, fm
     assert max(uf) > 5.0  # the loop actually infused
 
 
-def continuous_reference(seq, substeps: int = 20):
+def continuous_reference(
+    seq,
+    substeps: int = 20,
+    controller_fn=example_controller,
+    box=BOX,
+    rates=RATES,
+    omega: float = 0.1,
+    lambda_: float = 0.1,
+):
     """RK4 on the exact continuous controller (composite [x_k, u, x_e]); rho clamped and rate-limited
     as specified; x_k(t - tau) read from a fine history; u returned at the end of each sample."""
+    BOX, RATES = np.asarray(box, float), np.asarray(rates, float)  # noqa: N806
     lo, hi = BOX[:, 0], BOX[:, 1]
     h = TS / substeps
     z = np.zeros(5)
@@ -213,7 +222,7 @@ def continuous_reference(seq, substeps: int = 20):
         if prev is not None:
             r = np.clip(r, prev - RATES * TS, prev + RATES * TS)
         prev = r
-        Ac, Bc = composite_continuous(example_controller(r), 0.1, 0.1)
+        Ac, Bc = composite_continuous(controller_fn(r), omega, lambda_)
         e = target - mp
         ht, hx = np.asarray(hist_t), np.asarray(hist_x)
 

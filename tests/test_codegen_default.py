@@ -19,7 +19,12 @@ from codegen.discretise import discretise_node
 from codegen.emit_python import module_sha256
 from codegen.tables import frozen_loop_matrices, interpolate, unstable_root_count
 from runtime.controller_loader import ControllerSpecError, load_controller, module_text_sha256
-from tests.test_codegen_core import CController, fopdt_closed_loop, random_inputs
+from tests.test_codegen_core import (
+    CController,
+    continuous_reference,
+    fopdt_closed_loop,
+    random_inputs,
+)
 
 COMMITTED = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
 pytestmark = pytest.mark.skipif(not pl.DEFAULT_ARTIFACT.is_file(), reason="no shipped design")
@@ -164,3 +169,50 @@ def test_shipped_time_varying_loop_at_rate_bounds_stays_bounded_and_settles(ship
     tail = cmds[-3000:]
     assert all(math.isfinite(u) and 0.0 <= u <= mod.MAX_RATE_ML_H for u in cmds)
     assert max(tail) - min(tail) < 30.0
+
+
+@pytest.mark.slow  # ~110 s: synthesis.reconstruct at every tick of the RK4 reference
+@pytest.mark.xfail(
+    strict=True,
+    reason="known gap (issue 4): measured 0.76 ml/h max error vs the documented 0.53 ml/h bound "
+    "(0.05 + 0.02 x peak) on the shipped design; needs a finer tabulation or a derived bound",
+)
+def test_shipped_float_module_tracks_continuous_reference_on_replayed_closed_loop_inputs(shipped):
+    """Float module vs the synthesis package's exact continuous-time controller (RK4, fine delay
+    history), on inputs recorded from a closed loop with a delayed patient: target steps, sensor
+    noise, and rho sweeping inside and outside the design box."""
+    import random
+
+    mod, design = shipped["mod"], shipped["design"]
+    rng = random.Random(11)
+    ctrl = mod.Controller()
+    seq, got = [], []
+    dmap, hist = 0.0, [0.0] * 1000
+    for k in range(3000):  # 300 s at 0.1 s
+        t = 0.1 * k
+        rho = (0.6 + 0.5 * math.sin(t / 40.0), 150.0 + 70.0 * math.sin(t / 30.0), 30.0)
+        target = 75.0 if k < 1500 else 70.0
+        sample = (60.0 + dmap + rng.gauss(0.0, 0.5), target, *rho)
+        seq.append(sample)
+        u = ctrl.step(*sample)
+        # The tolerance below assumes the linear region; the one exception is the design's first
+        # seconds, where the continuous u dips a hair below 0 ml/h and the module clamps it.
+        assert not ctrl.status.saturated or u == 0.0
+        got.append(u)
+        hist[k % 1000] = u
+        ud = hist[(k - 300) % 1000] if k >= 300 else 0.0  # 30 s patient delay
+        a = math.exp(-0.1 / 150.0)
+        dmap = a * dmap + 0.55 * (1 - a) * ud
+    ref = continuous_reference(
+        seq,
+        controller_fn=design.controller_fn,
+        box=design.box,
+        rates=design.rate_bounds,
+        omega=design.omega,
+        lambda_=design.lambda_,
+    )
+    err = max(abs(a - max(b, 0.0)) for a, b in zip(got, ref, strict=True))
+    bound = mod.FLOAT_VS_CONTINUOUS_TOL_ML_H + mod.OFFGRID_REL_BOUND * max(ref)
+    assert err <= bound, (err, bound)
+    assert max(ref) > 10.0
+    assert min(ref) > -bound  # the clamped dip is within the tolerance too
