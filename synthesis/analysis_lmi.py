@@ -28,7 +28,16 @@ with Psi = [A Ad B], Gamma = [C Cd D]; the reported gamma is sqrt(mu).
 
 Choices (this module is independent of the synthesis LMI in :mod:`synthesis.lmi`):
 
-* ``P(rho)`` constant or affine in the normalised parameters rho_hat in [-1, 1]^s; Q, R constant.
+* ``P(rho)`` constant, affine, or quadratic in the normalised parameters rho_hat in [-1, 1]^s
+  (quadratic = the synthesis basis ``P0 + sum rho_i P_i1 + 1/2 sum rho_i^2 P_i2``, so
+  ``dP/dt = sum (P_i1 + rho_i P_i2) rho_i-dot``); Q, R constant. ``verify`` uses quadratic.
+* A constant state transform ``state_transform`` (a congruence: feasibility and gamma unchanged)
+  may replace the default diagonal balancing. Measured on the shipped designs: the diagonal
+  balancing gave a bogus "optimal" (re-check margin -64 on 27 points, gamma 265 on 125),
+  whitening by the centre point's own Lyapunov matrix alone a Clarabel NumericalError, whitening
+  followed by balancing (:func:`conditioning_transform`) a clean certificate.
+* ``gamma_cap``: feasibility form (gamma <= cap, maximise a common strictness margin t <= 1),
+  more robust on the dense grid than minimising gamma; ``verify`` uses it.
 * ``taubar`` is the largest delay of the box (``tau_max_s``) at every point, as in the paper.
 * Numerics (DESIGN.md §4): time is scaled by ``time_scale_s`` and the states by a constant diagonal
   balancing of the centre system (powers of two); both leave the L2 gain unchanged.

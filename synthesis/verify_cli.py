@@ -106,7 +106,8 @@ def main(command: str, argv: list[str]) -> int:
     print(
         f"(a) analysis LMI      {ok[lmi['certified']]}  gamma {_fmt(lmi['gamma'])} "
         f"(synthesis {_fmt(lmi['synthesis_gamma'])}), {lmi['n_lmis']} LMIs, "
-        f"status {lmi['status']}, failed points {lmi['n_failed_points']}"
+        f"status {lmi['status']}, failed points {lmi['n_failed_points']}, "
+        f"min margin {_fmt(lmi['min_margin'])}, P {lmi['p_dependence']}"
     )
     print(
         f"(b) delay stability   {ok[stab['stable']]}  max Re(s) "

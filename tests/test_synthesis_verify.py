@@ -105,3 +105,25 @@ def test_shipped_design_report_has_step_metrics_for_lpv_and_pi(tmp_path: Path) -
     assert pi["settling_time_s"] == pytest.approx(418.8, abs=1.0)
     assert report["grid"]["n_points_unseen_by_synthesis"] > 0
     assert report["delay_stability"]["stable"] is True
+
+
+def test_shipped_artifact_embeds_a_passing_report_with_quadratic_p_on_unseen_points() -> None:
+    from synthesis.artifact import default_artifact_path, load_artifact
+
+    art = load_artifact(default_artifact_path())
+    rep = art.metadata["verification"]
+    assert rep["passed"] is True
+    lmi = rep["analysis_lmi"]
+    assert lmi["certified"] is True and lmi["n_failed_points"] == 0 and lmi["min_margin"] > 0
+    assert lmi["p_dependence"] == "quadratic"
+    assert rep["grid"]["n_points_unseen_by_synthesis"] > 0
+    assert rep["delay_stability"]["stable"] is True
+
+
+@pytest.mark.slow
+def test_shipped_design_passes_the_default_verification_from_scratch(tmp_path: Path) -> None:
+    out = tmp_path / "verify.json"
+    assert main("verify", ["--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["analysis_lmi"]["certified"] is True
+    assert report["analysis_lmi"]["n_failed_points"] == 0
