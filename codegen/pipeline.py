@@ -40,7 +40,10 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_ARTIFACT = REPO_ROOT / "synthesis" / "data" / "default_design.npz"
 SAMPLE_PERIOD_S = 0.1
 #: Interpolation error bound enforced at every cell midpoint / random point (row-wise relative).
-OFFGRID_REL_TOL = 0.02
+#: 0.02 was not enough for the shipped (Y-constant) design: its slow controller modes (-0.007 1/s)
+#: are sensitive to small matrix errors, and a (3, 2, 2) table moved the nominal settling time from
+#: the verified 465 s to 776 s. At 0.005 the (4, 3, 2) table reproduces the verified step (465.4 s).
+OFFGRID_REL_TOL = 0.005
 #: Node counts (K, T, tau) the adaptive tabulation search starts from.
 TABULATION_START_COUNTS = (3, 2, 2)
 

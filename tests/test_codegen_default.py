@@ -171,12 +171,6 @@ def test_shipped_time_varying_loop_at_rate_bounds_stays_bounded_and_settles(ship
     assert max(tail) - min(tail) < 30.0
 
 
-@pytest.mark.slow  # ~110 s: synthesis.reconstruct at every tick of the RK4 reference
-@pytest.mark.xfail(
-    strict=True,
-    reason="known gap (issue 4): measured 0.76 ml/h max error vs the documented 0.53 ml/h bound "
-    "(0.05 + 0.02 x peak) on the shipped design; needs a finer tabulation or a derived bound",
-)
 def test_shipped_float_module_tracks_continuous_reference_on_replayed_closed_loop_inputs(shipped):
     """Float module vs the synthesis package's exact continuous-time controller (RK4, fine delay
     history), on inputs recorded from a closed loop with a delayed patient: target steps, sensor
