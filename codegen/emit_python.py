@@ -22,7 +22,6 @@ the same algorithm (see :mod:`codegen.fixed_point` for the integer formats):
 
 from __future__ import annotations
 
-import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -30,26 +29,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from codegen.fixed_point import FixedPointPlan
+from runtime.controller_loader import MODULE_SHA_PREFIX, module_text_sha256
 
 __all__ = ["EmitSpec", "emit_python", "module_sha256", "py_float"]
 
-#: Prefix of the self-hash line; its value is blanked ('') before hashing the module text.
-MODULE_SHA_PREFIX = "MODULE_SHA256 = "
-
-
-def module_sha256(text: str) -> str:
-    """sha256 of a generated module's text with the ``MODULE_SHA256`` value blanked.
-
-    The generated module records this value in its own ``MODULE_SHA256`` line, so any edit,
-    truncation or appended code changes the recomputed hash (``runtime.controller_loader`` checks
-    it before importing).
-    """
-    lines = text.split("\n")
-    for k, line in enumerate(lines):
-        if line.startswith(MODULE_SHA_PREFIX):
-            lines[k] = MODULE_SHA_PREFIX + "''"
-            break
-    return hashlib.sha256("\n".join(lines).encode("utf-8")).hexdigest()
+# One definition of the self-hash, shared with the loader that checks it (runtime needs no codegen).
+module_sha256 = module_text_sha256
 
 
 @dataclass(frozen=True)

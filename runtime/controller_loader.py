@@ -39,7 +39,7 @@ class ControllerSpecError(ValueError):
 def module_text_sha256(text: str) -> str:
     """sha256 of a generated module's text with its ``MODULE_SHA256`` value blanked.
 
-    Mirrors ``codegen.emit_python.module_sha256`` (kept here so the runtime needs no codegen/numpy).
+    The one definition: ``codegen`` imports it to stamp the modules it writes.
     """
     lines = text.split("\n")
     for k, line in enumerate(lines):
