@@ -49,14 +49,15 @@ def module_text_sha256(text: str) -> str:
     return hashlib.sha256("\n".join(lines).encode("utf-8")).hexdigest()
 
 
-def verify_module_file(path: Path, artifact_path: Path | None = None) -> str:
+def verify_module_file(path: Path, artifact_sha256: str | None = None) -> str:
     """Check a generated module's self-hash (and artifact sha256); return its text.
 
     Raises
     ------
     ControllerSpecError
-        Unreadable file, missing or mismatching ``MODULE_SHA256``, or (with ``artifact_path``) an
-        ``ARTIFACT_SHA256`` that differs from the artifact's stored sha256.
+        Unreadable file, missing or mismatching ``MODULE_SHA256``, or (with ``artifact_sha256``) an
+        ``ARTIFACT_SHA256`` that differs from it. The caller supplies the artifact's sha256 (the
+        runtime never loads the synthesis package).
     """
     try:
         text = Path(path).read_bytes().decode("utf-8")
@@ -74,24 +75,18 @@ def verify_module_file(path: Path, artifact_path: Path | None = None) -> str:
             f"{actual[:12]}...; the module was modified or truncated, regenerate it with "
             "pressor codegen"
         )
-    if artifact_path is not None:
+    if artifact_sha256 is not None:
         a = _ART_LINE.search(text)
-        from synthesis.artifact import load_artifact  # only when an artifact is named
-
-        try:
-            art_sha = str(load_artifact(Path(artifact_path)).sha256)
-        except Exception as exc:
-            raise ControllerSpecError(f"{artifact_path}: cannot load artifact ({exc})") from exc
-        if a is None or a.group(1) != art_sha:
+        if a is None or a.group(1) != artifact_sha256:
             got = a.group(1)[:12] if a else "missing"
             raise ControllerSpecError(
-                f"{path}: field 'ARTIFACT_SHA256' = {got} but {artifact_path} has sha256 "
-                f"{art_sha[:12]}...; regenerate with pressor codegen"
+                f"{path}: field 'ARTIFACT_SHA256' = {got}... but the expected artifact has sha256 "
+                f"{artifact_sha256[:12]}...; regenerate with pressor codegen"
             )
     return text
 
 
-def load_generated_module(path: Path, artifact_path: Path | None = None) -> ModuleType:
+def load_generated_module(path: Path, artifact_sha256: str | None = None) -> ModuleType:
     """Verify (:func:`verify_module_file`) and import a generated controller module from ``path``.
 
     Raises
@@ -103,7 +98,7 @@ def load_generated_module(path: Path, artifact_path: Path | None = None) -> Modu
     path = Path(path).resolve()
     if not path.is_file():
         raise ControllerSpecError(f"{path}: controller module not found")
-    verify_module_file(path, artifact_path)
+    verify_module_file(path, artifact_sha256)
     name = f"_pressor_generated_{abs(hash(str(path))):x}"
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
@@ -122,7 +117,7 @@ def load_generated_module(path: Path, artifact_path: Path | None = None) -> Modu
 
 
 def load_controller(
-    spec: str, sample_period_s: float = 0.1, artifact_path: Path | None = None
+    spec: str, sample_period_s: float = 0.1, artifact_sha256: str | None = None
 ) -> Controller:
     """Return a fresh controller for ``spec``.
 
@@ -133,8 +128,8 @@ def load_controller(
         a generated ``.py`` module.
     sample_period_s
         Loop period (s). A generated module is discretised for one period; a mismatch is an error.
-    artifact_path
-        Optional artifact the module must have been generated from (its sha256 is checked).
+    artifact_sha256
+        Optional sha256 of the artifact the module must have been generated from.
 
     Raises
     ------
@@ -149,7 +144,7 @@ def load_controller(
         raise ControllerSpecError(
             f"--controller {spec!r}: expected 'pi', 'lpv' or a path to a generated .py module"
         )
-    module = load_generated_module(path, artifact_path)
+    module = load_generated_module(path, artifact_sha256)
     controller = module.Controller()
     period = float(getattr(controller, "sample_period_s", float("nan")))
     if abs(period - sample_period_s) > 1e-12:

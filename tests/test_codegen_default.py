@@ -37,6 +37,10 @@ def _load(path: Path):
     return mod
 
 
+def _shipped_sha256() -> str:
+    return pl.load_design(pl.DEFAULT_ARTIFACT).sha256
+
+
 @pytest.fixture(scope="module")
 def shipped(tmp_path_factory):
     """The shipped artifact through every stage once: proof, q31 module, q31 C library."""
@@ -86,7 +90,7 @@ def test_regenerating_default_module_gives_identical_bytes(tmp_path):
 
 
 def test_loader_accepts_intact_module_and_checks_artifact_sha(tmp_path):
-    c = load_controller("lpv", artifact_path=pl.DEFAULT_ARTIFACT)
+    c = load_controller("lpv", artifact_sha256=_shipped_sha256())
     assert 0.0 <= c.step(80.0, 90.0, 0.5, 150.0, 30.0) <= c.max_rate_ml_h
 
 
@@ -117,7 +121,7 @@ def test_loader_refuses_module_for_another_artifact(tmp_path):
     p.write_text(other, encoding="utf-8")
     load_controller(str(p))  # intact, so it loads without an artifact to compare with
     with pytest.raises(ControllerSpecError, match="ARTIFACT_SHA256"):
-        load_controller(str(p), artifact_path=pl.DEFAULT_ARTIFACT)
+        load_controller(str(p), artifact_sha256=_shipped_sha256())
 
 
 def test_shipped_integer_python_matches_compiled_c_bit_exact(shipped):
