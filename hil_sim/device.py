@@ -43,7 +43,6 @@ import os
 import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 #: default wall-clock timeouts (s)
@@ -141,8 +140,7 @@ def main(command: str, argv: list[str]) -> int:
     link_faults = LinkFaults(world.fault_specs, world.sample_period_s)
     if link_faults.bytewise or link_faults.down:
         port = LinkFaultPort(port, link_faults, lambda: world.tick)
-    tlog_tmp = _tmp_path(args.tlog) if args.tlog else None
-    tlog = TlogWriter(tlog_tmp) if tlog_tmp else None
+    tlog = TlogWriter(args.tlog) if args.tlog else None
     clock = ManualClock()
     ep = LinkEndpoint(port, "device", signing=signing, clock=clock, tlog=tlog)
     ok = False
@@ -168,12 +166,7 @@ def main(command: str, argv: list[str]) -> int:
     finally:
         ep.close()
         if tlog is not None:
-            tlog.close()
-            # temp file + rename: a failed run never clobbers an earlier .tlog
-            if ok:
-                os.replace(tlog_tmp, args.tlog)
-            else:
-                Path(tlog_tmp).unlink(missing_ok=True)
+            tlog.close(commit=ok)  # a failed run never clobbers an earlier .tlog
     print(f"pressor {command}: {result.ended} after {result.ticks} ticks", file=sys.stderr)
     return 0 if result.ended in ("completed", "runtime closed the link") else 1
 
@@ -186,11 +179,6 @@ def _pin(cpu: int | None) -> None:
     if cpu not in allowed:
         raise _UsageError(f"--cpu: value {cpu} not one of the allowed CPUs {allowed}")
     os.sched_setaffinity(0, {cpu})
-
-
-def _tmp_path(path: str) -> str:
-    p = Path(path)
-    return str(p.with_name(f".{p.name}.{os.getpid()}.tmp"))
 
 
 def _parse_faults(texts: list[str]) -> tuple:

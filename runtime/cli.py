@@ -440,8 +440,7 @@ def run_runtime(
 
     period_s = 1.0 / args.rate
     controller = _load_controller(args.controller, period_s)
-    tlog_tmp = _tmp_name(args.tlog) if args.tlog is not None else None
-    tlog = TlogWriter(tlog_tmp) if tlog_tmp is not None else None
+    tlog = TlogWriter(args.tlog) if args.tlog is not None else None
     ok = False
     ep = LinkEndpoint(port, "runtime", signing=signing, tlog=tlog)
     recorder = None
@@ -526,11 +525,7 @@ def run_runtime(
             recorder.abort()
         ep.close()
         if tlog is not None:
-            tlog.close()
-            if ok:
-                os.replace(tlog_tmp, args.tlog)
-            else:
-                tlog_tmp.unlink(missing_ok=True)
+            tlog.close(commit=ok)
 
 
 def _finish(summary: dict[str, Any], result: Any, rrd: Path | None, args) -> int:

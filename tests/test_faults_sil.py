@@ -13,11 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-os.environ["CI"] = "1"
-
-from rerun.chunk import RrdReader  # noqa: E402
-
-from runtime.supervisor import Fault, State, SupervisorConfig  # noqa: E402
+from runtime.supervisor import Fault, State, SupervisorConfig
+from tests.sil_helpers import rrd_columns
 
 REENTRY_STEP = SupervisorConfig().reentry_step_ml_h
 LINK_SENSOR = [
@@ -61,18 +58,6 @@ def sil(tmp: Path, tag: str, controller: str, faults: list[str], duration: int):
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return proc, rrd, json.loads(summary.read_text())
-
-
-def rrd_columns(path: Path) -> dict[str, dict[int, float]]:
-    out: dict[str, dict[int, float]] = {}
-    for chunk in RrdReader(str(path)).stream().to_chunks():
-        batch = chunk.to_record_batch()
-        if "tick" not in batch.schema.names or "Scalars:scalars" not in batch.schema.names:
-            continue
-        ticks = batch.column("tick").to_pylist()
-        vals = [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
-        out.setdefault(str(chunk.entity_path), {}).update(zip(ticks, vals, strict=True))
-    return out
 
 
 @pytest.fixture(scope="module")

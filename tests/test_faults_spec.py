@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +18,7 @@ from runtime.faults import (
     parse_fault,
 )
 from runtime.supervisor import Fault
+from tests.sil_helpers import pressor
 
 ROOT = Path(__file__).resolve().parents[1]
 REQUIRED = (
@@ -76,20 +74,10 @@ def test_bad_fault_spec_names_field_value_and_range(text, needles):
         assert n in msg
 
 
-def _run(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    env = dict(os.environ, CI="1")
-    return subprocess.run(
-        [sys.executable, "-m", "pressor", *args],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-
-
 def test_sil_with_a_bad_fault_exits_2_with_one_line_and_writes_nothing(tmp_path):
-    proc = _run("sil", "--controller", "pi", "--fault", "sensor-flush:level_mmhg=900", cwd=tmp_path)
+    proc = pressor(
+        "sil", "--controller", "pi", "--fault", "sensor-flush:level_mmhg=900", cwd=tmp_path
+    )
     assert proc.returncode == 2
     line = proc.stderr.strip()
     assert len(line.splitlines()) == 1 and "level_mmhg" in line and "900" in line
@@ -104,7 +92,7 @@ def test_device_with_a_bad_fault_exits_2_naming_it(capsys):
 
 
 def test_faults_command_lists_every_kind_with_defaults_bound_and_safe_state(tmp_path):
-    proc = _run("faults", cwd=tmp_path)
+    proc = pressor("faults", cwd=tmp_path)
     assert proc.returncode == 0
     out = proc.stdout
     for kind in REQUIRED:

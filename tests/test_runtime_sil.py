@@ -6,45 +6,16 @@ The test may import hil_sim (the runtime may not): it is the independent referen
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-os.environ["CI"] = "1"
-
-from rerun.chunk import RrdReader  # noqa: E402
+from tests.sil_helpers import pressor, rrd_columns
 
 ROOT = Path(__file__).resolve().parents[1]
 DURATION_S = 300
 SEED = 3
-
-
-def pressor(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    env = dict(os.environ, CI="1")
-    return subprocess.run(
-        [sys.executable, "-m", "pressor", *args],
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-
-
-def rrd_columns(path: Path) -> dict[str, dict[int, float]]:
-    out: dict[str, dict[int, float]] = {}
-    for chunk in RrdReader(str(path)).stream().to_chunks():
-        batch = chunk.to_record_batch()
-        if "tick" not in batch.schema.names or "Scalars:scalars" not in batch.schema.names:
-            continue
-        ticks = batch.column("tick").to_pylist()
-        vals = [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
-        out.setdefault(str(chunk.entity_path), {}).update(zip(ticks, vals, strict=True))
-    return out
 
 
 @pytest.fixture(scope="module")

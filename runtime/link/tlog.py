@@ -19,6 +19,7 @@ To read a log with pymavlink's own tools, make the dialect known to them first::
 
 from __future__ import annotations
 
+import os
 import struct
 from collections.abc import Iterator
 from pathlib import Path
@@ -29,19 +30,23 @@ _TS = struct.Struct(">Q")
 
 
 class TlogWriter:
-    """Append frames to a .tlog file.
+    """Append frames to a .tlog file, written atomically.
+
+    Frames go to a hidden temporary sibling; :meth:`close` renames it over ``path`` (``commit``) or
+    deletes it, so a failed run never clobbers an earlier log.
 
     Parameters
     ----------
     path
-        Output file (truncated).
+        Output file (replaced on a committed close).
     buffer_bytes
         Write buffer size; the file is flushed when it fills and on :meth:`close`.
     """
 
     def __init__(self, path: str | Path, buffer_bytes: int = 1 << 16) -> None:
         self.path = Path(path)
-        self._file: BinaryIO = open(self.path, "wb", buffering=buffer_bytes)  # noqa: SIM115
+        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        self._file: BinaryIO = open(self._tmp, "wb", buffering=buffer_bytes)  # noqa: SIM115
         self.frames = 0
 
     def write(self, frame: bytes | bytearray, time_s: float) -> None:
@@ -52,19 +57,24 @@ class TlogWriter:
         self.frames += 1
 
     def flush(self) -> None:
-        """Push buffered frames to the file."""
+        """Push buffered frames to the temporary file."""
         self._file.flush()
 
-    def close(self) -> None:
-        """Flush and close (idempotent)."""
-        if not self._file.closed:
-            self._file.close()
+    def close(self, commit: bool = True) -> None:
+        """Flush and close; rename into place if ``commit`` else discard (idempotent)."""
+        if self._file.closed:
+            return
+        self._file.close()
+        if commit:
+            os.replace(self._tmp, self.path)
+        else:
+            self._tmp.unlink(missing_ok=True)
 
     def __enter__(self) -> TlogWriter:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        self.close(commit=exc_type is None)
 
 
 def read_tlog(path: str | Path) -> Iterator[tuple[int, bytes]]:

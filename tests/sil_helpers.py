@@ -1,0 +1,37 @@
+"""Shared helpers for end-to-end tests: run the ``pressor`` CLI in a subprocess, read a .rrd."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+os.environ["CI"] = "1"  # the rerun CLI writes analytics files otherwise
+
+from rerun.chunk import RrdReader  # noqa: E402
+
+
+def pressor(*args: str, cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
+    """Run ``python -m pressor ARGS`` in ``cwd`` and capture its output."""
+    return subprocess.run(
+        [sys.executable, "-m", "pressor", *args],
+        cwd=cwd,
+        env=dict(os.environ, CI="1"),
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def rrd_columns(path: Path) -> dict[str, dict[int, float]]:
+    """Every scalar series in a recording: entity path -> {tick: value}."""
+    out: dict[str, dict[int, float]] = {}
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        if "tick" not in batch.schema.names or "Scalars:scalars" not in batch.schema.names:
+            continue
+        ticks = batch.column("tick").to_pylist()
+        vals = [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
+        out.setdefault(str(chunk.entity_path), {}).update(zip(ticks, vals, strict=True))
+    return out
