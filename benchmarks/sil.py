@@ -1,22 +1,24 @@
 """SIL benchmark: lockstep real-time factor over the pty, and wall-clock lateness at 10 Hz.
 
 Runs ``pressor sil`` (device process + runtime over a pty, signed link, .rrd recording on) and
-prints:
+prints, in this order:
 
-1. lockstep: simulated seconds per wall second (real-time factor) for ``--sim-hours`` of patient
-   time (default 1 h) at 10 Hz — target ≥ 500× (1 h in ≤ 7.2 s). Two figures: the loop alone
-   (first sample to last command) and the whole command (process start, handshake, recording
-   written and renamed);
-0. floor: a bare pty ping-pong between two processes (a 184-byte tick burst one way, a 33-byte
-   command back; no Python work) on one CPU and across two, in the same run: the real-time
-   factor no lockstep run over this pty on this machine can exceed;
-2. real time: release lateness and execution time p50/p99/max at 10 Hz over ``--realtime-s``
-   seconds of wall time (default 600 = 10 min; ``--quick``: 30 s) — target p99 ≤ 1 ms. This
-   machine shows 10–20 ms host stalls whatever the sleep method (DESIGN.md §5): read the p99 with
-   that in mind.
+1. floor: a bare pty ping-pong between two processes (a 184-byte tick burst one way, a 33-byte
+   command back; no Python work) on one CPU, across two and unpinned, without and with the CPU
+   wake-up latency request (:mod:`runtime.cpu_latency`): the real-time factor no lockstep run
+   over this pty on this machine can exceed;
+2. lockstep: simulated seconds per wall second (real-time factor) for ``--sim-hours`` of patient
+   time (default 1 h) at 10 Hz, per controller, with the wake-up latency request held (the
+   default of ``pressor sil``) and without it (``--cpu-latency off``, what a user without root
+   gets) — target >= 500x (1 h in <= 7.2 s). Two figures: the loop alone (first sample to last
+   command) and the whole command (process start, handshake, recording written and renamed);
+3. real time: release lateness and execution time p50/p99/max at 10 Hz over ``--realtime-s``
+   seconds of wall time (default 600 = 10 min; ``--quick``: 30 s; 0 skips it), first controller
+   only — target p99 <= 1 ms. This machine shows 10-20 ms host stalls whatever the sleep method
+   (DESIGN.md §5): read the max with that in mind.
 
-Usage: ``python benchmarks/sil.py [--quick] [--controller pi|lpv|PATH] [--sim-hours H]
-[--realtime-s S]``.
+Usage: ``python benchmarks/sil.py [--quick] [--controller lpv,pi] [--sim-hours H]
+[--realtime-s S] [--cpu auto|none|N|N,M]``.
 """
 
 from __future__ import annotations
@@ -93,93 +95,138 @@ def pty_floor_us(n: int, cpus: tuple[int, int] | None) -> float:
     return dt / n * 1e6
 
 
+def print_floor(n: int, rate_hz: float) -> None:
+    """The bare pty round trip per CPU placement, without and with the wake-latency request."""
+    from runtime.cpu_latency import CpuLatencyRequest
+
+    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    placements: list[tuple[str, tuple[int, int] | None]] = [("unpinned", None)]
+    if len(cpus) >= 2:
+        placements = [("one CPU", (cpus[0], cpus[0])), ("two CPUs", (cpus[0], cpus[1]))]
+        placements.append(("unpinned", None))
+    print(f"floor: bare pty ping-pong between two processes, {n} round trips (us, ceiling x):")
+    for latency in (None, 0):
+        with CpuLatencyRequest(latency) as wake:
+            figures = []
+            for label, pin in placements:
+                us = pty_floor_us(n, pin)
+                figures.append(f"{label} {us:.1f} ({1e6 / rate_hz / us:.0f}x)")
+            print(f"  cpu wake-up latency {wake.status}: " + ", ".join(figures))
+
+
+def lockstep(d: Path, controller: str, a: argparse.Namespace, latency: str) -> int:
+    """One lockstep run over the pty; print its real-time factors."""
+    sim_h = a.sim_hours
+    code, wall, text = _sil(
+        [
+            "--controller",
+            controller,
+            "--rate",
+            str(a.rate),
+            "--duration",
+            str(sim_h * 3600.0),
+            "--cpu",
+            a.cpu,
+            "--cpu-latency",
+            latency,
+            "--rrd",
+            str(d / "lockstep.rrd"),
+            "--timing",
+            str(d / "lockstep.json"),
+        ]
+    )
+    if code != 0:
+        print(text, file=sys.stderr)
+        return code
+    t = json.loads((d / "lockstep.json").read_text())
+    rrd_mb = (d / "lockstep.rrd").stat().st_size / 1e6
+    sim_s = t["sim_s"]
+    lp = t["loop"]
+    print(
+        f"  {controller:3s} cpu wake-up latency {t['host']['cpu_latency']}, cpus (loop, device)"
+        f" {t['host']['cpus']}:"
+    )
+    print(
+        f"    loop          {t['run_wall_s']:6.2f} s wall -> real-time factor"
+        f" {sim_s / t['run_wall_s']:4.0f}x   (target >= 500x)"
+    )
+    print(
+        f"    whole command {wall:6.2f} s wall -> real-time factor {sim_s / wall:4.0f}x"
+        f"   (incl. device start, handshake, .rrd of {rrd_mb:.1f} MB written)"
+    )
+    print(
+        f"    runtime exec per tick p50/p99/max: {lp['exec_p50_us']:.1f} / {lp['exec_p99_us']:.1f}"
+        f" / {lp['exec_max_us']:.1f} us"
+    )
+    return 0
+
+
+def realtime(d: Path, controller: str, a: argparse.Namespace) -> int:
+    """One wall-clock run; print release lateness and execution time."""
+    code, _, text = _sil(
+        [
+            "--controller",
+            controller,
+            "--rate",
+            str(a.rate),
+            "--realtime",
+            "--duration",
+            str(a.realtime_s),
+            "--rrd",
+            str(d / "realtime.rrd"),
+            "--timing",
+            str(d / "realtime.json"),
+        ]
+    )
+    if code != 0:
+        print(text, file=sys.stderr)
+        return code
+    t = json.loads((d / "realtime.json").read_text())
+    lp = t["loop"]
+    print(
+        f"real time (--realtime), {controller}, {a.rate:g} Hz, {a.realtime_s:g} s wall,"
+        f" {lp['ticks']} ticks, cpu wake-up latency {t['host']['cpu_latency']}:"
+    )
+    print(
+        f"  release lateness p50/p99/max: {lp['lateness_p50_us'] / 1e3:.3f} /"
+        f" {lp['lateness_p99_us'] / 1e3:.3f} / {lp['lateness_max_us'] / 1e3:.3f} ms"
+        "   (target p99 <= 1 ms)"
+    )
+    print(
+        f"  exec p50/p99/max: {lp['exec_p50_us']:.1f} / {lp['exec_p99_us']:.1f} /"
+        f" {lp['exec_max_us']:.1f} us; overruns {lp['overruns']};"
+        f" skipped periods {lp['skipped_periods']}"
+    )
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="short runs (0.25 h lockstep, 30 s wall)")
-    p.add_argument("--controller", default="pi")
+    p.add_argument(
+        "--controller", default="lpv,pi", help="comma-separated: lpv, pi or generated .py files"
+    )
     p.add_argument("--sim-hours", type=float, default=None)
     p.add_argument("--realtime-s", type=float, default=None)
     p.add_argument("--rate", type=float, default=10.0)
-    p.add_argument("--cpu", default="auto", help="passed to pressor sil --cpu (auto|none|N)")
+    p.add_argument("--cpu", default="auto", help="passed to pressor sil --cpu (auto|none|N|N,M)")
     a = p.parse_args(argv)
-    sim_h = a.sim_hours if a.sim_hours is not None else (0.25 if a.quick else 1.0)
-    rt_s = a.realtime_s if a.realtime_s is not None else (30.0 if a.quick else 600.0)
-    n_floor = 3000
-    cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
-    print(f"floor: bare pty ping-pong between two processes, {n_floor} round trips:")
-    if len(cpus) >= 2:
-        for label, pin in (("one CPU", (cpus[0], cpus[0])), ("two CPUs", (cpus[0], cpus[1]))):
-            us = pty_floor_us(n_floor, pin)
-            print(f"  {label:9s} {us:6.1f} us/round trip -> ceiling {1e6 / a.rate / us:.0f}x")
-    us = pty_floor_us(n_floor, None)
-    print(f"  unpinned  {us:6.1f} us/round trip -> ceiling {1e6 / a.rate / us:.0f}x")
+    a.sim_hours = a.sim_hours if a.sim_hours is not None else (0.25 if a.quick else 1.0)
+    a.realtime_s = a.realtime_s if a.realtime_s is not None else (30.0 if a.quick else 600.0)
+    controllers = a.controller.split(",")
+    print_floor(3000, a.rate)
     with tempfile.TemporaryDirectory(prefix="pressor-bench-") as tmp:
         d = Path(tmp)
-        common = ["--controller", a.controller, "--rate", str(a.rate)]
-        code, wall, text = _sil(
-            [
-                *common,
-                "--duration",
-                str(sim_h * 3600.0),
-                "--cpu",
-                a.cpu,
-                "--rrd",
-                str(d / "lockstep.rrd"),
-                "--timing",
-                str(d / "lockstep.json"),
-            ]
-        )
-        if code != 0:
-            print(text, file=sys.stderr)
-            return code
-        t = json.loads((d / "lockstep.json").read_text())
-        rrd_mb = (d / "lockstep.rrd").stat().st_size / 1e6
-        sim_s = t["sim_s"]
         print(
-            f"lockstep over pty, {a.rate:g} Hz, signed, recording on ({a.controller},"
-            f" --cpu {a.cpu}):"
+            f"lockstep over pty, {a.rate:g} Hz, signed, recording on, {a.sim_hours:g} h"
+            f" simulated ({round(a.sim_hours * 3600 * a.rate)} ticks), --cpu {a.cpu}:"
         )
-        print(f"  simulated {sim_s:.0f} s ({sim_h:g} h), {t['loop']['ticks']} ticks")
-        print(
-            f"  loop:          {t['run_wall_s']:.2f} s wall -> real-time factor"
-            f" {sim_s / t['run_wall_s']:.0f}x   (target >= 500x)"
-        )
-        print(
-            f"  whole command: {wall:.2f} s wall -> real-time factor {sim_s / wall:.0f}x"
-            f"   (incl. device start, handshake, .rrd of {rrd_mb:.1f} MB written)"
-        )
-        lp = t["loop"]
-        print(
-            f"  runtime exec per tick p50/p99/max: {lp['exec_p50_us']:.1f} / {lp['exec_p99_us']:.1f}"
-            f" / {lp['exec_max_us']:.1f} us"
-        )
-        code, wall, text = _sil(
-            [
-                *common,
-                "--realtime",
-                "--duration",
-                str(rt_s),
-                "--rrd",
-                str(d / "realtime.rrd"),
-                "--timing",
-                str(d / "realtime.json"),
-            ]
-        )
-        if code != 0:
-            print(text, file=sys.stderr)
-            return code
-        lp = json.loads((d / "realtime.json").read_text())["loop"]
-        print(f"real time (--realtime), {a.rate:g} Hz, {rt_s:g} s wall, {lp['ticks']} ticks:")
-        print(
-            f"  release lateness p50/p99/max: {lp['lateness_p50_us'] / 1e3:.3f} /"
-            f" {lp['lateness_p99_us'] / 1e3:.3f} / {lp['lateness_max_us'] / 1e3:.3f} ms"
-            "   (target p99 <= 1 ms)"
-        )
-        print(
-            f"  exec p50/p99/max: {lp['exec_p50_us']:.1f} / {lp['exec_p99_us']:.1f} /"
-            f" {lp['exec_max_us']:.1f} us; overruns {lp['overruns']};"
-            f" skipped periods {lp['skipped_periods']}"
-        )
+        for latency in ("0", "off"):
+            for controller in controllers:
+                if code := lockstep(d, controller, a, latency):
+                    return code
+        if a.realtime_s > 0:
+            return realtime(d, controllers[0], a)
     return 0
 
 

@@ -172,7 +172,7 @@ def main(command: str, argv: list[str]) -> int:
 
 
 def _pin(cpu: int | None) -> None:
-    """Restrict this process to ``cpu`` (see ``runtime.cli.lockstep_cpu`` for why)."""
+    """Restrict this process to ``cpu`` (see ``runtime.cli.lockstep_cpus`` for why)."""
     if cpu is None:
         return
     allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []

@@ -73,6 +73,24 @@ def _positive(name: str, high: float):
     return parse
 
 
+def _cpu_latency(text: str) -> int | None:
+    from runtime.cpu_latency import MAX_LATENCY_US
+
+    if text == "off":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--cpu-latency {text!r}: allowed off or an integer in [0, {MAX_LATENCY_US}] us"
+        ) from None
+    if not 0 <= value <= MAX_LATENCY_US:
+        raise argparse.ArgumentTypeError(
+            f"--cpu-latency {text!r}: allowed off or [0, {MAX_LATENCY_US}] us"
+        )
+    return value
+
+
 def _seed(text: str) -> int:
     try:
         value = int(text)
@@ -126,6 +144,15 @@ def _common(p: argparse.ArgumentParser) -> None:
         default=10.0,
         help="lockstep: give up after this many wall seconds without a sample (default 10)",
     )
+    p.add_argument(
+        "--cpu-latency",
+        type=_cpu_latency,
+        default=0,
+        metavar="US|off",
+        help="hold the host's CPU wake-up latency at US microseconds during the run"
+        " (/dev/cpu_dma_latency, best effort, usually needs root; default 0: idle CPUs poll"
+        " instead of halting, 2x faster lockstep on a VM); off: make no request",
+    )
 
 
 def _sil_parser() -> argparse.ArgumentParser:
@@ -145,45 +172,48 @@ def _sil_parser() -> argparse.ArgumentParser:
         "--cpu",
         type=_cpu,
         default="auto",
-        help="lockstep: run the device and the loop thread on this one CPU (auto: the CPU this"
-        " process is on; none: let the scheduler place them). Ignored with --realtime",
+        metavar="auto|none|N|N,M",
+        help="lockstep CPU placement: auto (default) the loop thread on the CPU it is on and the"
+        " device on another; N both on CPU N; N,M the loop on N and the device on M; none let"
+        " the scheduler place them. Ignored with --realtime",
     )
     return p
 
 
-def _cpu(text: str) -> str | int:
+def _cpu(text: str) -> str | tuple[int, int]:
     if text in ("auto", "none"):
         return text
     allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    hint = f"allowed auto, none, N or N,M with N and M in {allowed}"
     try:
-        value = int(text)
+        cpus = tuple(int(part) for part in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--cpu {text!r}: allowed auto, none or a CPU number"
-        ) from None
-    if value not in allowed:
-        raise argparse.ArgumentTypeError(f"--cpu {text!r}: allowed auto, none or one of {allowed}")
-    return value
+        raise argparse.ArgumentTypeError(f"--cpu {text!r}: {hint}") from None
+    if len(cpus) not in (1, 2) or any(c not in allowed for c in cpus):
+        raise argparse.ArgumentTypeError(f"--cpu {text!r}: {hint}")
+    return (cpus[0], cpus[-1])
 
 
-def lockstep_cpu(choice: str | int, realtime: bool) -> int | None:
-    """The CPU both lockstep ends run on, or ``None`` (no pinning).
+def lockstep_cpus(choice: str | tuple[int, int], realtime: bool) -> tuple[int, int] | None:
+    """``(loop CPU, device CPU)`` for a lockstep run, or ``None`` (no pinning).
 
-    Why pin: in lockstep the two processes never run at the same time (each waits for the other's
-    frames), so they lose nothing by sharing a CPU, and every hand-over becomes a local wake-up.
-    Across CPUs each hand-over wakes an idle (virtual) CPU: a bare pty ping-pong between two
-    processes costs ~120-200 µs per round trip across the two vCPUs of the development VM and
-    ~18 µs on one (``benchmarks/sil.py`` measures both). Only the loop thread is pinned; the
-    recorder's rerun threads stay free to use the other CPUs.
+    ``auto`` puts the two ends on two different CPUs: the loop thread stays on the CPU it runs on
+    and the device takes another. Each end then keeps its caches, and the runtime records tick
+    k while the device computes tick k+1 (recording happens after the command is sent). With
+    the CPU wake-up latency request held (:mod:`runtime.cpu_latency`), two CPUs beat one
+    (development VM, PI, 1 h at 10 Hz: ~750x unpinned or split against ~500x on one CPU);
+    ``benchmarks/sil.py`` measures the bare pty round trip both ways. Only the loop thread is
+    pinned; the recorder's rerun threads stay free.
     """
     if choice == "none" or realtime or not hasattr(os, "sched_setaffinity"):
         return None
-    allowed = os.sched_getaffinity(0)
-    if isinstance(choice, int):
+    if isinstance(choice, tuple):
         return choice
+    allowed = os.sched_getaffinity(0)
     if len(allowed) < 2:
         return None
-    return _current_cpu(allowed)
+    here = _current_cpu(allowed)
+    return here, min(allowed - {here})
 
 
 def _current_cpu(allowed: set[int]) -> int:
@@ -433,6 +463,7 @@ def run_runtime(
     handshake_timeout_s: float = 30.0,
 ) -> tuple[dict[str, Any], Any, Path | None]:
     """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result, rrd)."""
+    from runtime.cpu_latency import CpuLatencyRequest
     from runtime.link.endpoint import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkEndpoint, LinkError
     from runtime.link.tlog import TlogWriter
     from runtime.loop import Loop, supervisor_config_for
@@ -487,13 +518,15 @@ def run_runtime(
             )
             recorder = Recorder(rrd, run_label=label)
         loop = Loop(controller, sup, ep, recorder=recorder, heartbeat_every=round(args.rate))
-        if args.realtime:
-            n = peer.n_ticks if peer.n_ticks else getattr(args, "ticks", 0)
-            result = loop.run_realtime(n)
-        else:
-            n = getattr(args, "ticks", 0) or peer.n_ticks
-            with _Pinned(getattr(args, "pin_cpu", None)):  # rerun's threads exist already
-                result = loop.run_lockstep(n, stall_timeout_s=args.stall_timeout)
+        with CpuLatencyRequest(getattr(args, "cpu_latency", None)) as wake:
+            if args.realtime:
+                n = peer.n_ticks if peer.n_ticks else getattr(args, "ticks", 0)
+                result = loop.run_realtime(n)
+            else:
+                n = getattr(args, "ticks", 0) or peer.n_ticks
+                with _Pinned(getattr(args, "pin_cpu", None)):  # rerun's threads exist already
+                    result = loop.run_lockstep(n, stall_timeout_s=args.stall_timeout)
+        result.host = {"cpu_latency": wake.status, "cpus": getattr(args, "cpus", None)}
         if recorder is not None:
             recorder.close()
             recorder = None
@@ -530,6 +563,8 @@ def run_runtime(
 
 def _finish(summary: dict[str, Any], result: Any, rrd: Path | None, args) -> int:
     print_summary(summary, result.timing)
+    if result.host:
+        print(f"host: cpu wake-up latency {result.host['cpu_latency']}")
     if args.summary is not None:
         _write_json_atomic(args.summary, summary)
         print(f"summary: {args.summary}")
@@ -539,6 +574,7 @@ def _finish(summary: dict[str, Any], result: Any, rrd: Path | None, args) -> int
             "run_wall_s": result.wall_s,
             "sim_s": summary["ticks"] / summary["rate_hz"],
             "link": result.link,
+            "host": result.host,
         }
         _write_json_atomic(args.timing, status)
         print(f"timing: {args.timing}")
@@ -597,9 +633,10 @@ def _main_sil(argv: list[str]) -> int:
         ]
         if args.realtime:
             cmd.append("--realtime")
-        args.pin_cpu = lockstep_cpu(args.cpu, args.realtime)
-        if args.pin_cpu is not None:
-            cmd += ["--cpu", str(args.pin_cpu)]
+        args.cpus = cpus = lockstep_cpus(args.cpu, args.realtime)
+        args.pin_cpu = None if cpus is None else cpus[0]
+        if cpus is not None:
+            cmd += ["--cpu", str(cpus[1])]
         for text in args.fault:
             cmd += ["--fault", text]
         if any(f.info.group == "link" for f in args.fault_specs):

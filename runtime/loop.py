@@ -133,6 +133,8 @@ class LoopResult:
     commands_out_of_range: int
     ended: str
     wall_s: float = 0.0
+    #: where the run executed (filled by the CLI: CPU wake-up latency request, CPU pinning)
+    host: dict[str, Any] = field(default_factory=dict)
 
 
 def sched_limits_of(controller: Controller) -> tuple[Any, Any]:

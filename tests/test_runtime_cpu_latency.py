@@ -1,0 +1,96 @@
+"""CPU wake-up latency request (runtime.cpu_latency) and the lockstep CPU placement options."""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+from pathlib import Path
+
+import pytest
+
+from runtime.cli import UsageError, _sil_parser, lockstep_cpus
+from runtime.cpu_latency import QOS_DEVICE, CpuLatencyRequest
+from tests.sil_helpers import pressor
+
+
+def test_request_writes_native_int32_and_releases_on_exit(tmp_path):
+    dev = tmp_path / "qos"
+    dev.write_bytes(b"")
+    with CpuLatencyRequest(7, device=str(dev)) as req:
+        assert req.held
+        assert "held at 7 us" in req.status
+        assert dev.read_bytes() == struct.pack("=i", 7)
+        fd = req._fd
+        assert fd is not None
+        os.fstat(fd)  # open while the block runs
+    assert not req.held
+    with pytest.raises(OSError):
+        os.fstat(fd)  # closing the descriptor is what withdraws the request
+
+
+def test_unavailable_device_is_reported_not_raised(tmp_path):
+    with CpuLatencyRequest(0, device=str(tmp_path / "missing" / "qos")) as req:
+        assert not req.held
+        assert req.status.startswith("not held: cannot open")
+
+
+def test_no_request_touches_nothing(tmp_path):
+    dev = tmp_path / "qos"
+    with CpuLatencyRequest(None, device=str(dev)) as req:
+        assert not req.held
+    assert not dev.exists()
+
+
+@pytest.mark.parametrize("bad", [-1, 1_000_001])
+def test_latency_outside_range_is_refused(bad):
+    with pytest.raises(ValueError, match=r"outside \[0, 1000000\]"):
+        CpuLatencyRequest(bad)
+
+
+@pytest.mark.parametrize("option", [["--cpu-latency", "-5"], ["--cpu-latency", "fast"]])
+def test_bad_cpu_latency_option_is_a_usage_error_naming_it(option):
+    with pytest.raises(UsageError, match="--cpu-latency"):
+        _sil_parser().parse_args(option)
+
+
+def test_cpu_option_takes_one_or_two_allowed_cpus():
+    allowed = sorted(os.sched_getaffinity(0))
+    args = _sil_parser().parse_args(["--cpu", f"{allowed[0]},{allowed[-1]}"])
+    assert args.cpu == (allowed[0], allowed[-1])
+    assert _sil_parser().parse_args(["--cpu", str(allowed[0])]).cpu == (allowed[0], allowed[0])
+    with pytest.raises(UsageError, match="--cpu"):
+        _sil_parser().parse_args(["--cpu", f"{allowed[0]},{max(allowed) + 1}"])
+
+
+def test_auto_puts_the_two_lockstep_ends_on_different_cpus():
+    allowed = os.sched_getaffinity(0)
+    cpus = lockstep_cpus("auto", realtime=False)
+    if len(allowed) < 2:
+        assert cpus is None
+    else:
+        assert cpus is not None and cpus[0] != cpus[1] and set(cpus) <= allowed
+    assert lockstep_cpus("auto", realtime=True) is None
+    assert lockstep_cpus("none", realtime=False) is None
+
+
+def test_sil_timing_reports_the_wake_latency_request_and_placement(tmp_path: Path):
+    proc = pressor(
+        "sil",
+        "--controller",
+        "pi",
+        "--duration",
+        "20",
+        "--rrd",
+        str(tmp_path / "r.rrd"),
+        "--timing",
+        str(tmp_path / "t.json"),
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr
+    host = json.loads((tmp_path / "t.json").read_text())["host"]
+    writable = os.access(QOS_DEVICE, os.W_OK)
+    assert host["cpu_latency"].startswith("held at 0 us" if writable else "not held")
+    assert f"cpu wake-up latency {host['cpu_latency']}" in proc.stdout
+    if len(os.sched_getaffinity(0)) >= 2:
+        assert host["cpus"][0] != host["cpus"][1]
