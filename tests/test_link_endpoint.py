@@ -391,3 +391,34 @@ def test_fast_decoder_refuses_forged_and_unsigned_frames_like_pymavlink():
     c = rx.counters
     assert (c.refused_bad_signature, c.refused_unsigned, c.bad_crc) == (1, 1, 1)
     assert rx.wait_for_command(0, 0.0).rate_ml_h == 5.0
+
+
+def test_signature_timestamp_rules_match_pymavlink_for_genuine_frames():
+    # stamps (run time, s) of frames from two streams (link ids 0 and 1): in order, a replay, an
+    # equal stamp, a new stream more than a minute behind the receiver's own stamp, one just
+    # inside the minute
+    key = Signing.generate(seed=9)
+    plan = [(0, 100.0), (0, 100.5), (0, 100.2), (0, 100.5), (1, 20.0), (1, 41.0), (0, 101.0)]
+    frames = []
+    for link_id, t in plan:
+        tx = LinkEndpoint(
+            _Sink(), "device", signing=Signing(key.key, link_id), clock=ManualClock(t)
+        )
+        frames.append(tx.send_fields(mavlink.MAVLINK_MSG_ID_PRESSOR_HEARTBEAT, 1, 2, 1))
+    ours = LinkEndpoint(_Sink(), "runtime", signing=key)
+    ref = mavlink.MAVLink(None, 1, 1)
+    ref.signing.secret_key = key.key
+    verdicts = []
+    for frame in frames:
+        refused = ours.counters.refused_bad_signature
+        ours.feed(frame)
+        try:
+            ref.decode(bytearray(frame))
+            want = True
+        except mavlink.MAVError:
+            want = False
+        got = ours.counters.refused_bad_signature == refused
+        verdicts.append((got, want))
+    assert [g for g, _ in verdicts] == [w for _, w in verdicts]
+    assert [g for g, _ in verdicts] == [True, True, False, False, False, True, True]
+    assert ours._mav.signing.timestamp == ref.signing.timestamp
