@@ -768,7 +768,7 @@ class LinkEndpoint:
         mavlink.MAVError
             Bad CRC, or "Invalid signature" (the caller tells the two apart by the message).
         """
-        _cls, st, extra, _, orders = codec
+        cls, st, extra, _, orders = codec
         plen = frame[1]
         end = _HEADER + plen
         if _mcrf4xx(bytes(frame[1:end]) + extra, 0xFFFF) != frame[end] | (frame[end + 1] << 8):
@@ -776,7 +776,7 @@ class LinkEndpoint:
         sg = self._mav.signing
         if sg.secret_key is not None and not (frame[2] & 1 and self._check_signature(frame)):
             cb = sg.allow_unsigned_callback
-            if cb is None or not cb(self._mav, _cls.id):
+            if cb is None or not cb(self._mav, cls.id):
                 raise mavlink.MAVError("Invalid signature")
         size = st.size
         payload = bytes(frame[_HEADER:end])
