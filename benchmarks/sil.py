@@ -114,32 +114,36 @@ def print_floor(n: int, rate_hz: float) -> None:
             print(f"  cpu wake-up latency {wake.status}: " + ", ".join(figures))
 
 
-def lockstep(d: Path, controller: str, a: argparse.Namespace, latency: str) -> int:
-    """One lockstep run over the pty; print its real-time factors."""
-    sim_h = a.sim_hours
+def _timed_sil(d: Path, name: str, controller: str, rate: float, extra: list[str]):
+    """``pressor sil`` with a recording and a timing file in ``d``; (timing, wall s, rrd MB) or
+    ``None`` after printing the run's output when it failed."""
+    rrd, timing = d / f"{name}.rrd", d / f"{name}.json"
     code, wall, text = _sil(
         [
             "--controller",
             controller,
             "--rate",
-            str(a.rate),
-            "--duration",
-            str(sim_h * 3600.0),
-            "--cpu",
-            a.cpu,
-            "--cpu-latency",
-            latency,
+            str(rate),
             "--rrd",
-            str(d / "lockstep.rrd"),
+            str(rrd),
             "--timing",
-            str(d / "lockstep.json"),
+            str(timing),
         ]
+        + extra
     )
     if code != 0:
         print(text, file=sys.stderr)
-        return code
-    t = json.loads((d / "lockstep.json").read_text())
-    rrd_mb = (d / "lockstep.rrd").stat().st_size / 1e6
+        return None
+    return json.loads(timing.read_text()), wall, rrd.stat().st_size / 1e6
+
+
+def lockstep(d: Path, controller: str, a: argparse.Namespace, latency: str) -> int:
+    """One lockstep run over the pty; print its real-time factors."""
+    extra = ["--duration", str(a.sim_hours * 3600.0), "--cpu", a.cpu, "--cpu-latency", latency]
+    run = _timed_sil(d, "lockstep", controller, a.rate, extra)
+    if run is None:
+        return 1
+    t, wall, rrd_mb = run
     sim_s = t["sim_s"]
     lp = t["loop"]
     print(
@@ -163,25 +167,12 @@ def lockstep(d: Path, controller: str, a: argparse.Namespace, latency: str) -> i
 
 def realtime(d: Path, controller: str, a: argparse.Namespace) -> int:
     """One wall-clock run; print release lateness and execution time."""
-    code, _, text = _sil(
-        [
-            "--controller",
-            controller,
-            "--rate",
-            str(a.rate),
-            "--realtime",
-            "--duration",
-            str(a.realtime_s),
-            "--rrd",
-            str(d / "realtime.rrd"),
-            "--timing",
-            str(d / "realtime.json"),
-        ]
+    run = _timed_sil(
+        d, "realtime", controller, a.rate, ["--realtime", "--duration", str(a.realtime_s)]
     )
-    if code != 0:
-        print(text, file=sys.stderr)
-        return code
-    t = json.loads((d / "realtime.json").read_text())
+    if run is None:
+        return 1
+    t = run[0]
     lp = t["loop"]
     print(
         f"real time (--realtime), {controller}, {a.rate:g} Hz, {a.realtime_s:g} s wall,"
