@@ -90,7 +90,7 @@ def _parser(command: str) -> argparse.ArgumentParser:
         "--cpu",
         type=int,
         default=None,
-        help="run on this CPU only (pressor sil pins both lockstep ends to one CPU)",
+        help="run on this CPU only (pressor sil puts the lockstep ends on two CPUs)",
     )
     p.add_argument(
         "--fault",

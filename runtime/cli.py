@@ -201,9 +201,10 @@ def lockstep_cpus(choice: str | tuple[int, int], realtime: bool) -> tuple[int, i
     and the device takes another. Each end then keeps its caches, and the runtime records tick
     k while the device computes tick k+1 (recording happens after the command is sent). With
     the CPU wake-up latency request held (:mod:`runtime.cpu_latency`), two CPUs beat one
-    (development VM, PI, 1 h at 10 Hz: ~750x unpinned or split against ~500x on one CPU);
-    ``benchmarks/sil.py`` measures the bare pty round trip both ways. Only the loop thread is
-    pinned; the recorder's rerun threads stay free.
+    (development VM, LPV, 30 min at 10 Hz: 610-680x split, 620-650x unpinned, 460-470x on one
+    CPU); without it split and unpinned give ~400x and one CPU ~330x. ``benchmarks/sil.py``
+    measures the bare pty round trip each way. Only the loop thread is pinned; the recorder's
+    rerun threads stay free.
     """
     if choice == "none" or realtime or not hasattr(os, "sched_setaffinity"):
         return None
@@ -524,7 +525,8 @@ def run_runtime(
                 result = loop.run_realtime(n)
             else:
                 n = getattr(args, "ticks", 0) or peer.n_ticks
-                with _Pinned(getattr(args, "pin_cpu", None)):  # rerun's threads exist already
+                cpus = getattr(args, "cpus", None)
+                with _Pinned(None if cpus is None else cpus[0]):  # rerun's threads exist already
                     result = loop.run_lockstep(n, stall_timeout_s=args.stall_timeout)
         result.host = {"cpu_latency": wake.status, "cpus": getattr(args, "cpus", None)}
         if recorder is not None:
@@ -634,7 +636,6 @@ def _main_sil(argv: list[str]) -> int:
         if args.realtime:
             cmd.append("--realtime")
         args.cpus = cpus = lockstep_cpus(args.cpu, args.realtime)
-        args.pin_cpu = None if cpus is None else cpus[0]
         if cpus is not None:
             cmd += ["--cpu", str(cpus[1])]
         for text in args.fault:
