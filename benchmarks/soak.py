@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 
 from runtime.cli import print_fault_table  # noqa: E402
 from runtime.controller_loader import load_controller  # noqa: E402
-from runtime.faults import FAULT_KINDS, FaultScorer, parse_fault  # noqa: E402
+from runtime.faults import FAULT_KINDS, FaultScorer, parse_faults  # noqa: E402
 from runtime.link.endpoint import Hello, LinkEndpoint, Signing  # noqa: E402
 from runtime.link.transport import PtyPair  # noqa: E402
 from runtime.loop import Loop, sched_limits_of, supervisor_config_for  # noqa: E402
@@ -73,7 +73,7 @@ def main() -> int:
     ts = 0.1
     duration = args.hours * 3600.0
     texts = schedule(args.hours)
-    specs = [parse_fault(t, i) for i, t in enumerate(texts)]
+    specs = parse_faults(texts)
     controller = load_controller(args.controller, sample_period_s=ts)
     signing = Signing.generate(seed=1)
     pair = PtyPair.open()

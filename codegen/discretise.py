@@ -47,7 +47,6 @@ __all__ = [
     "DelayedControllerMatrices",
     "composite_continuous",
     "discretise_node",
-    "n_states",
 ]
 
 Matrix = NDArray[np.float64]
@@ -74,11 +73,6 @@ class DelayedControllerMatrices:
     Ck: Matrix
     Cdk: Matrix
     Dk: Matrix
-
-
-def n_states(controller: ContinuousController) -> int:
-    """Controller order n_k (rows of Ak)."""
-    return int(np.asarray(controller.Ak).shape[0])
 
 
 def composite_continuous(

@@ -224,7 +224,31 @@ def _input_c() -> str:
     else if (e < -{PU}E_LIM) e = -{PU}E_LIM;"""
 
 
-def _output_c(fixed: bool, nk: int) -> str:
+def _delay_c(fixed: bool, nk: int, nz: int, W: int) -> str:
+    """Ring-buffer write and fractional-delay read of x_k(t - tau) into v[nz..]; v = [z; x_d; e]."""
+    if fixed:
+        scalar, interp = "int32_t", f"(int32_t)((((int64_t)s->buf[k][j] - a) * fd) >> {W})"
+    else:
+        scalar, interp = "double", "(s->buf[k][j] - a) * fd"
+    return f"""    h = s->head;
+    i = h - n;
+    if (i < 0) i += {PU}NBUF;
+    j = i - 1;
+    if (j < 0) j += {PU}NBUF;
+    for (k = 0; k < {PU}N_K; ++k) {{
+        {scalar} a;
+        s->buf[k][h] = s->z[k];
+        a = s->buf[k][i];
+        v[{nz} + k] = a + {interp};
+    }}
+    h += 1;
+    if (h == {PU}NBUF) h = 0;
+    s->head = h;
+    for (k = 0; k < {PU}N_Z; ++k) v[k] = s->z[k];
+    v[{nz + nk}] = ve;"""
+
+
+def _output_c(fixed: bool) -> str:
     if fixed:
         conv = f"out = (double)un * {PU}U_Q_TO_ML_H;"
     else:
@@ -275,22 +299,7 @@ def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) 
     if (dd > {PU}DMAX_SAMPLES) dd = {PU}DMAX_SAMPLES;
     n = (int32_t)dd;
     fd = (int32_t)((dd - n) * {PU}WONE);
-    h = s->head;
-    i = h - n;
-    if (i < 0) i += {PU}NBUF;
-    j = i - 1;
-    if (j < 0) j += {PU}NBUF;
-    for (k = 0; k < {PU}N_K; ++k) {{
-        int32_t a;
-        s->buf[k][h] = s->z[k];
-        a = s->buf[k][i];
-        v[{nz} + k] = a + (int32_t)((((int64_t)s->buf[k][j] - a) * fd) >> {W});
-    }}
-    h += 1;
-    if (h == {PU}NBUF) h = 0;
-    s->head = h;
-    for (k = 0; k < {PU}N_Z; ++k) v[k] = s->z[k];
-    v[{nz + nk}] = ve;
+{_delay_c(True, nk, nz, W)}
     b = (idx[0] * {nt} + idx[1]) * {na} + idx[2];
     for (k = 0; k < 8; ++k) cp[k] = {P}tab[b + {P}corner[k]];
     for (k = 0; k < {PU}NENT; ++k) {{
@@ -316,7 +325,7 @@ def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) 
             s->z[k] = (int32_t)xs;
         }}
     }}
-{_output_c(True, nk)}"""
+{_output_c(True)}"""
 
 
 def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
@@ -344,22 +353,7 @@ def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
     if (d > {PU}DMAX_SAMPLES) d = {PU}DMAX_SAMPLES;
     n = (int32_t)d;
     fd = d - n;
-    h = s->head;
-    i = h - n;
-    if (i < 0) i += {PU}NBUF;
-    j = i - 1;
-    if (j < 0) j += {PU}NBUF;
-    for (k = 0; k < {PU}N_K; ++k) {{
-        double a;
-        s->buf[k][h] = s->z[k];
-        a = s->buf[k][i];
-        v[{nz} + k] = a + (s->buf[k][j] - a) * fd;
-    }}
-    h += 1;
-    if (h == {PU}NBUF) h = 0;
-    s->head = h;
-    for (k = 0; k < {PU}N_Z; ++k) v[k] = s->z[k];
-    v[{nz + nk}] = ve;
+{_delay_c(False, nk, nz, 0)}
     b = (idx[0] * {nt} + idx[1]) * {na} + idx[2];
     for (k = 0; k < {nz - 1}; ++k) dz[k] = 0.0;
     for (c = 0; c < 8; ++c) {{
@@ -382,4 +376,4 @@ def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
             s->z[k] = xs;
         }}
     }}
-{_output_c(False, nk)}"""
+{_output_c(False)}"""

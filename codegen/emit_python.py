@@ -196,7 +196,6 @@ def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
     c = derived_constants(spec, plan)
     nk = spec.n_k
     nz = nk + 2
-    ncol = 2 * nk + 3
     entries = nonzero_entries(plan)
     offs = corner_offsets(spec.counts)
     W = plan.weight_bits
@@ -307,8 +306,8 @@ class Controller:
         return tuple(self._z) + tuple(self._r)
 '''
     )
-    add(_float_step(spec, plan, entries, offs, nk, nz, ncol))
-    add(_fixed_step(spec, plan, entries, offs, nk, nz, ncol))
+    add(_float_step(spec, entries, offs, nk, nz))
+    add(_fixed_step(spec, entries, offs, nk, nz))
     text = "\n".join(out) + "\n"
     digest = module_sha256(text)
     return text.replace(MODULE_SHA_PREFIX + "''", f"{MODULE_SHA_PREFIX}{digest!r}", 1)
@@ -369,7 +368,7 @@ def _entry_rows(entries: list[tuple[int, int]], nz: int) -> dict[int, list[tuple
     return rows
 
 
-def _common_head(fixed: bool, nk: int) -> list[str]:
+def _common_head(fixed: bool) -> list[str]:
     L = []
     sig = "(self, map_mmhg, target_mmhg, K, T, tau)"
     L.append(f"    def {'_step_fixed' if fixed else '_step_float'}{sig}:")
@@ -449,10 +448,17 @@ def _delay_lines(fixed: bool, nk: int) -> list[str]:
     L.append("        if h == _NBUF:")
     L.append("            h = 0")
     L.append("        self._head = h")
+    # v0..v{nz-1} are z, v{nz}.. x_d, v{nz+nk} = e; z_s for s < nk already bound above.
+    nz = nk + 2
+    for s in range(nk, nz):
+        L.append(f"        v{s} = z[{s}]")
+    for s in range(nk):
+        L.append(f"        v{s} = z{s}")
+    L.append(f"        v{nz + nk} = v_e")
     return L
 
 
-def _update_lines(fixed: bool, nk: int, nz: int) -> list[str]:
+def _update_lines(fixed: bool, nk: int) -> list[str]:
     """Anti-windup, state update with saturation, output."""
     L = []
     lo, hi = ("-_QMAX", "_QMAX") if fixed else ("-1.0", "1.0")
@@ -499,18 +505,12 @@ def _update_lines(fixed: bool, nk: int, nz: int) -> list[str]:
     return L
 
 
-def _float_step(spec, plan, entries, offs, nk, nz, ncol) -> str:
-    L = _common_head(False, nk)
+def _float_step(spec, entries, offs, nk, nz) -> str:
+    L = _common_head(False)
     L.append("        v_e = e * _E_TO_S")
     L += _rho_block(False)
     L += _corner_lines(False)
     L += _delay_lines(False, nk)
-    # v0..v{nz-1} are z, v{nz}.. x_d, v{nz+nk} = e; z_s for s < nk already bound above.
-    for s in range(nk, nz):
-        L.append(f"        v{s} = z[{s}]")
-    for s in range(nk):
-        L.append(f"        v{s} = z{s}")
-    L.append(f"        v{nz + nk} = v_e")
     rows = _entry_rows(entries, nz)
     L.append(f"        b = (i0 * {spec.counts[1]} + i1) * {spec.counts[2]} + i2")
     L.append("        t = _TF")
@@ -523,12 +523,12 @@ def _float_step(spec, plan, entries, offs, nk, nz, ncol) -> str:
             if rows[r]:
                 expr = " + ".join(f"m{p} * v{j}" for p, j in rows[r])
                 L.append(f"        d{r} += w{ci} * ({expr})")
-    L += _update_lines(False, nk, nz)
+    L += _update_lines(False, nk)
     return "\n".join(L) + "\n"
 
 
-def _fixed_step(spec, plan, entries, offs, nk, nz, ncol) -> str:
-    L = _common_head(True, nk)
+def _fixed_step(spec, entries, offs, nk, nz) -> str:
+    L = _common_head(True)
     L.append("        v_e = int(e * _E_TO_Q)")
     L.append("        if v_e > _QMAX:")
     L.append("            v_e = _QMAX")
@@ -537,24 +537,17 @@ def _fixed_step(spec, plan, entries, offs, nk, nz, ncol) -> str:
     L += _rho_block(True)
     L += _corner_lines(True)
     L += _delay_lines(True, nk)
-    for s in range(nk, nz):
-        L.append(f"        v{s} = z[{s}]")
-    for s in range(nk):
-        L.append(f"        v{s} = z{s}")
-    L.append(f"        v{nz + nk} = v_e")
     L.append(f"        b = (i0 * {spec.counts[1]} + i1) * {spec.counts[2]} + i2")
     L.append("        t = _TQ")
     for ci, off in enumerate(offs):
         L.append(f"        c{ci} = t[b + {off}]")
     rows = _entry_rows(entries, nz)
     for r in range(nz - 1):
-        terms = []
         for p, j in rows[r]:
             interp = " + ".join(f"w{ci} * c{ci}[{p}]" for ci in range(8))
             L.append(f"        m = ({interp}) >> _W")
-            terms.append(f"m * v{j}")
             L.append(f"        a{r}_{p} = m * v{j}")
         acc = " + ".join(f"a{r}_{p}" for p, _ in rows[r]) or "0"
         L.append(f"        d{r} = ({acc} + (1 << (_F{r} - 1))) >> _F{r}")
-    L += _update_lines(True, nk, nz)
+    L += _update_lines(True, nk)
     return "\n".join(L) + "\n"

@@ -52,8 +52,6 @@ Matrix = NDArray[np.float64]
 
 #: MAP error clamp (mmHg); also the error scale S_e.
 E_LIM_MMHG = 128.0
-#: Q-bits of the scheduling grid coordinates.
-GRID_FRAC_BITS = 20
 #: (coefficient magnitude bits, weight fraction bits) per format.
 FORMATS: dict[str, tuple[int, int]] = {"q31": (27, 30), "q15": (15, 15)}
 
@@ -65,7 +63,6 @@ def _pow2_ceil(x: float) -> float:
 def signal_peaks(
     tables: Matrix,
     box: Matrix,
-    omega_unused: float,
     sample_period_s: float,
     max_rate_ml_h: float,
     step_mmhg: float = 40.0,
@@ -189,7 +186,7 @@ def make_plan(
     box = np.asarray(box, float)
     nz = tables.shape[3]
     nk = nz - 2
-    peaks = signal_peaks(tables, box, 0.0, sample_period_s, max_rate_ml_h)
+    peaks = signal_peaks(tables, box, sample_period_s, max_rate_ml_h)
     peaks[nk] = max(peaks[nk], max_rate_ml_h)  # u spans the whole pump range by construction
     scale = np.array([_pow2_ceil(headroom * p) for p in peaks])
     col_scale = np.concatenate([scale, scale[:nk], [E_LIM_MMHG]])

@@ -112,10 +112,6 @@ class TabulationGrid:
         """Node count per axis."""
         return tuple(len(ax) for ax in self.nodes_per_axis)  # type: ignore[return-value]
 
-    def inv_widths(self, axis: int) -> Matrix:
-        """Reciprocal cell widths along ``axis`` (stored so the step never divides)."""
-        return 1.0 / np.diff(np.asarray(self.nodes_per_axis[axis]))
-
     def axes(self) -> tuple[Matrix, Matrix, Matrix]:
         """The node coordinates per axis."""
         return tuple(np.asarray(ax, float) for ax in self.nodes_per_axis)  # type: ignore[return-value]
@@ -157,10 +153,7 @@ def build_tables(
     sample_period_s: float,
 ) -> Matrix:
     """Increment matrices at every node, shape ``(nK, nT, ntau, n_z, n_col)``."""
-    mats = [
-        discretise_node(controller_fn(rho), omega, lambda_, sample_period_s) for rho in grid.nodes()
-    ]
-    return np.asarray(mats).reshape(*grid.counts, *mats[0].shape)
+    return _NodeCache(controller_fn, omega, lambda_, sample_period_s).tables(grid)
 
 
 def interpolate(tables: Matrix, grid: TabulationGrid, rho: Sequence[float]) -> Matrix:
@@ -306,10 +299,6 @@ class GridCheck:
     def passed_stability(self) -> bool:
         """Every interpolated frozen loop is stable where the exact one is."""
         return bool(np.all((self.unstable == 0) | (self.exact_unstable > 0)))
-
-    def passed(self, rel_tol: float) -> bool:
-        """Stability passed and every error within ``rel_tol``."""
-        return self.passed_stability and float(np.max(self.rel_error)) <= rel_tol
 
 
 def check_grid(

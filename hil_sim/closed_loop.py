@@ -7,7 +7,6 @@ serial SIL uses, on the same float32-rounded numbers, so both give the same traj
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -113,8 +112,3 @@ def simulate(world: World, controller: Controller, duration_s: float | None = No
         quality=np.asarray(quality, dtype=np.int64),
         alarms=np.asarray(alarms, dtype=np.int64),
     )
-
-
-def finite_or_none(x: float) -> float | None:
-    """``x`` if finite, else ``None`` (JSON has no NaN)."""
-    return float(x) if math.isfinite(x) else None

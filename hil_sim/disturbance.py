@@ -68,7 +68,6 @@ class Sinusoid:
 
 
 Disturbance = Hemorrhage | Bolus | Sinusoid
-KINDS: dict[str, type] = {"hemorrhage": Hemorrhage, "bolus": Bolus, "sinusoid": Sinusoid}
 
 
 class DisturbanceSum:

@@ -26,17 +26,9 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from hil_sim.sensor import Artifact
-from runtime.faults import FaultSpec, FaultSpecError, parse_fault
+from runtime.faults import FaultSpec
 
-__all__ = [
-    "FaultSpec",
-    "FaultSpecError",
-    "LinkFaultPort",
-    "LinkFaults",
-    "WorldFaults",
-    "parse_fault",
-    "split_frames",
-]
+__all__ = ["LinkFaultPort", "LinkFaults", "WorldFaults", "split_frames"]
 
 _SENSOR_ARTIFACT = {
     "sensor-nan": "nan",
@@ -46,10 +38,6 @@ _SENSOR_ARTIFACT = {
     "sensor-disconnect": "disconnect",
     "sensor-range": "range",
 }
-
-
-def _window(spec: FaultSpec, ts: float) -> tuple[int, int]:
-    return spec.ticks(ts)
 
 
 def _rng(spec: FaultSpec, tick: int, n: int) -> random.Random:
@@ -69,12 +57,11 @@ class WorldFaults:
 
     def __init__(self, specs: Sequence[FaultSpec], sample_period_s: float) -> None:
         ts = sample_period_s
-        self.ts = ts
         self.artifacts: list[Artifact] = []
         self.sched: list[tuple[int, int, FaultSpec]] = []
         self.pump: list[tuple[int, int, FaultSpec]] = []
         for spec in specs:
-            first, end = _window(spec, ts)
+            first, end = spec.ticks(ts)
             group = spec.info.group
             if group == "sensor":
                 a = spec.args
@@ -147,13 +134,12 @@ class LinkFaults:
     """The link faults of a schedule: which ticks the link is down, and the port wrapper's view."""
 
     def __init__(self, specs: Sequence[FaultSpec], sample_period_s: float) -> None:
-        self.ts = sample_period_s
         self.down: list[tuple[int, int, FaultSpec]] = []
         self.bytewise: list[tuple[int, int, FaultSpec]] = []
         for spec in specs:
             if spec.info.group != "link":
                 continue
-            first, end = _window(spec, sample_period_s)
+            first, end = spec.ticks(sample_period_s)
             if spec.kind in ("link-stall", "link-disconnect"):
                 self.down.append((first, end, spec))
             else:
@@ -316,8 +302,3 @@ class LinkFaultPort:
             if b >= 0:
                 buf.append(b)
         return bytes(buf)
-
-
-def parse_fault_args(texts: Sequence[str]) -> list[FaultSpec]:
-    """Parse ``--fault`` texts in order (raises :class:`FaultSpecError`)."""
-    return [parse_fault(t, i) for i, t in enumerate(texts)]

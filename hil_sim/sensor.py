@@ -39,8 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-QUALITY_INVALID = 1
-QUALITY_WAVEFORM = 2
+from runtime.faults import QUALITY_INVALID, QUALITY_WAVEFORM
+
 ARTIFACT_KINDS = ("flush", "damping", "disconnect", "monitor_fault", "nan", "flatline", "range")
 _NOISE_BLOCK = 4096
 

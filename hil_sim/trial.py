@@ -14,19 +14,20 @@ sensitivity (max over i ≤ max of k0·i·e^(−k1·i)).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
 import multiprocessing
 import os
 import tempfile
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from hil_sim.closed_loop import simulate
 from hil_sim.cohort import cohort_seeds
-from hil_sim.scenario import Scenario, load_scenario
+from hil_sim.scenario import Scenario
 from hil_sim.world import World
 from runtime.controller_loader import load_controller
 from runtime.metrics import RUN_METRICS, aggregate, run_metrics
@@ -96,16 +97,10 @@ def run_trial(
         for s in cohort_seeds(cohort_seed, n_patients)
     ]
     results: list[dict[str, Any]] = []
-    if jobs <= 1:
-        iterator: Iterator[dict[str, Any]] = map(_worker, tasks)
-        for rec in iterator:
-            results.append(rec)
-            if progress:
-                progress(len(results), len(tasks))
-        return results
-    ctx = multiprocessing.get_context("fork")
-    with ctx.Pool(processes=jobs) as pool:
-        for rec in pool.imap(_worker, tasks, chunksize=1):
+    pool = multiprocessing.get_context("fork").Pool(processes=jobs) if jobs > 1 else None
+    with pool or contextlib.nullcontext():
+        records = pool.imap(_worker, tasks, chunksize=1) if pool else map(_worker, tasks)
+        for rec in records:
             results.append(rec)
             if progress:
                 progress(len(results), len(tasks))
@@ -166,8 +161,3 @@ def write_outputs(
     _write_atomic(out_dir / "patients.json", json.dumps(list(records), indent=1) + "\n")
     _write_atomic(out_dir / "patients.csv", _csv_text(records))
     _write_atomic(out_dir / "summary.json", json.dumps(summary, indent=1) + "\n")
-
-
-def load_trial_scenario(name: str) -> Scenario:
-    """The scenario by name or path (re-exported for the CLI)."""
-    return load_scenario(name)

@@ -537,12 +537,12 @@ def run_runtime(
         if specs:
             from runtime.faults import fault_report
             from runtime.loop import sched_limits_of
-            from runtime.supervisor import Fault
+            from runtime.supervisor import FAULT_BITS
 
             report = fault_report(
                 specs,
                 result.trajectory,
-                {f.name: int(f) for f in Fault if f.name},
+                FAULT_BITS,
                 period_s,
                 scheduled=sched_limits_of(controller)[0] is not None,
             )

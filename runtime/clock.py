@@ -1,6 +1,7 @@
 """Clocks injected into the loop: virtual (lockstep, device-driven) and monotonic wall clock.
 
-The loop never calls ``time`` itself; it asks a clock. Two clocks implement the same small protocol:
+The loop never calls ``time`` itself; it asks a clock. Two clocks offer the same ``now_s`` and
+``wait_until``:
 
 ``VirtualClock``
     Lockstep mode (PX4 SITL style). Time is the device's sim time: it advances only when the loop
@@ -25,25 +26,8 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Protocol, runtime_checkable
 
 perf_counter_s = time.perf_counter
-
-
-@runtime_checkable
-class Clock(Protocol):
-    """What the loop needs from a clock (all times in s)."""
-
-    #: True when time advances only with the device's samples (lockstep).
-    virtual: bool
-
-    def now_s(self) -> float:
-        """Current time (s) on this clock."""
-        ...
-
-    def wait_until(self, deadline_s: float) -> float:
-        """Block until ``deadline_s`` (s, this clock); return the time actually reached (s)."""
-        ...
 
 
 class VirtualClock:
@@ -54,8 +38,6 @@ class VirtualClock:
     start_s
         Initial sim time (s), finite and ≥ 0.
     """
-
-    virtual = True
 
     def __init__(self, start_s: float = 0.0) -> None:
         if not (math.isfinite(start_s) and start_s >= 0.0):
@@ -93,8 +75,6 @@ class MonotonicClock:
     spin_s
         The last part (s) of each wait is a busy spin for release accuracy; in [0, 0.01].
     """
-
-    virtual = False
 
     def __init__(self, spin_s: float = 2e-4) -> None:
         if not 0.0 <= spin_s <= 0.01:

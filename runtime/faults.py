@@ -43,6 +43,9 @@ PUMP_ALARM_OUT_OF_RANGE = 16
 QUALITY_INVALID = 1
 QUALITY_WAVEFORM = 2  # the monitor's waveform check: no pulsatility / over-damped line
 
+#: default ``start_s`` of a fault (s of sim time)
+DEFAULT_START_S = 300.0
+
 
 class FaultSpecError(ValueError):
     """A bad fault specification; the message names source, field, value and allowed range."""
@@ -97,7 +100,7 @@ class FaultKind:
     bound_doc: str
     safe_state: str
     scheduled_only: bool = False
-    default_start_s: float = 300.0
+    default_start_s: float = DEFAULT_START_S
 
     def bound_at(self, sample_period_s: float) -> int | None:
         """The detection bound in ticks at ``sample_period_s`` (bounds are 10 Hz tick counts)."""
@@ -106,7 +109,6 @@ class FaultKind:
         return max(1, int(math.ceil(self.bound_ticks * 0.1 / sample_period_s - 1e-9)))
 
 
-DEFAULT_START_S = 300.0
 _COMMON = (
     Param("start_s", DEFAULT_START_S, 0.0, 7 * 86400.0, "first fault time (s of sim time)"),
     Param("duration_s", math.nan, 0.0, 7 * 86400.0, "length (s); 0 = one tick"),

@@ -256,12 +256,11 @@ class Loop:
         lateness_s: float = 0.0,
         skipped: int = 0,
         send: bool = True,
-        measured: bool = True,
     ) -> float:
         """Supervise, step, send and record one tick; return the command (ml/h).
 
         ``send=False`` (a silent tick of a stalled link, see the module docstring) skips the
-        link; ``measured=False`` records MAP as NaN (no sample arrived for this tick).
+        link and records MAP as NaN (no sample arrived for this tick).
         """
         sup = self.sup
         errors = self._link_errors()
@@ -300,7 +299,7 @@ class Loop:
             self.out_of_range += 1
         self.ticks_in_state[state] += 1
         raw_f = _NAN if raw is None else raw
-        map_rec = inp.map_mmhg if measured else _NAN
+        map_rec = inp.map_mmhg if send else _NAN
         self.trajectory.append(
             (inp.tick, inp.sim_time_s, map_rec, inp.target_mmhg, command, raw_f, sup.faults, state)
         )
@@ -448,7 +447,6 @@ class Loop:
                 sample_age_s=age,
                 link_silence_s=age,
                 send=False,
-                measured=False,
             )
 
     def run_realtime(

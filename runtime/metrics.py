@@ -70,7 +70,6 @@ RUN_METRICS = STEP_METRICS + (
     "max_rate_ml_h",
     "time_at_limit_pct",
 )
-FLAGS = ("reachable", "stable")
 
 
 def _f(x: float | np.floating) -> float:

@@ -72,6 +72,8 @@ import math
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 
+from runtime.faults import PUMP_ALARM_OCCLUSION, PUMP_ALARM_RESERVOIR_EMPTY, PUMP_ALARM_WATCHDOG
+
 #: slack (s) on time comparisons so that k·Ts sums reach a bound that is a whole number of ticks
 _EPS_S = 1e-9
 
@@ -110,16 +112,19 @@ class Fault(IntFlag):
 
 #: faults that never change the state (the command is clamped and the event logged)
 ADVISORY = Fault.COMMAND_CLAMPED | Fault.LINK_ERRORS
-#: pump alarm bits that count as a pump fault (runtime.faults: occlusion, empty, watchdog)
-PUMP_ALARM_MASK = 1 | 2 | 4
-_PUMP_WATCHDOG = 4
+#: pump alarm bits that count as a pump fault
+PUMP_ALARM_MASK = PUMP_ALARM_OCCLUSION | PUMP_ALARM_RESERVOIR_EMPTY | PUMP_ALARM_WATCHDOG
 #: scheduling faults that are advisory when ``sched_action == "advise"``
 SCHED_ENVELOPE = Fault.SCHED_OUT_OF_BOX | Fault.SCHED_RATE
+#: fault name -> bit, as plain ints (IntFlag arithmetic runs Python-level enum code)
+FAULT_BITS: dict[str, int] = {f.name: int(f) for f in Fault}
+#: the faults that raise the alarm (plain int, for the per-tick path)
+_ALARM_FAULTS = ~int(Fault.COMMAND_CLAMPED)
 
 
 def fault_names(faults: int) -> list[str]:
     """The names of the bits set in ``faults`` (e.g. ``['MAP_NAN', 'STALE_SAMPLE']``)."""
-    return [f.name for f in Fault if f and faults & f and f.name]
+    return [name for name, bit in FAULT_BITS.items() if faults & bit]
 
 
 @dataclass(frozen=True)
@@ -308,9 +313,9 @@ class Supervisor:
 
     def __init__(self, config: SupervisorConfig | None = None) -> None:
         self.config = config or SupervisorConfig()
-        self._advisory = ADVISORY | (
-            SCHED_ENVELOPE if self.config.sched_action == "advise" else Fault.NONE
-        )
+        advisory = ADVISORY | (SCHED_ENVELOPE if self.config.sched_action == "advise" else 0)
+        #: the faults that change the state (plain int, for the per-tick path)
+        self._holding_faults = ~int(advisory)
         self.reset()
 
     def reset(self) -> None:
@@ -337,9 +342,7 @@ class Supervisor:
     @property
     def alarm(self) -> bool:
         """True while the supervisor is not in normal automatic control or a fault is present."""
-        return self.state in (State.HOLD, State.FAILSAFE) or bool(
-            self.faults & ~Fault.COMMAND_CLAMPED
-        )
+        return self.state in (State.HOLD, State.FAILSAFE) or bool(self.faults & _ALARM_FAULTS)
 
     # -- input checks ---------------------------------------------------------------------------
     def _check_map(self, now_s: float, map_mmhg: float, quality: int) -> int:
@@ -397,7 +400,7 @@ class Supervisor:
         faults = 0
         if alarms & cfg.pump_alarm_mask:
             faults |= Fault.PUMP_ALARM
-            if alarms & _PUMP_WATCHDOG:
+            if alarms & PUMP_ALARM_WATCHDOG:
                 # the pump fell back to its own safe rate: hold *that*, re-enter from it
                 self.command_ml_h = _clamp(delivered, cfg.max_rate_ml_h)
         sent = self.command_ml_h
@@ -469,7 +472,7 @@ class Supervisor:
         faults |= self._check_pump(now_s, pump_delivered_ml_h, pump_alarms)
         self.faults = faults
         state = self.state
-        if faults & ~self._advisory:
+        if faults & self._holding_faults:
             self._good_since_s = None
             if self._fault_since_s is None:
                 self._fault_since_s = now_s

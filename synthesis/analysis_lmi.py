@@ -198,11 +198,9 @@ class _Assembler:
         return sp.csr_matrix((vals, (rows, cols)), shape=shape)
 
 
-def _balance(systems: Sequence[DelaySystem], time_scale_s: float) -> Array:
-    """Constant diagonal state scaling (powers of two) balancing the centre system."""
-    mid = systems[len(systems) // 2]
-    mag = np.abs(mid.A) + np.abs(mid.Ad)
-    mag = time_scale_s * mag + 1e-12 * np.eye(mid.n)
+def _balance(a: Array, ad: Array, time_scale_s: float) -> Array:
+    """Diagonal state scaling (powers of two) balancing ``|ts A| + |ts Ad|``."""
+    mag = time_scale_s * (np.abs(a) + np.abs(ad)) + 1e-12 * np.eye(a.shape[0])
     _, (scale, _perm) = scipy.linalg.matrix_balance(mag, permute=False, separate=True)
     return np.asarray(scale, dtype=float)
 
@@ -285,7 +283,8 @@ def analyse(
     n, nw = systems[0].n, systems[0].B.shape[1]
 
     if state_transform is None:
-        tx = np.diag(_balance(systems, ts))
+        mid = systems[m // 2]  # the centre system
+        tx = np.diag(_balance(mid.A, mid.Ad, ts))
     else:
         tx = np.asarray(state_transform, dtype=float)
         if tx.shape != (n, n) or not np.all(np.isfinite(tx)) or np.linalg.cond(tx) > 1e12:
@@ -466,10 +465,7 @@ def analyse(
         )
     xv = np.asarray(x.value)
     certified, margins, p_min = _recheck(xv)
-    p0 = xv[sym[np.triu_indices(n)[0], np.triu_indices(n)[1]] + off_p[0]]
-    p0m = np.zeros((n, n))
-    p0m[np.triu_indices(n)] = p0
-    p0m = p0m + np.triu(p0m, 1).T
+    p0m = xv[off_p[0] + sym]  # sym maps both (c, d) and (d, c) to the variable entry
     return AnalysisResult(
         certified,
         status,
@@ -519,7 +515,4 @@ def conditioning_transform(p_phys: Array, system: DelaySystem, time_scale_s: flo
     """
     t0 = whitening_transform(p_phys)
     t0i = np.linalg.inv(t0)
-    mag = time_scale_s * (np.abs(t0i @ system.A @ t0) + np.abs(t0i @ system.Ad @ t0))
-    mag = mag + 1e-12 * np.eye(system.n)
-    _, (scale, _perm) = scipy.linalg.matrix_balance(mag, permute=False, separate=True)
-    return t0 @ np.diag(np.asarray(scale, dtype=float))
+    return t0 @ np.diag(_balance(t0i @ system.A @ t0, t0i @ system.Ad @ t0, time_scale_s))

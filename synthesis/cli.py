@@ -6,16 +6,15 @@
                   [--lambda2 L2] [--lambda3 L3] [--backoff B] [--no-verify] [--quiet]
 
 Prints progress per λ point and per solve, then γ, solve time, solver status and the verification
-verdict (from :func:`synthesis.verify.verify_artifact` when that module is installed; the result
-is stored in the artifact's ``verification`` field). Exit codes: 0 ok, 1 the synthesis finished but
-the solver or the verification failed, 2 bad usage or a bad config value (one line naming file,
-field, value and allowed range).
+verdict (from :func:`synthesis.verify.verify_artifact`; the result is stored in the artifact's
+``verification`` field). Exit codes: 0 ok, 1 the synthesis finished but the solver or the
+verification failed, 2 bad usage or a bad config value (one line naming file, field, value and
+allowed range).
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 import time
 from pathlib import Path
@@ -148,20 +147,13 @@ def main(command: str, argv: list[str]) -> int:
     if args.no_verify:
         print("verification     skipped (--no-verify)")
     else:
-        try:
-            verify = importlib.import_module("synthesis.verify")
-        except ModuleNotFoundError:
-            verify = None
-        if verify is None or not hasattr(verify, "verify_artifact"):
-            print(
-                "verification     not available (synthesis.verify is not installed yet); artifact unverified"
-            )
-        else:
-            say("verify: independent checks ...")
-            report = verify.verify_artifact(art, density=2, progress=say)
-            art = with_verification(art, _without_wall_times(report.to_dict()))
-            print(f"verification     {'PASSED' if report.passed else 'FAILED'}")
-            verdict_code = 0 if report.passed else 1
+        from synthesis.verify import verify_artifact
+
+        say("verify: independent checks ...")
+        report = verify_artifact(art, density=2, progress=say)
+        art = with_verification(art, _without_wall_times(report.to_dict()))
+        print(f"verification     {'PASSED' if report.passed else 'FAILED'}")
+        verdict_code = 0 if report.passed else 1
     try:
         save_artifact(art, out)
     except OSError as exc:

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -173,20 +173,10 @@ class DesignConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict of the full design (stored in the artifact)."""
-        s = self.solver
         return {
             "model": self.model.to_dict(),
             "grid_points": list(self.grid_points),
-            "solver": {
-                "lambda2": s.lambda2,
-                "lambda3": s.lambda3,
-                "backoff": s.backoff,
-                "epsilon": s.epsilon,
-                "xy_dependence": s.xy_dependence,
-                "time_scale_s": s.time_scale_s,
-                "rate_terms": s.rate_terms,
-                "mean_gamma_weight": s.mean_gamma_weight,
-            },
+            "solver": asdict(self.solver),
             "line_search": {
                 "lambda2": list(self.lambda2_candidates),
                 "lambda3": list(self.lambda3_candidates),

@@ -60,11 +60,6 @@ class DelayRoots:
         """Largest real part among the roots (the spectral abscissa estimate)."""
         return float(np.max(self.roots.real))
 
-    @property
-    def stable(self) -> bool:
-        """True when every root lies strictly in the open left half-plane."""
-        return self.abscissa < 0.0
-
 
 def chebyshev_differentiation(degree: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Chebyshev-Lobatto nodes x_j = cos(j pi / N) on [-1, 1] and the differentiation matrix.

@@ -75,11 +75,13 @@ import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 import scipy.sparse as sp
 
 from synthesis import basis
+from synthesis.closed_loop import close_loop
 from synthesis.config import DesignConfig
 from synthesis.model import N_STATE, N_W, N_Y, N_Z, plant_batch
 from synthesis.scaling import Scaling
@@ -552,9 +554,7 @@ def solve(prob: Problem, solver_opts: dict | None = None, verbose: bool = False)
         # Back-off: accept γ ≤ (1+β)γ* and minimise the size of X, Y (better-conditioned
         # N = I − XY and controller matrices).
         t = cp.Variable()
-        xb = lay.offsets["X"]
-        bx = lay.by_name["X"]
-        Xmats = positivity_x(prob, x, xb, bx)
+        Xmats = positivity_x(prob, x)
         ycons = _y_matrix(x, lay)
         cons2 = [*cons, x[gidx] <= (1.0 + prob.cfg.solver.backoff) * gamma]
         cons2 += [t * np.eye(N_STATE) - Xm >> 0 for Xm in Xmats]
@@ -584,17 +584,14 @@ def _sym_expr(x, off: int, n: int):
     import cvxpy as cp
 
     iu = np.triu_indices(n)
-    k = len(iu[0])
-    rows, cols, idx = [], [], []
+    rows, cols = [], []
     for t, (r, c) in enumerate(zip(iu[0], iu[1], strict=True)):
         rows += [r * n + c]
-        idx += [off + t]
+        cols += [off + t]
         if r != c:
             rows += [c * n + r]
-            idx += [off + t]
-    cols = idx
+            cols += [off + t]
     S = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n * n, x.shape[0]))
-    del k
     return cp.reshape(S @ x, (n, n), order="C")
 
 
@@ -602,10 +599,11 @@ def _y_matrix(x, lay: Layout):
     return _sym_expr(x, lay.offsets["Y"], N_STATE)
 
 
-def positivity_x(prob: Problem, x, off: int, blk: Block) -> list:
+def positivity_x(prob: Problem, x) -> list:
     """X(ρ) at every node as cvxpy expressions (for the back-off objective)."""
     import cvxpy as cp
 
+    off, blk = prob.layout.offsets["X"], prob.layout.by_name["X"]
     per = N_STATE * (N_STATE + 1) // 2
     mats = [_sym_expr(x, off + b * per, N_STATE) for b in range(blk.nb)]
     if blk.nb == 1:
@@ -641,28 +639,17 @@ def closed_loop_analysis(
         (8, m, m), one matrix per rate vertex; the closed loop is certified at the node if all are
         negative definite.
     """
-    from synthesis import basis as _basis
-
     rh = prob.rho_hat[g : g + 1]
     p = {k: v[g] for k, v in prob.plant.items()}
     n = N_STATE
-    X = _basis.evaluate(coefs["X"], rh)[0]
-    Y = _basis.evaluate(coefs["Y"], rh)[0]
-    Pt = _basis.evaluate(coefs["P"], rh)[0]
+    X = basis.evaluate(coefs["X"], rh)[0]
+    Y = basis.evaluate(coefs["Y"], rh)[0]
+    Pt = basis.evaluate(coefs["P"], rh)[0]
     dW = prob.dweights[g]  # (3, nb)
     dPt = np.einsum("ib,brc->irc", dW, coefs["P"])
     Qt, Rt = coefs["Q"][0], coefs["R"][0]
-    Ak, Adk, Bk = ctrl["Ak"], ctrl["Adk"], ctrl["Bk"]
-    Ck, Cdk, Dk = ctrl["Ck"], ctrl["Cdk"], ctrl["Dk"]
-    A, Ad, B1, B2 = p["A"], p["Ad"], p["B1"], p["B2"]
-    C1, C1d, C2, C2d = p["C1"], p["C1d"], p["C2"], p["C2d"]
-    D11, D12, D21 = p["D11"], p["D12"], p["D21"]
-    Acl = np.block([[A + B2 @ Dk @ C2, B2 @ Ck], [Bk @ C2, Ak]])
-    Adcl = np.block([[Ad + B2 @ Dk @ C2d, B2 @ Cdk], [Bk @ C2d, Adk]])
-    Bcl = np.vstack([B1 + B2 @ Dk @ D21, Bk @ D21])
-    Ccl = np.hstack([C1 + D12 @ Dk @ C2, D12 @ Ck])
-    Cdcl = np.hstack([C1d + D12 @ Dk @ C2d, D12 @ Cdk])
-    Dcl = D11 + D12 @ Dk @ D21
+    # the delay value does not enter the matrices (the LMI uses τ̄ only)
+    cl = close_loop(SimpleNamespace(**p), SimpleNamespace(**ctrl), 0.0)
     eye, zero = np.eye(n), np.zeros((n, n))
     N = eye - X @ Y
     Pi1 = np.block([[Y, eye], [eye, zero]])
@@ -685,12 +672,12 @@ def closed_loop_analysis(
                 pdot,
                 back(Qt),
                 back(Rt),
-                Xcl @ Acl,
-                Xcl @ Adcl,
-                Xcl @ Bcl,
-                Ccl,
-                Cdcl,
-                Dcl,
+                Xcl @ cl.A,
+                Xcl @ cl.Ad,
+                Xcl @ cl.B,
+                cl.C,
+                cl.Cd,
+                cl.D,
                 np.array(gam),
                 np.array(s[2] * prob.nu_tau),
                 prob.tau_bar_hat,
@@ -723,7 +710,7 @@ def certificate_margins(artifact, rho: np.ndarray) -> np.ndarray:
     """
     from dataclasses import replace as _replace
 
-    from synthesis.config import DesignConfig, SolverConfig
+    from synthesis.config import SolverConfig
     from synthesis.reconstruct import reconstruct_scaled
 
     meta = artifact.metadata

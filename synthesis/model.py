@@ -33,7 +33,6 @@ N_STATE = 3
 N_W = 3
 N_Z = 2
 N_Y = 2
-N_U = 1
 
 
 @dataclass(frozen=True)

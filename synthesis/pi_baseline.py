@@ -4,7 +4,6 @@ The gains are the runtime's (:mod:`runtime.pi_controller`, the discrete PI with 
 the bedside loop runs); this module gives the same controller the continuous-time forms the
 synthesis-side checks need:
 
-- :meth:`PIBaseline.state_space` — Gc from e (mmHg) to u (ml/h): one integrator state.
 - :meth:`PIBaseline.as_output_feedback` — the same PI written in the LPV controller's interface
   (a ``DelayedController``-shaped object on y = [e; x_e]: Dk = [kp, ki], no states of its own), so
   it can be closed with any plant model through :func:`synthesis.closed_loop.close_loop`.
@@ -63,15 +62,6 @@ class PIBaseline:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.kp) and np.isfinite(self.ki) and self.kp >= 0 and self.ki >= 0):
             raise ValueError(f"PI gains must be finite and >= 0, got kp={self.kp}, ki={self.ki}")
-
-    def state_space(self) -> tuple[NDArray[np.float64], ...]:
-        """(Ac, Bc, Cc, Dc) of Gc: state = integral of e (mmHg*s), input e (mmHg), output u (ml/h)."""
-        return (
-            np.zeros((1, 1)),
-            np.ones((1, 1)),
-            np.array([[self.ki]]),
-            np.array([[self.kp]]),
-        )
 
     def as_output_feedback(self) -> OutputFeedback:
         """The PI as a static feedback on y = [e (mmHg); x_e (mmHg*s)]: u = kp e + ki x_e."""

@@ -23,6 +23,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from synthesis.closed_loop import DelaySystem
+from synthesis.config import NOMINAL_RHO
 
 __all__ = [
     "NOMINAL_K",
@@ -35,9 +36,8 @@ __all__ = [
     "simulate_step",
 ]
 
-NOMINAL_K = 0.55  # mmHg/(ml/h)
-NOMINAL_T_S = 150.0  # s
-NOMINAL_TAU_S = 40.0  # s
+# K [mmHg/(ml/h)], T [s], tau [s]: the nominal plant of the design config
+NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S = NOMINAL_RHO
 NOMINAL_STEP_MMHG = 20.0  # mmHg target step
 
 Vector = NDArray[np.float64]

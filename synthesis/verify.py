@@ -36,7 +36,9 @@ import numpy as np
 from synthesis.analysis_lmi import analyse, conditioning_transform
 from synthesis.closed_loop import DelaySystem, close_loop
 from synthesis.delay_stability import rightmost_roots
+from synthesis.model import plant_at
 from synthesis.pi_baseline import PIBaseline
+from synthesis.reconstruct import controller_at, scaling_of
 from synthesis.step_response import (
     NOMINAL_K,
     NOMINAL_STEP_MMHG,
@@ -144,21 +146,7 @@ def _artifact_parts(artifact: Any) -> tuple[Any, np.ndarray, np.ndarray, tuple[n
 
 
 def _closed_loop_at(artifact: Any, cfg: Any, rho: np.ndarray) -> DelaySystem:
-    from synthesis.model import plant_at
-    from synthesis.reconstruct import controller_at
-
     return close_loop(plant_at(rho, cfg), controller_at(artifact, rho), float(rho[2]))
-
-
-def _time_scale(artifact: Any) -> float:
-    # the synthesis' time unit if the artifact records it (numerics only: gamma is unaffected)
-    meta = getattr(artifact, "metadata", {}) or {}
-    scaling = meta.get("scaling") if isinstance(meta.get("scaling"), dict) else {}
-    value = scaling.get("time_s", meta.get("time_scale_s", NOMINAL_TAU_S))
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return NOMINAL_TAU_S
 
 
 def verify_artifact(
@@ -230,9 +218,9 @@ def verify_artifact(
     }
 
     # (a) analysis LMI over the dense grid
-    center, half = box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0])
-    rho_hat = (mesh - center) / half
-    ts = _time_scale(artifact)
+    # the synthesis' own scaling (numerics only: feasibility and gamma are unaffected)
+    sc = scaling_of(artifact)
+    rho_hat, half, ts = sc.to_hat(mesh), sc.rho_half, sc.time_s
     # conditioning: whiten the state by the centre point's own Lyapunov matrix (a constant
     # congruence, so feasibility and gamma are unchanged), then balance; see analysis_lmi
     ic = int(np.argmin(np.sum(rho_hat**2, axis=1)))

@@ -1,15 +1,21 @@
-"""Shared helpers for end-to-end tests: run the ``pressor`` CLI in a subprocess, read a .rrd."""
+"""Shared helpers for end-to-end tests: run the ``pressor`` CLI in a subprocess, read a .rrd,
+spawn ``pressor device`` on a pty and drain its link until it exits."""
 
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 os.environ["CI"] = "1"  # the rerun CLI writes analytics files otherwise
 
 from rerun.chunk import RrdReader  # noqa: E402
+
+from runtime.link import LinkClosedError, LinkEndpoint, PtyPair  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def pressor(*args: str, cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:
@@ -35,3 +41,20 @@ def rrd_columns(path: Path) -> dict[str, dict[int, float]]:
         vals = [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
         out.setdefault(str(chunk.entity_path), {}).update(zip(ticks, vals, strict=True))
     return out
+
+
+def spawn_device(pair: PtyPair, *args: str) -> subprocess.Popen:
+    """Start ``pressor device`` on the pty's follower end; its stderr is piped as text."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "pressor", "device", "--port", pair.follower_path, *args]
+    return subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
+
+
+def poll_until_exit(proc: subprocess.Popen, ep: LinkEndpoint, timeout_s: float) -> None:
+    """Keep reading the link until the device process exits, the link closes or time runs out."""
+    deadline = time.monotonic() + timeout_s
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            ep.poll(0.05)
+        except LinkClosedError:
+            break

@@ -89,7 +89,7 @@ def test_regenerating_default_module_gives_identical_bytes(tmp_path):
     assert skipped_again and paths[0].stat().st_mtime_ns == mtime
 
 
-def test_loader_accepts_intact_module_and_checks_artifact_sha(tmp_path):
+def test_loader_accepts_intact_module_and_checks_artifact_sha():
     c = load_controller("lpv", artifact_sha256=_shipped_sha256())
     assert 0.0 <= c.step(80.0, 90.0, 0.5, 150.0, 30.0) <= c.max_rate_ml_h
 

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -26,14 +24,7 @@ from runtime.link import (
     read_tlog,
 )
 from runtime.pi_controller import PIController
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _spawn_device(pair: PtyPair, *args: str) -> subprocess.Popen:
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    cmd = [sys.executable, "-m", "pressor", "device", "--port", pair.follower_path, *args]
-    return subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
+from tests.sil_helpers import poll_until_exit, spawn_device
 
 
 def _run_pi_runtime(ep: LinkEndpoint, max_ticks: int = 10**9) -> tuple[list, list]:
@@ -76,7 +67,7 @@ def test_device_process_in_lockstep_over_a_pty_matches_the_in_process_simulation
     seed, duration = 3, 300.0
     pair = PtyPair.open()
     ep = LinkEndpoint(pair.leader_port(), "runtime")
-    proc = _spawn_device(
+    proc = spawn_device(
         pair, "--scenario", "paper-tracking", "--patient-seed", str(seed), "--duration", "300"
     )
     maps, cmds = _run_pi_runtime(ep)
@@ -106,7 +97,7 @@ def _signed_device_run(tmp_path: Path, tag: str, key: Path) -> tuple[bytes, byte
     rlog = TlogWriter(tmp_path / f"{tag}-runtime.tlog")
     ep = LinkEndpoint(pair.leader_port(), "runtime", signing=Signing.from_file(key), tlog=rlog)
     dlog = tmp_path / f"{tag}-device.tlog"
-    proc = _spawn_device(
+    proc = spawn_device(
         pair,
         *("--scenario", "paper-tracking", "--patient-seed", "5", "--duration", "20"),
         *("--signing-key", str(key), "--tlog", str(dlog)),
@@ -133,18 +124,13 @@ def test_device_refuses_an_unsigned_runtime_and_gives_up_after_the_link_timeout(
     key = Signing.generate(seed=12).write(tmp_path / "key.hex")
     pair = PtyPair.open()
     ep = LinkEndpoint(pair.leader_port(), "runtime")  # no key: its hello and commands are unsigned
-    proc = _spawn_device(
+    proc = spawn_device(
         pair,
         *("--scenario", "paper-tracking", "--duration", "5", "--signing-key", str(key)),
         *("--handshake-timeout", "1.0"),
     )
     ep._hello = Hello("pi")  # answer the device's hellos (unsigned, so they are refused)
-    deadline = time.monotonic() + 20
-    while proc.poll() is None and time.monotonic() < deadline:
-        try:
-            ep.poll(0.05)
-        except LinkClosedError:
-            break
+    poll_until_exit(proc, ep, timeout_s=20)
     assert _finish(proc, pair, ep) == 1
     assert ep.counters.frames_received >= 2  # the device kept announcing itself
 
@@ -152,7 +138,7 @@ def test_device_refuses_an_unsigned_runtime_and_gives_up_after_the_link_timeout(
 def test_device_retransmits_a_tick_without_answer_then_reports_fault():
     pair = PtyPair.open()
     ep = LinkEndpoint(pair.leader_port(), "runtime")
-    proc = _spawn_device(
+    proc = spawn_device(
         pair,
         *("--scenario", "paper-tracking", "--duration", "5"),
         *("--retransmit", "0.05", "--link-timeout", "0.3"),
@@ -160,12 +146,7 @@ def test_device_retransmits_a_tick_without_answer_then_reports_fault():
     ep.handshake(Hello("pi"), timeout_s=30.0)
     first = ep.wait_for_sample(5.0)
     assert first is not None and first.tick == 0
-    deadline = time.monotonic() + 10
-    while proc.poll() is None and time.monotonic() < deadline:
-        try:
-            ep.poll(0.05)
-        except LinkClosedError:
-            break
+    poll_until_exit(proc, ep, timeout_s=10)
     assert _finish(proc, pair, ep) == 1
     assert ep.counters.duplicates >= 4  # tick 0 sent again every 50 ms
     assert ep.next_sample() is None  # the loop never sees a retransmitted tick twice
@@ -175,7 +156,7 @@ def test_device_retransmits_a_tick_without_answer_then_reports_fault():
 def test_device_exits_cleanly_when_the_runtime_closes_the_link():
     pair = PtyPair.open()
     ep = LinkEndpoint(pair.leader_port(), "runtime")
-    proc = _spawn_device(pair, "--scenario", "paper-tracking", "--duration", "100")
+    proc = spawn_device(pair, "--scenario", "paper-tracking", "--duration", "100")
     maps, _ = _run_pi_runtime(ep, max_ticks=10)
     assert len(maps) == 10
     pair.close_follower()
@@ -211,7 +192,7 @@ def test_realtime_device_paces_ticks_on_the_wall_clock_and_holds_the_rate_withou
     ep = LinkEndpoint(pair.leader_port(), "runtime")
     statuses: list = []
     ep.on_message = lambda m: statuses.append(m) if m.get_type() == "PUMP_STATUS" else None
-    proc = _spawn_device(pair, "--scenario", "paper-tracking", "--duration", "1.0", "--realtime")
+    proc = spawn_device(pair, "--scenario", "paper-tracking", "--duration", "1.0", "--realtime")
     peer = ep.handshake(Hello("pi"), timeout_s=30.0)
     assert peer.link_mode == 1 and peer.n_ticks == 10
     arrivals = []

@@ -28,8 +28,7 @@ _f32 = st.one_of(
 _u32 = st.integers(0, 2**32 - 1)
 
 
-def _frame(mav, draw_kind, vals):
-    kind = draw_kind
+def _frame(mav, kind, vals):
     if kind == 0:
         return mav.map_sample_encode(vals[0] % 1e9, vals[5], vals[1], vals[6] & 0xFFFF)
     if kind == 1:
@@ -77,8 +76,9 @@ def runtime_side(data: bytes) -> None:
     """Runtime parser + supervisor + controller: never raises, commands stay in [0, MAX]."""
     a, _ = loop_pair()
     ep = LinkEndpoint(a, "runtime", complete_ticks=False)
-    for cut in (len(data) // 3, len(data)):  # two reads, as a port would deliver them
-        ep.feed(data[:cut] if cut < len(data) else data[len(data) // 3 :])
+    third = len(data) // 3  # two reads, as a port would deliver them
+    ep.feed(data[:third])
+    ep.feed(data[third:])
     pi = PIController(0.1)
     sup = Supervisor(supervisor_config_for(pi, 0.0))
     t = 0.0

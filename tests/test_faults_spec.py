@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,7 +19,6 @@ from runtime.faults import (
 from runtime.supervisor import Fault
 from tests.sil_helpers import pressor
 
-ROOT = Path(__file__).resolve().parents[1]
 REQUIRED = (
     "link-flip link-drop link-stall link-disconnect link-garbage link-duplicate sensor-nan"
     " sensor-flatline sensor-flush sensor-damped sensor-disconnect sensor-range pump-occlusion"

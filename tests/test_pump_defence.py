@@ -6,16 +6,13 @@ A rogue runtime end, scripted in the test, talks to a real ``pressor device`` pr
 from __future__ import annotations
 
 import math
-import os
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 from runtime.faults import PUMP_ALARM_OUT_OF_RANGE, PUMP_ALARM_WATCHDOG
-from runtime.link import Hello, LinkClosedError, LinkEndpoint, PtyPair
+from runtime.link import Hello, LinkEndpoint, PtyPair
+from tests.sil_helpers import ROOT, poll_until_exit, spawn_device
 
-ROOT = Path(__file__).resolve().parents[1]
 MAX_RATE_ML_H = 120.0
 
 
@@ -27,25 +24,18 @@ def _scenario(tmp_path: Path, watchdog_s: float) -> Path:
     return path
 
 
-def _start(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, PtyPair, LinkEndpoint, list]:
+def _start(*args: str) -> tuple[subprocess.Popen, PtyPair, LinkEndpoint, list]:
     pair = PtyPair.open()
     ep = LinkEndpoint(pair.leader_port(), "runtime")
     statuses: list = []
     ep.on_message = lambda m: statuses.append(m) if m.get_type() == "PUMP_STATUS" else None
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    cmd = [sys.executable, "-m", "pressor", "device", "--port", pair.follower_path, *args]
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
+    proc = spawn_device(pair, *args)
     ep.handshake(Hello("rogue"), timeout_s=30.0)
     return proc, pair, ep, statuses
 
 
 def _drain(proc: subprocess.Popen, pair: PtyPair, ep: LinkEndpoint) -> None:
-    deadline = time.monotonic() + 10.0
-    while proc.poll() is None and time.monotonic() < deadline:
-        try:
-            ep.poll(0.05)
-        except LinkClosedError:
-            break
+    poll_until_exit(proc, ep, timeout_s=10.0)
     proc.wait(timeout=30)
     pair.close_follower()
     ep.close()
@@ -55,7 +45,7 @@ def test_pump_clamps_out_of_range_and_non_finite_commands_from_a_rogue_runtime(t
     rogue = [500.0, -10.0, math.inf, math.nan, 1e30, 60.0]
     scenario = _scenario(tmp_path, watchdog_s=5.0)
     proc, pair, ep, statuses = _start(
-        tmp_path, "--scenario", str(scenario), "--duration", str(0.1 * len(rogue))
+        "--scenario", str(scenario), "--duration", str(0.1 * len(rogue))
     )
     for rate in rogue:
         sample = ep.wait_for_sample(5.0)
@@ -72,7 +62,7 @@ def test_pump_clamps_out_of_range_and_non_finite_commands_from_a_rogue_runtime(t
 def test_pump_watchdog_falls_back_to_safe_rate_when_the_runtime_goes_silent(tmp_path):
     scenario = _scenario(tmp_path, watchdog_s=0.5)
     proc, pair, ep, statuses = _start(
-        tmp_path, "--scenario", str(scenario), "--duration", "1.5", "--realtime"
+        "--scenario", str(scenario), "--duration", "1.5", "--realtime"
     )
     ticks = 0
     while ticks < 15:

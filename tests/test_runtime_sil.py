@@ -6,14 +6,12 @@ The test may import hil_sim (the runtime may not): it is the independent referen
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.sil_helpers import pressor, rrd_columns
 
-ROOT = Path(__file__).resolve().parents[1]
 DURATION_S = 300
 SEED = 3
 

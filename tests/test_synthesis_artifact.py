@@ -25,18 +25,27 @@ def shipped():
     return load_artifact(default_artifact_path())
 
 
-def _rewrite(src: Path, dst: Path, change) -> None:
-    """Copy an npz entry by entry, letting ``change(name, array)`` replace entries."""
+def _damaged(artifact, tmp_path: Path, entry: str, change) -> Path:
+    """Save ``artifact``, then copy it with ``change(array)`` replacing one entry (None deletes)."""
+    src = save_artifact(artifact, tmp_path / "a.npz")
     with np.load(src, allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
-    for k in list(arrays):
-        new = change(k, arrays[k])
-        if new is None:
-            del arrays[k]
-        else:
-            arrays[k] = new
+    new = change(arrays[entry])
+    if new is None:
+        del arrays[entry]
+    else:
+        arrays[entry] = new
+    dst = tmp_path / "b.npz"
     with open(dst, "wb") as fh:
         np.savez(fh, **arrays)
+    return dst
+
+
+def _with_first(a: np.ndarray, value) -> np.ndarray:
+    """A copy of a node table with its first element set to ``value``."""
+    a = a.copy()
+    a[0, 0, 0, 0, 0] = value
+    return a
 
 
 def test_shipped_default_loads_and_its_box_contains_the_nominal_plant(shipped):
@@ -73,47 +82,25 @@ def test_truncated_file_names_the_file(shipped, tmp_path):
 
 
 def test_tampered_controller_entry_fails_the_hash_check(shipped, tmp_path):
-    src = save_artifact(shipped, tmp_path / "a.npz")
-    dst = tmp_path / "b.npz"
-
-    def change(name, a):
-        if name == "node_Dk":
-            a = a.copy()
-            a[0, 0, 0, 0, 0] += 1e-6
-        return a
-
-    _rewrite(src, dst, change)
+    dst = _damaged(shipped, tmp_path, "node_Dk", lambda a: _with_first(a, a[0, 0, 0, 0, 0] + 1e-6))
     with pytest.raises(ArtifactError, match="sha256"):
         load_artifact(dst)
 
 
 def test_nan_in_a_node_table_names_the_field(shipped, tmp_path):
-    src = save_artifact(shipped, tmp_path / "a.npz")
-    dst = tmp_path / "b.npz"
-
-    def change(name, a):
-        if name == "node_Ak":
-            a = a.copy()
-            a[0, 0, 0, 0, 0] = np.nan
-        return a
-
-    _rewrite(src, dst, change)
+    dst = _damaged(shipped, tmp_path, "node_Ak", lambda a: _with_first(a, np.nan))
     with pytest.raises(ArtifactError, match="node_Ak.*NaN"):
         load_artifact(dst)
 
 
 def test_missing_entry_names_the_field(shipped, tmp_path):
-    src = save_artifact(shipped, tmp_path / "a.npz")
-    dst = tmp_path / "b.npz"
-    _rewrite(src, dst, lambda name, a: None if name == "coef_X" else a)
+    dst = _damaged(shipped, tmp_path, "coef_X", lambda a: None)
     with pytest.raises(ArtifactError, match="coef_X.*missing"):
         load_artifact(dst)
 
 
 def test_wrong_shape_names_the_field(shipped, tmp_path):
-    src = save_artifact(shipped, tmp_path / "a.npz")
-    dst = tmp_path / "b.npz"
-    _rewrite(src, dst, lambda name, a: a[..., :1] if name == "node_Bk" else a)
+    dst = _damaged(shipped, tmp_path, "node_Bk", lambda a: a[..., :1])
     with pytest.raises(ArtifactError, match="node_Bk.*shape"):
         load_artifact(dst)
 
@@ -121,19 +108,15 @@ def test_wrong_shape_names_the_field(shipped, tmp_path):
 def test_other_format_version_is_rejected(shipped, tmp_path):
     meta = dict(shipped.metadata)
     meta["format_version"] = 99
-    src = save_artifact(shipped, tmp_path / "a.npz")
-    dst = tmp_path / "b.npz"
     raw = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-    _rewrite(src, dst, lambda name, a: raw if name == "metadata" else a)
+    dst = _damaged(shipped, tmp_path, "metadata", lambda a: raw)
     with pytest.raises(ArtifactError, match="format_version"):
         load_artifact(dst)
 
 
 def test_garbage_metadata_is_a_clear_error(shipped, tmp_path):
-    src = save_artifact(shipped, tmp_path / "a.npz")
-    dst = tmp_path / "b.npz"
     raw = np.frombuffer(b"{not json", dtype=np.uint8)
-    _rewrite(src, dst, lambda name, a: raw if name == "metadata" else a)
+    dst = _damaged(shipped, tmp_path, "metadata", lambda a: raw)
     with pytest.raises(ArtifactError, match="metadata.*JSON"):
         load_artifact(dst)
 

@@ -29,7 +29,7 @@ def test_bad_grid_exits_2(grid, tmp_path, capsys):
     assert "grid" in capsys.readouterr().err
 
 
-def test_unknown_option_exits_2(capsys):
+def test_unknown_option_exits_2():
     assert cli.main("synth", ["--no-such-option"]) == 2
 
 

@@ -40,36 +40,23 @@ def test_delay_rate_of_one_or_more_is_rejected_with_field_value_and_range(tmp_pa
     assert str(p) in msg and "rates.tau_s_per_s" in msg and "1.5" in msg and "0.999" in msg
 
 
-def test_box_with_lower_not_below_upper_is_rejected(tmp_path):
-    with pytest.raises(ConfigError, match=r"box\.T_s"):
-        load_config(_write(tmp_path, "[box]\nT_s = [200.0, 100.0]\n"))
-
-
-def test_unknown_key_is_an_error_not_a_silent_default(tmp_path):
-    with pytest.raises(ConfigError, match=r"weights\.phii"):
-        load_config(_write(tmp_path, "[weights]\nphii = 0.5\n"))
-
-
-def test_non_numeric_weight_is_rejected(tmp_path):
-    with pytest.raises(ConfigError, match=r"weights\.xi.*'abc'"):
-        load_config(_write(tmp_path, '[weights]\nxi = "abc"\n'))
-
-
-def test_negative_filter_pole_is_rejected(tmp_path):
-    with pytest.raises(ConfigError, match=r"filter\.lambda.*-0\.1"):
-        load_config(_write(tmp_path, "[filter]\nlambda = -0.1\n"))
-
-
-def test_grid_needs_three_integers_of_at_least_two(tmp_path):
-    with pytest.raises(ConfigError, match=r"grid\.points"):
-        load_config(_write(tmp_path, "[grid]\npoints = [3, 1, 3]\n"))
-    with pytest.raises(ConfigError, match=r"grid\.points"):
-        load_config(_write(tmp_path, "[grid]\npoints = [3, 3]\n"))
-
-
-def test_unknown_xy_dependence_is_rejected(tmp_path):
-    with pytest.raises(ConfigError, match=r"solver\.xy_dependence"):
-        load_config(_write(tmp_path, '[solver]\nxy_dependence = "neither"\n'))
+@pytest.mark.parametrize(
+    ("toml", "field"),
+    [
+        pytest.param("[box]\nT_s = [200.0, 100.0]\n", r"box\.T_s", id="box-lower-not-below-upper"),
+        pytest.param("[weights]\nphii = 0.5\n", r"weights\.phii", id="unknown-key-not-default"),
+        pytest.param('[weights]\nxi = "abc"\n', r"weights\.xi.*'abc'", id="non-numeric-weight"),
+        pytest.param("[filter]\nlambda = -0.1\n", r"filter\.lambda.*-0\.1", id="negative-filter"),
+        pytest.param("[grid]\npoints = [3, 1, 3]\n", r"grid\.points", id="grid-point-below-two"),
+        pytest.param("[grid]\npoints = [3, 3]\n", r"grid\.points", id="grid-not-three-axes"),
+        pytest.param(
+            '[solver]\nxy_dependence = "neither"\n', r"solver\.xy_dependence", id="unknown-xy"
+        ),
+    ],
+)
+def test_malformed_value_is_rejected_naming_the_field(tmp_path, toml, field):
+    with pytest.raises(ConfigError, match=field):
+        load_config(_write(tmp_path, toml))
 
 
 def test_invalid_toml_names_the_file(tmp_path):

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  b2d1737650c2abab72278fc50906264a879f3cc639784574bb3b44971be5c290
-Content hash:     f03c06462e9b36635600e3beec91f67f927dd6e7a6078e973e2d36142c75bd0e
+Content hash:     2c77fec9b22452a77f229a83df11f0a71c64a26c76b1756bef0084fa06a4665c
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -37,9 +37,9 @@ Error budgets (asserted by tests/test_codegen_*.py):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'cc7cffe51a4204ca2a707b8eb8424391234e128a260aa67d4362c1a6b1ac718e'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'd3e1d5f812a4d156319101afb61dc8e426cdbd66d9eee73d307383066571d947'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'b2d1737650c2abab72278fc50906264a879f3cc639784574bb3b44971be5c290'
-CONTENT_HASH = 'f03c06462e9b36635600e3beec91f67f927dd6e7a6078e973e2d36142c75bd0e'
+CONTENT_HASH = '2c77fec9b22452a77f229a83df11f0a71c64a26c76b1756bef0084fa06a4665c'
 TABLES_SHA256 = 'cb12f22719a954ceba680f370d4758eee69eafac4984829574fc6c30d1d8c32e'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

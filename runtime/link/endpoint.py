@@ -92,22 +92,38 @@ _sha256 = hashlib.sha256
 _mcrf4xx = getattr(mavlink, "mcrf4xx", None)
 
 
-def _fast_codecs() -> dict[int, tuple[Any, struct.Struct, bytes, tuple[int, ...], tuple[int, ...]]]:
+_Perm = tuple[int, ...] | None
+
+
+def _fast_codecs() -> dict[int, tuple[Any, struct.Struct, bytes, _Perm, _Perm]]:
     """Per message id without arrays or strings: (class, struct, crc_extra byte, XML→wire
-    permutation, wire→XML order). Those messages are packed and decoded here, byte-identical to
+    permutation, wire→XML order; each permutation None when it is the identity, as for every
+    pressor message). Those messages are packed and decoded here, byte-identical to
     pymavlink's ``pack``/``decode`` but without its per-frame objects (tests compare both)."""
     out = {}
     if _mcrf4xx is None:
         return out
+
+    def perm(order: tuple[int, ...]) -> _Perm:
+        return None if order == tuple(range(len(order))) else order
+
     for mid, cls in mavlink.mavlink_map.items():
         if any(n != 1 for n in cls.lengths) or any(t.startswith("char") for t in cls.fieldtypes):
             continue
         to_wire = tuple(cls.fieldnames.index(n) for n in cls.ordered_fieldnames)
-        out[mid] = (cls, cls.unpacker, bytes([cls.crc_extra]), to_wire, tuple(cls.orders))
+        out[mid] = (
+            cls,
+            cls.unpacker,
+            bytes([cls.crc_extra]),
+            perm(to_wire),
+            perm(tuple(cls.orders)),
+        )
     return out
 
 
 _FAST = _fast_codecs()
+#: longest payload (bytes) of each message id: a candidate frame claiming more is junk
+_MAXLEN = {mid: cls.unpacker.size for mid, cls in mavlink.mavlink_map.items()}
 
 
 _ID_HEARTBEAT = mavlink.MAVLINK_MSG_ID_PRESSOR_HEARTBEAT
@@ -353,10 +369,6 @@ class PumpStatusMsg:
     alarms: int
 
 
-def _max_payload_lengths() -> dict[int, int]:
-    return {mid: cls.unpacker.size for mid, cls in mavlink.mavlink_map.items()}
-
-
 class LinkEndpoint:
     """Send and receive pressor messages over a port.
 
@@ -416,7 +428,6 @@ class LinkEndpoint:
             if not signing.require:
                 mav.signing.allow_unsigned_callback = lambda _mav, _msgid: True
         self._mav = mav
-        self._maxlen = _max_payload_lengths()
         #: the port's one-syscall read (``transport.FdPort`` / ``FastPort``), if it has one
         self._read_some: Callable[[float], bytes] | None = getattr(port, "read_some", None)
         self._rx = bytearray()
@@ -462,17 +473,7 @@ class LinkEndpoint:
             ts = int(self.clock() * 100_000.0)
             if ts > mav.signing.timestamp:
                 mav.signing.timestamp = ts
-        frame = msg.pack(mav)
-        mav.seq = (mav.seq + 1) & 0xFF
-        self._tx += frame
-        c = self.counters
-        c.frames_sent += 1
-        c.bytes_sent += len(frame)
-        if self.tlog is not None:
-            self.tlog.write(frame, self.clock())
-        if flush:
-            self.flush()
-        return frame
+        return self._queue(msg.pack(mav), flush)
 
     def send_fields(self, msgid: int, *values: Any, flush: bool = True) -> bytes:
         """Pack (and sign) message ``msgid`` from its field values in XML order, queue it, and
@@ -486,7 +487,7 @@ class LinkEndpoint:
             cls = mavlink.mavlink_map[msgid]
             return self.send(cls(*values), flush=flush)
         _cls, st, extra, to_wire, _ = codec
-        payload = st.pack(*[values[j] for j in to_wire])
+        payload = st.pack(*(values if to_wire is None else [values[j] for j in to_wire]))
         payload = payload.rstrip(b"\x00") or payload[:1]  # MAVLink 2 trailing-zero truncation
         mav = self._mav
         signing = self.signing
@@ -511,6 +512,11 @@ class LinkEndpoint:
             frame += _SIGN_STAMP.pack(sg.link_id, sg.timestamp)[:7]
             frame += _sha256(sg.secret_key + frame).digest()[:6]
             sg.timestamp += 1
+        return self._queue(frame, flush)
+
+    def _queue(self, frame: bytes, flush: bool) -> bytes:
+        """Number, queue, count and log a packed ``frame``; write the queue if ``flush``."""
+        mav = self._mav
         mav.seq = (mav.seq + 1) & 0xFF
         self._tx += frame
         c = self.counters
@@ -627,12 +633,10 @@ class LinkEndpoint:
             if (now := time.monotonic()) >= deadline:
                 return self.counters.frames_received - before
 
-    def _read_once(self, block: bool, timeout_s: float | None = None) -> bool:
+    def _read_once(self, block: bool, timeout_s: float) -> bool:
         port = self.port
         try:
             if self._read_some is not None:  # tty hot path: one read for all that is there
-                if timeout_s is None:
-                    timeout_s = (port.timeout or 0.0) if block else 0.0
                 data = self._read_some(timeout_s if block else 0.0)
             else:
                 n = port.in_waiting
@@ -682,7 +686,7 @@ class LinkEndpoint:
         rx += data
         n = len(rx)
         i = 0
-        maxlen = self._maxlen
+        maxlen = _MAXLEN
         fast = _FAST
         while True:
             j = rx.find(_MARKER, i)
@@ -697,7 +701,8 @@ class LinkEndpoint:
                 break
             plen = rx[i + 1]
             incompat = rx[i + 2]
-            limit = maxlen.get(rx[i + 7] | (rx[i + 8] << 8) | (rx[i + 9] << 16))
+            mid = rx[i + 7] | (rx[i + 8] << 8) | (rx[i + 9] << 16)
+            limit = maxlen.get(mid)
             if limit is None or plen == 0 or plen > limit or incompat & 0xFE:
                 c.junk_bytes += 1
                 i += 1
@@ -706,7 +711,6 @@ class LinkEndpoint:
             if n - i < flen:
                 break
             frame = rx[i : i + flen]
-            mid = rx[i + 7] | (rx[i + 8] << 8) | (rx[i + 9] << 16)
             codec = fast.get(mid)
             try:
                 if codec is not None:
@@ -771,7 +775,7 @@ class LinkEndpoint:
         cls, st, extra, _, orders = codec
         plen = frame[1]
         end = _HEADER + plen
-        if _mcrf4xx(bytes(frame[1:end]) + extra, 0xFFFF) != frame[end] | (frame[end + 1] << 8):
+        if _mcrf4xx(frame[1:end] + extra, 0xFFFF) != frame[end] | (frame[end + 1] << 8):
             raise mavlink.MAVError("invalid MAVLink CRC")
         sg = self._mav.signing
         if sg.secret_key is not None and not (frame[2] & 1 and self._check_signature(frame)):
@@ -779,11 +783,11 @@ class LinkEndpoint:
             if cb is None or not cb(self._mav, cls.id):
                 raise mavlink.MAVError("Invalid signature")
         size = st.size
-        payload = bytes(frame[_HEADER:end])
-        if plen < size:
-            payload += bytes(size - plen)
-        t = st.unpack(payload)
-        return tuple([t[j] for j in orders])
+        if plen < size:  # MAVLink 2 trailing-zero truncation
+            t = st.unpack(frame[_HEADER:end] + bytes(size - plen))
+        else:
+            t = st.unpack_from(frame, _HEADER)
+        return t if orders is None else tuple([t[j] for j in orders])
 
     def _check_signature(self, frame: bytearray) -> bool:
         """pymavlink's ``check_signature`` rules, the hash checked first: a frame signed with
@@ -890,7 +894,11 @@ class LinkEndpoint:
         self.pump_status = PumpStatusMsg(*fields)
 
     # ----------------------------------------------------------- runtime side
-    def _next_sample(self) -> TickInputs | None:
+    def next_sample(self) -> TickInputs | None:
+        """Runtime, non-blocking: the oldest sample already received and not yet returned.
+
+        Call :meth:`poll` first to read the port.
+        """
         if not self._samples:
             return None
         sim_time_s, tick, map_mmhg, quality = self._samples.pop(0)
@@ -915,13 +923,6 @@ class LinkEndpoint:
             t[0] if t is not None else -1,
         )
 
-    def next_sample(self) -> TickInputs | None:
-        """Runtime, non-blocking: the oldest sample already received and not yet returned.
-
-        Call :meth:`poll` first to read the port.
-        """
-        return self._next_sample()
-
     def newest_sample(self) -> TickInputs | None:
         """Runtime, non-blocking: the newest sample already received; older ones not yet returned
         are superseded (counted in ``stale``). ``None`` when nothing new arrived.
@@ -932,7 +933,7 @@ class LinkEndpoint:
         if len(samples) > 1:
             self.counters.stale += len(samples) - 1
             del samples[:-1]
-        return self._next_sample()
+        return self.next_sample()
 
     def wait_for_sample(self, timeout_s: float) -> TickInputs | None:
         """Runtime: the next new MAP sample with the tick's scheduling parameters and target.
@@ -946,7 +947,7 @@ class LinkEndpoint:
         LinkClosedError
             The peer closed the link.
         """
-        return self._wait(self._next_sample, timeout_s)
+        return self._wait(self.next_sample, timeout_s)
 
     # ------------------------------------------------------------ device side
     def wait_for_command(self, tick: int, timeout_s: float) -> Command | None:

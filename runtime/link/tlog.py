@@ -103,7 +103,6 @@ def register_dialect_with_mavutil() -> ModuleType:
     ``mavutil.set_dialect`` imports ``pymavlink.dialects.v20.<name>``; this registers the committed
     module under that name (without writing into site-packages) and selects MAVLink 2.
     """
-    import os
     import sys
 
     from runtime.link.dialect import pressor

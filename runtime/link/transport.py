@@ -68,6 +68,27 @@ class Port(Protocol):
     def close(self) -> None: ...
 
 
+class _Wrapper:
+    """A port around another one (``self._port``): timeout, reads and close are the inner port's;
+    subclasses change the write path."""
+
+    _port: Any
+
+    @property
+    def timeout(self) -> float | None:
+        return self._port.timeout
+
+    @property
+    def in_waiting(self) -> int:
+        return self._port.in_waiting
+
+    def read(self, size: int = 1) -> bytes:
+        return self._port.read(size)
+
+    def close(self) -> None:
+        self._port.close()
+
+
 def open_port(spec: str, *, timeout_s: float = DEFAULT_READ_TIMEOUT_S, baudrate: int = 115200):
     """Open a pyserial port from a URL (``loop://``, ``socket://host:port``, ...) or a device path.
 
@@ -221,7 +242,7 @@ def _write_all(fd: int, data: bytes) -> int:
     return n
 
 
-class FastPort:
+class FastPort(_Wrapper):
     """A posix pyserial port whose hot path bypasses pyserial's Python wrapper.
 
     pyserial opened and configured the device (what a user with real hardware gets); reads and
@@ -242,19 +263,8 @@ class FastPort:
         _set_read_timer(self.fd)
 
     @property
-    def timeout(self) -> float | None:
-        return self._port.timeout
-
-    @property
     def is_open(self) -> bool:
         return bool(self._port.is_open)
-
-    @property
-    def in_waiting(self) -> int:
-        return self._port.in_waiting
-
-    def read(self, size: int = 1) -> bytes:
-        return self._port.read(size)
 
     def read_some(self, timeout_s: float) -> bytes:
         """Everything readable now, waiting at most ``timeout_s`` (s) for the first byte.
@@ -278,9 +288,6 @@ class FastPort:
 
     def reset_input_buffer(self) -> None:
         self._port.reset_input_buffer()
-
-    def close(self) -> None:
-        self._port.close()
 
 
 def fast_port(port: Any) -> Any:
@@ -351,37 +358,23 @@ class PtyPair:
             os.close(self.leader_fd)
 
 
-class CrossedPort:
+class CrossedPort(_Wrapper):
     """One end of an in-process link built from two pyserial ``loop://`` ports.
 
     A ``loop://`` port reads back what is written to it; crossing two of them gives a full-duplex
-    pair: this end writes into the peer's loop and reads its own.
+    pair: this end writes into the peer's loop and reads its own; closing it closes its own loop
+    (the peer then reads nothing more).
     """
 
     def __init__(self, own, peer) -> None:
-        self._own = own
+        self._port = own
         self._peer = peer
-
-    @property
-    def timeout(self) -> float | None:
-        return self._own.timeout
-
-    @property
-    def in_waiting(self) -> int:
-        return self._own.in_waiting
-
-    def read(self, size: int = 1) -> bytes:
-        return self._own.read(size)
 
     def write(self, data: bytes) -> int | None:
         return self._peer.write(data)
 
     def flush(self) -> None:
         """Nothing buffered on this side."""
-
-    def close(self) -> None:
-        """Close this end's loop (the peer then reads nothing more)."""
-        self._own.close()
 
 
 def loop_pair(
@@ -404,7 +397,7 @@ def loop_pair(
     return CrossedPort(a, b), CrossedPort(b, a)
 
 
-class FaultyPort:
+class FaultyPort(_Wrapper):
     """Fault injection on the write path of a port: corrupt or drop whole writes deterministically.
 
     Every ``corrupt_every``-th write has one byte flipped (position chosen by a seeded generator,
@@ -435,17 +428,6 @@ class FaultyPort:
         self.corrupted = 0
         self.dropped = 0
 
-    @property
-    def timeout(self) -> float | None:
-        return self._port.timeout
-
-    @property
-    def in_waiting(self) -> int:
-        return self._port.in_waiting
-
-    def read(self, size: int = 1) -> bytes:
-        return self._port.read(size)
-
     def write(self, data: bytes) -> int | None:
         self.writes += 1
         if self.drop_every and self.writes % self.drop_every == 0:
@@ -462,6 +444,3 @@ class FaultyPort:
         flush = getattr(self._port, "flush", None)
         if flush is not None:
             flush()
-
-    def close(self) -> None:
-        self._port.close()
