@@ -27,6 +27,7 @@ from typing import Any
 
 from hil_sim.sensor import Artifact
 from runtime.faults import FaultSpec
+from runtime.link.transport import PortWrapper
 
 __all__ = ["LinkFaultPort", "LinkFaults", "WorldFaults", "split_frames"]
 
@@ -171,7 +172,7 @@ class LinkFaults:
         return [(first, s) for first, end, s in self.bytewise if first <= tick < end]
 
 
-class LinkFaultPort:
+class LinkFaultPort(PortWrapper):
     """A port wrapper that applies the byte-level link faults of the current tick.
 
     Parameters
@@ -199,22 +200,11 @@ class LinkFaultPort:
         self.cut_next_write = False
         self.hits: dict[str, int] = {}
 
-    # pyserial subset -------------------------------------------------------------------------
-    @property
-    def timeout(self) -> float | None:
-        return self._port.timeout
-
-    @property
-    def in_waiting(self) -> int:
-        return self._port.in_waiting
-
+    # pyserial subset (timeout, in_waiting, close: PortWrapper) -------------------------------
     def flush(self) -> None:
         flush = getattr(self._port, "flush", None)
         if flush is not None:
             flush()
-
-    def close(self) -> None:
-        self._port.close()
 
     def _hit(self, kind: str, n: int = 1) -> None:
         self.hits[kind] = self.hits.get(kind, 0) + n

@@ -68,7 +68,7 @@ class Port(Protocol):
     def close(self) -> None: ...
 
 
-class _Wrapper:
+class PortWrapper:
     """A port around another one (``self._port``): timeout, reads and close are the inner port's;
     subclasses change the write path."""
 
@@ -242,7 +242,7 @@ def _write_all(fd: int, data: bytes) -> int:
     return n
 
 
-class FastPort(_Wrapper):
+class FastPort(PortWrapper):
     """A posix pyserial port whose hot path bypasses pyserial's Python wrapper.
 
     pyserial opened and configured the device (what a user with real hardware gets); reads and
@@ -358,7 +358,7 @@ class PtyPair:
             os.close(self.leader_fd)
 
 
-class CrossedPort(_Wrapper):
+class CrossedPort(PortWrapper):
     """One end of an in-process link built from two pyserial ``loop://`` ports.
 
     A ``loop://`` port reads back what is written to it; crossing two of them gives a full-duplex
@@ -397,7 +397,7 @@ def loop_pair(
     return CrossedPort(a, b), CrossedPort(b, a)
 
 
-class FaultyPort(_Wrapper):
+class FaultyPort(PortWrapper):
     """Fault injection on the write path of a port: corrupt or drop whole writes deterministically.
 
     Every ``corrupt_every``-th write has one byte flipped (position chosen by a seeded generator,
