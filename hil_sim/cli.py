@@ -2,7 +2,8 @@
 
 ``pressor trial --controller lpv|pi|PATH --patients N --seed S --scenario NAME [--jobs J] --out DIR``
 prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
-(reachable patients; unreachable ones counted and listed apart), and writes ``DIR/patients.json``,
+(reachable patients; unreachable ones counted and listed apart) and of each disturbance event's
+peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
 ``DIR/patients.csv`` and ``DIR/summary.json`` atomically. Same arguments → identical files, whatever
 ``--jobs``. Exit 0 on completion, 2 on bad usage or input (one line naming field, value and range).
 """
@@ -64,6 +65,13 @@ def format_table(summary: dict[str, Any]) -> str:
             f"{key:<24}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}{r['n']:>5}{r['n_null']:>5}"
             f" | {_fmt(u['median']):>15}{_fmt(u['p90']):>10}"
         )
+    for label, d in m["disturbances"].items():
+        lines.append(f"{label} at {_fmt(d['start_s'])} s (reachable patients):")
+        for key in ("peak_abs_deviation_mmhg", "recovery_s", "iae_mmhg_s"):
+            r = d[key]
+            lines.append(
+                f"  {key:<22}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}{r['n']:>5}{r['n_null']:>5}"
+            )
     if summary["unreachable_patient_seeds"]:
         lines.append(f"unreachable patient seeds: {summary['unreachable_patient_seeds']}")
     if summary["unstable_patient_seeds"]:

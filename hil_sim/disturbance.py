@@ -1,6 +1,7 @@
 """Output disturbances on MAP (mmHg, additive), as functions of simulation time (s).
 
-Kinds (each a small frozen dataclass; a scenario's list is summed, so any combination works):
+Kinds (each a small frozen dataclass whose class attribute ``kind`` is the scenario-file name; a
+scenario's list is summed, so any combination works):
 
 ``hemorrhage``
     Blood loss: MAP falls linearly by ``depth_mmhg`` over ``ramp_s`` from ``start_s`` and stays down.
@@ -16,12 +17,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 
 @dataclass(frozen=True)
 class Hemorrhage:
     """Ramp drop of ``depth_mmhg`` over ``ramp_s`` from ``start_s`` (mmHg, s)."""
 
+    kind: ClassVar[str] = "hemorrhage"
     start_s: float
     ramp_s: float
     depth_mmhg: float
@@ -37,6 +40,7 @@ class Hemorrhage:
 class Bolus:
     """Fluid bolus: rise of ``amplitude_mmhg`` over ``rise_s``, then decay with ``decay_s`` (s)."""
 
+    kind: ClassVar[str] = "bolus"
     start_s: float
     rise_s: float
     amplitude_mmhg: float
@@ -55,6 +59,7 @@ class Bolus:
 class Sinusoid:
     """Slow oscillation of ``amplitude_mmhg`` and ``period_s`` from ``start_s``, phase in degrees."""
 
+    kind: ClassVar[str] = "sinusoid"
     start_s: float
     amplitude_mmhg: float
     period_s: float

@@ -10,6 +10,13 @@ count as hypertension), with the settling band chosen by whether the scenario's 
 (DESIGN.md §3). ``reachable`` compares the largest ΔMAP the scenario asks for (target step minus
 disturbances) with the largest steady-state ΔMAP the pump's maximum rate gives at this patient's
 sensitivity (max over i ≤ max of k0·i·e^(−k1·i)).
+
+The scenario's hemorrhages and boluses are the disturbance events the metrics split the run at
+(``docs/METRICS.md``): the step metrics stop at the first one and each gets a record in the
+patient's ``disturbances`` list; a sinusoid is background, not an event. ``patients.csv`` flattens
+the records into ``LABEL_start_s``, ``LABEL_peak_deviation_mmhg``, ``LABEL_recovery_s`` and
+``LABEL_iae_mmhg_s`` columns, LABEL being the kind (``hemorrhage``, ``bolus``; ``hemorrhage_2``
+for a second one).
 """
 
 from __future__ import annotations
@@ -30,7 +37,20 @@ from hil_sim.cohort import cohort_seeds
 from hil_sim.scenario import Scenario
 from hil_sim.world import World
 from runtime.controller_loader import load_controller
-from runtime.metrics import RUN_METRICS, aggregate, run_metrics
+from runtime.metrics import (
+    EVENT_KINDS,
+    EVENT_METRICS,
+    RUN_METRICS,
+    Event,
+    aggregate,
+    event_labels,
+    run_metrics,
+)
+
+
+def scenario_events(scenario: Scenario) -> list[Event]:
+    """The scenario's disturbance events ``(kind, start_s)``: its hemorrhages and boluses."""
+    return [(d.kind, d.start_s) for d in scenario.disturbances if d.kind in EVENT_KINDS]
 
 
 def run_patient(
@@ -52,6 +72,7 @@ def run_patient(
         noisy=scenario.noisy,
         reachable=world.reachable(),
         map_true_mmhg=traj.map_true_mmhg,
+        events=scenario_events(scenario),
     )
     record: dict[str, Any] = {
         "patient_seed": int(patient_seed),
@@ -122,21 +143,31 @@ def summarize(
     }
 
 
+_EVENT_COLUMNS = ("start_s",) + EVENT_METRICS
+
+
 def _csv_text(records: Sequence[dict[str, Any]]) -> str:
     coeff_keys = list(records[0]["coefficients"]) if records else []
+    scalar_keys = (
+        ["required_delta_mmhg", "max_delta_mmhg"]
+        + list(RUN_METRICS)
+        + ["reachable", "stable", "commands_out_of_range"]
+    )
+    # Every patient of a trial runs the same scenario, so the first one's events name the columns.
+    labels = event_labels([d["kind"] for d in records[0]["disturbances"]]) if records else []
     header = (
         ["patient_seed"]
         + coeff_keys
-        + ["required_delta_mmhg", "max_delta_mmhg"]
-        + list(RUN_METRICS)
-        + ["reachable", "stable", "commands_out_of_range"]
+        + scalar_keys
+        + [f"{label}_{col}" for label in labels for col in _EVENT_COLUMNS]
     )
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(header)
     for r in records:
         row = [r["patient_seed"]] + [r["coefficients"][k] for k in coeff_keys]
-        row += [r[k] for k in header[1 + len(coeff_keys) :]]
+        row += [r[k] for k in scalar_keys]
+        row += [d[col] for d in r["disturbances"] for col in _EVENT_COLUMNS]
         writer.writerow(["" if v is None else repr(v) if isinstance(v, float) else v for v in row])
     return buf.getvalue()
 

@@ -1,5 +1,8 @@
 """Clinical performance metrics of a MAP control run (DESIGN.md §3), pure numpy.
 
+``docs/METRICS.md`` defines every metric name, window, band, unit and null rule; this docstring
+is the short form.
+
 Every function takes sampled signals on a uniform tick grid (``t_s`` in s, MAP and target in mmHg,
 rates in ml/h) and returns plain Python floats / bools / ``None`` under exactly the §3 JSON names.
 A metric that does not apply (no target step, never reached, never settled, no valid sample) is
@@ -41,11 +44,34 @@ Definitions (a target step of size Δ mmHg at ``t0``; e = MAP − target):
 ``reachable``
     Supplied by the caller (it needs the patient model): the target's required ΔMAP is within what
     the pump's maximum rate can produce at the patient's steady-state sensitivity.
+
+The names above keep their meaning whatever the scenario: they judge the whole run after the step,
+so on a scenario with disturbances ``overshoot_pct`` includes any disturbance's excursion above the
+target and ``settling_time_s`` the last excursion out of the band, whatever caused it. Tracking and
+disturbance rejection are told apart by the caller's list of disturbance events, ``(kind,
+start_s)`` pairs (:data:`EVENT_KINDS`; a continuous sinusoid is background, not an event):
+
+``step_overshoot_pct`` / ``step_rise_time_s`` / ``step_settling_time_s`` / ``step_iae_mmhg_s``
+    ``overshoot_pct`` / ``rise_time_s`` / ``settling_time_s`` / ``iae_mmhg_s`` over the step window
+    [t0, first event start) — the whole run when there is no event; ``None`` when the first event
+    starts at or before t0, and all four ``None`` when the events are not known.
+``disturbances``
+    One record per event, in start order, over its event window [start, next later start) — the
+    last one to the end of the run: ``kind``, ``start_s``, ``end_s`` (the window's end, s),
+    ``peak_deviation_mmhg`` (e at the sample of largest |e|, sign kept: negative for a dip),
+    ``recovery_s`` (from the start to the time MAP is back inside ±5 mmHg of the target for the
+    rest of the window, interpolated linearly between the last valid sample outside the band and
+    the next valid one; 0 if it never left the band, ``None`` if the window's last valid sample is
+    outside) and ``iae_mmhg_s`` (Σ |e_k|·Ts over the window's valid samples). Events that start
+    after the last sample are not in the run and get no record; a window without a valid sample
+    gives ``None`` for the three numbers. ``None`` (not a list) when the events are not known.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -69,7 +95,21 @@ RUN_METRICS = STEP_METRICS + (
     "drug_total_ml",
     "max_rate_ml_h",
     "time_at_limit_pct",
+    "step_overshoot_pct",
+    "step_rise_time_s",
+    "step_settling_time_s",
+    "step_iae_mmhg_s",
 )
+STEP_WINDOW_METRICS = RUN_METRICS[-4:]
+"""The step metrics over the window before the first disturbance event."""
+EVENT_KINDS = ("hemorrhage", "bolus")
+"""Disturbance kinds that are events with a start; a sinusoid is continuous background."""
+EVENT_METRICS = ("peak_deviation_mmhg", "recovery_s", "iae_mmhg_s")
+"""The numbers of one disturbance record (besides ``kind``, ``start_s``, ``end_s``)."""
+_TIME_EPS_S = 1e-9  # sample times are sums of float periods: a window edge must not split a tick
+
+Event = tuple[str, float]
+"""A disturbance event: ``(kind, start_s)``, kind in :data:`EVENT_KINDS`, start in s."""
 
 
 def _f(x: float | np.floating) -> float:
@@ -183,6 +223,137 @@ def step_metrics(
     return out
 
 
+def event_windows(
+    t_s: Sequence[float] | np.ndarray, events: Iterable[Event]
+) -> list[tuple[str, float, float]]:
+    """The events of a run with their windows, ``(kind, start_s, end_s)`` in start order.
+
+    An event's window runs from its start to the next later start, the last one to the end of the
+    run (the last sample time plus one period); events that start together share a window; events
+    that start after the last sample are not in the run and are left out.
+
+    Raises
+    ------
+    ValueError
+        A kind outside :data:`EVENT_KINDS` or a non-finite start.
+    """
+    t = np.asarray(t_s, dtype=float)
+    run_end = float(t[-1]) + _period(t)
+    kept: list[tuple[str, float]] = []
+    for kind, start in events:
+        if kind not in EVENT_KINDS:
+            raise ValueError(f"event kind {kind!r} must be one of {list(EVENT_KINDS)}")
+        if not np.isfinite(start):
+            raise ValueError(f"event {kind!r} start_s {start!r} must be finite")
+        if start <= t[-1] + _TIME_EPS_S:
+            kept.append((kind, float(start)))
+    kept.sort(key=lambda e: e[1])
+    starts = [s for _, s in kept]
+    out = []
+    for kind, start in kept:
+        later = [s for s in starts if s > start + _TIME_EPS_S]
+        out.append((kind, start, later[0] if later else run_end))
+    return out
+
+
+def event_labels(kinds: Sequence[str]) -> list[str]:
+    """Stable names for a run's events: the kind, then ``kind_2``, ``kind_3`` for repeats."""
+    seen: dict[str, int] = {}
+    labels = []
+    for kind in kinds:
+        seen[kind] = seen.get(kind, 0) + 1
+        labels.append(kind if seen[kind] == 1 else f"{kind}_{seen[kind]}")
+    return labels
+
+
+def _in_window(t: np.ndarray, start_s: float, end_s: float) -> np.ndarray:
+    return (t >= start_s - _TIME_EPS_S) & (t < end_s - _TIME_EPS_S)
+
+
+def step_window_metrics(
+    t_s: Sequence[float] | np.ndarray,
+    map_mmhg: Sequence[float] | np.ndarray,
+    target_mmhg: Sequence[float] | np.ndarray | float,
+    step_time_s: float,
+    step_mmhg: float,
+    end_s: float,
+    noisy: bool = False,
+) -> dict[str, float | None]:
+    """``step_overshoot_pct``, ``step_rise_time_s``, ``step_settling_time_s``, ``step_iae_mmhg_s``.
+
+    :func:`step_metrics` over the samples in [``step_time_s``, ``end_s``) (s), normally ``end_s``
+    = the first disturbance event's start. All ``None`` when that window holds fewer than two
+    samples (an event at or before the step leaves no clean step to judge).
+    """
+    t, y, r = _as_arrays(t_s, map_mmhg, target_mmhg)
+    out: dict[str, float | None] = dict.fromkeys(STEP_WINDOW_METRICS)
+    keep = t < end_s - _TIME_EPS_S
+    if np.count_nonzero(keep & (t >= step_time_s - _TIME_EPS_S)) < 2:
+        return out
+    m = step_metrics(t[keep], y[keep], r[keep], step_time_s, step_mmhg, noisy=noisy)
+    for name in STEP_WINDOW_METRICS:
+        out[name] = m[name.removeprefix("step_")]
+    return out
+
+
+def _recovery_s(t: np.ndarray, e: np.ndarray, start_s: float, band: float) -> float | None:
+    """Time from ``start_s`` until e is inside ±band for the rest of the samples (docstring)."""
+    valid = np.flatnonzero(np.isfinite(e))
+    outside = valid[np.abs(e[valid]) > band]
+    if outside.size == 0:
+        return 0.0
+    k = int(outside[-1])
+    if k == int(valid[-1]):
+        return None
+    j = int(valid[valid > k][0])
+    level = band if e[k] > 0 else -band
+    frac = (e[k] - level) / (e[k] - e[j])  # e_j is inside the band, so this is in (0, 1]
+    return _f(t[k] + frac * (t[j] - t[k]) - start_s)
+
+
+def disturbance_metrics(
+    t_s: Sequence[float] | np.ndarray,
+    map_mmhg: Sequence[float] | np.ndarray,
+    target_mmhg: Sequence[float] | np.ndarray | float,
+    events: Iterable[Event],
+    band_mmhg: float = CLINICAL_BAND_MMHG,
+) -> list[dict[str, str | float | None]]:
+    """One record per disturbance event over its window (module docstring, docs/METRICS.md).
+
+    Parameters
+    ----------
+    t_s, map_mmhg, target_mmhg
+        As for :func:`step_metrics`; NaN MAP samples are ignored.
+    events
+        ``(kind, start_s)`` pairs, kind in :data:`EVENT_KINDS`, in any order.
+    band_mmhg
+        The recovery band (mmHg) around the target.
+
+    Returns
+    -------
+    list of dict
+        In start order: ``kind``, ``start_s``, ``end_s`` (s), ``peak_deviation_mmhg`` (signed),
+        ``recovery_s``, ``iae_mmhg_s``; the three numbers ``None`` for a window without a valid
+        sample, ``recovery_s`` ``None`` when MAP is still outside the band at the window's end.
+    """
+    t, y, r = _as_arrays(t_s, map_mmhg, target_mmhg)
+    ts = _period(t)
+    records: list[dict[str, str | float | None]] = []
+    for kind, start, end in event_windows(t, events):
+        inside = _in_window(t, start, end)
+        tw, e = t[inside], (y - r)[inside]
+        rec: dict[str, str | float | None] = {"kind": kind, "start_s": start, "end_s": end}
+        rec.update(dict.fromkeys(EVENT_METRICS))
+        valid = np.isfinite(e)
+        if valid.any():
+            k = int(np.nanargmax(np.abs(e)))
+            rec["peak_deviation_mmhg"] = _f(e[k])
+            rec["recovery_s"] = _recovery_s(tw, e, start, band_mmhg)
+            rec["iae_mmhg_s"] = _f(np.sum(np.abs(e[valid])) * ts)
+        records.append(rec)
+    return records
+
+
 def _percent(mask: np.ndarray) -> float:
     return _f(100.0 * np.count_nonzero(mask) / mask.size)
 
@@ -215,7 +386,8 @@ def run_metrics(
     noisy: bool = False,
     reachable: bool = True,
     map_true_mmhg: Sequence[float] | np.ndarray | None = None,
-) -> dict[str, float | bool | None]:
+    events: Iterable[Event] | None = None,
+) -> dict[str, Any]:
     """All §3 metrics of one run (without the fault entries, which the runtime adds).
 
     Parameters
@@ -235,17 +407,21 @@ def run_metrics(
         The caller's reachability verdict for this patient and scenario.
     map_true_mmhg
         The true MAP for the ``stable`` flag; defaults to ``map_mmhg``.
+    events
+        The run's disturbance events, ``(kind, start_s)`` (:func:`disturbance_metrics`); ``[]``
+        for a run without one; ``None`` when they are not known (the step-window metrics and
+        ``disturbances`` are then ``None``).
 
     Returns
     -------
     dict
-        Keys :data:`RUN_METRICS` + ``reachable`` + ``stable``.
+        Keys :data:`RUN_METRICS` + ``reachable`` + ``stable`` + ``disturbances``.
     """
     t, y, r, u = _as_arrays(t_s, map_mmhg, target_mmhg, rate_ml_h)
     ts = _period(t)
     has_step = step_time_s is not None and step_mmhg is not None and step_mmhg != 0.0
     if has_step:
-        out: dict[str, float | bool | None] = dict(
+        out: dict[str, Any] = dict(
             step_metrics(t, y, r, float(step_time_s), float(step_mmhg), noisy=noisy)
         )
         t0 = float(step_time_s)
@@ -282,6 +458,15 @@ def run_metrics(
     out["drug_total_ml"] = _f(np.sum(u) * ts / 3600.0)
     out["max_rate_ml_h"] = _f(np.max(u))
     out["time_at_limit_pct"] = _percent(u >= max_rate_ml_h * (1.0 - 1e-6))
+    out.update(dict.fromkeys(STEP_WINDOW_METRICS))
+    disturbances = None
+    if events is not None:
+        disturbances = disturbance_metrics(t, y, r, events)
+        if has_step:
+            first = float(disturbances[0]["start_s"]) if disturbances else math.inf  # type: ignore[arg-type]
+            out.update(
+                step_window_metrics(t, y, r, float(step_time_s), float(step_mmhg), first, noisy)
+            )
     band = (
         step_band_mmhg(float(step_mmhg), noisy)
         if has_step
@@ -290,6 +475,7 @@ def run_metrics(
     truth = y if map_true_mmhg is None else np.asarray(map_true_mmhg, dtype=float)
     out["reachable"] = bool(reachable)
     out["stable"] = stable_flag(truth, r, max(band, 1.0))
+    out["disturbances"] = disturbances
     return out
 
 
@@ -315,14 +501,50 @@ def percentile_summary(values: Iterable[float | None]) -> dict[str, float | int 
     }
 
 
+def aggregate_disturbances(per_run: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per-event summaries across runs of one scenario, keyed by :func:`event_labels`.
+
+    Returns
+    -------
+    dict
+        label → ``kind``, ``start_s`` (``None`` if the runs disagree), and
+        :func:`percentile_summary` of ``peak_abs_deviation_mmhg`` (|``peak_deviation_mmhg``|, so
+        the 90th percentile is the severe tail for a dip and a rise alike), ``recovery_s`` and
+        ``iae_mmhg_s``. Runs whose ``disturbances`` is ``None`` (events not known) are skipped.
+    """
+    by_label: dict[str, list[Mapping[str, Any]]] = {}
+    for run in per_run:
+        records = run.get("disturbances")
+        if records is None:
+            continue
+        for label, rec in zip(event_labels([d["kind"] for d in records]), records, strict=True):
+            by_label.setdefault(label, []).append(rec)
+    out: dict[str, dict[str, Any]] = {}
+    for label, recs in by_label.items():
+        starts = {d["start_s"] for d in recs}
+        peaks = [
+            None if d["peak_deviation_mmhg"] is None else abs(d["peak_deviation_mmhg"])
+            for d in recs
+        ]
+        out[label] = {
+            "kind": recs[0]["kind"],
+            "start_s": starts.pop() if len(starts) == 1 else None,
+            "peak_abs_deviation_mmhg": percentile_summary(peaks),
+            "recovery_s": percentile_summary(d["recovery_s"] for d in recs),
+            "iae_mmhg_s": percentile_summary(d["iae_mmhg_s"] for d in recs),
+        }
+    return out
+
+
 def aggregate(per_run: Sequence[Mapping[str, object]]) -> dict[str, object]:
     """Aggregate per-run metric dicts: reachable and unreachable patients reported apart.
 
     Returns
     -------
     dict
-        ``n``, ``n_reachable``, ``n_unreachable``, ``n_unstable``, and ``reachable`` /
-        ``unreachable`` / ``all``: each a mapping metric → :func:`percentile_summary`.
+        ``n``, ``n_reachable``, ``n_unreachable``, ``n_unstable``, ``reachable`` /
+        ``unreachable`` / ``all``: each a mapping metric → :func:`percentile_summary`, and
+        ``disturbances``: :func:`aggregate_disturbances` over the reachable runs.
     """
     groups = {
         "reachable": [m for m in per_run if m.get("reachable", True)],
@@ -337,4 +559,5 @@ def aggregate(per_run: Sequence[Mapping[str, object]]) -> dict[str, object]:
     }
     for name, runs in groups.items():
         out[name] = {k: percentile_summary(m.get(k) for m in runs) for k in RUN_METRICS}  # type: ignore[misc]
+    out["disturbances"] = aggregate_disturbances(groups["reachable"])
     return out
