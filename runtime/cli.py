@@ -24,8 +24,10 @@ injected by a device started by hand.
 Files. The ``.rrd``, ``.tlog``, ``--summary`` and ``--timing`` files are written to a hidden
 temporary name and renamed when the run succeeds; a failed run leaves earlier files untouched.
 
-Summary JSON (``--summary``): run identity, the §3 metrics (``runtime.metrics.run_metrics``) plus
-``commands_out_of_range``, the supervisor's account and the link's error counts. It holds only
+Summary JSON (``--summary``): run identity, the §3 metrics (``runtime.metrics.run_metrics``,
+defined in ``docs/METRICS.md``; with ``pressor sil`` the step metrics stop at the first disturbance
+and each hemorrhage or bolus of the scenario file gets a ``disturbances`` record; with ``pressor
+run`` the device's scenario is not known, so those are null) plus ``commands_out_of_range``, the supervisor's account and the link's error counts. It holds only
 values that are functions of the seed (no wall-clock timing), so two runs give identical files;
 loop timing (p50/p99/max) is printed and recorded under ``/loop``.
 
@@ -294,9 +296,11 @@ def build_summary(
     max_rate_ml_h: float,
     noisy: bool,
     faults: list[dict[str, Any]] | None = None,
+    events: list[tuple[str, float]] | None = None,
 ):
     """The JSON-ready summary of a run: identity, §3 metrics, supervisor and link account, and
-    the scored fault list when faults were scheduled."""
+    the scored fault list when faults were scheduled. ``events`` are the scenario's disturbance
+    events (``runtime.metrics.run_metrics``); ``None`` when not known (``pressor run``)."""
     from runtime.metrics import run_metrics
 
     tr = result.trajectory
@@ -315,6 +319,7 @@ def build_summary(
             step_mmhg=step_d,
             noisy=noisy,
             reachable=_reachable(y, r, u, max_rate_ml_h),
+            events=events,
         )
     metrics["commands_out_of_range"] = result.commands_out_of_range
     link = result.link
@@ -364,8 +369,17 @@ def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = No
         file=out,
     )
     print("metrics (DESIGN.md §3):", file=out)
-    for k, v in summary["metrics"].items():
-        print(f"  {k:<24} {_fmt(v)}", file=out)
+    metrics = summary["metrics"]
+    for k, v in metrics.items():
+        if k != "disturbances":
+            print(f"  {k:<24} {_fmt(v)}", file=out)
+    for d in metrics.get("disturbances") or []:
+        print(
+            f"  {d['kind']} at {_fmt(d['start_s'])} s: peak deviation"
+            f" {_fmt(d['peak_deviation_mmhg'])} mmHg, recovery {_fmt(d['recovery_s'])} s,"
+            f" IAE {_fmt(d['iae_mmhg_s'])} mmHg·s",
+            file=out,
+        )
     sup = summary["supervisor"]
     states = ", ".join(f"{k} {v}" for k, v in sup["ticks_in_state"].items() if v)
     print(f"supervisor: ticks in state: {states}", file=out)
@@ -552,6 +566,7 @@ def run_runtime(
             controller.max_rate_ml_h,
             noisy=peer.sensor_noise_mmhg > 0.0,
             faults=report,
+            events=getattr(args, "events", None),
         )
         ok = True
         return summary, result, rrd
@@ -598,6 +613,7 @@ def _main_sil(argv: list[str]) -> int:
     _load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device starts
     args.fault_specs = _fault_specs(args.fault)
     args.fault_specs += _scenario_faults(args.scenario, len(args.fault_specs))
+    args.events = _scenario_events(args.scenario)
     signing = _signing(args, allow_generate=True)
     identity = {
         "controller": args.controller,
@@ -684,14 +700,38 @@ def _fault_specs(texts: list[str]) -> list[Any]:
         raise UsageError(str(exc)) from None
 
 
+def _scenario_path(scenario: str) -> Path:
+    """The file the device loads for ``--scenario`` (a shipped name or a ``.toml`` path)."""
+    if scenario.endswith(".toml") or "/" in scenario:
+        return Path(scenario)
+    return Path(__file__).resolve().parents[1] / "hil_sim" / "scenarios" / f"{scenario}.toml"
+
+
+def _scenario_events(scenario: str) -> list[tuple[str, float]] | None:
+    """The disturbance events ``(kind, start_s)`` of the device's scenario file (read, not
+    imported), for the metrics; ``None`` if the file cannot be read (the device reports why)."""
+    import tomllib
+
+    from runtime.metrics import EVENT_KINDS
+
+    try:
+        data = tomllib.loads(_scenario_path(scenario).read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError):
+        return None
+    raw = data.get("disturbances", [])
+    tables = [d for d in raw if isinstance(d, dict)] if isinstance(raw, list) else []
+    return [
+        (str(d["kind"]), float(d["start_s"]))
+        for d in tables
+        if d.get("kind") in EVENT_KINDS and isinstance(d.get("start_s"), (int, float))
+    ]
+
+
 def _scenario_faults(scenario: str, first_index: int) -> list[Any]:
     """The ``[[faults]]`` the device will inject from its scenario file (read, not imported)."""
     from runtime.faults import FaultSpecError, scenario_file_faults
 
-    if scenario.endswith(".toml") or "/" in scenario:
-        path = Path(scenario)
-    else:
-        path = Path(__file__).resolve().parents[1] / "hil_sim" / "scenarios" / f"{scenario}.toml"
+    path = _scenario_path(scenario)
     if not path.is_file():
         return []
     try:
