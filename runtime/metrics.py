@@ -229,7 +229,7 @@ def event_windows(
     """The events of a run with their windows, ``(kind, start_s, end_s)`` in start order.
 
     An event's window runs from its start to the next later start, the last one to the end of the
-    run (the last sample time plus one period); events that start together share a window; events
+    run (the last sample time plus one period, rounded to the µs); events that start together share a window; events
     that start after the last sample are not in the run and are left out.
 
     Raises
@@ -238,7 +238,7 @@ def event_windows(
         A kind outside :data:`EVENT_KINDS` or a non-finite start.
     """
     t = np.asarray(t_s, dtype=float)
-    run_end = float(t[-1]) + _period(t)
+    run_end = round(float(t[-1]) + _period(t), 6)  # µs: 300.0, not 300.00000000000006
     kept: list[tuple[str, float]] = []
     for kind, start in events:
         if kind not in EVENT_KINDS:

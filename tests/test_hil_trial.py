@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 from pathlib import Path
 
@@ -66,6 +68,33 @@ def test_trial_outputs_name_seed_coefficients_and_metrics(tmp_path, short_scenar
     text = capsys.readouterr()
     assert "settling_time_s" in text.out and "median" in text.out
     assert "4/4 patients" in text.err
+
+
+def test_trial_records_and_csv_carry_step_window_and_disturbance_fields(
+    tmp_path, short_scenario, capsys
+):
+    out = _run(tmp_path, short_scenario, 1, "a")
+    patients = json.loads((out / "patients.json").read_text())
+    rows = list(csv.DictReader(io.StringIO((out / "patients.csv").read_text())))
+    for p, row in zip(patients, rows, strict=True):
+        (hem,) = p["disturbances"]  # the scenario's one hemorrhage, at 120 s of a 300 s run
+        assert (hem["kind"], hem["start_s"], hem["end_s"]) == ("hemorrhage", 120.0, 300.0)
+        assert hem["peak_deviation_mmhg"] < 0.0  # a dip
+        # The step window [0, 120) s is part of the run after the step [0, 300) s.
+        assert 0.0 < p["step_iae_mmhg_s"] < p["iae_mmhg_s"]
+        assert p["step_overshoot_pct"] <= p["overshoot_pct"]
+        for key in ("step_overshoot_pct", "step_settling_time_s", "step_iae_mmhg_s"):
+            assert row[key] == ("" if p[key] is None else repr(p[key]))
+        for key in ("start_s", "peak_deviation_mmhg", "recovery_s", "iae_mmhg_s"):
+            assert row[f"hemorrhage_{key}"] == ("" if hem[key] is None else repr(hem[key]))
+    summary = json.loads((out / "summary.json").read_text())["metrics"]
+    hem_summary = summary["disturbances"]["hemorrhage"]
+    assert hem_summary["start_s"] == 120.0
+    assert hem_summary["iae_mmhg_s"]["n"] == summary["n_reachable"]
+    assert set(summary["reachable"]["step_overshoot_pct"]) == {"median", "p90", "n", "n_null"}
+    text = capsys.readouterr().out
+    assert "step_overshoot_pct" in text and "hemorrhage at 120 s" in text
+    assert "peak_abs_deviation_mmhg" in text
 
 
 def test_trial_rejects_bad_inputs_with_exit_2_and_one_line(tmp_path, short_scenario, capsys):

@@ -131,3 +131,38 @@ def test_sil_with_shipped_lpv_over_30_min_equals_in_process_simulator(tmp_path):
     np.testing.assert_array_equal(sil_map, ref.map_mmhg)
     np.testing.assert_array_equal(sil_cmd.astype(np.float64), ref.command_ml_h)
     assert sil_cmd.max() > 10.0
+
+
+def test_sil_without_disturbance_reports_whole_run_step_metrics_and_no_events(two_runs):
+    _, _, s0 = two_runs[0]
+    m = json.loads(s0.read_text())["metrics"]
+    assert m["disturbances"] == []  # paper-tracking has no hemorrhage or bolus
+    for old in ("overshoot_pct", "rise_time_s", "settling_time_s", "iae_mmhg_s"):
+        assert m[f"step_{old}"] == m[old]
+
+
+def test_sil_reads_the_scenario_files_disturbances_into_the_summary(tmp_path):
+    scenario = tmp_path / "dip.toml"
+    scenario.write_text(
+        'name = "dip"\nduration_s = 300.0\n[patient]\nmode = "nonlinear"\n'
+        "[target]\nstep_mmhg = 20.0\n"
+        '[[disturbances]]\nkind = "sinusoid"\nstart_s = 0.0\namplitude_mmhg = 1.0\n'
+        "period_s = 600.0\n"
+        '[[disturbances]]\nkind = "hemorrhage"\nstart_s = 150.0\nramp_s = 30.0\n'
+        "depth_mmhg = 10.0\n"
+    )
+    summary = tmp_path / "s.json"
+    proc = pressor(
+        "sil",
+        *("--controller", "pi", "--scenario", str(scenario), "--duration", "300"),
+        *("--rrd", str(tmp_path / "r.rrd"), "--summary", str(summary)),
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr
+    m = json.loads(summary.read_text())["metrics"]
+    (hem,) = m["disturbances"]  # the sinusoid is background, not an event
+    assert (hem["kind"], hem["start_s"]) == ("hemorrhage", 150.0)
+    assert hem["end_s"] == pytest.approx(300.0, abs=1e-3)
+    assert hem["peak_deviation_mmhg"] < 0.0
+    assert 0.0 < m["step_iae_mmhg_s"] < m["iae_mmhg_s"]
+    assert "hemorrhage at 150 s: peak deviation" in proc.stdout
