@@ -86,22 +86,27 @@ STEP_METRICS = (
     "steady_state_dev_mmhg",
     "iae_mmhg_s",
 )
-RUN_METRICS = STEP_METRICS + (
-    "time_in_band_pct",
-    "time_below_pct",
-    "mdpe_pct",
-    "mdape_pct",
-    "wobble_pct",
-    "drug_total_ml",
-    "max_rate_ml_h",
-    "time_at_limit_pct",
+STEP_WINDOW_METRICS = (
     "step_overshoot_pct",
     "step_rise_time_s",
     "step_settling_time_s",
     "step_iae_mmhg_s",
 )
-STEP_WINDOW_METRICS = RUN_METRICS[-4:]
 """The step metrics over the window before the first disturbance event."""
+RUN_METRICS = (
+    STEP_METRICS
+    + (
+        "time_in_band_pct",
+        "time_below_pct",
+        "mdpe_pct",
+        "mdape_pct",
+        "wobble_pct",
+        "drug_total_ml",
+        "max_rate_ml_h",
+        "time_at_limit_pct",
+    )
+    + STEP_WINDOW_METRICS
+)
 EVENT_KINDS = ("hemorrhage", "bolus")
 """Disturbance kinds that are events with a start; a sinusoid is continuous background."""
 EVENT_METRICS = ("peak_deviation_mmhg", "recovery_s", "iae_mmhg_s")
@@ -237,7 +242,7 @@ def event_windows(
     ValueError
         A kind outside :data:`EVENT_KINDS` or a non-finite start.
     """
-    t = np.asarray(t_s, dtype=float)
+    (t,) = _as_arrays(t_s)
     run_end = round(float(t[-1]) + _period(t), 6)  # µs: 300.0, not 300.00000000000006
     kept: list[tuple[str, float]] = []
     for kind, start in events:
@@ -297,7 +302,7 @@ def step_window_metrics(
 
 
 def _recovery_s(t: np.ndarray, e: np.ndarray, start_s: float, band: float) -> float | None:
-    """Time from ``start_s`` until e is inside ±band for the rest of the samples (docstring)."""
+    """Time (s) from ``start_s`` until e stays inside ±band to the last sample (module docstring)."""
     valid = np.flatnonzero(np.isfinite(e))
     outside = valid[np.abs(e[valid]) > band]
     if outside.size == 0:
