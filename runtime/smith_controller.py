@@ -134,7 +134,11 @@ class SmithController:
         self._n = math.ceil(self.tau_max_s / self.sample_period_s - 1e-9) + 1
         self._line = [0.0] * self._n
         dts = self.sample_period_s
-        self._max_steps = tuple(r * dts for r in SCHEDULE_RATE_LIMITS)
+        self._max_steps = (
+            SCHEDULE_RATE_LIMITS[0] * dts,
+            SCHEDULE_RATE_LIMITS[1] * dts,
+            SCHEDULE_RATE_LIMITS[2] * dts,
+        )
         self.reset()
 
     def reset(self) -> None:
@@ -156,24 +160,31 @@ class SmithController:
 
     def _sanitise(self, K: float, T: float, tau: float) -> tuple[float, float, float, bool, bool]:
         """Hold non-finite values, clamp to the range, rate-limit against the previous tick."""
-        raw = tuple(
-            v if math.isfinite(v) else held for v, held in zip((K, T, tau), self._raw, strict=True)
-        )
-        self._raw = raw
-        lows = (K_RANGE[0], T_RANGE_S[0], 0.0)
-        highs = (K_RANGE[1], T_RANGE_S[1], self.tau_max_s)
-        clamped = tuple(min(max(v, lo), hi) for v, lo, hi in zip(raw, lows, highs, strict=True))
-        was_clamped = clamped != raw
-        previous = self._schedule
-        if previous is None:
-            out = clamped
-        else:
-            out = tuple(
-                _limit(v, p, m) for v, p, m in zip(clamped, previous, self._max_steps, strict=True)
+        # written out per parameter: this runs every tick
+        raw_k, raw_t, raw_tau = self._raw
+        if math.isfinite(K):
+            raw_k = K
+        if math.isfinite(T):
+            raw_t = T
+        if math.isfinite(tau):
+            raw_tau = tau
+        self._raw = (raw_k, raw_t, raw_tau)
+        k = min(max(raw_k, K_RANGE[0]), K_RANGE[1])
+        t_s = min(max(raw_t, T_RANGE_S[0]), T_RANGE_S[1])
+        tau_s = min(max(raw_tau, 0.0), self.tau_max_s)
+        was_clamped = k != raw_k or t_s != raw_t or tau_s != raw_tau
+        was_limited = False
+        if self._schedule is not None:
+            (prev_k, prev_t, prev_tau), (dk, dt, dtau) = self._schedule, self._max_steps
+            lim_k, lim_t, lim_tau = (
+                _limit(k, prev_k, dk),
+                _limit(t_s, prev_t, dt),
+                _limit(tau_s, prev_tau, dtau),
             )
-        was_limited = out != clamped
-        self._schedule = out  # type: ignore[assignment]
-        return out[0], out[1], out[2], was_clamped, was_limited
+            was_limited = lim_k != k or lim_t != t_s or lim_tau != tau_s
+            k, t_s, tau_s = lim_k, lim_t, lim_tau
+        self._schedule = (k, t_s, tau_s)
+        return k, t_s, tau_s, was_clamped, was_limited
 
     def _delayed_model(self, tau_s: float) -> float:
         """The model output τ ago (mmHg), linear interpolation between the two nearest ticks."""
