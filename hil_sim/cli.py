@@ -1,6 +1,6 @@
 """``pressor scenarios`` and ``pressor trial``: the named scenarios and the in-silico cohort trial.
 
-``pressor trial --controller lpv|pi|PATH --patients N --seed S --scenario NAME [--jobs J] --out DIR``
+``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--jobs J] --out DIR``
 prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
 (reachable patients; unreachable ones counted and listed apart) and of each disturbance event's
 peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
@@ -93,7 +93,11 @@ def _progress_bar(done: int, total: int) -> None:
 
 def _trial(argv: list[str]) -> int:
     p = _ArgParser(prog="pressor trial", description="in-silico cohort trial of a controller")
-    p.add_argument("--controller", default="pi", help="pi | lpv | PATH to a generated module")
+    p.add_argument(
+        "--controller",
+        default="pi",
+        help="pi | smith[:LAMBDA_S] (Smith predictor, lambda 30 s) | lpv | PATH to a generated module",
+    )
     p.add_argument("--patients", type=int, default=20, help="cohort size N (1..100000)")
     p.add_argument("--seed", type=int, default=1, help="cohort seed S (>= 0)")
     p.add_argument("--scenario", default="paper-disturbance", help="scenario name or .toml path")

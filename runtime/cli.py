@@ -109,7 +109,11 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--controller", default="lpv", help="lpv (default), pi, or a generated .py")
+    p.add_argument(
+        "--controller",
+        default="lpv",
+        help="lpv (default), pi, smith[:LAMBDA_S] (Smith predictor, lambda 30 s), or a generated .py",
+    )
     p.add_argument(
         "--rate",
         type=_positive("--rate", 1000.0),

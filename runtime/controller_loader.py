@@ -1,4 +1,7 @@
-"""Resolve a ``--controller`` spec (``pi``, ``lpv`` or a path) to a :class:`Controller` instance.
+"""Resolve a ``--controller`` spec (``pi``, ``smith[:λ]``, ``lpv`` or a path) to a :class:`Controller`.
+
+``smith`` is the scheduled Smith predictor of :mod:`runtime.smith_controller` with its default
+closed-loop time constant (30 s); ``smith:45`` sets λ = 45 s (allowed range in that module).
 
 ``lpv`` is the generated module for the shipped default design, committed at
 ``runtime/generated/lpv_map_controller.py``; a path names any module written by ``pressor codegen``
@@ -23,6 +26,7 @@ from types import ModuleType
 
 from runtime.controller import Controller
 from runtime.pi_controller import PIController
+from runtime.smith_controller import LAMBDA_MAX_S, LAMBDA_MIN_S, SmithController
 
 DEFAULT_LPV_MODULE = Path(__file__).resolve().parent / "generated" / "lpv_map_controller.py"
 
@@ -34,6 +38,26 @@ _ART_LINE = re.compile(r"^ARTIFACT_SHA256 = '([0-9a-f]{64})'", re.MULTILINE)
 
 class ControllerSpecError(ValueError):
     """A ``--controller`` value that names no loadable controller (message names spec and choices)."""
+
+
+SMITH_PREFIX = "smith"
+
+
+def _smith(spec: str, sample_period_s: float) -> SmithController:
+    """``smith`` or ``smith:LAMBDA_S``; a bad λ names the value and the allowed range."""
+    _, sep, text = spec.partition(":")
+    if not sep:
+        return SmithController(sample_period_s=sample_period_s)
+    try:
+        lambda_s = float(text)
+    except ValueError:
+        lambda_s = float("nan")
+    if not LAMBDA_MIN_S <= lambda_s <= LAMBDA_MAX_S:  # also refuses nan and inf
+        raise ControllerSpecError(
+            f"--controller {spec!r}: closed-loop time constant lambda {text!r} s outside "
+            f"[{LAMBDA_MIN_S:g}, {LAMBDA_MAX_S:g}] s (e.g. smith:45)"
+        )
+    return SmithController(sample_period_s=sample_period_s, lambda_s=lambda_s)
 
 
 def module_text_sha256(text: str) -> str:
@@ -124,8 +148,9 @@ def load_controller(
     Parameters
     ----------
     spec
-        ``"pi"`` (the paper's PI baseline), ``"lpv"`` (the shipped generated LPV module) or a path to
-        a generated ``.py`` module.
+        ``"pi"`` (the paper's PI baseline), ``"smith"`` / ``"smith:LAMBDA_S"`` (the scheduled Smith
+        predictor, λ in s), ``"lpv"`` (the shipped generated LPV module) or a path to a generated
+        ``.py`` module.
     sample_period_s
         Loop period (s). A generated module is discretised for one period; a mismatch is an error.
     artifact_sha256
@@ -139,10 +164,12 @@ def load_controller(
     """
     if spec == "pi":
         return PIController(sample_period_s=sample_period_s)
+    if spec == SMITH_PREFIX or spec.startswith(SMITH_PREFIX + ":"):
+        return _smith(spec, sample_period_s)
     path = DEFAULT_LPV_MODULE if spec == "lpv" else Path(spec)
     if spec != "lpv" and path.suffix != ".py":
         raise ControllerSpecError(
-            f"--controller {spec!r}: expected 'pi', 'lpv' or a path to a generated .py module"
+            f"--controller {spec!r}: expected 'pi', 'smith[:LAMBDA_S]', 'lpv' or a path to a generated .py module"
         )
     module = load_generated_module(path, artifact_sha256)
     controller = module.Controller()

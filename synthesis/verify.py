@@ -17,8 +17,11 @@ the synthesis never saw), then:
     at every dense point (delays up to tau_max are on the grid), by the spectral method of
     :mod:`synthesis.delay_stability`;
 (c) ``nominal_step`` — the frozen nominal step (K = 0.55, T = 150 s, tau = 40 s, +20 mmHg, no noise)
-    of the LPV loop and of the PI baseline Gc(s) = 3 + 0.017/s, with DESIGN.md §3 metric names,
-    and whether the paper's claim (overshoot < 1 %, settling < 200 s) holds for the LPV loop.
+    of the LPV loop, of the PI baseline Gc(s) = 3 + 0.017/s and of the scheduled Smith predictor
+    (``smith``: the discrete runtime controller at Ts = 0.1 s, lambda 30 s, pump clamped to
+    the artifact's limit, against the exact ZOH plant with the delay;
+    :mod:`synthesis.smith_baseline`), with DESIGN.md §3 metric names, and whether the paper's
+    claim (overshoot < 1 %, settling < 200 s) holds for the LPV loop.
 
 ``passed`` requires (a) certified, (b) every frozen point exponentially stable and (c) the LPV step
 settling inside the 2 % band; the paper's claim is reported beside it, not folded into it (the issue
@@ -39,6 +42,7 @@ from synthesis.delay_stability import rightmost_roots
 from synthesis.model import plant_at
 from synthesis.pi_baseline import PIBaseline
 from synthesis.reconstruct import controller_at, scaling_of
+from synthesis.smith_baseline import smith_step_response
 from synthesis.step_response import (
     NOMINAL_K,
     NOMINAL_STEP_MMHG,
@@ -273,7 +277,7 @@ def verify_artifact(
         f"({res.solve_time_s:.1f} s)"
     )
 
-    # (c) nominal step, LPV and PI
+    # (c) nominal step, LPV, PI and Smith
     nominal = np.array([NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S])
     in_box = bool(np.all((nominal >= box[:, 0]) & (nominal <= box[:, 1])))
     max_rate = float(getattr(artifact, "max_rate_ml_h", 120.0))
@@ -289,6 +293,12 @@ def verify_artifact(
         ),
         max_rate,
     )
+    smith = response_metrics(
+        smith_step_response(
+            NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S, NOMINAL_STEP_MMHG, STEP_HORIZON_S, max_rate
+        ),
+        max_rate,
+    )
     step = {
         "rho": nominal.tolist(),
         "rho_in_box": in_box,
@@ -296,10 +306,12 @@ def verify_artifact(
         "horizon_s": STEP_HORIZON_S,
         "lpv": lpv,
         "pi": pi,
+        "smith": smith,
     }
     say(
         f"nominal step: LPV overshoot {lpv['overshoot_pct']:.2f} % settling {lpv['settling_time_s']} s"
         f" | PI overshoot {pi['overshoot_pct']:.2f} % settling {pi['settling_time_s']} s"
+        f" | Smith overshoot {smith['overshoot_pct']:.2f} % settling {smith['settling_time_s']} s"
     )
     ovs, sett = lpv["overshoot_pct"], lpv["settling_time_s"]
     claim = {

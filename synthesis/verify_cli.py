@@ -2,9 +2,10 @@
 
 Runs :func:`synthesis.verify.verify_artifact` on ARTIFACT (default: the shipped
 ``synthesis/data/default_design.npz``), prints one progress line per stage and a summary, and
-optionally writes the full report as JSON (``nominal_step.lpv`` / ``nominal_step.pi`` carry the
-DESIGN.md §3 metric names). Exit codes: 0 every check passed, 1 a check failed, 2 bad input (a
-missing, unreadable or corrupt artifact, a bad option value) with one line naming it.
+optionally writes the full report as JSON (``nominal_step.lpv`` / ``.pi`` / ``.smith`` carry the
+DESIGN.md §3 metric names; ``smith`` is the scheduled Smith predictor, lambda 30 s). Exit codes:
+0 every check passed, 1 a check failed, 2 bad input (a missing, unreadable or corrupt artifact, a
+bad option value) with one line naming it.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ def _parser(command: str) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=f"pressor {command}",
         description="Independent checks of a controller artifact on a grid denser than the "
-        "synthesis grid: analysis LMI, frozen delay-system stability, nominal step vs PI.",
+        "synthesis grid: analysis LMI, frozen delay-system stability, nominal step vs PI and "
+        "Smith predictor.",
     )
     p.add_argument("artifact", nargs="?", default=str(DEFAULT_ARTIFACT), help="artifact .npz")
     p.add_argument("--json", metavar="FILE", help="write the full report as JSON to FILE")
@@ -113,10 +115,10 @@ def main(command: str, argv: list[str]) -> int:
         f"(b) delay stability   {ok[stab['stable']]}  max Re(s) "
         f"{_fmt(stab['max_real_part_per_s'], ' 1/s')} at rho {stab['worst_rho']}"
     )
-    for name in ("lpv", "pi"):
+    for name in ("lpv", "pi", "smith"):
         m = step[name]
         print(
-            f"(c) nominal step {name.upper():3s}  overshoot {_fmt(m['overshoot_pct'], ' %')}, "
+            f"(c) nominal step {name.upper():5s}  overshoot {_fmt(m['overshoot_pct'], ' %')}, "
             f"rise {_fmt(m['rise_time_s'], ' s')}, settling {_fmt(m['settling_time_s'], ' s')}, "
             f"max rate {_fmt(m['max_rate_ml_h'], ' ml/h')}"
         )

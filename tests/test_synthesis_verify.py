@@ -92,14 +92,15 @@ def test_cli_density_out_of_range_exits_2(capsys) -> None:
 
 
 @pytest.mark.slow
-def test_shipped_design_report_has_step_metrics_for_lpv_and_pi(tmp_path: Path) -> None:
+def test_shipped_design_report_has_step_metrics_for_lpv_pi_and_smith(tmp_path: Path) -> None:
     out = tmp_path / "verify.json"
     code = main("verify", ["--json", str(out), "--p-dependence", "constant"])
     report = json.loads(out.read_text())
     assert code == (0 if report["passed"] else 1)
-    for name in ("lpv", "pi"):
+    for name in ("lpv", "pi", "smith"):
         for key in STEP_NAMES:
             assert key in report["nominal_step"][name]
+    assert report["nominal_step"]["smith"]["settling_time_s"] == pytest.approx(277.0, abs=1.0)
     pi = report["nominal_step"]["pi"]
     assert pi["rise_time_s"] == pytest.approx(109.5, abs=1.0)
     assert pi["settling_time_s"] == pytest.approx(418.8, abs=1.0)
