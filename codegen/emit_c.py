@@ -1,11 +1,15 @@
 """Emit the C99 target: ``<name>.h`` / ``<name>.c``, prefix ``lpvmap_``.
 
 One scalar typedef (``lpvmap_scalar_t``: ``int32_t`` Q0.31 in fixed-point mode, ``double`` in float
-mode), static const tables, caller-owned ``lpvmap_state_t``, no heap, no division and no libm call
-in the step (reciprocals of the grid spacings are stored; finiteness is tested with ``x - x != 0``).
-The fixed-point step is the integer twin of the Python module's ``Controller(fixed_point=True)`` and
-agrees with it bit for bit (see :mod:`codegen.fixed_point` for formats, accumulators and shifts;
-it relies on arithmetic right shifts of negative values, asserted at compile time). Compiles with
+mode), static const tables, caller-owned ``lpvmap_state_t``, no heap and no libm call in the step
+(reciprocals of the grid spacings are stored; finiteness is tested with ``x - x != 0``). The only
+divisions are the prefilter's (:mod:`synthesis.reference`, emitted when the design enables it), by
+its K and T clamped to strictly positive ranges. The fixed-point step is the integer twin of the
+Python module's ``Controller(fixed_point=True)`` and agrees with it bit for bit (see
+:mod:`codegen.fixed_point` for formats, accumulators and shifts; it relies on arithmetic right
+shifts of negative values, asserted at compile time, and the prefilter's double arithmetic on
+IEEE-754 operations in the Python order, i.e. no contraction into fused multiply-adds: gcc's
+default in an ISO mode such as ``-std=c99`` is ``-ffp-contract=off``). Compiles with
 ``gcc -std=c99 -Wall -Wextra -Werror -pedantic``.
 """
 

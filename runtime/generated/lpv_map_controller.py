@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  e10e5610c2e3d6580aa1afba4d675fdc83b2369e63f5d4c42ed07bef8e8601d5
-Content hash:     90aff5d3aeb3786d90073464c08470958f1fcdff1b8352d0f8d0f858709c2053
+Content hash:     8a8acf1b8fab0cde2f52bb505f27f7cbc10715873fd1e57d6040cf30adbe35f6
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -47,9 +47,9 @@ Error budgets (asserted by tests/test_codegen_*.py):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'f444cfd56c600d39e273bbe76a09edc2c9debbe8fbfbb086a1ecddd137cd72c8'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'd11374e5d20b793f27e40ee82b8c3a612b3ad8a99b467d82ef5a94761dc6c030'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'e10e5610c2e3d6580aa1afba4d675fdc83b2369e63f5d4c42ed07bef8e8601d5'
-CONTENT_HASH = '90aff5d3aeb3786d90073464c08470958f1fcdff1b8352d0f8d0f858709c2053'
+CONTENT_HASH = '8a8acf1b8fab0cde2f52bb505f27f7cbc10715873fd1e57d6040cf30adbe35f6'
 TABLES_SHA256 = 'cb12f22719a954ceba680f370d4758eee69eafac4984829574fc6c30d1d8c32e'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
