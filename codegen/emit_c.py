@@ -1,11 +1,15 @@
 """Emit the C99 target: ``<name>.h`` / ``<name>.c``, prefix ``lpvmap_``.
 
 One scalar typedef (``lpvmap_scalar_t``: ``int32_t`` Q0.31 in fixed-point mode, ``double`` in float
-mode), static const tables, caller-owned ``lpvmap_state_t``, no heap, no division and no libm call
-in the step (reciprocals of the grid spacings are stored; finiteness is tested with ``x - x != 0``).
-The fixed-point step is the integer twin of the Python module's ``Controller(fixed_point=True)`` and
-agrees with it bit for bit (see :mod:`codegen.fixed_point` for formats, accumulators and shifts;
-it relies on arithmetic right shifts of negative values, asserted at compile time). Compiles with
+mode), static const tables, caller-owned ``lpvmap_state_t``, no heap and no libm call in the step
+(reciprocals of the grid spacings are stored; finiteness is tested with ``x - x != 0``). The only
+divisions are the prefilter's (:mod:`synthesis.reference`, emitted when the design enables it), by
+its K and T clamped to strictly positive ranges. The fixed-point step is the integer twin of the
+Python module's ``Controller(fixed_point=True)`` and agrees with it bit for bit (see
+:mod:`codegen.fixed_point` for formats, accumulators and shifts; it relies on arithmetic right
+shifts of negative values, asserted at compile time, and the prefilter's double arithmetic on
+IEEE-754 operations in the Python order, i.e. no contraction into fused multiply-adds: gcc's
+default in an ISO mode such as ``-std=c99`` is ``-ffp-contract=off``). Compiles with
 ``gcc -std=c99 -Wall -Wextra -Werror -pedantic``.
 """
 
@@ -107,8 +111,7 @@ def emit_c(
         "    uint8_t saturated;\n"
         "    uint8_t rho_clamped;\n"
         "    uint8_t rho_rate_limited;\n"
-        "    uint8_t input_invalid;\n"
-        f"}} {P}state_t;\n"
+        "    uint8_t input_invalid;\n" + _reference_fields(spec) + f"}} {P}state_t;\n"
     )
     h.append(f"void {P}reset({P}state_t *s);")
     h.append(f"/** sizeof({P}state_t), for foreign-function callers. */")
@@ -154,12 +157,39 @@ def emit_c(
         src.append(_table(f"{P}tab", ctype, plan.q_tables, entries, lambda x: str(int(x))))
         shifts = ", ".join(str(int(x)) for x in plan.row_shift)
         src.append(f"static const int32_t {P}rshift[{nz - 1}] = {{{shifts}}};\n")
-    src.append(_reset_fn(nz, nk))
+    src.append(_reset_fn(nz, nk, spec.reference is not None))
     src.append(_step_float(spec, nk, nz) if float_mode else _step_fixed(spec, plan, nk, nz, W))
     return {f"{module}.h": "\n".join(h), f"{module}.c": "\n".join(src)}
 
 
-def _reset_fn(nz: int, nk: int) -> str:
+def _reference_fields(spec: EmitSpec) -> str:
+    """State of the two-degree-of-freedom prefilter (synthesis.reference), when the design has one."""
+    if spec.reference is None:
+        return ""
+    lam, frac, k_min = spec.reference
+    return (
+        f"    /* prefilter (lambda {lam!r} s, pump fraction {frac!r}, K floor {k_min!r}), double */\n"
+        "    double m0;                       /* anchor: MAP at the first valid sample, mmHg */\n"
+        "    double y0;                       /* delay-free model MAP deviation, mmHg */\n"
+        "    double ym;                       /* delayed model MAP deviation, mmHg */\n"
+        "    double rm;                       /* last reference MAP, mmHg */\n"
+        "    double uff;                      /* last feedforward, ml/h */\n"
+        f"    double pbuf[{PU}NBUF];            /* past feedforward (ring buffer), ml/h */\n"
+        f"    double qbuf[{PU}NBUF];            /* past delay-free model MAP (ring buffer), mmHg */\n"
+        "    int32_t phead;\n"
+        "    int32_t anchored;\n"
+    )
+
+
+def _reset_fn(nz: int, nk: int, reference: bool) -> str:
+    pf = (
+        "    s->m0 = s->y0 = s->ym = s->rm = s->uff = 0.0;\n"
+        f"    for (j = 0; j < {PU}NBUF; ++j) s->pbuf[j] = s->qbuf[j] = 0.0;\n"
+        "    s->phead = 0;\n"
+        "    s->anchored = 0;\n"
+        if reference
+        else ""
+    )
     return f"""uint32_t {P}state_size(void)
 {{
     return (uint32_t)sizeof({P}state_t);
@@ -176,7 +206,7 @@ void {P}reset({P}state_t *s)
     s->started = 0;
     s->out = 0.0;
     s->saturated = s->rho_clamped = s->rho_rate_limited = s->input_invalid = 0;
-}}
+{pf}}}
 """
 
 
@@ -213,13 +243,57 @@ def _rho_c(fixed: bool) -> str:
     return "\n".join(L)
 
 
-def _input_c() -> str:
+def _reference_c() -> str:
+    """The prefilter, the same double operations in the same order as the Python module."""
+    return f"""
+    if (!s->anchored) {{ s->m0 = map_mmhg; s->anchored = 1; }}
+    rr = target_mmhg - s->m0;
+    kp = K;
+    if (kp < {PU}PF_KLO) kp = {PU}PF_KLO;
+    else if (kp > {PU}HI0) kp = {PU}HI0;
+    tp = T;
+    if (tp < {PU}LO1) tp = {PU}LO1;
+    else if (tp > {PU}HI1) tp = {PU}HI1;
+    dp = tau;
+    if (dp < {PU}LO2) dp = {PU}LO2;
+    else if (dp > {PU}HI2) dp = {PU}HI2;
+    ik = 1.0 / kp;
+    dp = dp * {PU}INV_TS;
+    n = (int32_t)dp;
+    fdp = dp - n;
+    i = s->phead - n;
+    if (i < 0) i += {PU}NBUF;
+    j = i - 1;
+    if (j < 0) j += {PU}NBUF;
+    s->qbuf[s->phead] = s->y0;
+    pr = s->y0 + (s->ym - (s->qbuf[i] + (s->qbuf[j] - s->qbuf[i]) * fdp)); /* Smith correction */
+    uff = (pr + tp * (rr - pr) * {PU}PF_INV_LAMBDA) * ik;
+    cap = {PU}PF_UMAX;
+    need = rr * ik;
+    if (need > cap) cap = need > {PU}MAX_RATE_ML_H ? {PU}MAX_RATE_ML_H : need;
+    if (uff > cap) uff = cap;
+    else if (uff < 0.0) uff = 0.0;
+    hs = {PU}PF_TS / tp;
+    cs = hs * (1.0 - hs * (0.5 - hs * {PU}PF_SIXTH)); /* 1 - exp(-Ts/T) */
+    s->y0 = s->y0 + cs * (kp * uff - s->y0);
+    s->pbuf[s->phead] = uff;
+    ud = s->pbuf[i] + (s->pbuf[j] - s->pbuf[i]) * fdp;
+    s->phead += 1;
+    if (s->phead == {PU}NBUF) s->phead = 0;
+    rm = s->m0 + s->ym;
+    s->ym = s->ym + cs * (kp * ud - s->ym);
+    s->rm = rm;
+    s->uff = uff;
+    e = rm - map_mmhg;"""
+
+
+def _input_c(reference: bool) -> str:
     return f"""    e = target_mmhg - map_mmhg;
     if (e - e != 0.0 || K - K != 0.0 || T - T != 0.0 || tau - tau != 0.0) {{
         s->input_invalid = 1;
         return s->out;
     }}
-    s->input_invalid = 0;
+    s->input_invalid = 0;{_reference_c() if reference else ""}
     if (e > {PU}E_LIM) e = {PU}E_LIM;
     else if (e < -{PU}E_LIM) e = -{PU}E_LIM;"""
 
@@ -248,11 +322,12 @@ def _delay_c(fixed: bool, nk: int, nz: int, W: int) -> str:
     v[{nz + nk}] = ve;"""
 
 
-def _output_c(fixed: bool) -> str:
+def _output_c(fixed: bool, reference: bool) -> str:
+    total = "(un + uffs)" if reference else "un"
     if fixed:
-        conv = f"out = (double)un * {PU}U_Q_TO_ML_H;"
+        conv = f"out = (double){total} * {PU}U_Q_TO_ML_H;"
     else:
-        conv = f"out = un * {PU}U_SCALE;"
+        conv = f"out = {total} * {PU}U_SCALE;"
     return f"""    if (out > {PU}MAX_RATE_ML_H) out = {PU}MAX_RATE_ML_H;
     else if (out < 0.0) out = 0.0;
     s->out = out;
@@ -263,8 +338,28 @@ def _output_c(fixed: bool) -> str:
 """.replace("    if (out >", f"    {conv}\n    if (out >", 1)
 
 
+def _reference_decl(reference: bool, share: str) -> str:
+    if not reference:
+        return ""
+    return (
+        "    double rr, kp, tp, dp, ik, pr, uff, cap, need, hs, cs, fdp, ud, rm;\n"
+        f"    {share} uffs, uhi;\n"
+    )
+
+
+def _ff_share_c(reference: bool, fixed: bool) -> str:
+    """The feedforward's share of the command state's range (the feedback is clamped to the rest)."""
+    if not reference:
+        return ""
+    if fixed:
+        return f"    uffs = (int64_t)(uff * {PU}U_TO_Q);\n    uhi = {PU}U_MAX_Q - uffs;\n"
+    return f"    uffs = uff * {PU}INV_U_SCALE;\n    uhi = {PU}U_MAX_S - uffs;\n"
+
+
 def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) -> str:
     nt, na = spec.counts[1], spec.counts[2]
+    ref = spec.reference is not None
+    uhi, ulo = ("uhi", "-uffs") if ref else (f"{PU}U_MAX_Q", "0")
     ctype = "int16_t" if plan.coef_bits <= 15 else "int32_t"
     return f"""double {P}step({P}state_t *s, double map_mmhg, double target_mmhg, double K, double T,
                   double tau)
@@ -275,7 +370,7 @@ def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) 
     int64_t acc, dz[{nz - 1}], un, dxe, xs;
     const {ctype} *cp[8];
     uint8_t clamped = 0, limited = 0, freeze = 0;
-{_input_c()}
+{_reference_decl(ref, "int64_t")}{_input_c(ref)}
     x = e * {PU}E_TO_Q;
     if (x > 2147483647.0) x = 2147483647.0;
     else if (x < -2147483647.0) x = -2147483647.0;
@@ -310,9 +405,9 @@ def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) 
     for (k = 0; k < {nz - 1}; ++k) dz[k] = 0;
     for (k = 0; k < {PU}NENT; ++k) dz[{P}row[k]] += (int64_t)m[k] * v[{P}col[k]];
     for (k = 0; k < {nz - 1}; ++k) dz[k] = (dz[k] + (INT64_C(1) << ({P}rshift[k] - 1))) >> {P}rshift[k];
-    un = (int64_t)s->z[{nk}] + dz[{nk}];
-    if (un > {PU}U_MAX_Q) {{ un = {PU}U_MAX_Q; freeze = ve > 0; s->saturated = 1; }}
-    else if (un < 0) {{ un = 0; freeze = ve < 0; s->saturated = 1; }}
+{_ff_share_c(ref, True)}    un = (int64_t)s->z[{nk}] + dz[{nk}];
+    if (un > {uhi}) {{ un = {uhi}; freeze = ve > 0; s->saturated = 1; }}
+    else if (un < {ulo}) {{ un = {ulo}; freeze = ve < 0; s->saturated = 1; }}
     else s->saturated = 0;
     s->z[{nk}] = (int32_t)un;
     if (!freeze) {{
@@ -325,11 +420,13 @@ def _step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) 
             s->z[k] = (int32_t)xs;
         }}
     }}
-{_output_c(True)}"""
+{_output_c(True, ref)}"""
 
 
 def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
     nt, na = spec.counts[1], spec.counts[2]
+    ref = spec.reference is not None
+    uhi, ulo = ("uhi", "-uffs") if ref else (f"{PU}U_MAX_S", "0.0")
     return f"""double {P}step({P}state_t *s, double map_mmhg, double target_mmhg, double K, double T,
                   double tau)
 {{
@@ -338,7 +435,7 @@ def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
     int32_t idx[3], n, h, i, j, k, c, b, lo, hi, mid;
     const double *cp;
     uint8_t clamped = 0, limited = 0, freeze = 0;
-{_input_c()}
+{_reference_decl(ref, "double")}{_input_c(ref)}
     ve = e * {PU}E_TO_S;
 {_rho_c(False)}
     t00 = (1.0 - fr[0]) * (1.0 - fr[1]);
@@ -362,9 +459,9 @@ def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
         for (k = 0; k < {PU}NENT; ++k) part[{P}row[k]] += cp[k] * v[{P}col[k]];
         for (k = 0; k < {nz - 1}; ++k) dz[k] += w[c] * part[k];
     }}
-    un = s->z[{nk}] + dz[{nk}];
-    if (un > {PU}U_MAX_S) {{ un = {PU}U_MAX_S; freeze = ve > 0.0; s->saturated = 1; }}
-    else if (un < 0.0) {{ un = 0.0; freeze = ve < 0.0; s->saturated = 1; }}
+{_ff_share_c(ref, False)}    un = s->z[{nk}] + dz[{nk}];
+    if (un > {uhi}) {{ un = {uhi}; freeze = ve > 0.0; s->saturated = 1; }}
+    else if (un < {ulo}) {{ un = {ulo}; freeze = ve < 0.0; s->saturated = 1; }}
     else s->saturated = 0;
     s->z[{nk}] = un;
     if (!freeze) {{
@@ -376,4 +473,4 @@ def _step_float(spec: EmitSpec, nk: int, nz: int) -> str:
             s->z[k] = xs;
         }}
     }}
-{_output_c(False)}"""
+{_output_c(False, ref)}"""

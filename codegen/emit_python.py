@@ -4,7 +4,10 @@ The emitted module has a float mode and a bit-exact integer mode (the C target's
 the same algorithm (see :mod:`codegen.fixed_point` for the integer formats):
 
 1. e = target - MAP; any non-finite input (or e) holds the last command, updates nothing and sets
-   ``status.input_invalid``; e is clamped to +-E_LIM.
+   ``status.input_invalid``. With the design's two-degree-of-freedom prefilter
+   (:mod:`synthesis.reference`, emitted only when the artifact enables it) e = r_m - MAP instead,
+   r_m and the feedforward u_ff from the scheduled model, in double in both modes. e is clamped to
+   +-E_LIM.
 2. rho -> grid coordinates s_i = (rho_i - lo_i) * inv_h_i, clamped to [0, n_i - 1] (never
    extrapolated, ``rho_clamped``), then rate-limited to the synthesis bounds (``rho_rate_limited``;
    the first step after reset takes rho as is).
@@ -17,7 +20,9 @@ the same algorithm (see :mod:`codegen.fixed_point` for the integer formats):
    frozen this step (conditional integration); states are saturated to their Q0.31 range in both
    modes. The freeze is keyed on the sign of e, not of du: keyed on du, a design whose u_a starts
    negative after a target step (u pinned at 0, du < 0) froze x_e for good and never infused.
-7. Return u (ml/h), clamped once more to [0, max_rate] after the unit conversion.
+   With the prefilter, u is the feedback share, clamped to [-u_ff, max_rate - u_ff], so the same
+   rule freezes the feedback while the total command sits at a limit.
+7. Return u (+ u_ff) in ml/h, clamped once more to [0, max_rate] after the unit conversion.
 """
 
 from __future__ import annotations
@@ -56,6 +61,9 @@ class EmitSpec:
         Provenance for the header.
     budgets
         Name -> (value, description) error budgets stated in the header.
+    reference
+        (lambda_s, pump_fraction, k_min) of the two-degree-of-freedom prefilter
+        (:mod:`synthesis.reference`), or None: the controller then sees the target directly.
     """
 
     nodes: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
@@ -67,6 +75,7 @@ class EmitSpec:
     content_hash: str
     command: str
     budgets: dict[str, tuple[float, str]]
+    reference: tuple[float, float, float] | None = None
 
     @property
     def lo(self) -> tuple[float, float, float]:
@@ -122,6 +131,15 @@ def derived_constants(spec: EmitSpec, plan: FixedPointPlan) -> dict[str, float |
         c[f"RSTEP{i}"] = float(spec.rate_bounds[i] * ts)
     for i in range(nz - 1):
         c[f"F{i}"] = int(plan.row_shift[i])
+    if spec.reference is not None:
+        lam, frac, k_min = spec.reference
+        c["PF_KLO"] = float(k_min)
+        c["PF_INV_LAMBDA"] = 1.0 / lam
+        c["PF_UMAX"] = frac * spec.max_rate_ml_h
+        c["PF_TS"] = float(ts)
+        c["PF_SIXTH"] = 1.0 / 6.0
+        c["INV_U_SCALE"] = 1.0 / float(plan.state_scale[spec.n_k])
+        c["U_TO_Q"] = 2.0**31 / float(plan.state_scale[spec.n_k])
     return c
 
 
@@ -179,7 +197,7 @@ from a ring buffer of NBUF samples with linear interpolation, anti-windup by con
 integration at the pump limits [0, {spec.max_rate_ml_h}] ml/h. Non-finite input holds the last
 command.
 
-Scaling (power of two, common to all nodes): {scales}; e: {plan.e_scale:g} mmHg (clamp).
+{_reference_doc(spec)}Scaling (power of two, common to all nodes): {scales}; e: {plan.e_scale:g} mmHg (clamp).
 Q-formats ({plan.fmt}): states, e and x_d Q0.31 int32 (saturating); grid coordinates Q11.20;
 weights Q{31 - plan.weight_bits}.{plan.weight_bits}; coefficients |q| <= 2^{plan.coef_bits}-1 with
 per-row shifts {plan.row_shift.tolist()}; 64-bit accumulators; arithmetic right shifts; rounding
@@ -189,6 +207,24 @@ Error budgets (asserted by tests/test_codegen_*.py):
 {budgets}
 """
 '''
+
+
+def _reference_doc(spec: EmitSpec) -> str:
+    """Header paragraph on the prefilter (empty when the design has none)."""
+    if spec.reference is None:
+        return ""
+    lam, frac, k_min = spec.reference
+    return f"""Two degrees of freedom (synthesis.reference; lambda {lam!r} s, pump fraction {frac!r},
+K floor {k_min!r} mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
+MAP after reset generates the reference MAP r_m and the feedforward
+u_ff = clamp((p + T (dr - p) / lambda) / K, 0, cap), with p = y0 + y_m - y0(t - tau) (Smith
+prediction), dr = target - anchor and cap = max(fraction * MAX_RATE_ML_H, min(MAX_RATE_ML_H,
+dr / K)). The model runs on K clamped to [K floor, box upper K] and T, tau clamped to the box (not
+rate limited), in double in both modes (two divisions, by the clamped K and T). The controller
+above regulates e = r_m - MAP; its command state is clamped to [-u_ff, MAX_RATE_ML_H - u_ff]
+(conditional integration against the total) and the output is u_fb + u_ff.
+
+"""
 
 
 def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
@@ -220,6 +256,11 @@ def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
         add(f"_NODES{i} = GRID_NODES[{i}]")
         add(f"_INVW{i} = ({', '.join(py_float(x) for x in spec.inv_widths(i))},)  # 1/width")
     add(f"RATE_BOUNDS = ({', '.join(py_float(x) for x in spec.rate_bounds)})  # per s")
+    add(f"REFERENCE_ENABLED = {spec.reference is not None}")
+    if spec.reference is not None:
+        add(f"REFERENCE_LAMBDA_S = {py_float(spec.reference[0])}")
+        add(f"REFERENCE_PUMP_FRACTION = {py_float(spec.reference[1])}")
+        add(f"REFERENCE_K_MIN = {py_float(spec.reference[2])}  # mmHg/(ml/h)")
     add(f"DELAY_BUFFER_LEN = {c['NBUF']}")
     add(f"N_K = {nk}")
     add(f"E_LIM_MMHG = {py_float(plan.e_scale)}")
@@ -292,7 +333,7 @@ class Controller:
         zero = 0 if self.fixed_point else 0.0
         self._z = [zero] * '''
         + str(nz)
-        + '''
+        + """
         self._buf = [[zero] * _NBUF for _ in range(N_K)]
         self._head = 0
         self._r = [0.0, 0.0, 0.0]
@@ -300,17 +341,113 @@ class Controller:
         self._out = 0.0
         st = self._status
         st.saturated = st.rho_clamped = st.rho_rate_limited = st.input_invalid = False
-
+"""
+        + _reset_reference(spec)
+        + '''
     def state(self):
         """Internal state as a tuple (z..., scheduled rho K, T, tau) for tests and logging."""
         return tuple(self._z) + tuple(self._r)
 '''
+        + _reference_accessor(spec)
     )
     add(_float_step(spec, entries, offs, nk, nz))
     add(_fixed_step(spec, entries, offs, nk, nz))
     text = "\n".join(out) + "\n"
     digest = module_sha256(text)
     return text.replace(MODULE_SHA_PREFIX + "''", f"{MODULE_SHA_PREFIX}{digest!r}", 1)
+
+
+def _reset_reference(spec: EmitSpec) -> str:
+    if spec.reference is None:
+        return ""
+    return """        self._anchored = False
+        self._m0 = 0.0
+        self._y0 = 0.0
+        self._ym = 0.0
+        self._pbuf = [0.0] * _NBUF
+        self._qbuf = [0.0] * _NBUF
+        self._phead = 0
+        self._rm = 0.0
+        self._uff = 0.0
+"""
+
+
+def _reference_accessor(spec: EmitSpec) -> str:
+    if spec.reference is None:
+        return ""
+    return '''
+    def reference(self):
+        """(anchor MAP mmHg, reference MAP r_m mmHg, feedforward u_ff ml/h) of the last step."""
+        return (self._m0, self._rm, self._uff)
+'''
+
+
+def _clamp_lines(var: str, src: str, i: int, lo: str = "") -> list[str]:
+    lo = lo or f"_LO{i}"
+    indent = "        "
+    return [
+        f"{indent}{var} = {src}",
+        f"{indent}if {var} < {lo}:",
+        f"{indent}    {var} = {lo}",
+        f"{indent}elif {var} > _HI{i}:",
+        f"{indent}    {var} = _HI{i}",
+    ]
+
+
+def _reference_lines() -> list[str]:
+    """The prefilter (synthesis.reference), in double in both modes; sets e = r_m - MAP, uff."""
+    L = []
+    L.append("        if not self._anchored:")
+    L.append("            self._m0 = map_mmhg")
+    L.append("            self._anchored = True")
+    L.append("        m0 = self._m0")
+    L.append("        rr = target_mmhg - m0")
+    L += _clamp_lines("kp", "K", 0, lo="_PF_KLO")
+    L += _clamp_lines("tp", "T", 1)
+    L += _clamp_lines("dp", "tau", 2)
+    L.append("        ik = 1.0 / kp")
+    L.append("        y0 = self._y0")
+    L.append("        ym = self._ym")
+    L.append("        dp = dp * _INV_TS")
+    L.append("        n = int(dp)")
+    L.append("        fd = dp - n")
+    L.append("        ph = self._phead")
+    L.append("        i = ph - n")
+    L.append("        if i < 0:")
+    L.append("            i += _NBUF")
+    L.append("        j = i - 1")
+    L.append("        if j < 0:")
+    L.append("            j += _NBUF")
+    L.append("        qb = self._qbuf")
+    L.append("        qb[ph] = y0")
+    L.append("        a = qb[i]")
+    L.append("        pr = y0 + (ym - (a + (qb[j] - a) * fd))  # Smith correction for a moving tau")
+    L.append("        uff = (pr + tp * (rr - pr) * _PF_INV_LAMBDA) * ik")
+    L.append("        cap = _PF_UMAX")
+    L.append("        need = rr * ik")
+    L.append("        if need > cap:")
+    L.append("            cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need")
+    L.append("        if uff > cap:")
+    L.append("            uff = cap")
+    L.append("        elif uff < 0.0:")
+    L.append("            uff = 0.0")
+    L.append("        hs = _PF_TS / tp")
+    L.append("        cs = hs * (1.0 - hs * (0.5 - hs * _PF_SIXTH))  # 1 - exp(-Ts/T)")
+    L.append("        self._y0 = y0 + cs * (kp * uff - y0)")
+    L.append("        pb = self._pbuf")
+    L.append("        pb[ph] = uff")
+    L.append("        a = pb[i]")
+    L.append("        ud = a + (pb[j] - a) * fd")
+    L.append("        ph += 1")
+    L.append("        if ph == _NBUF:")
+    L.append("            ph = 0")
+    L.append("        self._phead = ph")
+    L.append("        self._ym = ym + cs * (kp * ud - ym)")
+    L.append("        rm = m0 + ym")
+    L.append("        self._rm = rm")
+    L.append("        self._uff = uff")
+    L.append("        e = rm - map_mmhg")
+    return L
 
 
 def _rho_block(fixed: bool) -> list[str]:
@@ -368,7 +505,7 @@ def _entry_rows(entries: list[tuple[int, int]], nz: int) -> dict[int, list[tuple
     return rows
 
 
-def _common_head(fixed: bool) -> list[str]:
+def _common_head(fixed: bool, reference: bool) -> list[str]:
     L = []
     sig = "(self, map_mmhg, target_mmhg, K, T, tau)"
     L.append(f"    def {'_step_fixed' if fixed else '_step_float'}{sig}:")
@@ -381,6 +518,8 @@ def _common_head(fixed: bool) -> list[str]:
     L.append("            st.input_invalid = True")
     L.append("            return self._out")
     L.append("        st.input_invalid = False")
+    if reference:
+        L += _reference_lines()
     L.append("        if e > _E_LIM:")
     L.append("            e = _E_LIM")
     L.append("        elif e < -_E_LIM:")
@@ -458,20 +597,29 @@ def _delay_lines(fixed: bool, nk: int) -> list[str]:
     return L
 
 
-def _update_lines(fixed: bool, nk: int) -> list[str]:
-    """Anti-windup, state update with saturation, output."""
+def _update_lines(fixed: bool, nk: int, reference: bool) -> list[str]:
+    """Anti-windup, state update with saturation, output. With the prefilter the command state is
+    the feedback share, clamped so that feedback + feedforward stays in [0, max_rate]."""
     L = []
     lo, hi = ("-_QMAX", "_QMAX") if fixed else ("-1.0", "1.0")
     umax = "_U_MAX_Q" if fixed else "_U_MAX_S"
     zero = "0" if fixed else "0.0"
+    ulo = zero
+    if reference:
+        if fixed:
+            L.append("        uffs = int(uff * _U_TO_Q)")
+        else:
+            L.append("        uffs = uff * _INV_U_SCALE")
+        L.append(f"        uhi = {umax} - uffs")
+        umax, ulo = "uhi", "-uffs"
     L.append(f"        un = z[{nk}] + d{nk}")
     L.append("        freeze = False")
     L.append(f"        if un > {umax}:")
     L.append(f"            un = {umax}")
     L.append(f"            freeze = v_e > {zero}")
     L.append("            st.saturated = True")
-    L.append(f"        elif un < {zero}:")
-    L.append(f"            un = {zero}")
+    L.append(f"        elif un < {ulo}:")
+    L.append(f"            un = {ulo}")
     L.append(f"            freeze = v_e < {zero}")
     L.append("            st.saturated = True")
     L.append("        else:")
@@ -490,10 +638,11 @@ def _update_lines(fixed: bool, nk: int) -> list[str]:
         L.append(f"            elif x < {lo}:")
         L.append(f"                x = {lo}")
         L.append(f"            z[{s}] = x")
+    total = "(un + uffs)" if reference else "un"
     if fixed:
-        L.append("        out = un * _U_Q_TO_ML_H")
+        L.append(f"        out = {total} * _U_Q_TO_ML_H")
     else:
-        L.append("        out = un * _U_SCALE")
+        L.append(f"        out = {total} * _U_SCALE")
     L.append("        if out > MAX_RATE_ML_H:")
     L.append("            out = MAX_RATE_ML_H")
     L.append("        elif out < 0.0:")
@@ -506,7 +655,7 @@ def _update_lines(fixed: bool, nk: int) -> list[str]:
 
 
 def _float_step(spec, entries, offs, nk, nz) -> str:
-    L = _common_head(False)
+    L = _common_head(False, spec.reference is not None)
     L.append("        v_e = e * _E_TO_S")
     L += _rho_block(False)
     L += _corner_lines(False)
@@ -523,12 +672,12 @@ def _float_step(spec, entries, offs, nk, nz) -> str:
             if rows[r]:
                 expr = " + ".join(f"m{p} * v{j}" for p, j in rows[r])
                 L.append(f"        d{r} += w{ci} * ({expr})")
-    L += _update_lines(False, nk)
+    L += _update_lines(False, nk, spec.reference is not None)
     return "\n".join(L) + "\n"
 
 
 def _fixed_step(spec, entries, offs, nk, nz) -> str:
-    L = _common_head(True)
+    L = _common_head(True, spec.reference is not None)
     L.append("        v_e = int(e * _E_TO_Q)")
     L.append("        if v_e > _QMAX:")
     L.append("            v_e = _QMAX")
@@ -549,5 +698,5 @@ def _fixed_step(spec, entries, offs, nk, nz) -> str:
             L.append(f"        a{r}_{p} = m * v{j}")
         acc = " + ".join(f"a{r}_{p}" for p, _ in rows[r]) or "0"
         L.append(f"        d{r} = ({acc} + (1 << (_F{r} - 1))) >> _F{r}")
-    L += _update_lines(True, nk)
+    L += _update_lines(True, nk, spec.reference is not None)
     return "\n".join(L) + "\n"

@@ -92,6 +92,9 @@ class LoadedDesign:
         Pump limit (ml/h).
     synthesis_counts
         Node counts of the synthesis grid (the tabulation search starts there).
+    reference
+        (lambda_s, pump_fraction, k_min) of the design's two-degree-of-freedom prefilter
+        (``synthesis.reference``), or None when the artifact has none or it is disabled.
     """
 
     sha256: str
@@ -103,6 +106,7 @@ class LoadedDesign:
     lambda_: float
     max_rate_ml_h: float
     synthesis_counts: tuple[int, int, int]
+    reference: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -177,6 +181,9 @@ def load_design(path: str | Path) -> LoadedDesign:
         lambda_=float(art.lambda_),
         max_rate_ml_h=float(art.max_rate_ml_h),
         synthesis_counts=tuple(len(g) for g in art.grid),  # type: ignore[arg-type]
+        reference=(ref.lambda_s, ref.pump_fraction, ref.k_min)
+        if (ref := art.reference).enabled
+        else None,
     )
 
 
@@ -244,6 +251,7 @@ def emit(
         content_hash=chash,
         command=command_line(design.display_path, target, plan.fmt),
         budgets=BUDGETS,
+        reference=design.reference,
     )
     thash = array_hash(plan.q_tables, plan.scaled_tables)
     if target == "python":

@@ -6,7 +6,9 @@ Layout (``numpy.savez``, no pickled objects):
   [mmHg/(ml/h)], T [s], τ [s]), ``rate_bounds``, ``grid`` (3 lists, physical units), ``basis``,
   ``model`` (Ω, Λ, φ, ξ, η, box, rates, pump max), ``design`` (full config), ``scaling``,
   ``lambda2``, ``lambda3``, ``gamma``, ``solver`` (name, status, times, iterations),
-  ``verification`` (``null`` until :func:`with_verification` fills it), ``created_by``.
+  ``verification`` (``null`` until :func:`with_verification` fills it), ``created_by``, and
+  optionally ``reference`` (``enabled``, ``lambda_s``, ``pump_fraction``, ``k_min``: the 2-DOF
+  prefilter of :mod:`synthesis.reference`; absent in older artifacts, read as disabled).
 * ``coef_<name>`` — decision-variable basis coefficients (scaled coordinates; see
   :mod:`synthesis.lmi`): P, Q, R, X, Y, Ah, Adh, Bh, Ch, Cdh, Dk.
 * ``node_<name>`` — the reconstructed controller at the grid nodes, physical units (time in s),
@@ -32,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from synthesis.config import ModelConfig
+from synthesis.reference import ReferenceConfig
 
 FORMAT_VERSION = 1
 
@@ -137,6 +140,13 @@ class ControllerArtifact:
     def gamma(self) -> float:
         """Guaranteed L2 gain bound γ on the synthesis grid."""
         return float(self.metadata["gamma"])
+
+    @property
+    def reference(self) -> ReferenceConfig:
+        """The design's prefilter (:class:`~synthesis.reference.ReferenceConfig`); disabled when the
+        artifact carries none."""
+        ref = self.metadata.get("reference")
+        return ReferenceConfig() if ref is None else ReferenceConfig.from_dict(ref)
 
     @property
     def model_config(self) -> ModelConfig:
@@ -247,6 +257,15 @@ def _validate(
         ModelConfig.from_dict(meta["model"])
     except (TypeError, ValueError, KeyError) as exc:
         raise _err(path, "metadata", f"malformed ({exc})") from None
+    if meta.get("reference") is not None:
+        ref = meta["reference"]
+        keys = {"enabled", "lambda_s", "pump_fraction", "k_min"}
+        if not isinstance(ref, dict) or set(ref) != keys:
+            raise _err(path, "metadata.reference", f"must have exactly the keys {sorted(keys)}")
+        try:
+            ReferenceConfig.from_dict(ref)
+        except (TypeError, ValueError) as exc:
+            raise _err(path, "metadata.reference", str(exc)) from None
     if box.shape != (3, 2) or not np.all(np.isfinite(box)) or not np.all(box[:, 0] < box[:, 1]):
         raise _err(path, "metadata.box", "must be a finite 3x2 array with lower < upper")
     if rates.shape != (3,) or not np.all(np.isfinite(rates)) or np.any(rates < 0):

@@ -13,6 +13,10 @@ A design is described by a TOML file with the sections below (all physical units
                  ("vertices" | "bound"), mean_gamma_weight
     [line_search] lambda2 = [...], lambda3 = [...]   candidate values for ``--lambda-search``
     [pump]       max_rate_ml_h
+    [reference]  enabled (bool), lambda_s (s, in [1, 1000]), pump_fraction (in [0.1, 1]),
+                 k_min (mmHg/(ml/h), in [0.001, box K upper])
+                 the two-degree-of-freedom prefilter of :mod:`synthesis.reference` (outside the
+                 certified loop: it changes the reference and adds a feedforward, not the LMIs)
 
 Every missing key takes the shipped default (``synthesis/data/default_design.toml``). Any bad
 value raises :class:`ConfigError` whose message names the file, the field, the value and the
@@ -29,6 +33,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from synthesis.reference import K_MIN_RANGE, LAMBDA_RANGE_S, PUMP_FRACTION_RANGE, ReferenceConfig
 
 #: Nominal plant the default box must contain (DESIGN.md §4).
 NOMINAL_RHO = (0.55, 150.0, 40.0)
@@ -145,11 +151,12 @@ class SolverConfig:
 
 @dataclass(frozen=True)
 class DesignConfig:
-    """A full design: model, grid, solver settings and the line-search candidates."""
+    """A full design: model, grid, solver settings, line-search candidates and the prefilter."""
 
     model: ModelConfig
     grid_points: tuple[int, int, int]
     solver: SolverConfig
+    reference: ReferenceConfig = field(default_factory=ReferenceConfig)
     lambda2_candidates: tuple[float, ...] = (0.5, 1.0, 2.0)
     lambda3_candidates: tuple[float, ...] = (0.25, 0.5, 1.0)
     source: str = "<default>"
@@ -181,6 +188,7 @@ class DesignConfig:
                 "lambda2": list(self.lambda2_candidates),
                 "lambda3": list(self.lambda3_candidates),
             },
+            "reference": self.reference.to_dict(),
         }
 
 
@@ -336,6 +344,32 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
             raise _fail(source, f, val, "a list of 1 to 20 numbers in [1e-4, 1e4]")
         cands.append(tuple(_check_range(source, f, v, 1e-4, 1e4) for v in val))
 
+    enabled = _get(table, "reference", "enabled", default)
+    if not isinstance(enabled, bool):
+        raise _fail(source, "reference.enabled", enabled, "true or false")
+    reference = ReferenceConfig(
+        enabled=enabled,
+        lambda_s=_check_range(
+            source,
+            "reference.lambda_s",
+            _get(table, "reference", "lambda_s", default),
+            *LAMBDA_RANGE_S,
+        ),
+        pump_fraction=_check_range(
+            source,
+            "reference.pump_fraction",
+            _get(table, "reference", "pump_fraction", default),
+            *PUMP_FRACTION_RANGE,
+        ),
+        k_min=_check_range(
+            source,
+            "reference.k_min",
+            _get(table, "reference", "k_min", default),
+            K_MIN_RANGE[0],
+            min(K_MIN_RANGE[1], float(box[0, 1])),
+        ),
+    )
+
     model = ModelConfig(
         omega=omega,
         lambda_=lam,
@@ -360,6 +394,7 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         model=model,
         grid_points=grid,
         solver=solver,
+        reference=reference,
         lambda2_candidates=cands[0],
         lambda3_candidates=cands[1],
         source=source,

@@ -72,6 +72,7 @@ def to_artifact(
         "basis": basis.BASIS_NAME,
         "model": cfg.model.to_dict(),
         "design": cfg.to_dict(),
+        "reference": cfg.reference.to_dict(),
         "scaling": {
             "time_s": sc.time_s,
             "sx": sc.sx.tolist(),

@@ -115,6 +115,7 @@ def main(command: str, argv: list[str]) -> int:
         f"(b) delay stability   {ok[stab['stable']]}  max Re(s) "
         f"{_fmt(stab['max_real_part_per_s'], ' 1/s')} at rho {stab['worst_rho']}"
     )
+    print(f"(c) nominal step LPV structure: {step['lpv']['structure']}")
     for name in ("lpv", "pi", "smith"):
         m = step[name]
         print(
