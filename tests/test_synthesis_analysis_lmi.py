@@ -113,13 +113,16 @@ def _pi_loops(kp: float) -> tuple[list, np.ndarray, tuple]:
     return systems, rho, args
 
 
+@pytest.mark.parametrize("rate_bound", [False, True])
 @pytest.mark.parametrize("kp", [3.0, 15.0])
-def test_working_set_gives_the_verdict_of_the_all_points_solve_on_pi_loops(kp: float) -> None:
+def test_working_set_gives_the_verdict_of_the_all_points_solve_on_pi_loops(
+    kp: float, rate_bound: bool
+) -> None:
     # kp = 3: the shipped PI, certified; kp = 15: past its delay margin, not certifiable
     systems, rho, (rate, dtau, tau_max) = _pi_loops(kp)
-    kw = dict(p_dependence="affine", time_scale_s=40.0, gamma_cap=1e3)
+    kw = dict(p_dependence="quadratic", time_scale_s=40.0, gamma_cap=1e3)
     full = analyse(systems, rho, rate, dtau, tau_max, **kw)
-    fast = analyse(systems, rho, rate, dtau, tau_max, working_set=2, **kw)
+    fast = analyse(systems, rho, rate, dtau, tau_max, working_set=2, rate_bound=rate_bound, **kw)
     assert full.certified == fast.certified == (kp == 3.0)
     assert fast.n_lmis == full.n_lmis == 12 * 8  # every point, every rate vertex re-checked
     if fast.certified:
@@ -148,3 +151,18 @@ def test_solver_progress_reports_iterations_and_residuals() -> None:
     iters = [ln for ln in lines if " iter " in ln]
     assert len(iters) >= 3
     assert all("gap" in ln and "pres" in ln and "dres" in ln for ln in iters)
+
+
+def test_rate_bound_form_too_conservative_falls_back_to_the_vertex_form_and_certifies() -> None:
+    # x' = -(1 + 0.5 rho) x + 0.45 x(t - tau(rho)), tau = 0.5 + 0.45 rho moving at 0.45 s/s: the
+    # bound form charges the worst dP/dt and the worst dtau/dt at once (they come from the same
+    # rho-dot, opposite signs help each other at the vertices) and fails; the vertices certify
+    rho = np.linspace(-1.0, 1.0, 3)[:, None]
+    systems = [_scalar(-(1.0 + 0.5 * r), 0.45, 0.5 + 0.45 * r) for r in rho[:, 0]]
+    args = (systems, rho, np.array([1.0]), np.array([0.45]), 0.95)
+    kw = dict(p_dependence="quadratic", gamma_cap=50.0)
+    full = analyse(*args, **kw)
+    fast = analyse(*args, working_set=1, rate_bound=True, **kw)
+    assert full.certified and fast.certified
+    assert any("rate-bound form not certified" in note for note in fast.notes)
+    assert np.all(fast.margins > 0) and fast.n_lmis == 3 * 2
