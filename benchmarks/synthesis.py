@@ -77,7 +77,9 @@ def _child(kind: str, args: argparse.Namespace) -> None:
 
 def _run(kind: str, argv: list[str]) -> dict:
     cmd = [sys.executable, __file__, "--child", kind, *argv]
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    # one BLAS thread, as pressor synth / verify set it (synthesis.blas_threads), for every case
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False, env=env)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if proc.returncode != 0 or not lines:
         return {"kind": kind, "error": proc.stderr.strip().splitlines()[-1:] or ["?"]}

@@ -70,6 +70,9 @@ def _without_wall_times(obj):
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point for ``pressor synth`` (see module docstring for exit codes)."""
+    from synthesis.blas_threads import single_blas_thread
+
+    single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
     parser = _parser()
     try:
         args = parser.parse_args(argv)

@@ -52,6 +52,9 @@ def _fmt(value: object, unit: str = "") -> str:
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point used by the ``pressor`` dispatcher; returns the exit code."""
+    from synthesis.blas_threads import single_blas_thread
+
+    single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
     try:
         args = _parser(command).parse_args(argv)
     except SystemExit as exc:  # argparse: --help -> 0, bad usage -> 2
