@@ -220,8 +220,9 @@ class _Assembler:
     def svec(self) -> tuple[sp.csr_matrix, Array]:
         """``(F, f0)`` with ``svec(M_k(x))`` stacked over k equal to ``F x + f0``."""
         idx, w = svec_rows(self.size)
-        f = self.coef.reshape(self.k, -1, self.nvar)[:, idx, :] * w[None, :, None]
-        f0 = self.const.reshape(self.k, -1)[:, idx] * w[None, :]
+        nn = self.size * self.size
+        f = self.coef.reshape(self.k, nn, self.nvar)[:, idx, :] * w[None, :, None]
+        f0 = self.const.reshape(self.k, nn)[:, idx] * w[None, :]
         return sp.csr_matrix(f.reshape(-1, self.nvar)), f0.reshape(-1)
 
 

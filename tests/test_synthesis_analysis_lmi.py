@@ -166,3 +166,17 @@ def test_rate_bound_form_too_conservative_falls_back_to_the_vertex_form_and_cert
     assert full.certified and fast.certified
     assert any("rate-bound form not certified" in note for note in fast.notes)
     assert np.all(fast.margins > 0) and fast.n_lmis == 3 * 2
+
+
+@pytest.mark.parametrize("p_dependence", ["constant", "affine"])
+def test_rate_bound_form_without_or_with_p_slopes_matches_the_vertex_verdict(
+    p_dependence: str,
+) -> None:
+    # constant P: no dP/dt, no slack at all, only the worst dtau/dt; affine P: one slack per point
+    rho = np.linspace(-1.0, 1.0, 3)[:, None]
+    systems = [_scalar(-1.0 - 0.5 * r, 0.2, 0.5 + 0.25 * r) for r in rho[:, 0]]
+    args = (systems, rho, np.array([0.4]), np.array([0.25]), 0.75)
+    kw = dict(p_dependence=p_dependence, gamma_cap=10.0)
+    fast = analyse(*args, working_set=1, rate_bound=True, **kw)
+    assert fast.certified and analyse(*args, **kw).certified
+    assert any("rate-bound form, re-checked" in note for note in fast.notes)
