@@ -1,14 +1,22 @@
-"""Synthesis benchmark: the batched sparse formulation vs the naive per-point cvxpy formulation.
+"""Synthesis and verification benchmark: what ``pressor synth`` runs vs the straightforward forms.
 
-Each formulation runs in its own subprocess (so peak memory is its own ``ru_maxrss``) on the same
-design (default: the shipped design config and grid). Prints wall time (build + solve), peak RSS,
-γ, solver status and iterations for both, and the ratios.
+Each case runs in its own subprocess (so peak memory is its own ``ru_maxrss``), all in the same
+run so machine load is comparable. Prints wall time, peak RSS and the outcome of each case, and the
+ratio of the straightforward formulation to the one ``pressor synth`` / ``pressor verify`` use:
+
+* synth: the batched sparse formulation (:func:`synthesis.lmi.solve`) vs the naive per-point
+  cvxpy formulation (:mod:`synthesis.lmi_naive`), on the design's grid;
+* verify: :func:`synthesis.verify.verify_artifact` with the analysis LMI on a working set (the
+  default) vs every dense point in one solve (``all_points_at_once``), on an artifact.
+
+::
 
     python benchmarks/synthesis.py [--config FILE.toml] [--grid 3,3,3] [--rate-terms vertices]
-                                   [--skip-naive]
+                                   [--artifact FILE.npz] [--only synth|verify] [--skip-naive]
 
-``--rate-terms vertices`` benchmarks the paper's 2³-vertex formulation (8 LMIs per node) instead
-of the design's setting.
+``--rate-terms vertices`` benchmarks the paper's 2³-vertex synthesis (8 LMIs per node) instead of
+the design's setting; ``--skip-naive`` leaves out both straightforward cases (they are the slow
+ones).
 """
 
 from __future__ import annotations
@@ -22,59 +30,56 @@ import sys
 import time
 
 
-def _child(kind: str, config: str | None, grid: str | None, rate_terms: str | None) -> None:
+def _child(kind: str, args: argparse.Namespace) -> None:
     # this script is itself called synthesis.py: keep its directory from shadowing the package
     here = os.path.dirname(os.path.abspath(__file__))
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != here]
     sys.modules.pop("synthesis", None)
-    from synthesis import lmi
-    from synthesis.config import load_config
-
-    cfg = load_config(config)
-    if grid:
-        cfg = cfg.with_grid(tuple(int(v) for v in grid.split(",")))
-    if rate_terms:
-        from dataclasses import replace
-
-        cfg = replace(cfg, solver=replace(cfg.solver, rate_terms=rate_terms))
     t0 = time.perf_counter()
-    prob = lmi.make_problem(cfg)
-    if kind == "batched":
-        res = lmi.solve(prob)
+    if kind.startswith("verify"):
+        from synthesis.artifact import default_artifact_path, load_artifact
+        from synthesis.verify import verify_artifact
+
+        art = load_artifact(args.artifact or default_artifact_path())
+        rep = verify_artifact(art, all_points_at_once=kind == "verify-all").to_dict()
+        lmi = rep["analysis_lmi"]
+        row = {
+            "outcome": f"passed={rep['passed']} certified={lmi['certified']}",
+            "detail": f"{lmi['n_lmis']} LMIs re-checked, analysis {lmi['solve_time_s']:.1f} s",
+        }
     else:
-        from synthesis.lmi_naive import solve_naive
+        from synthesis import lmi
+        from synthesis.config import load_config
 
-        res = solve_naive(prob)
-    wall = time.perf_counter() - t0
-    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    print(
-        json.dumps(
-            {
-                "kind": kind,
-                "grid": list(cfg.grid_points),
-                "wall_s": wall,
-                "build_s": res.build_time_s,
-                "solve_s": res.solve_time_s,
-                "peak_rss_mb": peak_mb,
-                "gamma": res.gamma,
-                "status": res.status,
-                "iterations": res.iterations,
-                "n_lmi": res.n_lmi,
-                "lmi_size": res.lmi_size,
-            }
-        )
-    )
+        cfg = load_config(args.config)
+        if args.grid:
+            cfg = cfg.with_grid(tuple(int(v) for v in args.grid.split(",")))
+        if args.rate_terms:
+            from dataclasses import replace
+
+            cfg = replace(cfg, solver=replace(cfg.solver, rate_terms=args.rate_terms))
+        prob = lmi.make_problem(cfg)
+        if kind == "synth":
+            res = lmi.solve(prob)
+        else:
+            from synthesis.lmi_naive import solve_naive
+
+            res = solve_naive(prob)
+        row = {
+            "outcome": f"gamma={res.gamma:.4f} {res.status}",
+            "detail": f"{res.n_lmi} LMIs of {res.lmi_size}, build {res.build_time_s:.2f} s, "
+            f"{res.iterations} iterations",
+        }
+    row["wall_s"] = time.perf_counter() - t0
+    row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    print(json.dumps({"kind": kind, **row}))
 
 
-def _run(kind: str, config: str | None, grid: str | None, rate_terms: str | None) -> dict:
-    cmd = [sys.executable, __file__, "--child", kind]
-    if rate_terms:
-        cmd += ["--rate-terms", rate_terms]
-    if config:
-        cmd += ["--config", config]
-    if grid:
-        cmd += ["--grid", grid]
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+def _run(kind: str, argv: list[str]) -> dict:
+    cmd = [sys.executable, __file__, "--child", kind, *argv]
+    # one BLAS thread, as pressor synth / verify set it (synthesis.blas_threads), for every case
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False, env=env)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if proc.returncode != 0 or not lines:
         return {"kind": kind, "error": proc.stderr.strip().splitlines()[-1:] or ["?"]}
@@ -88,33 +93,42 @@ def main() -> int:
     ap.add_argument("--config")
     ap.add_argument("--grid")
     ap.add_argument("--rate-terms", choices=["bound", "vertices"])
+    ap.add_argument("--artifact", help="artifact for the verify cases (default: the shipped one)")
+    ap.add_argument("--only", choices=["synth", "verify"])
     ap.add_argument("--skip-naive", action="store_true")
-    ap.add_argument("--child", choices=["batched", "naive"], help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--child", choices=["synth", "naive", "verify", "verify-all"], help=argparse.SUPPRESS
+    )
     args = ap.parse_args()
     if args.child:
-        _child(args.child, args.config, args.grid, args.rate_terms)
+        _child(args.child, args)
         return 0
-    rows = [_run("batched", args.config, args.grid, args.rate_terms)]
-    if not args.skip_naive:
-        rows.append(_run("naive", args.config, args.grid, args.rate_terms))
-    hdr = f"{'formulation':<12}{'grid':>9}{'LMIs':>6}{'build s':>9}{'solve s':>9}{'wall s':>9}{'peak MB':>9}{'gamma':>10}{'iters':>7}  status"
-    print(hdr)
-    for r in rows:
-        if "error" in r:
-            print(f"{r['kind']:<12} failed: {r['error']}")
-            continue
-        print(
-            f"{r['kind']:<12}{'x'.join(map(str, r['grid'])):>9}{r['n_lmi']:>6}{r['build_s']:>9.2f}"
-            f"{r['solve_s']:>9.1f}{r['wall_s']:>9.1f}{r['peak_rss_mb']:>9.0f}{r['gamma']:>10.4f}"
-            f"{str(r['iterations']):>7}  {r['status']}"
-        )
-    if len(rows) == 2 and all("error" not in r for r in rows):
-        b, n = rows
-        print(
-            f"naive / batched: build {n['build_s'] / b['build_s']:.0f}x, wall {n['wall_s'] / b['wall_s']:.2f}x, "
-            f"peak memory {n['peak_rss_mb'] / b['peak_rss_mb']:.2f}x; gamma difference "
-            f"{abs(n['gamma'] - b['gamma']) / b['gamma'] * 100:.3f} %"
-        )
+    argv = [
+        f"--{k.replace('_', '-')}={v}"
+        for k, v in vars(args).items()
+        if k in ("config", "grid", "rate_terms", "artifact") and v
+    ]
+    # (what pressor uses, the straightforward formulation it is compared with)
+    pairs = [("synth", "naive"), ("verify", "verify-all")]
+    if args.only:
+        pairs = [p for p in pairs if p[0] == args.only]
+    print(f"{'case':<12}{'wall s':>9}{'peak MB':>9}  outcome / detail")
+    for used, straight in pairs:
+        rows = [_run(used, argv)] + ([] if args.skip_naive else [_run(straight, argv)])
+        for r in rows:
+            if "error" in r:
+                print(f"{r['kind']:<12} failed: {r['error']}")
+                continue
+            print(
+                f"{r['kind']:<12}{r['wall_s']:>9.1f}{r['peak_rss_mb']:>9.0f}  {r['outcome']}; "
+                f"{r['detail']}"
+            )
+        if len(rows) == 2 and all("error" not in r for r in rows):
+            u, s = rows
+            print(
+                f"{s['kind']} / {u['kind']}: wall {s['wall_s'] / u['wall_s']:.2f}x, "
+                f"peak memory {s['peak_rss_mb'] / u['peak_rss_mb']:.2f}x"
+            )
     return 0
 
 

@@ -5,8 +5,9 @@
     pressor synth [--config FILE.toml] [--grid a,b,c] [--out PATH] [--lambda-search]
                   [--lambda2 L2] [--lambda3 L3] [--backoff B] [--no-verify] [--quiet]
 
-Prints progress per λ point and per solve, then γ, solve time, solver status and the verification
-verdict (from :func:`synthesis.verify.verify_artifact`; the result is stored in the artifact's
+Prints progress on stderr (per λ point, per stage and one line per solver iteration: iteration,
+cost, relative gap, primal and dual residuals), then on stdout γ, solve time, solver status and the
+verification verdict (from :func:`synthesis.verify.verify_artifact`; the result is stored in the artifact's
 ``verification`` field). Exit codes: 0 ok, 1 the synthesis finished but the solver or the
 verification failed, 2 bad usage or a bad config value (one line naming file, field, value and
 allowed range).
@@ -37,7 +38,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--lambda3", type=float, help="fixed lambda3 (overrides the config)")
     p.add_argument("--backoff", type=float, help="accept gamma up to (1+B) gamma* (0..1)")
     p.add_argument("--no-verify", action="store_true", help="skip the independent verification")
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--quiet", action="store_true", help="no progress lines (stderr)")
     return p
 
 
@@ -69,6 +70,9 @@ def _without_wall_times(obj):
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point for ``pressor synth`` (see module docstring for exit codes)."""
+    from synthesis.blas_threads import single_blas_thread
+
+    single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
     parser = _parser()
     try:
         args = parser.parse_args(argv)
@@ -83,7 +87,7 @@ def main(command: str, argv: list[str]) -> int:
 
     def say(msg: str) -> None:
         if not args.quiet:
-            print(f"[synth {time.perf_counter() - t0:6.1f} s] {msg}", flush=True)
+            print(f"[synth {time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
     t0 = time.perf_counter()
     try:

@@ -487,28 +487,36 @@ class SolveResult:
 DEFAULT_SOLVER_OPTS: dict = {"tol_gap_abs": 1e-7, "tol_gap_rel": 1e-6, "tol_feas": 1e-7}
 
 
-def _run(problem, solver_opts: dict) -> tuple[str, float, int | None]:
+def _run(
+    problem, solver_opts: dict, progress: Callable[[str], None] | None = None
+) -> tuple[str, float, int | None]:
     import warnings
 
     import cvxpy as cp
+
+    from synthesis.conic import solve_cvxpy
 
     t0 = time.perf_counter()
     try:
         with warnings.catch_warnings():
             # batched (3-D) PSD expressions use cvxpy's SCIPY canonicalisation backend: expected
             warnings.filterwarnings("ignore", message=".*dimension greater than 2.*")
-            problem.solve(solver=cp.CLARABEL, **solver_opts)
+            # Clarabel called on cvxpy's own conic data, so each iteration can be reported
+            sol = solve_cvxpy(problem, solver_opts, progress, "solve")
     except cp.error.SolverError as exc:  # numerical failure: report, do not crash
         return f"solver_error: {exc}", time.perf_counter() - t0, None
-    its = None
-    stats = problem.solver_stats
-    if stats is not None:
-        its = stats.num_iters
-    return str(problem.status), time.perf_counter() - t0, its
+    return str(problem.status), time.perf_counter() - t0, sol.iterations
 
 
-def solve(prob: Problem, solver_opts: dict | None = None, verbose: bool = False) -> SolveResult:
+def solve(
+    prob: Problem,
+    solver_opts: dict | None = None,
+    verbose: bool = False,
+    progress: Callable[[str], None] | None = None,
+) -> SolveResult:
     """Build the batched SDP and minimise γ (then optionally back off, see ``solver.backoff``).
+
+    ``progress`` is called with one line per solver iteration (iteration, cost, gap, residuals).
 
     Returns
     -------
@@ -547,7 +555,7 @@ def solve(prob: Problem, solver_opts: dict | None = None, verbose: bool = False)
     objective = x[gidx] + mu * cp.sum(gn) / gn.shape[0] if mu > 0 else x[gidx]
     problem = cp.Problem(cp.Minimize(objective), cons)
     build = time.perf_counter() - t0
-    status, t_solve, its = _run(problem, opts)
+    status, t_solve, its = _run(problem, opts, progress)
     xval = None if xf.value is None else E @ np.array(xf.value, dtype=float)
     gamma = float(xval[gidx]) if xval is not None else float("nan")
     if xval is not None and status == "optimal" and prob.cfg.solver.backoff > 0.0:
@@ -560,7 +568,7 @@ def solve(prob: Problem, solver_opts: dict | None = None, verbose: bool = False)
         cons2 += [t * np.eye(N_STATE) - Xm >> 0 for Xm in Xmats]
         cons2 += [t * np.eye(N_STATE) - ycons >> 0]
         p2 = cp.Problem(cp.Minimize(t), cons2)
-        st2, t2, its2 = _run(p2, opts)
+        st2, t2, its2 = _run(p2, opts, progress)
         t_solve += t2
         if st2 == "optimal" and xf.value is not None:
             xval = E @ np.array(xf.value, dtype=float)

@@ -41,9 +41,11 @@ def build(cfg: DesignConfig) -> lmi.Problem:
     return lmi.make_problem(cfg)
 
 
-def solve_design(prob: lmi.Problem, solver_opts: dict | None = None) -> lmi.SolveResult:
-    """Stage 2: the SDP (minimise γ, optional back-off)."""
-    return lmi.solve(prob, solver_opts)
+def solve_design(
+    prob: lmi.Problem, solver_opts: dict | None = None, progress: Progress | None = None
+) -> lmi.SolveResult:
+    """Stage 2: the SDP (minimise γ, optional back-off); ``progress`` gets one line per iteration."""
+    return lmi.solve(prob, solver_opts, progress=progress)
 
 
 def to_artifact(
@@ -119,7 +121,7 @@ def synthesize(
         f"solve: grid {cfg.grid_points}, lambda2={cfg.solver.lambda2:g}, "
         f"lambda3={cfg.solver.lambda3:g} ({prob.rho.shape[0]} nodes) ..."
     )
-    res = solve_design(prob, solver_opts)
+    res = solve_design(prob, solver_opts, progress)
     say(
         f"solve: status {res.status}, gamma {res.gamma:.4g}, build {res.build_time_s:.2f} s, "
         f"solve {res.solve_time_s:.1f} s, {res.iterations} iterations"

@@ -11,8 +11,12 @@ the synthesis never saw), then:
     dense grid in one solve, in state coordinates whitened by the centre point's own Lyapunov
     matrix and then balanced (a constant congruence: it changes conditioning, not feasibility);
     solved in feasibility form (gain <= ANALYSIS_GAMMA_CAP_FACTOR x synthesis gamma, maximise a
-    common strictness margin); certified = every LMI and P(rho_k) re-evaluated in floating point
-    is definite;
+    common strictness margin). Solved fast: in the rate-bound form (one LMI per point, slacks
+    bounding dP/dt, which implies every rate vertex) on a working set (as many dense points as the
+    synthesis grid has nodes, spread over the grid, grown by the points whose re-check fails;
+    P(rho_k) > 0 imposed everywhere), with the all-vertex form as fallback. Certified = every LMI
+    at every dense point and every rate vertex, and every P(rho_k), re-evaluated in floating
+    point, is definite (measured on the shipped design: 27 points suffice, 6 s instead of 67 s);
 (b) ``delay_stability`` — the rightmost characteristic roots of the frozen closed-loop delay system
     at every dense point (delays up to tau_max are on the grid), by the spectral method of
     :mod:`synthesis.delay_stability`;
@@ -186,6 +190,7 @@ def verify_artifact(
     density: int = 2,
     progress: Progress | None = None,
     p_dependence: str = "quadratic",
+    all_points_at_once: bool = False,
 ) -> VerificationReport:
     """Run the independent checks (a), (b), (c) on an artifact.
 
@@ -200,6 +205,13 @@ def verify_artifact(
     p_dependence
         Lyapunov matrix P of the analysis LMI: "quadratic" in rho (default, the synthesis basis
         P0 + sum rho_i P_i1 + 1/2 sum rho_i^2 P_i2), "affine" or "constant".
+    all_points_at_once
+        Impose the analysis LMI at every dense point and rate vertex in one solve (the
+        straightforward formulation, for comparison) instead of the fast path: the rate-bound
+        form on a working set (as many points as the synthesis grid has nodes, spread over the
+        dense grid, grown by the points whose re-check fails; the vertex form if that does not
+        certify). The certificate is the same either way: the re-check at every point and rate
+        vertex.
 
     Returns
     -------
@@ -284,6 +296,8 @@ def verify_artifact(
         progress=say,
         state_transform=transform,
         gamma_cap=ANALYSIS_GAMMA_CAP_FACTOR * float(artifact.gamma),
+        working_set=None if all_points_at_once else int(np.prod([len(g) for g in grid])),
+        rate_bound=not all_points_at_once,
     )
     finite = np.isfinite(res.margins)
     worst_lmi = int(np.nanargmin(res.margins)) if finite.any() else None

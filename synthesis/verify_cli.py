@@ -1,7 +1,8 @@
 """``pressor verify [ARTIFACT] [--json FILE] [--density N] [--p-dependence affine|constant]``.
 
 Runs :func:`synthesis.verify.verify_artifact` on ARTIFACT (default: the shipped
-``synthesis/data/default_design.npz``), prints one progress line per stage and a summary, and
+``synthesis/data/default_design.npz``), prints progress on stderr (one line per stage and per
+solver iteration: iteration, cost, relative gap, residuals) and a summary on stdout, and
 optionally writes the full report as JSON (``nominal_step.lpv`` / ``.pi`` / ``.smith`` carry the
 DESIGN.md §3 metric names; ``smith`` is the scheduled Smith predictor, lambda 30 s). Exit codes:
 0 every check passed, 1 a check failed, 2 bad input (a missing, unreadable or corrupt artifact, a
@@ -53,6 +54,9 @@ def _fmt(value: object, unit: str = "") -> str:
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point used by the ``pressor`` dispatcher; returns the exit code."""
+    from synthesis.blas_threads import single_blas_thread
+
+    single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
     try:
         args = _parser(command).parse_args(argv)
     except SystemExit as exc:  # argparse: --help -> 0, bad usage -> 2
@@ -91,7 +95,7 @@ def main(command: str, argv: list[str]) -> int:
     t0 = time.perf_counter()
 
     def progress(msg: str) -> None:
-        print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", flush=True)
+        print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", file=sys.stderr, flush=True)
 
     print(f"verifying {path} (sha256 {str(getattr(artifact, 'sha256', ''))[:16]}...)", flush=True)
     report = verify_artifact(

@@ -122,9 +122,16 @@ def test_shipped_artifact_embeds_a_passing_report_with_quadratic_p_on_unseen_poi
 
 
 @pytest.mark.slow
-def test_shipped_design_passes_the_default_verification_from_scratch(tmp_path: Path) -> None:
+def test_shipped_design_passes_the_default_verification_from_scratch(
+    tmp_path: Path, capsys
+) -> None:
     out = tmp_path / "verify.json"
     assert main("verify", ["--json", str(out)]) == 0
     report = json.loads(out.read_text())
     assert report["analysis_lmi"]["certified"] is True
     assert report["analysis_lmi"]["n_failed_points"] == 0
+    # every dense point and every rate vertex was re-checked (125 x 8), whatever the working set
+    assert report["analysis_lmi"]["n_lmis"] == report["grid"]["n_points"] * 8
+    # the analysis solve reports its iterations on stderr while it runs
+    err = capsys.readouterr().err.splitlines()
+    assert sum("analysis LMI" in ln and " iter " in ln and "gap" in ln for ln in err) >= 5

@@ -1,0 +1,30 @@
+"""One BLAS thread for the synthesis commands (set before numpy is first imported).
+
+The synthesis and verification work on many small dense matrices (eigenvalues of 100-250 square
+generators, 6-22 square LMI blocks); OpenBLAS' thread pool does not speed those up and, on a
+loaded machine, its waiting threads make them many times slower. Measured with ``pressor synth``
+of the default design on a shared 2-core machine (load ~13): the 125 frozen-delay root
+computations took 57 s with OpenBLAS' default threads and ~2 s with one thread. Clarabel's
+sparse factorisation keeps its own threads. An explicit ``OPENBLAS_NUM_THREADS`` is respected.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+__all__ = ["single_blas_thread"]
+
+
+def single_blas_thread() -> bool:
+    """Ask OpenBLAS for one thread unless the environment already chose a number.
+
+    Returns
+    -------
+    bool
+        True if it takes effect (numpy not imported yet and no explicit setting), else False.
+    """
+    if "numpy" in sys.modules or "OPENBLAS_NUM_THREADS" in os.environ:
+        return False
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    return True

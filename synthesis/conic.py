@@ -1,0 +1,195 @@
+"""Run Clarabel on conic data and report its progress while it iterates.
+
+One job: call ``clarabel.DefaultSolver`` on ``min q'x s.t. A x + s = b, s in K`` (data built by
+the caller, or compiled by cvxpy), stream one progress line per interior-point iteration through a
+callback (Clarabel's termination callback, which sees the iteration, the costs, the relative gap
+and the primal/dual residuals), and name the outcome with cvxpy's status strings so that callers
+that switched from ``problem.solve`` keep their status logic.
+
+PSD blocks use Clarabel's ``PSDTriangleConeT`` convention: the upper triangle by columns (for a
+symmetric matrix the same entries as the lower triangle by rows) with the off-diagonal entries
+scaled by sqrt(2); :func:`svec_rows` gives those positions and weights.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+__all__ = ["ConicSolution", "solve_conic", "solve_cvxpy", "svec_rows"]
+
+Progress = Callable[[str], None]
+
+#: Clarabel status -> cvxpy status string (the strings the callers already test for)
+_STATUS = {
+    "Solved": "optimal",
+    "AlmostSolved": "optimal_inaccurate",
+    "PrimalInfeasible": "infeasible",
+    "AlmostPrimalInfeasible": "infeasible_inaccurate",
+    "DualInfeasible": "unbounded",
+    "AlmostDualInfeasible": "unbounded_inaccurate",
+    "MaxIterations": "user_limit",
+    "MaxTime": "user_limit",
+    "CallbackTerminated": "user_limit",
+}
+
+
+@dataclass(frozen=True)
+class ConicSolution:
+    """Outcome of :func:`solve_conic`.
+
+    Attributes
+    ----------
+    status
+        cvxpy-style status ("optimal", "optimal_inaccurate", "infeasible", ..., "solver_error").
+    clarabel_status
+        Clarabel's own status name (e.g. "NumericalError").
+    x
+        Primal solution (None unless a solution is present).
+    iterations
+        Interior-point iterations.
+    solve_time_s
+        Wall time of setup + solve (s).
+    raw
+        Clarabel's solution object (for cvxpy's ``unpack_results``).
+    """
+
+    status: str
+    clarabel_status: str
+    x: NDArray[np.float64] | None
+    iterations: int
+    solve_time_s: float
+    raw: Any = None
+
+
+def svec_rows(size: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Row-major indices (r * size + c, r >= c) of a ``size x size`` matrix in Clarabel's PSD
+    triangle order, and the weights (1 on the diagonal, sqrt(2) off it)."""
+    # Clarabel: the upper triangle column by column, i.e. (0,0), (0,1), (1,1), (0,2), ...
+    pairs = [(r, c) for c in range(size) for r in range(c + 1)]
+    rr = np.array([r for r, _ in pairs], dtype=np.int64)
+    cc = np.array([c for _, c in pairs], dtype=np.int64)
+    idx = rr * size + cc
+    w = np.where(rr == cc, 1.0, np.sqrt(2.0))
+    return idx.astype(np.int64), w
+
+
+def _reporter(label: str, progress: Progress | None, every_s: float) -> Callable[[Any], bool]:
+    last = [-np.inf]
+
+    def callback(info: Any) -> bool:
+        now = time.perf_counter()
+        if progress is not None and now - last[0] >= every_s:
+            last[0] = now
+            progress(
+                f"{label}: iter {info.iterations:3d}  cost {info.cost_primal:+.5e}  "
+                f"gap {info.gap_rel:.1e}  pres {info.res_primal:.1e}  dres {info.res_dual:.1e}"
+            )
+        return False  # never stop the solver: the callback only reports
+
+    return callback
+
+
+def _settings(options: dict[str, Any]) -> Any:
+    import clarabel
+
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    for key, value in options.items():
+        if not hasattr(settings, key):
+            raise ValueError(f"unknown Clarabel setting {key!r}")
+        setattr(settings, key, value)
+    return settings
+
+
+def solve_conic(
+    q: NDArray[np.float64],
+    a: sp.spmatrix,
+    b: NDArray[np.float64],
+    cones: list[Any],
+    options: dict[str, Any] | None = None,
+    progress: Progress | None = None,
+    label: str = "Clarabel",
+    every_s: float = 0.0,
+    p: sp.spmatrix | None = None,
+) -> ConicSolution:
+    """Solve ``min 1/2 x'Px + q'x  s.t.  a x + s = b, s in cones`` with Clarabel.
+
+    Parameters
+    ----------
+    q, a, b, cones
+        Conic data in Clarabel's form (``cones`` a list of ``clarabel.*ConeT``).
+    options
+        Clarabel settings by name (e.g. ``{"direct_solve_method": "qdldl"}``); verbose is off.
+    progress
+        Called with one line per iteration (at most one per ``every_s`` seconds) while it runs.
+    label
+        Prefix of the progress lines.
+    every_s
+        Minimum spacing of progress lines (s); 0 reports every iteration.
+    p
+        Quadratic cost (upper triangle used); default none.
+
+    Returns
+    -------
+    ConicSolution
+    """
+    import clarabel
+
+    t0 = time.perf_counter()
+    n = int(np.asarray(q).size)
+    p_mat = sp.csc_matrix((n, n)) if p is None else sp.triu(p, format="csc")
+    solver = clarabel.DefaultSolver(
+        p_mat,
+        np.asarray(q, dtype=float),
+        sp.csc_matrix(a),
+        np.asarray(b, dtype=float),
+        cones,
+        _settings(options or {}),
+    )
+    solver.set_termination_callback(_reporter(label, progress, every_s))
+    sol = solver.solve()
+    name = str(sol.status)
+    status = _STATUS.get(name, "solver_error")
+    has_x = status in ("optimal", "optimal_inaccurate") and sol.x is not None
+    x = np.asarray(sol.x, dtype=float) if has_x else None
+    return ConicSolution(status, name, x, int(sol.iterations), time.perf_counter() - t0, sol)
+
+
+def solve_cvxpy(
+    problem: Any,
+    options: dict[str, Any] | None = None,
+    progress: Progress | None = None,
+    label: str = "Clarabel",
+    every_s: float = 0.0,
+) -> ConicSolution:
+    """Solve a cvxpy problem with Clarabel through :func:`solve_conic` (so progress is reported)
+    and load the result back into the problem's variables, as ``problem.solve`` would.
+
+    ``options`` are Clarabel settings by name (as for ``problem.solve(solver=CLARABEL, ...)``).
+    """
+    import cvxpy as cp
+    import cvxpy.settings as s
+    from cvxpy.reductions.solvers.conic_solvers.clarabel_conif import dims_to_solver_cones
+    from cvxpy.reductions.solvers.conic_solvers.conic_solver import ConicSolver
+
+    data, chain, inverse = problem.get_problem_data(cp.CLARABEL, solver_opts=dict(options or {}))
+    sol = solve_conic(
+        data[s.C],
+        data[s.A],
+        data[s.B],
+        dims_to_solver_cones(data[ConicSolver.DIMS]),
+        options,
+        progress,
+        label,
+        every_s,
+        data.get(s.P),
+    )
+    problem.unpack_results(sol.raw, chain, inverse)
+    return sol
