@@ -19,6 +19,14 @@ A design is described by a TOML file with the sections below (all physical units
     [line_search] lambda2 = [...], lambda3 = [...]   candidate values for ``--lambda-search``
     [pump]       max_rate_ml_h
 
+What [box] and [rates] buy: the synthesis certificate (and ``pressor verify``) covers plants whose
+(K, T, τ) stay inside the box and change no faster than the rate bounds, with the controller
+scheduled on the true ρ. The generated controller clamps its scheduling input to the box and
+rate-limits it to the same bounds, so outside them it runs the controller of the nearest admissible
+ρ on a plant it was not certified for: no guarantee, only whatever robustness margin the design has
+(a patient at K = 0.18 with a box starting at 0.25 sees the K = 0.25 gains, a delay moving at 1 s/s
+with a 0.1 s/s bound is tracked late by the controller's delay line).
+
 Every missing key takes the shipped default (``synthesis/data/default_design.toml``). Any bad
 value raises :class:`ConfigError` whose message names the file, the field, the value and the
 allowed range; the CLI turns it into exit code 2.
