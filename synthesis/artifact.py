@@ -4,10 +4,10 @@ Layout (``numpy.savez``, no pickled objects):
 
 * ``metadata`` — uint8 bytes of a UTF-8 JSON document: ``format_version``, ``box`` (3×2: K
   [mmHg/(ml/h)], T [s], τ [s]), ``rate_bounds``, ``grid`` (3 lists, physical units), ``basis``,
-  ``model`` (Ω, Λ, φ, ξ, η, box, rates, pump max), ``design`` (full config), ``scaling``,
-  ``lambda2``, ``lambda3``, ``gamma``, ``solver`` (name, status, times, iterations),
-  ``verification`` (``null`` until :func:`with_verification` fills it), ``created_by``, and
-  optionally ``reference`` (``enabled``, ``lambda_s``, ``pump_fraction``, ``k_min``: the 2-DOF
+  ``model`` (Ω, Λ, φ, ξ, η, box, rates, pump max, frequency ``shaping`` if set), ``design`` (full
+  config), ``scaling``, ``lambda2``, ``lambda3``, ``gamma``, ``solver`` (name, status, times,
+  iterations), ``verification`` (``null`` until :func:`with_verification` fills it), ``created_by``,
+  and optionally ``reference`` (``enabled``, ``lambda_s``, ``pump_fraction``, ``k_min``: the 2-DOF
   prefilter of :mod:`synthesis.reference`; absent in older artifacts, read as disabled).
 * ``coef_<name>`` — decision-variable basis coefficients (scaled coordinates; see
   :mod:`synthesis.lmi`): P, Q, R, X, Y, Ah, Adh, Bh, Ch, Cdh, Dk.
@@ -34,33 +34,48 @@ from typing import Any
 import numpy as np
 
 from synthesis.config import ModelConfig
+from synthesis.model import dims
 from synthesis.reference import ReferenceConfig
 
 FORMAT_VERSION = 1
 
-#: decision coefficients: name -> (rows, cols) ; leading axis = number of basis terms (1 or 7)
-COEF_SHAPES: dict[str, tuple[int, int]] = {
-    "P": (6, 6),
-    "Q": (6, 6),
-    "R": (6, 6),
-    "X": (3, 3),
-    "Y": (3, 3),
-    "Ah": (3, 3),
-    "Adh": (3, 3),
-    "Bh": (3, 2),
-    "Ch": (1, 3),
-    "Cdh": (1, 3),
-    "Dk": (1, 2),
-}
-#: controller at nodes: name -> (rows, cols)
-NODE_SHAPES: dict[str, tuple[int, int]] = {
-    "Ak": (3, 3),
-    "Adk": (3, 3),
-    "Bk": (3, 2),
-    "Ck": (1, 3),
-    "Cdk": (1, 3),
-    "Dk": (1, 2),
-}
+#: decision coefficients (leading axis = number of basis terms, 1 or 7); shapes: :func:`coef_shapes`
+COEF_NAMES = ("P", "Q", "R", "X", "Y", "Ah", "Adh", "Bh", "Ch", "Cdh", "Dk")
+
+
+def coef_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
+    """Decision coefficients: name -> (rows, cols) for a generalised plant of order ``n``.
+
+    n = 3 for the shipped design; frequency weights add states (:func:`synthesis.model.dims`).
+    """
+    n2 = 2 * n
+    return {
+        "P": (n2, n2),
+        "Q": (n2, n2),
+        "R": (n2, n2),
+        "X": (n, n),
+        "Y": (n, n),
+        "Ah": (n, n),
+        "Adh": (n, n),
+        "Bh": (n, ny),
+        "Ch": (1, n),
+        "Cdh": (1, n),
+        "Dk": (1, ny),
+    }
+
+
+def node_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
+    """Controller at the grid nodes: name -> (rows, cols); the controller order equals ``n``."""
+    return {
+        "Ak": (n, n),
+        "Adk": (n, n),
+        "Bk": (n, ny),
+        "Ck": (1, n),
+        "Cdk": (1, n),
+        "Dk": (1, ny),
+    }
+
+
 _REQUIRED_META = (
     "format_version",
     "box",
@@ -254,7 +269,7 @@ def _validate(
         rates = np.asarray(meta["rate_bounds"], dtype=float)
         grid = [np.asarray(g, dtype=float) for g in meta["grid"]]
         gamma = float(meta["gamma"])
-        ModelConfig.from_dict(meta["model"])
+        pd = dims(ModelConfig.from_dict(meta["model"]))
     except (TypeError, ValueError, KeyError) as exc:
         raise _err(path, "metadata", f"malformed ({exc})") from None
     if meta.get("reference") is not None:
@@ -277,7 +292,7 @@ def _validate(
             raise _err(path, "metadata.grid", f"axis {i} not increasing inside the box")
     if not np.isfinite(gamma) or gamma <= 0:
         raise _err(path, "metadata.gamma", f"{gamma!r} is not a positive finite number")
-    for name, (r, c) in COEF_SHAPES.items():
+    for name, (r, c) in coef_shapes(pd.n, pd.ny).items():
         if name not in coefs:
             raise _err(path, f"coef_{name}", "missing")
         nb = coefs[name].shape[0] if coefs[name].ndim == 3 else -1
@@ -285,7 +300,7 @@ def _validate(
             raise _err(path, f"coef_{name}", f"shape {coefs[name].shape}, expected (1|7, {r}, {c})")
         _check_array(path, f"coef_{name}", coefs[name], (nb, r, c))
     gshape = tuple(g.size for g in grid)
-    for name, (r, c) in NODE_SHAPES.items():
+    for name, (r, c) in node_shapes(pd.n, pd.ny).items():
         if name not in nodes:
             raise _err(path, f"node_{name}", "missing")
         _check_array(path, f"node_{name}", nodes[name], (*gshape, r, c))

@@ -5,7 +5,12 @@ A design is described by a TOML file with the sections below (all physical units
     [box]        K = [lo, hi]  (mmHg/(ml/h)),  T_s = [lo, hi] (s),  tau_s = [lo, hi] (s)
     [rates]      K_per_s (mmHg/(ml/h)/s),  T_s_per_s (s/s),  tau_s_per_s (s/s, < 1)
     [filter]     omega (1/s), lambda (1/s)            u = omega/(s + lambda) u_a
-    [weights]    phi (1/(mmHg·s)) on x_e,  xi on u_a,  eta_xe (mmHg·s) x_e measurement-noise weight
+    [weights]    phi (1/(mmHg·s)) on x_e,  xi on u_a,  eta_xe (mmHg·s) x_e measurement-noise weight,
+                 performance ("integral" | "shaped") and, for "shaped", the frequency weights
+                 e_crossover_rad_s (ω_b), e_peak (M), e_dc (A) of W_e(s) = (s/M + ω_b)/(s + ω_b A)
+                 on the tracking error and u_crossover_rad_s (ω_u), u_dc (M_u, (ml/h)/mmHg),
+                 u_hf (ε_u) of W_u(s) = (s + ω_u/M_u)/(ε_u s + ω_u) on the infusion
+                 (see :mod:`synthesis.model`; optional keys, defaults in ``SHAPING_DEFAULTS``)
     [grid]       points = [nK, nT, ntau]              synthesis grid (each >= 2)
     [solver]     lambda2, lambda3 (scaled-time slack multipliers), backoff (fraction, >= 0),
                  epsilon (strictness margin), xy_dependence ("constant" | "x" | "xy"),
@@ -17,6 +22,14 @@ A design is described by a TOML file with the sections below (all physical units
                  k_min (mmHg/(ml/h), in [0.001, box K upper])
                  the two-degree-of-freedom prefilter of :mod:`synthesis.reference` (outside the
                  certified loop: it changes the reference and adds a feedforward, not the LMIs)
+
+What [box] and [rates] buy: the synthesis certificate (and ``pressor verify``) covers plants whose
+(K, T, τ) stay inside the box and change no faster than the rate bounds, with the controller
+scheduled on the true ρ. The generated controller clamps its scheduling input to the box and
+rate-limits it to the same bounds, so outside them it runs the controller of the nearest admissible
+ρ on a plant it was not certified for: no guarantee, only whatever robustness margin the design has
+(a patient at K = 0.18 with a box starting at 0.25 sees the K = 0.25 gains, a delay moving at 1 s/s
+with a 0.1 s/s bound is tracked late by the controller's delay line).
 
 Every missing key takes the shipped default (``synthesis/data/default_design.toml``). Any bad
 value raises :class:`ConfigError` whose message names the file, the field, the value and the
@@ -47,11 +60,57 @@ _BOX_RANGE = {"K": (1e-3, 10.0), "T_s": (1.0, 2000.0), "tau_s": (0.0, 600.0)}
 _RATE_RANGE = {"K_per_s": (0.0, 1.0), "T_s_per_s": (0.0, 10.0), "tau_s_per_s": (0.0, 0.999)}
 
 
+#: Optional [weights] keys (not in the shipped TOML, whose design uses performance = "integral").
+SHAPING_DEFAULTS: dict[str, Any] = {
+    "performance": "integral",
+    "e_crossover_rad_s": 0.005,
+    "e_peak": 2.0,
+    "e_dc": 0.0,
+    "u_crossover_rad_s": 0.05,
+    "u_dc": 20.0,
+    "u_hf": 0.0,
+}
+
+
 class ConfigError(ValueError):
     """A design configuration value is missing, malformed or out of range.
 
     The message names the file, the field, the offending value and the allowed range.
     """
+
+
+@dataclass(frozen=True)
+class PerformanceShaping:
+    """Frequency weights of the "shaped" performance output (see :mod:`synthesis.model`).
+
+    Attributes
+    ----------
+    e_crossover_rad_s
+        ω_b (rad/s): crossover of W_e(s) = (s/M + ω_b)/(s + ω_b A) on the tracking error; with
+        γ ≤ 1, |S(jω)| ≲ ω/ω_b below ω_b (the bandwidth demand).
+    e_peak
+        M > 1: bound on |S| at high frequency (sensitivity peak), with γ ≤ 1.
+    e_dc
+        A in [0, 1): bound on |S(0)|; 0 makes W_e an integrator realised by x_e (no state).
+    u_crossover_rad_s
+        ω_u (rad/s): above it the bound on |K S| (infusion per target, (ml/h)/mmHg) falls as ω_u/ω.
+    u_dc
+        M_u ((ml/h)/mmHg): bound on |K S| below ω_u; must exceed 1/K_min (the static inverse).
+    u_hf
+        ε_u in [0, M_u): with γ ≤ 1, |K S| ≤ 1/ε_u at high frequency; 0 makes W_u improper
+        (realised with du/dt = Ω u_a − Λ u, no state).
+    """
+
+    e_crossover_rad_s: float
+    e_peak: float
+    e_dc: float
+    u_crossover_rad_s: float
+    u_dc: float
+    u_hf: float
+
+    def to_dict(self) -> dict[str, float]:
+        """JSON-ready dict."""
+        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -74,6 +133,9 @@ class ModelConfig:
         (3,) array: |dK/dt| [mmHg/(ml/h)/s], |dT/dt| [s/s], |dtau/dt| [s/s].
     max_rate_ml_h
         Pump limit (ml/h).
+    shaping
+        ``None``: the paper's performance output z = [φ x_e; ξ u_a]; otherwise the frequency
+        weights of ``weights.performance = "shaped"``.
     """
 
     omega: float
@@ -84,10 +146,11 @@ class ModelConfig:
     box: np.ndarray
     rate_bounds: np.ndarray
     max_rate_ml_h: float
+    shaping: PerformanceShaping | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (the artifact's ``model`` metadata entry)."""
-        return {
+        """JSON-ready dict (the artifact's ``model`` metadata entry; ``shaping`` only if set)."""
+        out = {
             "omega": self.omega,
             "lambda": self.lambda_,
             "phi": self.phi,
@@ -97,6 +160,9 @@ class ModelConfig:
             "rate_bounds": np.asarray(self.rate_bounds, float).tolist(),
             "max_rate_ml_h": self.max_rate_ml_h,
         }
+        if self.shaping is not None:
+            out["shaping"] = self.shaping.to_dict()
+        return out
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ModelConfig:
@@ -110,6 +176,11 @@ class ModelConfig:
             box=np.asarray(d["box"], dtype=float).reshape(3, 2),
             rate_bounds=np.asarray(d["rate_bounds"], dtype=float).reshape(3),
             max_rate_ml_h=float(d["max_rate_ml_h"]),
+            shaping=(
+                PerformanceShaping(**{k: float(v) for k, v in d["shaping"].items()})
+                if d.get("shaping") is not None
+                else None
+            ),
         )
 
 
@@ -244,6 +315,7 @@ def _get(table: dict[str, Any], section: str, key: str, default: dict[str, Any])
 
 def _merge_check_keys(source: str, table: dict[str, Any], default: dict[str, Any]) -> None:
     """Unknown sections/keys are errors (a typo must not silently fall back to a default)."""
+    default = {**default, "weights": {**default.get("weights", {}), **SHAPING_DEFAULTS}}
     for section, body in table.items():
         if section not in default:
             raise _fail(source, section, "<section>", f"one of {sorted(default)}")
@@ -302,6 +374,7 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
     phi = _check_pos(source, "weights.phi", _get(table, "weights", "phi", default), 1e3)
     xi = _check_pos(source, "weights.xi", _get(table, "weights", "xi", default), 1e3)
     eta = _check_pos(source, "weights.eta_xe", _get(table, "weights", "eta_xe", default), 1e6)
+    shaping = _parse_shaping(table, source)
     pump = _check_pos(
         source, "pump.max_rate_ml_h", _get(table, "pump", "max_rate_ml_h", default), 1e4
     )
@@ -379,6 +452,7 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         box=box,
         rate_bounds=rates,
         max_rate_ml_h=pump,
+        shaping=shaping,
     )
     solver = SolverConfig(
         lambda2=l2,
@@ -400,6 +474,35 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         source=source,
         raw=table,
     )
+
+
+def _parse_shaping(table: dict[str, Any], source: str) -> PerformanceShaping | None:
+    """The [weights] frequency-shaping keys (validated even when ``performance = "integral"``)."""
+    sec = table.get("weights", {})
+
+    def get(key: str) -> Any:
+        return sec.get(key, SHAPING_DEFAULTS[key])
+
+    mode = get("performance")
+    if mode not in ("integral", "shaped"):
+        raise _fail(source, "weights.performance", mode, "one of 'integral', 'shaped'")
+    wb = _check_pos(source, "weights.e_crossover_rad_s", get("e_crossover_rad_s"), 10.0)
+    m = _check_range(source, "weights.e_peak", get("e_peak"), 1.0, 100.0)
+    if m <= 1.0:
+        raise _fail(source, "weights.e_peak", get("e_peak"), "in (1, 100] (|S| peaks above 1)")
+    a = _check_range(source, "weights.e_dc", get("e_dc"), 0.0, 1.0)
+    if a >= 1.0:
+        raise _fail(source, "weights.e_dc", get("e_dc"), "in [0, 1) (|S(0)| below 1)")
+    wu = _check_pos(source, "weights.u_crossover_rad_s", get("u_crossover_rad_s"), 100.0)
+    mu = _check_pos(source, "weights.u_dc", get("u_dc"), 1e4)
+    eu = _check_range(source, "weights.u_hf", get("u_hf"), 0.0, 1e4)
+    if eu >= mu:
+        raise _fail(
+            source, "weights.u_hf", get("u_hf"), f"in [0, u_dc = {mu:g}) (W_u is a high-pass)"
+        )
+    if mode == "integral":
+        return None
+    return PerformanceShaping(wb, m, a, wu, mu, eu)
 
 
 def load_config(path: str | Path | None = None) -> DesignConfig:

@@ -83,10 +83,10 @@ import scipy.sparse as sp
 from synthesis import basis
 from synthesis.closed_loop import close_loop
 from synthesis.config import DesignConfig
-from synthesis.model import N_STATE, N_W, N_Y, N_Z, plant_batch
+from synthesis.model import N_STATE, PlantDims, dims, plant_batch
 from synthesis.scaling import Scaling
 
-N2 = 2 * N_STATE  # closed-loop order
+N2 = 2 * N_STATE  # closed-loop order of the shipped ("integral") plant
 
 
 @dataclass(frozen=True)
@@ -108,30 +108,38 @@ class Block:
 class Layout:
     """Positions of every decision matrix inside the decision vector."""
 
-    def __init__(self, xy_dependence: str, rate_terms: str = "vertices", n_nodes: int = 0) -> None:
+    def __init__(
+        self,
+        xy_dependence: str,
+        rate_terms: str = "vertices",
+        n_nodes: int = 0,
+        plant_dims: PlantDims | None = None,
+    ) -> None:
         nbx = basis.N_BASIS if xy_dependence in ("x", "xy") else 1
         nby = basis.N_BASIS if xy_dependence == "xy" else 1
         nb = basis.N_BASIS
-        n = N_STATE
+        d = plant_dims or PlantDims(N_STATE, 3, 2, 2, False, False)
+        n, n2, ny = d.n, 2 * d.n, d.ny
+        self.n = n
         self.blocks = [
-            Block("P", N2, N2, True, nb),
-            Block("Q", N2, N2, True, 1),
-            Block("R", N2, N2, True, 1),
+            Block("P", n2, n2, True, nb),
+            Block("Q", n2, n2, True, 1),
+            Block("R", n2, n2, True, 1),
             Block("X", n, n, True, nbx),
             Block("Y", n, n, True, nby),
             Block("Ah", n, n, False, nb),
             Block("Adh", n, n, False, nb),
-            Block("Bh", n, N_Y, False, nb),
+            Block("Bh", n, ny, False, nb),
             Block("Ch", 1, n, False, nb),
             Block("Cdh", 1, n, False, nb),
-            Block("Dk", 1, N_Y, False, nb),
+            Block("Dk", 1, ny, False, nb),
             Block("gamma", 1, 1, False, 1),
         ]
         # per-node performance levels γ_g ≤ γ (the guarantee is γ = max γ_g)
         self.blocks.append(Block("gnode", 1, 1, False, max(n_nodes, 1)))
         if rate_terms == "bound":
             # node-local bounds Z_{g,i} ⪰ ±∂P̃/∂ρ̂_i (3 per node), see module docstring
-            self.blocks.append(Block("Z", N2, N2, True, 3 * n_nodes))
+            self.blocks.append(Block("Z", n2, n2, True, 3 * n_nodes))
         self.offsets: dict[str, int] = {}
         off = 0
         for b in self.blocks:
@@ -210,12 +218,13 @@ class Problem:
     @property
     def size(self) -> int:
         """Order m of each synthesis LMI."""
-        return 3 * N2 + N_W + N_Z
+        return 6 * self.layout.n + self.plant["B1"].shape[-1] + self.plant["C1"].shape[-2]
 
 
 def make_problem(cfg: DesignConfig, rho: np.ndarray | None = None) -> Problem:
     """Set up the scaled problem on ``cfg``'s grid (or on the given (G, 3) physical points)."""
-    sc = Scaling.for_box(cfg.model.box, cfg.solver.time_scale_s)
+    d = dims(cfg.model)
+    sc = Scaling.for_box(cfg.model.box, cfg.solver.time_scale_s, d.n)
     if rho is None:
         g = cfg.grid()
         rho = np.array(list(itertools.product(*g)), dtype=float)
@@ -225,7 +234,7 @@ def make_problem(cfg: DesignConfig, rho: np.ndarray | None = None) -> Problem:
     return Problem(
         cfg=cfg,
         scaling=sc,
-        layout=Layout(cfg.solver.xy_dependence, cfg.solver.rate_terms, rho.shape[0]),
+        layout=Layout(cfg.solver.xy_dependence, cfg.solver.rate_terms, rho.shape[0], d),
         rho=rho,
         rho_hat=rho_hat,
         plant=plant,
@@ -273,7 +282,8 @@ def lmi_blocks(prob: Problem, vals: dict[str, np.ndarray]) -> dict[str, np.ndarr
     C1, C1d, C2, C2d = p["C1"], p["C1d"], p["C2"], p["C2d"]
     D11, D12, D21 = p["D11"], p["D12"], p["D21"]
     j, g = X.shape[0], w.shape[0]
-    eye = np.broadcast_to(np.eye(N_STATE), (j, g, N_STATE, N_STATE))
+    n = X.shape[-1]
+    eye = np.broadcast_to(np.eye(n), (j, g, n, n))
     B2Dk = B2 @ Dk
 
     def cat(a, b, c, d):
@@ -386,8 +396,8 @@ def synthesis_lmi(prob: Problem, vals: dict[str, np.ndarray]) -> np.ndarray:
     if prob.cfg.solver.rate_terms == "bound":
         # one LMI per node: Ṗ ⪯ Σ_i ν̂_i Z_{g,i}; −(1 − τ̇)Q̃ is largest at τ̇ = +ν_τ (Q̃ ⪰ 0)
         verts = np.ones((1, 3))
-        j = blk["V"].shape[0]
-        z = vals["Z"].reshape(j, -1, 3, N2, N2)
+        j, n2 = blk["V"].shape[0], blk["V"].shape[-1]
+        z = vals["Z"].reshape(j, -1, 3, n2, n2)
         pdot = np.einsum("i,jgirc->jgrc", prob.nu_hat, z)[:, :, None]
     else:
         verts = prob.vertices  # (V, 3)
@@ -432,10 +442,10 @@ def positivity(prob: Problem, vals: dict[str, np.ndarray]) -> np.ndarray:
     R = vals["R"][:, :1]
     parts = [P, Q, R]
     if prob.cfg.solver.rate_terms == "bound":
-        j = P.shape[0]
+        j, n2 = P.shape[0], P.shape[-1]
         dP = np.einsum("gib,jbrc->jgirc", prob.dweights, vals["P"])
-        z = vals["Z"].reshape(j, -1, 3, N2, N2)
-        parts += [(z - dP).reshape(j, -1, N2, N2), (z + dP).reshape(j, -1, N2, N2)]
+        z = vals["Z"].reshape(j, -1, 3, n2, n2)
+        parts += [(z - dP).reshape(j, -1, n2, n2), (z + dP).reshape(j, -1, n2, n2)]
     return np.concatenate(parts, axis=1)
 
 
@@ -543,9 +553,10 @@ def solve(
     xf = cp.Variable(int(free.sum()))
     x = E @ xf
     eye1 = np.tile(np.eye(m).reshape(-1), n1)
-    eye2 = np.tile(np.eye(N2).reshape(-1), n2)
+    k2 = shp2[-1]
+    eye2 = np.tile(np.eye(k2).reshape(-1), n2)
     S1 = cp.reshape(-(A1 @ x) - b1 - eps * eye1, (n1, m, m), order="C")
-    S2 = cp.reshape(A2 @ x + b2 - eps * eye2, (n2, N2, N2), order="C")
+    S2 = cp.reshape(A2 @ x + b2 - eps * eye2, (n2, k2, k2), order="C")
     gidx = lay.offsets["gamma"]
     go = lay.offsets["gnode"]
     gn = x[go : go + lay.by_name["gnode"].nb]
@@ -565,8 +576,8 @@ def solve(
         Xmats = positivity_x(prob, x)
         ycons = _y_matrix(x, lay)
         cons2 = [*cons, x[gidx] <= (1.0 + prob.cfg.solver.backoff) * gamma]
-        cons2 += [t * np.eye(N_STATE) - Xm >> 0 for Xm in Xmats]
-        cons2 += [t * np.eye(N_STATE) - ycons >> 0]
+        cons2 += [t * np.eye(lay.n) - Xm >> 0 for Xm in Xmats]
+        cons2 += [t * np.eye(lay.n) - ycons >> 0]
         p2 = cp.Problem(cp.Minimize(t), cons2)
         st2, t2, its2 = _run(p2, opts, progress)
         t_solve += t2
@@ -604,7 +615,7 @@ def _sym_expr(x, off: int, n: int):
 
 
 def _y_matrix(x, lay: Layout):
-    return _sym_expr(x, lay.offsets["Y"], N_STATE)
+    return _sym_expr(x, lay.offsets["Y"], lay.n)
 
 
 def positivity_x(prob: Problem, x) -> list:
@@ -612,8 +623,9 @@ def positivity_x(prob: Problem, x) -> list:
     import cvxpy as cp
 
     off, blk = prob.layout.offsets["X"], prob.layout.by_name["X"]
-    per = N_STATE * (N_STATE + 1) // 2
-    mats = [_sym_expr(x, off + b * per, N_STATE) for b in range(blk.nb)]
+    n = prob.layout.n
+    per = n * (n + 1) // 2
+    mats = [_sym_expr(x, off + b * per, n) for b in range(blk.nb)]
     if blk.nb == 1:
         return mats
     out = []
@@ -649,7 +661,7 @@ def closed_loop_analysis(
     """
     rh = prob.rho_hat[g : g + 1]
     p = {k: v[g] for k, v in prob.plant.items()}
-    n = N_STATE
+    n = prob.layout.n
     X = basis.evaluate(coefs["X"], rh)[0]
     Y = basis.evaluate(coefs["Y"], rh)[0]
     Pt = basis.evaluate(coefs["P"], rh)[0]

@@ -39,12 +39,16 @@ class Scaling:
     rho_half: np.ndarray
 
     @classmethod
-    def for_box(cls, box: np.ndarray, time_s: float) -> Scaling:
-        """Scaling for a (3, 2) box: x_e and the x_e measurement divided by t_s."""
+    def for_box(cls, box: np.ndarray, time_s: float, n_state: int = 3) -> Scaling:
+        """Scaling for a (3, 2) box: x_e and the x_e measurement divided by t_s.
+
+        States after x_e (the frequency-weight states of :mod:`synthesis.model`, integrals of e or
+        u over their weight's time constant) are divided by t_s as well.
+        """
         b = np.asarray(box, dtype=float)
         return cls(
             time_s=float(time_s),
-            sx=np.array([1.0, 1.0, time_s]),
+            sx=np.array([1.0, 1.0] + [time_s] * (n_state - 2)),
             sy=np.array([1.0, time_s]),
             rho_center=0.5 * (b[:, 0] + b[:, 1]),
             rho_half=0.5 * (b[:, 1] - b[:, 0]),

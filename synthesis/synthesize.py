@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from synthesis import basis, lmi
-from synthesis.artifact import COEF_SHAPES, FORMAT_VERSION, ControllerArtifact, make_artifact
+from synthesis.artifact import COEF_NAMES, FORMAT_VERSION, ControllerArtifact, make_artifact
 from synthesis.config import DesignConfig
 from synthesis.reconstruct import controllers_at
 
@@ -59,7 +59,7 @@ def to_artifact(
         raise SynthesisError(f"no solution to package (status {res.status})")
     cfg = prob.cfg
     vals = prob.layout.unpack(res.x[None, :])
-    coefs = {k: vals[k][0] for k in COEF_SHAPES}
+    coefs = {k: vals[k][0] for k in COEF_NAMES}
     grid = cfg.grid()
     mesh = np.stack(np.meshgrid(*grid, indexing="ij"), axis=-1)  # (nK, nT, ntau, 3)
     k = controllers_at(coefs, mesh.reshape(-1, 3), prob.scaling, cfg.model)
