@@ -376,6 +376,12 @@ def verify_artifact(
         "settling_below_200_s": sett is not None and sett < PAPER_SETTLING_S,
     }
     claim["holds"] = claim["overshoot_below_1_pct"] and claim["settling_below_200_s"]
+    smith_sett = smith["settling_time_s"]
+    # the bar beside the paper's: the certified design must settle before the textbook
+    # scheduled Smith predictor does (reported, not part of ``passed``)
+    claim["settles_before_smith"] = bool(
+        sett is not None and smith_sett is not None and sett < smith_sett
+    )
     step_ok = sett is not None and bool(lpv["stable"])
     passed = bool(res.certified and stability["stable"] and step_ok)
     meta = {"sha256": getattr(artifact, "sha256", None), "gamma": float(artifact.gamma)}

@@ -131,6 +131,10 @@ def main(command: str, argv: list[str]) -> int:
         f"paper claim (LPV overshoot < 1 %, settling < 200 s): "
         f"{'holds' if claim['holds'] else 'does not hold'}"
     )
+    print(
+        "LPV settles before the Smith baseline: "
+        f"{'yes' if claim.get('settles_before_smith') else 'no'}"
+    )
     print(f"verification {ok[report.passed]}")
     if args.json:
         try:

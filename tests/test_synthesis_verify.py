@@ -101,6 +101,11 @@ def test_shipped_design_report_has_step_metrics_for_lpv_pi_and_smith(tmp_path: P
         for key in STEP_NAMES:
             assert key in report["nominal_step"][name]
     assert report["nominal_step"]["smith"]["settling_time_s"] == pytest.approx(277.0, abs=1.0)
+    # the shipped two-degree-of-freedom structure: the paper's claim and the Smith bar both hold
+    lpv = report["nominal_step"]["lpv"]
+    assert lpv["overshoot_pct"] < 1.0 and lpv["settling_time_s"] < 200.0
+    assert report["paper_claim"]["holds"] is True
+    assert report["paper_claim"]["settles_before_smith"] is True
     pi = report["nominal_step"]["pi"]
     assert pi["rise_time_s"] == pytest.approx(109.5, abs=1.0)
     assert pi["settling_time_s"] == pytest.approx(418.8, abs=1.0)
