@@ -108,6 +108,12 @@ class AnalysisResult:
         The constant term P0 of the certificate mapped back to the original (unscaled, untransformed)
         state coordinates, up to a positive factor (None when the solve failed); used to whiten
         the state for a better-conditioned second solve (:func:`whitening_transform`).
+    certificate
+        The Lyapunov-Krasovskii matrices the solve found, divided by gamma (so that they satisfy
+        the printed, unrescaled Theorem-1 LMI at gain ``gamma``), in the solved coordinates:
+        ``P`` (n_p, n, n) coefficients of the P basis (weights 1, rho_hat_i, and for "quadratic"
+        1/2 rho_hat_i^2), ``Q``, ``R`` (n, n), the ``transform`` T (x = T x_solved) and the
+        ``time_scale_s``; None when the solve failed.
     """
 
     certified: bool
@@ -120,6 +126,7 @@ class AnalysisResult:
     p_dependence: str
     notes: list[str] = field(default_factory=list)
     p0_phys: Array | None = None
+    certificate: dict[str, Any] | None = None
 
 
 def _sym_index(n: int) -> tuple[NDArray[np.int64], int]:
@@ -466,6 +473,14 @@ def analyse(
     xv = np.asarray(x.value)
     certified, margins, p_min = _recheck(xv)
     p0m = xv[off_p[0] + sym]  # sym maps both (c, d) and (d, c) to the variable entry
+    g = max(_gam(float(xv[var_g])), 1e-300)
+    cert = {
+        "P": np.stack([xv[o + sym] for o in off_p]) / g,
+        "Q": xv[off_q + sym] / g,
+        "R": xv[off_r + sym] / g,
+        "transform": tx,
+        "time_scale_s": ts,
+    }
     return AnalysisResult(
         certified,
         status,
@@ -477,6 +492,7 @@ def analyse(
         p_dependence,
         notes,
         txi.T @ p0m @ txi,
+        cert,
     )
 
 

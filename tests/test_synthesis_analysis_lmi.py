@@ -99,3 +99,58 @@ def test_feasibility_form_with_gamma_cap_below_the_true_gain_is_not_certified() 
     assert not _single(_scalar(-1.0, 0.1, 1.0), gamma_cap=1.0).certified
     ok = _single(_scalar(-1.0, 0.1, 1.0), gamma_cap=2.0)
     assert ok.certified and ok.gamma <= 2.0 + 1e-6
+
+
+def _theorem1_unrescaled(
+    cert: dict,
+    system: DelaySystem,
+    rho: float,
+    sigma: float,
+    gamma: float,
+    rate: float,
+    dtau_drho: float,
+    tau_max: float,
+) -> np.ndarray:
+    """The printed 5-block Theorem-1 LMI (with the -R and -gamma I blocks) at one point/vertex."""
+    tx, ts = cert["transform"], cert["time_scale_s"]
+    txi = np.linalg.inv(tx)
+    a, ad = ts * txi @ system.A @ tx, ts * txi @ system.Ad @ tx
+    b, c, cd, d = ts * txi @ system.B, system.C @ tx, system.Cd @ tx, system.D
+    p = cert["P"][0] + rho * cert["P"][1]  # affine P
+    dp = sigma * rate * ts * cert["P"][1]
+    q, r, tb = cert["Q"], cert["R"], tau_max / ts
+    dtau = sigma * rate * dtau_drho
+    n, nw, nz = a.shape[0], b.shape[1], c.shape[0]
+    z = np.zeros
+    m = np.block(
+        [
+            [p @ a + a.T @ p + dp + q - r, p @ ad + r, p @ b, c.T, tb * a.T @ r],
+            [(p @ ad + r).T, -(1 - dtau) * q - r, z((n, nw)), cd.T, tb * ad.T @ r],
+            [(p @ b).T, z((nw, n)), -gamma * np.eye(nw), d.T, tb * b.T @ r],
+            [c, cd, d, -gamma * np.eye(nz), z((nz, n))],
+            [tb * r @ a, tb * r @ ad, tb * r @ b, z((n, nz)), -r],
+        ]
+    )
+    return 0.5 * (m + m.T)
+
+
+def test_returned_certificate_satisfies_the_printed_unrescaled_lmi_at_the_reported_gain() -> None:
+    # the certificate is what a controller step holds fixed: it must satisfy the 5-block LMI of
+    # the module docstring (not the solved, rescaled form) at every point and rate vertex
+    rho = np.linspace(-1.0, 1.0, 3)[:, None]
+    systems = [_scalar(-(1.0 + 0.5 * r), 0.2, 0.5 + 0.25 * r) for r in rho[:, 0]]
+    res = analyse(systems, rho, np.array([0.1]), np.array([0.25]), 0.75, p_dependence="affine")
+    assert res.certified and res.certificate is not None
+    cert = res.certificate
+    assert cert["P"].shape == (2, 1, 1) and cert["Q"].shape == (1, 1)
+    worst = max(
+        np.linalg.eigvalsh(
+            _theorem1_unrescaled(cert, s, float(r[0]), sg, res.gamma, 0.1, 0.25, 0.75)
+        )[-1]
+        for s, r in zip(systems, rho, strict=True)
+        for sg in (-1.0, 1.0)
+    )
+    assert worst < 0.0
+    # and it is not slack by a factor: at a tenth of the gain the same matrices fail
+    too_low = _theorem1_unrescaled(cert, systems[0], -1.0, 1.0, 0.1 * res.gamma, 0.1, 0.25, 0.75)
+    assert np.linalg.eigvalsh(too_low)[-1] > 0.0
