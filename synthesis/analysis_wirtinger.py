@@ -1,12 +1,13 @@
 """Delay-dependent analysis LMI with an augmented (Wirtinger-based) Lyapunov-Krasovskii functional.
 
 Why a second analysis: the Jensen functional of :mod:`synthesis.analysis_lmi` (Theorem 1) is
-nearly tight for the shipped design but cannot certify delay-compensating controllers at all: a
-Smith predictor in the controller class (:mod:`synthesis.smith_lpv`) is infeasible for it even at
-one frozen point with tau >= 27.5 s, while this functional bounds the same loops at (within
-solver accuracy) their exact frozen H-infinity norm. Reference: Seuret & Gouaisbaut, "Wirtinger-based
-integral inequality: application to time-delay systems", Automatica 49 (2013), extended here to
-the LPV grid, a parameter-dependent P and a delay tau(rho) that moves with rho.
+nearly tight for the shipped design but nearly blind to delay compensation: a Smith predictor in
+the controller class (:mod:`synthesis.smith_lpv`, loop gain 1.5) is infeasible for it at frozen
+points with tau = 27.5 and 45 s and bounded at twice its exact norm at the nominal point, while
+this functional bounds the same loops at their exact frozen H-infinity norm (within solver
+accuracy; measured figures in docs/CERTIFICATE-STRUCTURE.md). Reference: Seuret & Gouaisbaut,
+"Wirtinger-based integral inequality: application to time-delay systems", Automatica 49 (2013),
+extended here to the LPV grid, a parameter-dependent P and a delay tau(rho) that moves with rho.
 
 Functional, with ``xi = [x; int_{t-tau}^t x ds]`` (2n states)::
 
