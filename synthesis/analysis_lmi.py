@@ -124,6 +124,10 @@ class AnalysisResult:
         The constant term P0 of the certificate mapped back to the original (unscaled, untransformed)
         state coordinates, up to a positive factor (None when the solve failed); used to whiten
         the state for a better-conditioned second solve (:func:`whitening_transform`).
+    certificate
+        The Lyapunov-Krasovskii matrices divided by gamma, with the state transform and time
+        scale they live in, for analyses that return them (:mod:`synthesis.analysis_wirtinger`);
+        None here.
     """
 
     certified: bool
@@ -136,6 +140,7 @@ class AnalysisResult:
     p_dependence: str
     notes: list[str] = field(default_factory=list)
     p0_phys: Array | None = None
+    certificate: dict[str, Any] | None = None
 
 
 def _sym_index(n: int) -> tuple[NDArray[np.int64], int]:

@@ -1,0 +1,74 @@
+"""The Wirtinger-based analysis LMI: valid bounds, tighter than Jensen's, and it certifies a Smith loop."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from synthesis.analysis_lmi import AnalysisResult, analyse
+from synthesis.analysis_wirtinger import analyse_wirtinger
+from synthesis.closed_loop import DelaySystem, close_loop
+from synthesis.config import parse_config
+from synthesis.model import plant_at
+from synthesis.smith_lpv import SmithLPV
+
+
+def _scalar(a: float, ad: float, tau: float) -> DelaySystem:
+    one = np.ones((1, 1))
+    return DelaySystem(a * one, ad * one, one, one, 0 * one, 0 * one, tau)
+
+
+def _single(fn: Callable[..., AnalysisResult], system: DelaySystem, **kw: float) -> AnalysisResult:
+    zero = np.zeros(1)
+    return fn([system], np.zeros((1, 1)), zero, zero, system.tau, p_dependence="constant", **kw)
+
+
+def _hinf(system: DelaySystem) -> float:
+    """Exact frozen H-infinity norm by a frequency sweep (independent of any LMI)."""
+    best = 0.0
+    for w in np.concatenate([[1e-9], np.logspace(-6, 1, 3000)]):
+        e = np.exp(-1j * w * system.tau)
+        res = np.linalg.solve(1j * w * np.eye(system.n) - system.A - system.Ad * e, system.B)
+        g = (system.C + system.Cd * e) @ res + system.D
+        best = max(best, float(np.linalg.svd(g, compute_uv=False)[0]))
+    return best
+
+
+def test_gain_bound_is_valid_and_tight_on_a_scalar_delay_system() -> None:
+    # x' = -x + 0.1 x(t - 1) + w, z = x: H-infinity norm is the DC gain 1 / 0.9
+    res = _single(analyse_wirtinger, _scalar(-1.0, 0.1, 1.0))
+    assert res.certified
+    assert 1.0 / 0.9 * (1 - 1e-6) <= res.gamma <= 1.0 / 0.9 * 1.001
+
+
+def test_pure_delayed_feedback_certified_beyond_jensen_but_not_past_pi_over_2() -> None:
+    # x' = -x(t - tau) is stable iff tau < pi/2 = 1.5708; Jensen stops below 1.5, Wirtinger at 1.5
+    assert not _single(analyse, _scalar(0.0, -1.0, 1.5)).certified
+    assert _single(analyse_wirtinger, _scalar(0.0, -1.0, 1.5)).certified
+    assert not _single(analyse_wirtinger, _scalar(0.0, -1.0, 1.6)).certified
+
+
+def test_smith_loop_gain_bound_is_its_exact_norm_where_jensen_doubles_it() -> None:
+    rho = (0.55, 150.0, 40.0)
+    model = parse_config({}).model
+    loop = close_loop(plant_at(rho, model), SmithLPV(1.5).at(rho), rho[2])
+    exact = _hinf(loop)
+    wirt = _single(analyse_wirtinger, loop, time_scale_s=40.0)
+    jensen = _single(analyse, loop, time_scale_s=40.0, backoff=0.0)
+    assert wirt.certified
+    assert exact * (1 - 1e-3) <= wirt.gamma <= exact * 1.02
+    assert jensen.gamma is None or jensen.gamma > 1.5 * wirt.gamma
+
+
+def test_certificate_has_the_augmented_lyapunov_matrix() -> None:
+    res = _single(analyse_wirtinger, _scalar(-1.0, 0.1, 1.0))
+    cert = res.certificate
+    assert cert is not None and cert["P"].shape == (1, 2, 2)
+    assert np.linalg.eigvalsh(cert["P"][0])[0] > 0 and cert["S"][0, 0] > 0 and cert["R"][0, 0] > 0
+
+
+def test_zero_delay_is_rejected() -> None:
+    with pytest.raises(ValueError, match="delay"):
+        _single(analyse_wirtinger, _scalar(-1.0, 0.1, 0.0))
