@@ -278,6 +278,61 @@ class _Problem:
         return self.var_g + 1
 
 
+def checked_inputs(
+    systems: Sequence[DelaySystem],
+    rho_hat: Array,
+    rate_hat_per_s: Array,
+    dtau_drho_hat_s: Array,
+    tau_max_s: float,
+    p_dependence: str,
+    zero_delay_ok: bool = True,
+) -> tuple[Array, Array, Array, float, Array]:
+    """Validate the arguments every analysis LMI shares; return rho_hat, rates, dtau, tau_max, taus.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``p_dependence``, a rho_hat row count that differs from the systems, a negative
+        or non-finite rate, a delay outside [0, tau_max] ((0, tau_max] without ``zero_delay_ok``)
+        or a delay that may change at 1 s/s or faster.
+    """
+    if p_dependence not in P_DEPENDENCES:
+        raise ValueError(f"p_dependence={p_dependence!r} must be one of {P_DEPENDENCES}")
+    m = len(systems)
+    rho = np.atleast_2d(np.asarray(rho_hat, dtype=float))
+    if m == 0 or rho.shape[0] != m:
+        raise ValueError(f"need one rho_hat row per system, got {rho.shape} for {m} systems")
+    s = rho.shape[1]
+    rate = np.asarray(rate_hat_per_s, dtype=float).reshape(s)
+    dtau = np.asarray(dtau_drho_hat_s, dtype=float).reshape(s)
+    if np.any(rate < 0) or not np.all(np.isfinite(rate)):
+        raise ValueError(f"rate_hat_per_s={rate.tolist()} must be finite and >= 0")
+    tau_max = float(tau_max_s)
+    taus = np.array([sys_.tau for sys_ in systems])
+    low_bad = taus < 0 if zero_delay_ok else taus <= 0
+    if np.any(taus > tau_max * (1 + 1e-12)) or np.any(low_bad):
+        lo = "[0" if zero_delay_ok else "(0"
+        raise ValueError(f"every delay must lie in {lo}, tau_max_s={tau_max}] s")
+    if float(np.sum(rate * np.abs(dtau))) >= 1.0:
+        raise ValueError("the delay may change at >= 1 s/s: the functional needs |dtau/dt| < 1")
+    return rho, rate, dtau, tau_max, taus
+
+
+def transform_of(
+    systems: Sequence[DelaySystem], time_scale_s: float, state_transform: Array | None
+) -> tuple[Array, Array]:
+    """The constant state transform (and its inverse): given, or the centre system's balancing."""
+    n = systems[0].n
+    if state_transform is None:
+        mid = systems[len(systems) // 2]  # the centre system
+        tx = np.diag(_balance(mid.A, mid.Ad, time_scale_s))
+    else:
+        tx = np.asarray(state_transform, dtype=float)
+        if tx.shape != (n, n) or not np.all(np.isfinite(tx)) or np.linalg.cond(tx) > 1e12:
+            raise ValueError(f"state_transform must be a finite, invertible {n}x{n} matrix")
+    return tx, np.linalg.inv(tx)
+
+
 def _lmi_map(
     pr: _Problem, points: NDArray[np.int64], bound: bool = False
 ) -> tuple[sp.csr_matrix, Array]:
@@ -495,36 +550,16 @@ def analyse(
     import clarabel
 
     t_start = time.perf_counter()
-    if p_dependence not in P_DEPENDENCES:
-        raise ValueError(f"p_dependence={p_dependence!r} must be one of {P_DEPENDENCES}")
-    m = len(systems)
-    rho_hat = np.atleast_2d(np.asarray(rho_hat, dtype=float))
-    if m == 0 or rho_hat.shape[0] != m:
-        raise ValueError(f"need one rho_hat row per system, got {rho_hat.shape} for {m} systems")
-    s = rho_hat.shape[1]
-    rate = np.asarray(rate_hat_per_s, dtype=float).reshape(s)
-    dtau = np.asarray(dtau_drho_hat_s, dtype=float).reshape(s)
-    if np.any(rate < 0) or not np.all(np.isfinite(rate)):
-        raise ValueError(f"rate_hat_per_s={rate.tolist()} must be finite and >= 0")
-    tau_max = float(tau_max_s)
-    taus = np.array([sys_.tau for sys_ in systems])
-    if np.any(taus > tau_max * (1 + 1e-12)) or np.any(taus < 0):
-        raise ValueError(f"every delay must lie in [0, tau_max_s={tau_max}] s")
-    if float(np.sum(rate * np.abs(dtau))) >= 1.0:
-        raise ValueError("the delay may change at >= 1 s/s: the functional needs |dtau/dt| < 1")
+    rho_hat, rate, dtau, tau_max, taus = checked_inputs(
+        systems, rho_hat, rate_hat_per_s, dtau_drho_hat_s, tau_max_s, p_dependence
+    )
+    m, s = rho_hat.shape
     if working_set is not None and int(working_set) < 1:
         raise ValueError(f"working_set={working_set!r} must be None or an integer >= 1")
     ts = float(time_scale_s) if time_scale_s is not None else (tau_max if tau_max > 0 else 1.0)
     n = systems[0].n
 
-    if state_transform is None:
-        mid = systems[m // 2]  # the centre system
-        tx = np.diag(_balance(mid.A, mid.Ad, ts))
-    else:
-        tx = np.asarray(state_transform, dtype=float)
-        if tx.shape != (n, n) or not np.all(np.isfinite(tx)) or np.linalg.cond(tx) > 1e12:
-            raise ValueError(f"state_transform must be a finite, invertible {n}x{n} matrix")
-    txi = np.linalg.inv(tx)
+    tx, txi = transform_of(systems, ts, state_transform)
 
     # rate vertices: only parameters that move and matter (P affine, or the delay depends on them)
     moving = [i for i in range(s) if rate[i] > 0 and (p_dependence != "constant" or dtau[i] != 0.0)]

@@ -49,7 +49,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from synthesis.analysis_lmi import P_DEPENDENCES, AnalysisResult, _balance
+from synthesis.analysis_lmi import AnalysisResult, checked_inputs, transform_of
 from synthesis.closed_loop import DelaySystem
 
 __all__ = ["analyse_wirtinger"]
@@ -116,33 +116,19 @@ def analyse_wirtinger(
     import cvxpy as cp
 
     t_start = time.perf_counter()
-    if p_dependence not in P_DEPENDENCES:
-        raise ValueError(f"p_dependence={p_dependence!r} must be one of {P_DEPENDENCES}")
-    m = len(systems)
-    rho_hat = np.atleast_2d(np.asarray(rho_hat, dtype=float))
-    if m == 0 or rho_hat.shape[0] != m:
-        raise ValueError(f"need one rho_hat row per system, got {rho_hat.shape} for {m} systems")
-    s = rho_hat.shape[1]
-    rate = np.asarray(rate_hat_per_s, dtype=float).reshape(s)
-    dtau = np.asarray(dtau_drho_hat_s, dtype=float).reshape(s)
-    if np.any(rate < 0) or not np.all(np.isfinite(rate)):
-        raise ValueError(f"rate_hat_per_s={rate.tolist()} must be finite and >= 0")
-    tau_max = float(tau_max_s)
-    taus = np.array([q.tau for q in systems])
-    if np.any(taus > tau_max * (1 + 1e-12)) or np.any(taus <= 0):
-        raise ValueError(f"every delay must lie in (0, tau_max_s={tau_max}] s")
-    if float(np.sum(rate * np.abs(dtau))) >= 1.0:
-        raise ValueError("the delay may change at >= 1 s/s: the functional needs |dtau/dt| < 1")
+    rho_hat, rate, dtau, tau_max, taus = checked_inputs(
+        systems,
+        rho_hat,
+        rate_hat_per_s,
+        dtau_drho_hat_s,
+        tau_max_s,
+        p_dependence,
+        zero_delay_ok=False,
+    )
+    m, s = rho_hat.shape
     ts = float(time_scale_s) if time_scale_s is not None else tau_max
     n, nw = systems[0].n, systems[0].B.shape[1]
-    if state_transform is None:
-        mid = systems[m // 2]
-        tx = np.diag(_balance(mid.A, mid.Ad, ts))
-    else:
-        tx = np.asarray(state_transform, dtype=float)
-        if tx.shape != (n, n) or not np.all(np.isfinite(tx)) or np.linalg.cond(tx) > 1e12:
-            raise ValueError(f"state_transform must be a finite, invertible {n}x{n} matrix")
-    txi = np.linalg.inv(tx)
+    tx, txi = transform_of(systems, ts, state_transform)
     a = np.stack([ts * txi @ q.A @ tx for q in systems])
     ad = np.stack([ts * txi @ q.Ad @ tx for q in systems])
     b = np.stack([ts * txi @ q.B for q in systems])
