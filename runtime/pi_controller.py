@@ -23,6 +23,20 @@ KP_ML_H_PER_MMHG = 3.0
 KI_ML_H_PER_MMHG_S = 0.017
 
 
+def check_period_and_limit(sample_period_s: float, max_rate_ml_h: float) -> None:
+    """Reject a sample period outside (0, 10] s or a pump limit outside (0, 10000] ml/h.
+
+    Raises
+    ------
+    ValueError
+        Naming the argument, its value and the allowed range.
+    """
+    if not 0.0 < sample_period_s <= 10.0:
+        raise ValueError(f"sample_period_s={sample_period_s!r} outside (0, 10] s")
+    if not 0.0 < max_rate_ml_h <= 10000.0:
+        raise ValueError(f"max_rate_ml_h={max_rate_ml_h!r} outside (0, 10000] ml/h")
+
+
 @dataclass
 class PIStatus:
     """Flags of the last PI step (``rho_*`` are always False: the PI is not scheduled)."""
@@ -54,10 +68,7 @@ class PIController:
         kp: float = KP_ML_H_PER_MMHG,
         ki: float = KI_ML_H_PER_MMHG_S,
     ) -> None:
-        if not 0.0 < sample_period_s <= 10.0:
-            raise ValueError(f"sample_period_s={sample_period_s!r} outside (0, 10] s")
-        if not 0.0 < max_rate_ml_h <= 10000.0:
-            raise ValueError(f"max_rate_ml_h={max_rate_ml_h!r} outside (0, 10000] ml/h")
+        check_period_and_limit(sample_period_s, max_rate_ml_h)
         if kp < 0.0 or ki < 0.0:
             raise ValueError(f"PI gains must be >= 0, got kp={kp!r}, ki={ki!r}")
         self.sample_period_s = float(sample_period_s)

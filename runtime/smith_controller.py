@@ -55,6 +55,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from runtime.pi_controller import check_period_and_limit
+
 LAMBDA_DEFAULT_S = 30.0
 LAMBDA_MIN_S = 5.0
 LAMBDA_MAX_S = 600.0
@@ -116,10 +118,7 @@ class SmithController:
         lambda_s: float = LAMBDA_DEFAULT_S,
         tau_max_s: float = TAU_MAX_DEFAULT_S,
     ) -> None:
-        if not 0.0 < sample_period_s <= 10.0:
-            raise ValueError(f"sample_period_s={sample_period_s!r} outside (0, 10] s")
-        if not 0.0 < max_rate_ml_h <= 10000.0:
-            raise ValueError(f"max_rate_ml_h={max_rate_ml_h!r} outside (0, 10000] ml/h")
+        check_period_and_limit(sample_period_s, max_rate_ml_h)
         if not LAMBDA_MIN_S <= lambda_s <= LAMBDA_MAX_S:
             raise ValueError(
                 f"lambda_s={lambda_s!r} outside [{LAMBDA_MIN_S:g}, {LAMBDA_MAX_S:g}] s"

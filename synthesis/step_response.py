@@ -123,6 +123,25 @@ def _discretise(
     return e[:n, :n], e[:n, n : 2 * n], e[:n, 2 * n : 3 * n], e[:n, 3 * n :]
 
 
+def _time_grid(
+    loop: StepLoop, step_mmhg: float, t_end_s: float, h_max_s: float
+) -> tuple[int, float, int]:
+    """Check a step simulation's arguments; return (delay in steps, step h s, number of steps).
+
+    The step h is the largest that is ≤ ``h_max_s`` and divides the delay exactly.
+    """
+    if not (np.isfinite(step_mmhg) and step_mmhg != 0.0):
+        raise ValueError(f"step_mmhg={step_mmhg!r} must be finite and non-zero")
+    if not (np.isfinite(t_end_s) and t_end_s > 0.0):
+        raise ValueError(f"t_end_s={t_end_s!r} must be > 0 s")
+    if not (np.isfinite(h_max_s) and h_max_s > 0.0):
+        raise ValueError(f"h_max_s={h_max_s!r} must be > 0 s")
+    tau = float(loop.tau_s)
+    lag = int(np.ceil(tau / h_max_s - 1e-9)) if tau > 0.0 else 0
+    h = tau / lag if lag else h_max_s
+    return lag, h, int(np.ceil(t_end_s / h))
+
+
 def simulate_step(
     loop: StepLoop,
     step_mmhg: float = NOMINAL_STEP_MMHG,
@@ -147,19 +166,7 @@ def simulate_step(
     StepResponse
         Samples every h on [0, t_end].
     """
-    if not (np.isfinite(step_mmhg) and step_mmhg != 0.0):
-        raise ValueError(f"step_mmhg={step_mmhg!r} must be finite and non-zero")
-    if not (np.isfinite(t_end_s) and t_end_s > 0.0):
-        raise ValueError(f"t_end_s={t_end_s!r} must be > 0 s")
-    if not (np.isfinite(h_max_s) and h_max_s > 0.0):
-        raise ValueError(f"h_max_s={h_max_s!r} must be > 0 s")
-    tau = float(loop.tau_s)
-    if tau > 0.0:
-        lag = int(np.ceil(tau / h_max_s - 1e-9))
-        h = tau / lag
-    else:
-        lag, h = 0, h_max_s
-    steps = int(np.ceil(t_end_s / h))
+    lag, h, steps = _time_grid(loop, step_mmhg, t_end_s, h_max_s)
     a = np.asarray(loop.A, dtype=float)
     ad = np.asarray(loop.Ad, dtype=float)
     n = a.shape[0]
@@ -233,16 +240,7 @@ def simulate_prefiltered_step(
     step_mmhg, t_end_s, h_max_s
         As :func:`simulate_step`.
     """
-    if not (np.isfinite(step_mmhg) and step_mmhg != 0.0):
-        raise ValueError(f"step_mmhg={step_mmhg!r} must be finite and non-zero")
-    if not (np.isfinite(t_end_s) and t_end_s > 0.0):
-        raise ValueError(f"t_end_s={t_end_s!r} must be > 0 s")
-    if not (np.isfinite(h_max_s) and h_max_s > 0.0):
-        raise ValueError(f"h_max_s={h_max_s!r} must be > 0 s")
-    tau = float(loop.tau_s)
-    lag = int(np.ceil(tau / h_max_s - 1e-9)) if tau > 0.0 else 0
-    h = tau / lag if lag else h_max_s
-    steps = int(np.ceil(t_end_s / h))
+    lag, h, steps = _time_grid(loop, step_mmhg, t_end_s, h_max_s)
     a = np.asarray(loop.A, dtype=float)
     ad = np.asarray(loop.Ad, dtype=float)
     n = a.shape[0]
@@ -250,7 +248,7 @@ def simulate_prefiltered_step(
         a, ad = a + ad, np.zeros_like(ad)
     t = np.arange(steps + 1) * h
     u_ff, r_m = reference(t)
-    u_ff_d, r_m_d = reference(t - tau)
+    u_ff_d, r_m_d = reference(t - float(loop.tau_s))
     v = np.column_stack([r_m, r_m_d, u_ff_d])  # inputs on the grid, first-order hold between
     b = np.column_stack([loop.b_r, loop.bd_r, np.asarray(b_ff, dtype=float)])
     phi, g_p, g_q, g_v, g_dv = _discretise_foh(a, ad, b, h)

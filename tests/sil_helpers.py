@@ -11,6 +11,7 @@ from pathlib import Path
 
 os.environ["CI"] = "1"  # the rerun CLI writes analytics files otherwise
 
+import numpy as np  # noqa: E402
 from rerun.chunk import RrdReader  # noqa: E402
 
 from runtime.link import LinkClosedError, LinkEndpoint, PtyPair  # noqa: E402
@@ -41,6 +42,21 @@ def rrd_columns(path: Path) -> dict[str, dict[int, float]]:
         vals = [v[0] for v in batch.column("Scalars:scalars").to_pylist()]
         out.setdefault(str(chunk.entity_path), {}).update(zip(ticks, vals, strict=True))
     return out
+
+
+def assert_recording_equals_simulation(rrd: Path, ref) -> np.ndarray:
+    """Every tick of a SIL recording has the in-process simulation's MAP and command, bit for bit.
+
+    ``ref`` is a :class:`hil_sim.closed_loop.Trajectory`; returns the recorded commands (ml/h).
+    """
+    cols = rrd_columns(rrd)
+    n = ref.t_s.size
+    assert sorted(cols["/pump/command_ml_h"]) == list(range(n))
+    sil_map = np.array([cols["/patient/map_mmhg"][k] for k in range(n)])
+    sil_cmd = np.array([cols["/pump/command_ml_h"][k] for k in range(n)], dtype=np.float32)
+    np.testing.assert_array_equal(sil_map, ref.map_mmhg)
+    np.testing.assert_array_equal(sil_cmd.astype(np.float64), ref.command_ml_h)
+    return sil_cmd
 
 
 def spawn_device(pair: PtyPair, *args: str) -> subprocess.Popen:

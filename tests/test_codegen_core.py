@@ -68,7 +68,7 @@ def _design() -> pl.LoadedDesign:
     )
 
 
-def _load(path: Path):
+def load_module(path: Path):
     spec = importlib.util.spec_from_file_location(f"gen_{abs(hash(str(path))):x}", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
@@ -86,7 +86,14 @@ def built(tmp_path_factory):
     check = check_grid(example_controller, grid, tables, pts, 0.1, 0.1, TS)
     proof = TabulationProof(grid, tables, check, HAND_GRID_REL_TOL)
     out = {"proof": proof, "design": design, "check": check}
-    root = tmp_path_factory.mktemp("gen")
+    out.update(emit_targets(design, proof, tmp_path_factory.mktemp("gen")))
+    return out
+
+
+def emit_targets(design: pl.LoadedDesign, proof: TabulationProof, root: Path) -> dict:
+    """q31/q15 plans, the Python module (loaded, and its source) and the C libraries (int and
+    float) of ``design`` under ``root``; the C ones only where gcc is installed."""
+    out: dict = {}
     gcc = shutil.which("gcc")
     for fmt in ("q31", "q15"):
         plan = pl.quantise(design, proof, fmt)
@@ -95,7 +102,7 @@ def built(tmp_path_factory):
         d.mkdir()
         src = pl.emit(design, proof, plan, "python").files["lpv_map_controller.py"]
         (d / "lpv_map_controller.py").write_text(src)
-        out[f"py_{fmt}"] = _load(d / "lpv_map_controller.py")
+        out[f"py_{fmt}"] = load_module(d / "lpv_map_controller.py")
         out[f"src_{fmt}"] = src
         for flt in (False, True):
             files = pl.emit(design, proof, plan, "c", c_float=flt).files

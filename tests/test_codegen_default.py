@@ -5,7 +5,6 @@ reference and with the exactly reconstructed controller. Also tamper detection a
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import math
 import shutil
 import subprocess
@@ -23,18 +22,12 @@ from tests.test_codegen_core import (
     CController,
     continuous_reference,
     fopdt_closed_loop,
+    load_module,
     random_inputs,
 )
 
 COMMITTED = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
 pytestmark = pytest.mark.skipif(not pl.DEFAULT_ARTIFACT.is_file(), reason="no shipped design")
-
-
-def _load(path: Path):
-    spec = importlib.util.spec_from_file_location(f"gen_{abs(hash(str(path))):x}", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _shipped_sha256() -> str:
@@ -50,7 +43,7 @@ def shipped(tmp_path_factory):
     root = tmp_path_factory.mktemp("shipped")
     src = pl.emit(design, proof, plan, "python").files["lpv_map_controller.py"]
     (root / "lpv_map_controller.py").write_text(src, encoding="utf-8")
-    out = {"design": design, "proof": proof, "mod": _load(root / "lpv_map_controller.py"),
+    out = {"design": design, "proof": proof, "mod": load_module(root / "lpv_map_controller.py"),
            "src": src, "root": root}  # fmt: skip
     gcc = shutil.which("gcc")
     if gcc:

@@ -9,10 +9,7 @@ ctypes, the plants are FOPDT simulations written here.
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import math
-import shutil
-import subprocess
 import tomllib
 from pathlib import Path
 
@@ -22,48 +19,25 @@ import pytest
 from codegen import pipeline as pl
 from synthesis.config import ConfigError, parse_config
 from synthesis.reference import ReferenceConfig, frozen_step_reference
-from tests.test_codegen_core import BOX, TS, CController, built, random_inputs  # noqa: F401
+from tests.test_codegen_core import (  # noqa: F401
+    BOX,
+    TS,
+    CController,
+    built,
+    emit_targets,
+    load_module,
+    random_inputs,
+)
 
 LAMBDA_S, FRACTION, K_MIN = 10.0, 0.9, 0.05
 COMMITTED = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
-
-
-def _load(path: Path):
-    spec = importlib.util.spec_from_file_location(f"pf_{abs(hash(str(path))):x}", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @pytest.fixture(scope="module")
 def pf(built, tmp_path_factory):  # noqa: F811
     """The hand-built design of test_codegen_core with the prefilter: modules and C libraries."""
     design = dataclasses.replace(built["design"], reference=(LAMBDA_S, FRACTION, K_MIN))
-    proof = built["proof"]
-    root = tmp_path_factory.mktemp("pf")
-    out = {}
-    gcc = shutil.which("gcc")
-    for fmt in ("q31", "q15"):
-        plan = pl.quantise(design, proof, fmt)
-        d = root / fmt
-        d.mkdir()
-        src = pl.emit(design, proof, plan, "python").files["lpv_map_controller.py"]
-        (d / "lpv_map_controller.py").write_text(src)
-        out[f"py_{fmt}"] = _load(d / "lpv_map_controller.py")
-        for flt in (False, True):
-            cd = d / ("cf" if flt else "c")
-            cd.mkdir()
-            for name, text in pl.emit(design, proof, plan, "c", c_float=flt).files.items():
-                (cd / name).write_text(text)
-            if gcc:
-                lib = cd / "libctl.so"
-                subprocess.run(
-                    [gcc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
-                     "-shared", "-fPIC", "-o", str(lib), str(cd / "lpv_map_controller.c")],
-                    check=True, capture_output=True, text=True,
-                )  # fmt: skip
-                out[f"c_{fmt}{'_f' if flt else ''}"] = lib
-    return out
+    return emit_targets(design, built["proof"], tmp_path_factory.mktemp("pf"))
 
 
 class LawReference:
@@ -256,9 +230,8 @@ def test_shipped_module_on_nominal_plant_matches_the_continuous_verify_step():
     from synthesis.verify import _closed_loop_at, nominal_lpv_step
 
     art = load_artifact(pl.DEFAULT_ARTIFACT)
-    if not art.reference.enabled:
-        pytest.skip("the shipped design has no prefilter")
-    mod = _load(COMMITTED)
+    assert art.reference.enabled  # the shipped design is the two-degree-of-freedom structure
+    mod = load_module(COMMITTED)
     assert mod.REFERENCE_ENABLED
     rho = np.array([0.55, 150.0, 40.0])
     cont = nominal_lpv_step(_closed_loop_at(art, art.model_config, rho), rho, art.reference, 120.0)
@@ -271,9 +244,8 @@ def test_shipped_module_on_nominal_plant_matches_the_continuous_verify_step():
 
 @pytest.mark.skipif(not COMMITTED.is_file(), reason="no shipped module")
 def test_shipped_module_tracks_mid_run_target_changes_without_overshoot():
-    mod = _load(COMMITTED)
-    if not getattr(mod, "REFERENCE_ENABLED", False):
-        pytest.skip("the shipped module has no prefilter")
+    mod = load_module(COMMITTED)
+    assert mod.REFERENCE_ENABLED
     plan = [(0.0, 20.0), (600.0, 30.0), (1200.0, 10.0)]  # target step, +10 more, then down to +10
 
     def targets(t: float) -> float:

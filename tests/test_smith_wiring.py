@@ -5,13 +5,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from hil_sim.cli import main as hil_main
 from runtime.controller_loader import ControllerSpecError, load_controller
 from runtime.smith_controller import SmithController
-from tests.sil_helpers import pressor, rrd_columns
+from tests.sil_helpers import assert_recording_equals_simulation, pressor
 
 
 def test_smith_spec_gives_the_smith_predictor_with_lambda_30_s():
@@ -78,11 +77,5 @@ def test_sil_with_smith_over_the_pty_equals_the_in_process_simulator(tmp_path: P
     s = json.loads(summary.read_text())
     assert s["controller"] == "smith:45" and s["metrics"]["commands_out_of_range"] == 0
     ref = simulate(World("paper-tracking", 3, 0.1), SmithController(0.1, lambda_s=45.0), 300.0)
-    cols = rrd_columns(rrd)
-    n = ref.t_s.size
-    assert sorted(cols["/pump/command_ml_h"]) == list(range(n))
-    sil_map = np.array([cols["/patient/map_mmhg"][k] for k in range(n)])
-    sil_cmd = np.array([cols["/pump/command_ml_h"][k] for k in range(n)], dtype=np.float32)
-    np.testing.assert_array_equal(sil_map, ref.map_mmhg)
-    np.testing.assert_array_equal(sil_cmd.astype(np.float64), ref.command_ml_h)
+    sil_cmd = assert_recording_equals_simulation(rrd, ref)
     assert sil_cmd.max() == pytest.approx(120.0)  # the step drove the pump to its limit
