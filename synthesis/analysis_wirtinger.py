@@ -199,16 +199,20 @@ def analyse_wirtinger(
         g1p, g0p, gap, hp = g1[pts], g0[pts], ga[pts], h[pts]
         pc = _sym(x[:, :off_s].reshape(j, n_p, ns2), n2)
         sm, rm, mu = _sym(x[:, off_s:off_r], n), _sym(x[:, off_r:var_mu], n), x[:, var_mu]
-        p = np.einsum("mk,Jkab->Jmab", w_p[pts], pc)
-        pdot = np.einsum("mvk,Jkab->Jmvab", dw_v[pts], pc)
-        he = np.einsum("mra,Jmrs,mvsb->Jmvab", g1p, p, g0p)
-        out = he + np.swapaxes(he, -1, -2) + np.einsum("mra,Jmvrs,msb->Jmvab", g1p, pdot, g1p)
-        out += np.einsum("ra,Jrs,sb->Jab", ex, sm, ex)[:, None, None]
-        out -= (1.0 - dtau_dt)[None, None, :, None, None] * np.einsum("ra,Jrs,sb->Jab", eh, sm, eh)[
-            :, None, None
-        ]
-        out += hbar**2 * np.einsum("mra,Jrs,msb->Jmab", gap, rm, gap)[:, :, None]
-        wirt = np.einsum("ra,Jrs,sb->Jab", e1, rm, e1) + 3.0 * np.einsum(
+        p = np.einsum("mk,Jkab->Jmab", w_p[pts], pc, optimize=True)
+        pdot = np.einsum("mvk,Jkab->Jmvab", dw_v[pts], pc, optimize=True)
+        he = np.einsum("mra,Jmrs,mvsb->Jmvab", g1p, p, g0p, optimize=True)
+        out = (
+            he
+            + np.swapaxes(he, -1, -2)
+            + np.einsum("mra,Jmvrs,msb->Jmvab", g1p, pdot, g1p, optimize=True)
+        )
+        out += np.einsum("ra,Jrs,sb->Jab", ex, sm, ex, optimize=True)[:, None, None]
+        out -= (1.0 - dtau_dt)[None, None, :, None, None] * np.einsum(
+            "ra,Jrs,sb->Jab", eh, sm, eh, optimize=True
+        )[:, None, None]
+        out += hbar**2 * np.einsum("mra,Jrs,msb->Jmab", gap, rm, gap, optimize=True)[:, :, None]
+        wirt = np.einsum("ra,Jrs,sb->Jab", e1, rm, e1, optimize=True) + 3.0 * np.einsum(
             "ra,Jrs,sb->Jab", e2, rm, e2
         )
         out -= (hbar / hp)[None, :, None, None, None] * wirt[:, None, None]
