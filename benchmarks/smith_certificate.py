@@ -7,10 +7,11 @@ with all rate vertices. Prints the certificate verdict, γ, the smallest re-chec
 and peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
 
     python benchmarks/smith_certificate.py --loop-gain 2 --grid 3,3,3 [--p-dependence quadratic]
-    python benchmarks/smith_certificate.py --loop-gain 2 --grid 5,5,5 --working-set 27
+    python benchmarks/smith_certificate.py --loop-gain 2 --grid 5,5,5 --working-set 27 --gamma-cap 15
 
 ``--working-set K`` imposes the LMI at K spread points and re-checks every point and rate vertex
-(the verdict covers the whole grid either way).
+(the verdict covers the whole grid either way); ``--gamma-cap G`` solves the feasibility form (γ ≤ G,
+largest common margin), whose solution is off the boundary of the points left out.
 """
 
 from __future__ import annotations
@@ -62,6 +63,13 @@ def main() -> None:
         metavar="K",
         help="impose the LMI at K spread points, re-check all (default: every point)",
     )
+    ap.add_argument(
+        "--gamma-cap",
+        type=float,
+        default=None,
+        metavar="G",
+        help="feasibility form: gamma <= G, maximise the common margin (default: minimise gamma)",
+    )
     ap.add_argument("--progress", action="store_true", help="solver progress lines on stderr")
     args = ap.parse_args()
     if args.working_set is not None and args.working_set < 1:
@@ -96,13 +104,14 @@ def main() -> None:
         time_scale_s=sc.time_s,
         state_transform=tx,
         working_set=args.working_set,
+        gamma_cap=args.gamma_cap,
         progress=_progress(t0) if args.progress else None,
     )
     wall = time.perf_counter() - t0
     rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
     print(
         f"loop gain {args.loop_gain:g}, grid {args.grid}, P {args.p_dependence}, "
-        f"working set {args.working_set}: "
+        f"working set {args.working_set}, gamma cap {args.gamma_cap}: "
         f"certified={res.certified} status={res.status} gamma={res.gamma} "
         f"min margin={np.min(res.margins):.3g} LMIs={res.n_lmis} "
         f"wall={wall:.0f} s peak RSS={rss_gb:.2f} GB (shipped design gamma {art.gamma:.2f})"
