@@ -479,6 +479,7 @@ def grow_working_set(
     notes: list[str],
     progress: Callable[[str], None] | None,
     n_vertices: int,
+    stop_if_imposed_fails: bool = False,
 ) -> tuple[str, Array | None, NDArray[np.int64], Recheck]:
     """Solve with the LMI imposed at ``points``, re-check every point, add failing ones, repeat.
 
@@ -486,6 +487,8 @@ def grow_working_set(
     (certified, margins (m,), P eigenvalue minima) at EVERY point and rate vertex. Up to
     ``working_set`` failing points (the worst first; all of them when None) are added per round,
     until the re-check passes, every point is imposed, or no failing point is left to add.
+    ``stop_if_imposed_fails``: also stop when an imposed point fails (sound for a feasibility
+    form with a fixed gamma cap: a larger set of points cannot be feasible when a subset is not).
 
     Returns
     -------
@@ -502,7 +505,14 @@ def grow_working_set(
         m = len(margins)
         failing = np.flatnonzero(~(margins > 0))
         new = np.setdiff1d(failing[np.argsort(margins[failing], kind="stable")], points)
+        imposed_fail = np.intersect1d(failing, points)
         if certified or len(points) == m or len(new) == 0:
+            return status, xv, points, checked
+        if stop_if_imposed_fails and len(imposed_fail):
+            notes.append(
+                f"{len(imposed_fail)} of the {len(points)} imposed points failed the re-check: "
+                "not certifiable at this gamma cap, no points added"
+            )
             return status, xv, points, checked
         add = new if working_set is None else new[: int(working_set)]
         if progress:

@@ -128,7 +128,8 @@ def analyse_wirtinger(
     ``gamma_cap`` for a centred certificate; no rate-bound form). Every delay must be > 0 (the
     functional divides by tau) and <= ``tau_max_s``. ``working_set=k`` imposes the LMI (all rate
     vertices) at k spread points, re-checks every point and vertex in floating point and adds up
-    to k failing points per round; ``certified`` is that re-check either way.
+    to k failing points per round (with ``gamma_cap`` it stops as soon as an imposed point fails:
+    that cap is then infeasible for the whole grid too); ``certified`` is that re-check either way.
 
     Returns
     -------
@@ -320,7 +321,14 @@ def analyse_wirtinger(
         return certified, margins, p_min
 
     status, xv, points, (certified, margins, p_min) = grow_working_set(
-        points, working_set, solve, recheck, notes, progress, nv
+        points,
+        working_set,
+        solve,
+        recheck,
+        notes,
+        progress,
+        nv,
+        stop_if_imposed_fails=gamma_cap is not None,
     )
     elapsed = time.perf_counter() - t_start
     if xv is None:

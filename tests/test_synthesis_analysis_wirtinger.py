@@ -117,3 +117,17 @@ def test_working_set_adds_a_point_it_never_imposed_that_fails_the_recheck() -> N
     assert fast.gamma == pytest.approx(full.gamma, rel=1e-3)
     iters = [ln for ln in lines if " iter " in ln]  # the solver reports every iteration
     assert len(iters) >= 3 and all("gap" in ln and "pres" in ln for ln in iters)
+
+
+def test_gamma_cap_infeasible_at_the_imposed_points_stops_without_adding_points() -> None:
+    # every point has the DC gain 1/(1 - 0.2) = 1.25 > cap 1.2: the imposed centre point fails,
+    # so no larger set can pass and the verdict is the all-points one without another solve
+    rho = np.linspace(-1.0, 1.0, 5)[:, None]
+    systems = [_scalar(-1.0, 0.2, 0.5) for _ in rho[:, 0]]
+    args = (systems, rho, np.zeros(1), np.zeros(1), 0.5)
+    fast = analyse_wirtinger(*args, p_dependence="constant", gamma_cap=1.2, working_set=1)
+    full = analyse_wirtinger(*args, p_dependence="constant", gamma_cap=1.2)
+    assert not fast.certified and not full.certified
+    assert any("no points added" in note for note in fast.notes)
+    assert "working set: LMI imposed at 1 of 5 points" in fast.notes
+    assert fast.margins.shape == (5,) and np.all(fast.margins < 0)
