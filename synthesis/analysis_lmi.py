@@ -83,7 +83,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from synthesis.closed_loop import DelaySystem
-from synthesis.conic import solve_conic, svec_rows
+from synthesis.conic import solve_conic, svec_eye, svec_rows, unsvec
 
 __all__ = [
     "P_DEPENDENCES",
@@ -439,21 +439,6 @@ def _bound_parts(
     return sp.hstack([f_x, f_z], format="csr"), f0, sp.hstack([g_x, g_z], format="csr"), nz
 
 
-def _unsvec(v: Array, size: int) -> Array:
-    """(..., size(size+1)/2) Clarabel triangles -> (..., size, size) symmetric matrices."""
-    idx, w = svec_rows(size)
-    out = np.zeros((*v.shape[:-1], size * size))
-    out[..., idx] = v / w
-    out = out.reshape(*v.shape[:-1], size, size)
-    return out + np.swapaxes(np.triu(out, 1), -1, -2)
-
-
-def _svec_eye(size: int) -> Array:
-    """The identity in Clarabel's PSD-triangle order."""
-    idx, _ = svec_rows(size)
-    return (idx // size == idx % size).astype(float)
-
-
 def _p_map(pr: _Problem) -> sp.csr_matrix:
     """svec of P(rho_k) at every point (P(rho) = sum_j w_j(rho) P_j), then Q, R: ``F x``."""
     m, n = pr.rho_hat.shape[0], pr.n
@@ -464,6 +449,79 @@ def _p_map(pr: _Problem) -> sp.csr_matrix:
     pasm.add_mvn(eye, eye, pr.off_q, pr.sym, 0, 0, np.r_[np.zeros(m), 1.0, 0.0])
     pasm.add_mvn(eye, eye, pr.off_q + pr.ns, pr.sym, 0, 0, np.r_[np.zeros(m), 0.0, 1.0])
     return pasm.svec()[0]
+
+
+def first_points(rho_hat: Array, working_set: int | None) -> NDArray[np.int64]:
+    """The points of the first solve: every point (``working_set=None``) or the first k of
+    :func:`_spread_order`, sorted.
+
+    Raises
+    ------
+    ValueError
+        ``working_set`` not None and below 1.
+    """
+    if working_set is not None and int(working_set) < 1:
+        raise ValueError(f"working_set={working_set!r} must be None or an integer >= 1")
+    m = rho_hat.shape[0]
+    return (
+        np.arange(m) if working_set is None else np.sort(_spread_order(rho_hat)[: int(working_set)])
+    )
+
+
+Recheck = tuple[bool, Array, Array]
+
+
+def grow_working_set(
+    points: NDArray[np.int64],
+    working_set: int | None,
+    solve: Callable[[NDArray[np.int64]], tuple[str, Array | None]],
+    recheck: Callable[[Array], Recheck],
+    notes: list[str],
+    progress: Callable[[str], None] | None,
+    n_vertices: int,
+    stop_if_imposed_fails: bool = False,
+) -> tuple[str, Array | None, NDArray[np.int64], Recheck]:
+    """Solve with the LMI imposed at ``points``, re-check every point, add failing ones, repeat.
+
+    ``solve(points)`` returns (status, decision vector or None); ``recheck(x)`` returns
+    (certified, margins (m,), P eigenvalue minima) at EVERY point and rate vertex. Up to
+    ``working_set`` failing points (the worst first; all of them when None) are added per round,
+    until the re-check passes, every point is imposed, or no failing point is left to add.
+    ``stop_if_imposed_fails``: also stop when an imposed point fails (sound for a feasibility
+    form with a fixed gamma cap: a larger set of points cannot be feasible when a subset is not).
+
+    Returns
+    -------
+    tuple
+        (status, x or None, the points imposed last, the last re-check (False, nan, nan if none)).
+    """
+    checked: Recheck = (False, np.array([np.nan]), np.array([np.nan]))
+    while True:
+        status, xv = solve(points)
+        if xv is None:
+            return status, xv, points, checked
+        checked = recheck(xv)
+        certified, margins, _ = checked
+        m = len(margins)
+        failing = np.flatnonzero(~(margins > 0))
+        new = np.setdiff1d(failing[np.argsort(margins[failing], kind="stable")], points)
+        imposed_fail = np.intersect1d(failing, points)
+        if certified or len(points) == m or len(new) == 0:
+            return status, xv, points, checked
+        if stop_if_imposed_fails and len(imposed_fail):
+            notes.append(
+                f"{len(imposed_fail)} of the {len(points)} imposed points failed the re-check: "
+                "not certifiable at this gamma cap, no points added"
+            )
+            return status, xv, points, checked
+        add = new if working_set is None else new[: int(working_set)]
+        if progress:
+            progress(
+                f"analysis LMI: re-check of all {m} points x {n_vertices} vertices: "
+                f"{len(failing)} fail; adding {len(add)} points"
+            )
+        notes.append(f"working set {len(points)} points: {len(failing)} failed the re-check")
+        points = np.union1d(points, add)
 
 
 def _spread_order(rho_hat: Array) -> NDArray[np.int64]:
@@ -554,8 +612,7 @@ def analyse(
         systems, rho_hat, rate_hat_per_s, dtau_drho_hat_s, tau_max_s, p_dependence
     )
     m, s = rho_hat.shape
-    if working_set is not None and int(working_set) < 1:
-        raise ValueError(f"working_set={working_set!r} must be None or an integer >= 1")
+    points = first_points(rho_hat, working_set)
     ts = float(time_scale_s) if time_scale_s is not None else (tau_max if tau_max > 0 else 1.0)
     n = systems[0].n
 
@@ -606,7 +663,7 @@ def analyse(
     f0 = np.concatenate([c0 for _, c0 in parts])
     del parts
     pmat = _p_map(pr)
-    eye_lmi, eye_p = _svec_eye(size), _svec_eye(n)
+    eye_lmi, eye_p = svec_eye(size), svec_eye(n)
     notes: list[str] = []
     opts = {"chordal_decomposition_enable": False, **(solver_options or {})}
 
@@ -616,9 +673,9 @@ def analyse(
     def _recheck(xv: Array) -> tuple[bool, Array, Array]:
         # the certificate is the floating-point re-check of every point and vertex, not the
         # solver's word: "optimal_inaccurate" with every LMI negative definite certifies
-        lmi_val = _unsvec((fmat @ xv + f0).reshape(kk, nsv), size)
+        lmi_val = unsvec((fmat @ xv + f0).reshape(kk, nsv), size)
         margins = -np.linalg.eigvalsh(lmi_val)[:, -1].reshape(m, nv).max(axis=1)
-        p_val = _unsvec((pmat @ xv).reshape(m + 2, -1)[:m], n)
+        p_val = unsvec((pmat @ xv).reshape(m + 2, -1)[:m], n)
         p_min = np.linalg.eigvalsh(p_val)[:, 0]
         tol = 1e-10 * max(1.0, float(np.max(np.abs(lmi_val))))
         return bool(np.all(margins > tol) and np.all(p_min > 0)), margins, p_min
@@ -713,27 +770,17 @@ def analyse(
                 )
         return status, xv
 
-    order = _spread_order(rho_hat)
-    points = np.arange(m) if working_set is None else np.sort(order[: int(working_set)])
     certified = False
     for bound in (True, False) if rate_bound else (False,):
-        while True:
-            status, xv = _round(points, bound)
-            if xv is None:
-                break
-            certified, margins, p_min = _recheck(xv)
-            failing = np.flatnonzero(~(margins > 0))
-            new = np.setdiff1d(failing[np.argsort(margins[failing], kind="stable")], points)
-            if certified or len(points) == m or len(new) == 0:
-                break
-            add = new if working_set is None else new[: int(working_set)]
-            if progress:
-                progress(
-                    f"analysis LMI: re-check of all {m} points x {nv} vertices: "
-                    f"{len(failing)} fail; adding {len(add)} points"
-                )
-            notes.append(f"working set {len(points)} points: {len(failing)} failed the re-check")
-            points = np.union1d(points, add)
+        status, xv, points, (certified, margins, p_min) = grow_working_set(
+            points,
+            working_set,
+            lambda pts, bound=bound: _round(pts, bound),
+            _recheck,
+            notes,
+            progress,
+            nv,
+        )
         if certified:
             break
         if bound:  # the sufficient rate-bound form did not certify: the vertex form decides

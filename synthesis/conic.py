@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-__all__ = ["ConicSolution", "solve_conic", "solve_cvxpy", "svec_rows"]
+__all__ = ["ConicSolution", "solve_conic", "solve_cvxpy", "svec_eye", "svec_rows", "unsvec"]
 
 Progress = Callable[[str], None]
 
@@ -78,6 +78,21 @@ def svec_rows(size: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     idx = rr * size + cc
     w = np.where(rr == cc, 1.0, np.sqrt(2.0))
     return idx.astype(np.int64), w
+
+
+def unsvec(v: NDArray[np.float64], size: int) -> NDArray[np.float64]:
+    """(..., size(size+1)/2) Clarabel triangles -> (..., size, size) symmetric matrices."""
+    idx, w = svec_rows(size)
+    out = np.zeros((*v.shape[:-1], size * size))
+    out[..., idx] = v / w
+    out = out.reshape(*v.shape[:-1], size, size)
+    return out + np.swapaxes(np.triu(out, 1), -1, -2)
+
+
+def svec_eye(size: int) -> NDArray[np.float64]:
+    """The identity in Clarabel's PSD-triangle order."""
+    idx, _ = svec_rows(size)
+    return (idx // size == idx % size).astype(float)
 
 
 def _reporter(label: str, progress: Progress | None, every_s: float) -> Callable[[Any], bool]:

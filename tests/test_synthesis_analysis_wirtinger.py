@@ -72,3 +72,62 @@ def test_certificate_has_the_augmented_lyapunov_matrix() -> None:
 def test_zero_delay_is_rejected() -> None:
     with pytest.raises(ValueError, match="delay"):
         _single(analyse_wirtinger, _scalar(-1.0, 0.1, 0.0))
+
+
+def _delayed_feedback_grid(k0: float, k1: float) -> tuple[list[DelaySystem], np.ndarray, tuple]:
+    """x' = -k(rho1) x(t - tau(rho2)) + w on a 3 x 3 grid, k = k0 + k1 rho1, tau = 0.9 + 0.1 rho2 s,
+    both parameters moving (4 rate vertices): stable at every frozen point iff k tau < pi/2."""
+    r = np.linspace(-1.0, 1.0, 3)
+    rho = np.array([(r1, r2) for r1 in r for r2 in r])
+    systems = [_scalar(0.0, -(k0 + k1 * r1), 0.9 + 0.1 * r2) for r1, r2 in rho]
+    return systems, rho, (np.array([0.05, 0.05]), np.array([0.0, 0.1]), 1.0)
+
+
+@pytest.mark.parametrize(("k0", "k1", "stable"), [(1.0, 0.2, True), (1.3, 0.4, False)])
+def test_working_set_gives_the_verdict_of_the_all_points_solve(
+    k0: float, k1: float, stable: bool
+) -> None:
+    # k tau <= 1.2 everywhere (certifiable); k tau = 1.7 > pi/2 at one corner (unstable there)
+    systems, rho, (rate, dtau, tau_max) = _delayed_feedback_grid(k0, k1)
+    kw = dict(p_dependence="affine", gamma_cap=1e3)
+    full = analyse_wirtinger(systems, rho, rate, dtau, tau_max, **kw)
+    fast = analyse_wirtinger(systems, rho, rate, dtau, tau_max, working_set=2, **kw)
+    assert full.certified == fast.certified == stable
+    assert fast.n_lmis == full.n_lmis == 9 * 4  # every point, every rate vertex re-checked
+    assert fast.margins.shape == fast.p_min_eig.shape == (9,)
+    if stable:
+        assert np.all(fast.margins > 0) and np.all(fast.p_min_eig > 0)
+    else:
+        assert np.min(fast.margins) <= 0
+
+
+def test_working_set_adds_a_point_it_never_imposed_that_fails_the_recheck() -> None:
+    # x' = a x + 0.2 x(t - 0.5) + w, z = x: DC gain 1/(-a - 0.2) is 1.25 at a = -1 and 10 at the
+    # one weak point a = -0.3 (rho = 1, not in the first working set of one centre point), so
+    # the centre-only optimum (gamma ~ 1.25) must fail the re-check there and the set must grow
+    rho = np.linspace(-1.0, 1.0, 5)[:, None]
+    systems = [_scalar(-0.3 if r == 1.0 else -1.0, 0.2, 0.5) for r in rho[:, 0]]
+    args = (systems, rho, np.zeros(1), np.zeros(1), 0.5)
+    lines: list[str] = []
+    fast = analyse_wirtinger(*args, p_dependence="constant", working_set=1, progress=lines.append)
+    full = analyse_wirtinger(*args, p_dependence="constant")
+    assert fast.certified and full.certified
+    assert any("failed the re-check" in note for note in fast.notes)
+    assert fast.gamma >= 10.0 * (1 - 1e-5)  # the exact gain at the point first left out
+    assert fast.gamma == pytest.approx(full.gamma, rel=1e-3)
+    iters = [ln for ln in lines if " iter " in ln]  # the solver reports every iteration
+    assert len(iters) >= 3 and all("gap" in ln and "pres" in ln for ln in iters)
+
+
+def test_gamma_cap_infeasible_at_the_imposed_points_stops_without_adding_points() -> None:
+    # every point has the DC gain 1/(1 - 0.2) = 1.25 > cap 1.2: the imposed centre point fails,
+    # so no larger set can pass and the verdict is the all-points one without another solve
+    rho = np.linspace(-1.0, 1.0, 5)[:, None]
+    systems = [_scalar(-1.0, 0.2, 0.5) for _ in rho[:, 0]]
+    args = (systems, rho, np.zeros(1), np.zeros(1), 0.5)
+    fast = analyse_wirtinger(*args, p_dependence="constant", gamma_cap=1.2, working_set=1)
+    full = analyse_wirtinger(*args, p_dependence="constant", gamma_cap=1.2)
+    assert not fast.certified and not full.certified
+    assert any("no points added" in note for note in fast.notes)
+    assert "working set: LMI imposed at 1 of 5 points" in fast.notes
+    assert fast.margins.shape == (5,) and np.all(fast.margins < 0)
