@@ -125,10 +125,11 @@ def _discretise(
 
 def _time_grid(
     loop: StepLoop, step_mmhg: float, t_end_s: float, h_max_s: float
-) -> tuple[int, float, int]:
-    """Check a step simulation's arguments; return (delay in steps, step h s, number of steps).
+) -> tuple[int, float, int, NDArray[np.float64], NDArray[np.float64]]:
+    """Check a step simulation's arguments; return (delay in steps, step h s, number of steps, A, Ad).
 
-    The step h is the largest that is ≤ ``h_max_s`` and divides the delay exactly.
+    The step h is the largest that is ≤ ``h_max_s`` and divides the delay exactly; with no delay
+    the delayed term is folded into A (Ad returned as zeros).
     """
     if not (np.isfinite(step_mmhg) and step_mmhg != 0.0):
         raise ValueError(f"step_mmhg={step_mmhg!r} must be finite and non-zero")
@@ -139,7 +140,11 @@ def _time_grid(
     tau = float(loop.tau_s)
     lag = int(np.ceil(tau / h_max_s - 1e-9)) if tau > 0.0 else 0
     h = tau / lag if lag else h_max_s
-    return lag, h, int(np.ceil(t_end_s / h))
+    a = np.asarray(loop.A, dtype=float)
+    ad = np.asarray(loop.Ad, dtype=float)
+    if lag == 0:
+        a, ad = a + ad, np.zeros_like(ad)
+    return lag, h, int(np.ceil(t_end_s / h)), a, ad
 
 
 def simulate_step(
@@ -166,12 +171,8 @@ def simulate_step(
     StepResponse
         Samples every h on [0, t_end].
     """
-    lag, h, steps = _time_grid(loop, step_mmhg, t_end_s, h_max_s)
-    a = np.asarray(loop.A, dtype=float)
-    ad = np.asarray(loop.Ad, dtype=float)
+    lag, h, steps, a, ad = _time_grid(loop, step_mmhg, t_end_s, h_max_s)
     n = a.shape[0]
-    if lag == 0:
-        a, ad = a + ad, np.zeros_like(ad)
     b = np.column_stack([loop.b_r, loop.bd_r])
     phi, g_p, g_q, g_w = _discretise(a, ad, b, h)
     g_q = g_q / h  # q = (x_{k-lag+1} - x_{k-lag}) / h
@@ -240,12 +241,8 @@ def simulate_prefiltered_step(
     step_mmhg, t_end_s, h_max_s
         As :func:`simulate_step`.
     """
-    lag, h, steps = _time_grid(loop, step_mmhg, t_end_s, h_max_s)
-    a = np.asarray(loop.A, dtype=float)
-    ad = np.asarray(loop.Ad, dtype=float)
+    lag, h, steps, a, ad = _time_grid(loop, step_mmhg, t_end_s, h_max_s)
     n = a.shape[0]
-    if lag == 0:
-        a, ad = a + ad, np.zeros_like(ad)
     t = np.arange(steps + 1) * h
     u_ff, r_m = reference(t)
     u_ff_d, r_m_d = reference(t - float(loop.tau_s))
