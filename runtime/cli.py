@@ -27,8 +27,9 @@ temporary name and renamed when the run succeeds; a failed run leaves earlier fi
 Summary JSON (``--summary``): run identity, the §3 metrics (``runtime.metrics.run_metrics``,
 defined in ``docs/METRICS.md``; with ``pressor sil`` the step metrics stop at the first disturbance
 and each hemorrhage or bolus of the scenario file gets a ``disturbances`` record; with ``pressor
-run`` the device's scenario is not known, so those are null) plus ``commands_out_of_range``, the supervisor's account and the link's error counts. It holds only
-values that are functions of the seed (no wall-clock timing), so two runs give identical files;
+run`` the device's scenario is not known, so those are null) plus ``commands_out_of_range``, the
+supervisor's account and the link's error counts. It holds only values that are functions of the
+seed (no wall-clock timing), so two runs give identical files;
 loop timing (p50/p99/max) is printed and recorded under ``/loop``.
 
 ``reachable`` is inferred from the run, since the runtime does not know the patient: false when the
@@ -372,7 +373,7 @@ def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = No
         f"  ({summary['ended']})",
         file=out,
     )
-    print("metrics (DESIGN.md §3):", file=out)
+    print("metrics (defined in docs/METRICS.md):", file=out)
     metrics = summary["metrics"]
     for k, v in metrics.items():
         if k != "disturbances":
