@@ -220,12 +220,10 @@ class SmithController:
         command = self._last_command_ml_h
         a = math.exp(-self.sample_period_s / t_s)
         self._ym_mmhg = a * self._ym_mmhg + (1.0 - a) * k * command
-        old = self._status
-        self._status = SmithStatus(
-            saturated=saturated,
-            rho_clamped=was_clamped,
-            rho_rate_limited=was_limited,
-            rho_clamped_count=old.rho_clamped_count + was_clamped,
-            rho_rate_limited_count=old.rho_rate_limited_count + was_limited,
-        )
+        st = self._status  # updated in place, as the generated modules do: no allocation per tick
+        st.saturated = saturated
+        st.rho_clamped = was_clamped
+        st.rho_rate_limited = was_limited
+        st.rho_clamped_count += was_clamped
+        st.rho_rate_limited_count += was_limited
         return command
