@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from codegen.fixed_point import FixedPointPlan
-from runtime.controller_loader import MODULE_SHA_PREFIX, module_text_sha256
+from contracts.module_hash import MODULE_SHA_PREFIX, module_text_sha256
 
 __all__ = ["EmitSpec", "emit_python", "module_sha256", "py_float"]
 
@@ -306,7 +306,7 @@ class ControllerStatus:
 
 
 class Controller:
-    """The scheduled LPV controller (runtime.controller.Controller protocol).
+    """The scheduled LPV controller (contracts.controller.Controller protocol).
 
     Parameters
     ----------

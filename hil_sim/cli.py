@@ -47,7 +47,7 @@ def _fmt(v: Any) -> str:
 
 def format_table(summary: dict[str, Any]) -> str:
     """The terminal table: median and p90 of every metric, reachable patients first."""
-    from runtime.metrics import RUN_METRICS
+    from contracts.metrics import RUN_METRICS
 
     m = summary["metrics"]
     lines = [

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from contracts.controller import Controller
 from hil_sim.world import World
-from runtime.controller import Controller
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,7 @@ def simulate(world: World, controller: Controller, duration_s: float | None = No
     world
         A fresh :class:`~hil_sim.world.World` (its tick 0 is the first sample).
     controller
-        Any :class:`~runtime.controller.Controller` at the world's sample period.
+        Any :class:`~contracts.controller.Controller` at the world's sample period.
     duration_s
         Simulated time (s); ``round(duration / Ts)`` ticks.
 

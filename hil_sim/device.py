@@ -19,7 +19,7 @@ Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:
 the command answering it is applied if it arrived before the next release, otherwise the pump keeps
 the previous rate (counted as a timeout).
 
-Faults (``--fault KIND[:ARGS]``, repeatable; see ``pressor faults`` and :mod:`runtime.faults`):
+Faults (``--fault KIND[:ARGS]``, repeatable; see ``pressor faults`` and :mod:`contracts.faults`):
 sensor, pump and scheduling faults are injected in the world (:mod:`hil_sim.faults`); byte-level
 link faults by a wrapper of the port; ``link-stall`` / ``link-disconnect`` by this loop: during
 the window the device keeps simulating (the pump holds its last rate until its own watchdog trips)
@@ -182,7 +182,7 @@ def _pin(cpu: int | None) -> None:
 
 
 def _parse_faults(texts: list[str]) -> tuple:
-    from runtime.faults import FaultSpecError, parse_faults
+    from contracts.faults import FaultSpecError, parse_faults
 
     try:
         return tuple(parse_faults(texts))

@@ -1,7 +1,7 @@
 """Fault injection on the device side: the world (sensor, pump, scheduling) and the link.
 
-The schedule is a list of :class:`runtime.faults.FaultSpec` (parsed from ``--fault KIND[:ARGS]``
-or a scenario's ``[[faults]]``; see :mod:`runtime.faults` for the names, arguments and defaults).
+The schedule is a list of :class:`contracts.faults.FaultSpec` (parsed from ``--fault KIND[:ARGS]``
+or a scenario's ``[[faults]]``; see :mod:`contracts.faults` for the names, arguments and defaults).
 Everything is timed in ticks of the device's sample period and every random draw comes from a
 generator seeded by (fault seed, fault index, tick, write number), so a faulted run is as
 repeatable as a clean one - also when the wall-clock retransmissions of the lockstep protocol
@@ -25,8 +25,8 @@ import random
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from contracts.faults import FaultSpec
 from hil_sim.sensor import Artifact
-from runtime.faults import FaultSpec
 from runtime.link.transport import PortWrapper
 
 __all__ = ["LinkFaultPort", "LinkFaults", "WorldFaults", "split_frames"]

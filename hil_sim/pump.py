@@ -17,7 +17,7 @@ occlusion (nothing flows, ``ALARM_OCCLUSION``), empty reservoir (nothing flows,
 (delivered = factor × set rate; ``delivered_ml_h`` reports the measured delivery) and
 :meth:`Pump.feed_watchdog` for a pump that acknowledges commands without applying them.
 
-The alarm bit values are the link protocol's (:mod:`runtime.faults`), one definition for both ends.
+The alarm bit values are the link protocol's (:mod:`contracts.faults`), one definition for both ends.
 
 The delivered rate over a step may change inside it (latency not a multiple of the step, reservoir
 running dry): :meth:`Pump.advance` returns the exact mean rate over the step, which is what the
@@ -29,11 +29,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from runtime.faults import PUMP_ALARM_INVALID_COMMAND as ALARM_INVALID_COMMAND
-from runtime.faults import PUMP_ALARM_OCCLUSION as ALARM_OCCLUSION
-from runtime.faults import PUMP_ALARM_OUT_OF_RANGE as ALARM_OUT_OF_RANGE
-from runtime.faults import PUMP_ALARM_RESERVOIR_EMPTY as ALARM_RESERVOIR_EMPTY
-from runtime.faults import PUMP_ALARM_WATCHDOG as ALARM_WATCHDOG
+from contracts.faults import PUMP_ALARM_INVALID_COMMAND as ALARM_INVALID_COMMAND
+from contracts.faults import PUMP_ALARM_OCCLUSION as ALARM_OCCLUSION
+from contracts.faults import PUMP_ALARM_OUT_OF_RANGE as ALARM_OUT_OF_RANGE
+from contracts.faults import PUMP_ALARM_RESERVOIR_EMPTY as ALARM_RESERVOIR_EMPTY
+from contracts.faults import PUMP_ALARM_WATCHDOG as ALARM_WATCHDOG
 
 
 @dataclass(frozen=True)

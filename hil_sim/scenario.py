@@ -30,7 +30,7 @@ A scenario file (``hil_sim/scenarios/NAME.toml``)::
     ramp_s = 300.0
     depth_mmhg = 10.0
 
-    [[faults]]                 # injected faults, as `--fault KIND:ARGS` (runtime.faults)
+    [[faults]]                 # injected faults, as `--fault KIND:ARGS` (contracts.faults)
     kind = "sensor-flush"
     start_s = 600.0
     duration_s = 4.0
@@ -47,11 +47,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from contracts.faults import FaultSpec, FaultSpecError, parse_fault_table
 from hil_sim.disturbance import Bolus, Disturbance, Hemorrhage, Sinusoid
 from hil_sim.patient import FrozenParams
 from hil_sim.pump import PumpConfig
 from hil_sim.sensor import ARTIFACT_KINDS, Artifact, SensorConfig
-from runtime.faults import FaultSpec, FaultSpecError, parse_fault_table
 
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 _REQUIRED = object()

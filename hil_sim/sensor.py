@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from runtime.faults import QUALITY_INVALID, QUALITY_WAVEFORM
+from contracts.faults import QUALITY_INVALID, QUALITY_WAVEFORM
 
 ARTIFACT_KINDS = ("flush", "damping", "disconnect", "monitor_fault", "nan", "flatline", "range")
 _NOISE_BLOCK = 4096

@@ -32,12 +32,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from hil_sim.closed_loop import simulate
-from hil_sim.cohort import cohort_seeds
-from hil_sim.scenario import Scenario
-from hil_sim.world import World
-from runtime.controller_loader import load_controller
-from runtime.metrics import (
+from contracts.metrics import (
     EVENT_KINDS,
     EVENT_METRICS,
     RUN_METRICS,
@@ -46,6 +41,11 @@ from runtime.metrics import (
     event_labels,
     run_metrics,
 )
+from hil_sim.closed_loop import simulate
+from hil_sim.cohort import cohort_seeds
+from hil_sim.scenario import Scenario
+from hil_sim.world import World
+from runtime.controller_loader import load_controller
 
 
 def scenario_events(scenario: Scenario) -> list[Event]:

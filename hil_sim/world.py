@@ -115,7 +115,7 @@ class World:
     sample_period_s
         Loop period (s); a whole multiple of the scenario's internal patient step.
     faults
-        Extra injected faults (:class:`runtime.faults.FaultSpec`), after the scenario's own.
+        Extra injected faults (:class:`contracts.faults.FaultSpec`), after the scenario's own.
     """
 
     def __init__(

@@ -2,5 +2,5 @@
 
 Never imports ``synthesis``, ``cvxpy`` or ``hil_sim`` (DESIGN.md §1): a bedside box has no solver
 and no simulated patient. Keep this ``__init__`` free of imports so that light modules
-(``runtime.controller``, ``runtime.pi_controller``, ``runtime.metrics``) load without serial or rerun.
+(``contracts.controller``, ``baselines.pi``, ``contracts.metrics``) load without serial or rerun.
 """

@@ -15,7 +15,7 @@ Faults. ``pressor sil --fault KIND[:ARGS]`` (repeatable) passes each fault to th
 which injects it (the runtime never imports ``hil_sim``; the control path learns of a fault only
 through its inputs). Faults a scenario file declares (``[[faults]]``) are injected by the device
 too and read here from the same file. After the run, the summary's ``faults`` list scores each
-scheduled fault from the supervisor's per-tick log (:func:`runtime.faults.fault_report`):
+scheduled fault from the supervisor's per-tick log (:func:`contracts.faults.fault_report`):
 ``kind``, ``start_tick``, ``detected_tick``, ``latency_ticks`` and its documented bound,
 ``safe_state_s``, ``max_reentry_step_ml_h``; ``commands_out_of_range`` counts commands outside
 [0, max] (always 0 - the run exits 1 otherwise). ``pressor run --fault ...`` scores a schedule
@@ -24,7 +24,7 @@ injected by a device started by hand.
 Files. The ``.rrd``, ``.tlog``, ``--summary`` and ``--timing`` files are written to a hidden
 temporary name and renamed when the run succeeds; a failed run leaves earlier files untouched.
 
-Summary JSON (``--summary``): run identity, the §3 metrics (``runtime.metrics.run_metrics``,
+Summary JSON (``--summary``): run identity, the §3 metrics (``contracts.metrics.run_metrics``,
 defined in ``docs/METRICS.md``; with ``pressor sil`` the step metrics stop at the first disturbance
 and each hemorrhage or bolus of the scenario file gets a ``disturbances`` record; with ``pressor
 run`` the device's scenario is not known, so those are null) plus ``commands_out_of_range``, the
@@ -305,8 +305,8 @@ def build_summary(
 ):
     """The JSON-ready summary of a run: identity, §3 metrics, supervisor and link account, and
     the scored fault list when faults were scheduled. ``events`` are the scenario's disturbance
-    events (``runtime.metrics.run_metrics``); ``None`` when not known (``pressor run``)."""
-    from runtime.metrics import run_metrics
+    events (``contracts.metrics.run_metrics``); ``None`` when not known (``pressor run``)."""
+    from contracts.metrics import run_metrics
 
     tr = result.trajectory
     t, y, r, u = tr["sim_time_s"], tr["map_mmhg"], tr["target_mmhg"], tr["command_ml_h"]
@@ -554,7 +554,7 @@ def run_runtime(
         specs = getattr(args, "fault_specs", None)
         report = None
         if specs:
-            from runtime.faults import fault_report
+            from contracts.faults import fault_report
             from runtime.loop import sched_limits_of
             from runtime.supervisor import FAULT_BITS
 
@@ -697,7 +697,7 @@ def _main_sil(argv: list[str]) -> int:
 
 
 def _fault_specs(texts: list[str]) -> list[Any]:
-    from runtime.faults import FaultSpecError, parse_faults
+    from contracts.faults import FaultSpecError, parse_faults
 
     try:
         return parse_faults(texts)
@@ -717,7 +717,7 @@ def _scenario_events(scenario: str) -> list[tuple[str, float]] | None:
     imported), for the metrics; ``None`` if the file cannot be read (the device reports why)."""
     import tomllib
 
-    from runtime.metrics import EVENT_KINDS
+    from contracts.metrics import EVENT_KINDS
 
     try:
         data = tomllib.loads(_scenario_path(scenario).read_text(encoding="utf-8"))
@@ -734,7 +734,7 @@ def _scenario_events(scenario: str) -> list[tuple[str, float]] | None:
 
 def _scenario_faults(scenario: str, first_index: int) -> list[Any]:
     """The ``[[faults]]`` the device will inject from its scenario file (read, not imported)."""
-    from runtime.faults import FaultSpecError, scenario_file_faults
+    from contracts.faults import FaultSpecError, scenario_file_faults
 
     path = _scenario_path(scenario)
     if not path.is_file():
@@ -787,7 +787,7 @@ def _main_run(argv: list[str]) -> int:
 
 
 def _main_faults(argv: list[str]) -> int:
-    from runtime.faults import catalogue_rows
+    from contracts.faults import catalogue_rows
     from runtime.supervisor import SupervisorConfig, detection_bounds
 
     p = _Parser(prog="pressor faults", description="fault kinds the supervisor detects")

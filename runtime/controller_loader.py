@@ -1,6 +1,6 @@
 """Resolve a ``--controller`` spec (``pi``, ``smith[:λ]``, ``lpv`` or a path) to a :class:`Controller`.
 
-``smith`` is the scheduled Smith predictor of :mod:`runtime.smith_controller` with its default
+``smith`` is the scheduled Smith predictor of :mod:`baselines.smith` with its default
 closed-loop time constant (30 s); ``smith:45`` sets λ = 45 s (allowed range in that module).
 
 ``lpv`` is the generated module for the shipped default design, committed at
@@ -17,23 +17,17 @@ the module was generated from is given, its stored sha256 must equal the module'
 
 from __future__ import annotations
 
-import hashlib
 import importlib.util
-import re
 import sys
 from pathlib import Path
 from types import ModuleType
 
-from runtime.controller import Controller
-from runtime.pi_controller import PIController
-from runtime.smith_controller import LAMBDA_MAX_S, LAMBDA_MIN_S, SmithController
+from baselines.pi import PIController
+from baselines.smith import LAMBDA_MAX_S, LAMBDA_MIN_S, SmithController
+from contracts.controller import Controller
+from contracts.module_hash import ARTIFACT_SHA_LINE, MODULE_SHA_LINE, module_text_sha256
 
 DEFAULT_LPV_MODULE = Path(__file__).resolve().parent / "generated" / "lpv_map_controller.py"
-
-
-MODULE_SHA_PREFIX = "MODULE_SHA256 = "
-_SHA_LINE = re.compile(r"^MODULE_SHA256 = '([0-9a-f]{64})'", re.MULTILINE)
-_ART_LINE = re.compile(r"^ARTIFACT_SHA256 = '([0-9a-f]{64})'", re.MULTILINE)
 
 
 class ControllerSpecError(ValueError):
@@ -60,19 +54,6 @@ def _smith(spec: str, sample_period_s: float) -> SmithController:
     return SmithController(sample_period_s=sample_period_s, lambda_s=lambda_s)
 
 
-def module_text_sha256(text: str) -> str:
-    """sha256 of a generated module's text with its ``MODULE_SHA256`` value blanked.
-
-    The one definition: ``codegen`` imports it to stamp the modules it writes.
-    """
-    lines = text.split("\n")
-    for k, line in enumerate(lines):
-        if line.startswith(MODULE_SHA_PREFIX):
-            lines[k] = MODULE_SHA_PREFIX + "''"
-            break
-    return hashlib.sha256("\n".join(lines).encode("utf-8")).hexdigest()
-
-
 def verify_module_file(path: Path, artifact_sha256: str | None = None) -> str:
     """Check a generated module's self-hash (and artifact sha256); return its text.
 
@@ -87,7 +68,7 @@ def verify_module_file(path: Path, artifact_sha256: str | None = None) -> str:
         text = Path(path).read_bytes().decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ControllerSpecError(f"{path}: cannot read generated controller ({exc})") from exc
-    m = _SHA_LINE.search(text)
+    m = MODULE_SHA_LINE.search(text)
     if m is None:
         raise ControllerSpecError(
             f"{path}: field 'MODULE_SHA256' missing; not an intact pressor codegen module"
@@ -100,7 +81,7 @@ def verify_module_file(path: Path, artifact_sha256: str | None = None) -> str:
             "pressor codegen"
         )
     if artifact_sha256 is not None:
-        a = _ART_LINE.search(text)
+        a = ARTIFACT_SHA_LINE.search(text)
         if a is None or a.group(1) != artifact_sha256:
             got = a.group(1)[:12] if a else "missing"
             raise ControllerSpecError(

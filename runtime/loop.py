@@ -46,8 +46,8 @@ from typing import Any
 
 import numpy as np
 
+from contracts.controller import Controller
 from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
-from runtime.controller import Controller
 from runtime.link.endpoint import (
     MODE_AUTO,
     MODE_SAFE,
@@ -198,7 +198,7 @@ class Loop:
     Parameters
     ----------
     controller
-        Any :class:`~runtime.controller.Controller` (stepped once per tick).
+        Any :class:`~contracts.controller.Controller` (stepped once per tick).
     supervisor
         The safety supervisor (its config's period must match the controller's).
     endpoint
@@ -212,7 +212,7 @@ class Loop:
         runs); ``None`` keeps every tick.
     on_tick
         Called after every tick with ``(tick, state, fault bits, command ml/h)`` (e.g. a
-        :class:`runtime.faults.FaultScorer`'s ``update``).
+        :class:`contracts.faults.FaultScorer`'s ``update``).
     """
 
     def __init__(

@@ -72,7 +72,7 @@ import math
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 
-from runtime.faults import PUMP_ALARM_OCCLUSION, PUMP_ALARM_RESERVOIR_EMPTY, PUMP_ALARM_WATCHDOG
+from contracts.faults import PUMP_ALARM_OCCLUSION, PUMP_ALARM_RESERVOIR_EMPTY, PUMP_ALARM_WATCHDOG
 
 #: slack (s) on time comparisons so that k·Ts sums reach a bound that is a whole number of ticks
 _EPS_S = 1e-9

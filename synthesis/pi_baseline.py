@@ -1,6 +1,6 @@
 """The paper's PI baseline Gc(s) = 3 + 0.017/s on the synthesis side (continuous time).
 
-The gains are the runtime's (:mod:`runtime.pi_controller`, the discrete PI with anti-windup that
+The gains are the runtime's (:mod:`baselines.pi`, the discrete PI with anti-windup that
 the bedside loop runs); this module gives the same controller the continuous-time forms the
 synthesis-side checks need:
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from runtime.pi_controller import KI_ML_H_PER_MMHG_S, KP_ML_H_PER_MMHG
+from baselines.pi import KI_ML_H_PER_MMHG_S, KP_ML_H_PER_MMHG
 from synthesis.closed_loop import DelaySystem
 from synthesis.step_response import StepLoop
 

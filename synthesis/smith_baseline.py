@@ -1,6 +1,6 @@
 """The scheduled Smith-predictor baseline's frozen step on the synthesis side (discrete time).
 
-The controller is the runtime's own (:class:`runtime.smith_controller.SmithController`, the one
+The controller is the runtime's own (:class:`baselines.smith.SmithController`, the one
 ``--controller smith`` runs), stepped at its sample period Ts against the exact zero-order-hold
 discretisation of the first-order-plus-delay plant ``T dy/dt = −y + K u(t − τ)``: with
 τ = (D + f)·Ts, D integer, 0 ≤ f < 1, a command held over each tick gives exactly::
@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from runtime.smith_controller import LAMBDA_DEFAULT_S, SmithController
+from baselines.smith import LAMBDA_DEFAULT_S, SmithController
 from synthesis.step_response import StepResponse
 
 __all__ = ["smith_step_response"]

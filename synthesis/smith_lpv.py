@@ -27,7 +27,7 @@ eigenvalue at 0, and no strict Lyapunov certificate exists. The trapezoid keeps 
 integrator, so the closed loop can be asymptotically stable.
 
 Tuning: ``Kc = T/(K λ)``, ``Ti = T`` (``Ki = Kc/Ti = 1/(K λ)``), the rule of
-:mod:`runtime.smith_controller`; the PI zero cancels the model's T pole and the delay-free loop is
+:mod:`baselines.smith`; the PI zero cancels the model's T pole and the delay-free loop is
 ``1/(λ s (s/Λ + 1) + 1)`` when Ω = Λ. The closed-loop time constant is scheduled as
 ``λ = T / loop_gain``: ``loop_gain = K·Kc`` is then the same at every ρ, which is what the
 closed-loop dynamics depend on (a fixed λ makes the loop faster, relative to the plant, where T is

@@ -268,14 +268,14 @@ def simulate_prefiltered_step(
 
 
 def response_metrics(response: StepResponse, max_rate_ml_h: float = 120.0) -> dict[str, object]:
-    """DESIGN.md §3 metrics of a noise-free step (computed by :mod:`runtime.metrics`).
+    """DESIGN.md §3 metrics of a noise-free step (computed by :mod:`contracts.metrics`).
 
     Returns the step metrics (``overshoot_pct``, ``rise_time_s``, ``settling_time_s``,
     ``steady_state_dev_mmhg``, ``iae_mmhg_s``; 2 % band) plus ``max_rate_ml_h``,
     ``drug_total_ml``, ``time_at_limit_pct`` and ``stable`` of the unsaturated command, and
     ``min_rate_ml_h`` (a negative value means the linear loop asked the pump to run backwards).
     """
-    from runtime.metrics import run_metrics, step_metrics
+    from contracts.metrics import run_metrics, step_metrics
 
     out: dict[str, object] = dict(
         step_metrics(response.t_s, response.map_mmhg, response.target_mmhg, 0.0, response.step_mmhg)

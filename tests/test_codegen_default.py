@@ -17,7 +17,8 @@ from codegen import pipeline as pl
 from codegen.discretise import discretise_node
 from codegen.emit_python import module_sha256
 from codegen.tables import frozen_loop_matrices, interpolate, unstable_root_count
-from runtime.controller_loader import ControllerSpecError, load_controller, module_text_sha256
+from contracts.module_hash import module_text_sha256
+from runtime.controller_loader import ControllerSpecError, load_controller
 from tests.test_codegen_core import (
     CController,
     continuous_reference,

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from baselines.pi import PIController
 from hil_sim.closed_loop import simulate
 from hil_sim.device import main as device_main
 from hil_sim.world import World
@@ -23,7 +24,6 @@ from runtime.link import (
     TlogWriter,
     read_tlog,
 )
-from runtime.pi_controller import PIController
 from tests.sil_helpers import poll_until_exit, spawn_device
 
 

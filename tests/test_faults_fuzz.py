@@ -13,11 +13,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from baselines.pi import PIController
 from hil_sim.world import World
 from runtime.link import LinkEndpoint, Signing, loop_pair
 from runtime.link.dialect import pressor as mavlink
 from runtime.loop import supervisor_config_for
-from runtime.pi_controller import PIController
 from runtime.supervisor import Supervisor
 
 MAX = 120.0

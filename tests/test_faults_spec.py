@@ -7,15 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from hil_sim.device import main as device_main
-from hil_sim.scenario import ScenarioError, load_scenario_file
-from runtime.faults import (
+from contracts.faults import (
     CATALOGUE,
     FAULT_KINDS,
     FaultSpecError,
     fault_report,
     parse_fault,
 )
+from hil_sim.device import main as device_main
+from hil_sim.scenario import ScenarioError, load_scenario_file
 from runtime.supervisor import Fault
 from tests.sil_helpers import pressor
 

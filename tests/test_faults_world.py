@@ -6,14 +6,14 @@ import math
 
 import numpy as np
 
+from baselines.pi import PIController
+from contracts.faults import parse_fault
 from hil_sim.closed_loop import simulate
 from hil_sim.faults import LinkFaultPort, LinkFaults, split_frames
 from hil_sim.pump import ALARM_OCCLUSION, ALARM_RESERVOIR_EMPTY
 from hil_sim.sensor import QUALITY_WAVEFORM
 from hil_sim.world import World
-from runtime.faults import parse_fault
 from runtime.link import LinkEndpoint, loop_pair
-from runtime.pi_controller import PIController
 
 TS = 0.1
 

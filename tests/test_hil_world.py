@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
+from baselines.pi import PIController
+from contracts.metrics import step_metrics
 from hil_sim.closed_loop import simulate
 from hil_sim.world import Observation, PumpStatus, World, f32
-from runtime.metrics import step_metrics
-from runtime.pi_controller import PIController
 
 
 def _reference_nominal_pi(duration_s: float) -> tuple[np.ndarray, np.ndarray]:

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from contracts.metrics import step_metrics
 from hil_sim.closed_loop import simulate
 from hil_sim.world import World
 from runtime.controller_loader import load_controller
-from runtime.metrics import step_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 HORIZON_S = 1500.0

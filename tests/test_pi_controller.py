@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from runtime.controller import Controller
-from runtime.pi_controller import PIController
+from baselines.pi import PIController
+from contracts.controller import Controller
 
 
 def test_pi_satisfies_controller_interface():

@@ -9,7 +9,7 @@ import math
 import subprocess
 from pathlib import Path
 
-from runtime.faults import PUMP_ALARM_OUT_OF_RANGE, PUMP_ALARM_WATCHDOG
+from contracts.faults import PUMP_ALARM_OUT_OF_RANGE, PUMP_ALARM_WATCHDOG
 from runtime.link import Hello, LinkEndpoint, PtyPair
 from tests.sil_helpers import ROOT, poll_until_exit, spawn_device
 

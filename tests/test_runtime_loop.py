@@ -15,6 +15,7 @@ import pytest
 
 os.environ.setdefault("CI", "1")
 
+from baselines.pi import PIController  # noqa: E402
 from runtime.link.endpoint import (  # noqa: E402
     LINK_LOCKSTEP,
     STATE_FINISHED,
@@ -25,7 +26,6 @@ from runtime.link.endpoint import (  # noqa: E402
 )
 from runtime.link.transport import PtyPair, loop_pair  # noqa: E402
 from runtime.loop import DeviceStalled, Loop, supervisor_config_for  # noqa: E402
-from runtime.pi_controller import PIController  # noqa: E402
 from runtime.supervisor import State, Supervisor  # noqa: E402
 
 TS = 0.1
@@ -204,11 +204,8 @@ def test_realtime_watchdogs_flag_stale_sample_then_link_loss_and_failsafe():
 
 
 def test_supervisor_config_reads_design_envelope_from_generated_module_constants(tmp_path):
-    from runtime.controller_loader import (
-        MODULE_SHA_PREFIX,
-        load_generated_module,
-        module_text_sha256,
-    )
+    from contracts.module_hash import MODULE_SHA_PREFIX, module_text_sha256
+    from runtime.controller_loader import load_generated_module
 
     src = tmp_path / "fake_gen.py"
     text = (

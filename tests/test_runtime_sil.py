@@ -52,9 +52,9 @@ def test_sil_exits_0_and_prints_summary_and_replay_command(two_runs):
 
 
 def test_sil_trajectory_equals_in_process_simulator(two_runs):
+    from baselines.pi import PIController
     from hil_sim.closed_loop import simulate
     from hil_sim.world import World
-    from runtime.pi_controller import PIController
 
     _, rrd, _ = two_runs[0]
     ref = simulate(World("paper-tracking", SEED, 0.1), PIController(0.1), float(DURATION_S))

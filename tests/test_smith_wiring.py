@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from baselines.smith import SmithController
 from hil_sim.cli import main as hil_main
 from runtime.controller_loader import ControllerSpecError, load_controller
-from runtime.smith_controller import SmithController
 from tests.sil_helpers import assert_recording_equals_simulation, pressor
 
 

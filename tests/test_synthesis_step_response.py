@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from runtime.pi_controller import PIController
+from baselines.pi import PIController
 from synthesis.pi_baseline import PIBaseline
 from synthesis.step_response import StepLoop, response_metrics, simulate_step
 

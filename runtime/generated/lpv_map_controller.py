@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  ceddb4037f0f1ab83aa568112b7086b347b0bb64e2f2824d85b846137276c810
-Content hash:     994fe2ac387fa84daab4d7f31dd4f4addfb6f5c1e7de7053e76e8cc7e136fbe2
+Content hash:     55a548cca37c4a80f490f7ff6aafa0d6b396461cc6a307f5faf7dd20ec952dac
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -47,9 +47,9 @@ Error budgets (asserted by tests/test_codegen_*.py):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '4aaed6da5a6b0d66f66716e22c0c9f45b7ba316f20cf5232b5287a6028be2689'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '1f6c4204c76c9c2dcbf8e3e0af0a1b820ee20ee330d6dcfd8c89bfb78d70b33e'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'ceddb4037f0f1ab83aa568112b7086b347b0bb64e2f2824d85b846137276c810'
-CONTENT_HASH = '994fe2ac387fa84daab4d7f31dd4f4addfb6f5c1e7de7053e76e8cc7e136fbe2'
+CONTENT_HASH = '55a548cca37c4a80f490f7ff6aafa0d6b396461cc6a307f5faf7dd20ec952dac'
 TABLES_SHA256 = 'cb12f22719a954ceba680f370d4758eee69eafac4984829574fc6c30d1d8c32e'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
@@ -193,7 +193,7 @@ class ControllerStatus:
 
 
 class Controller:
-    """The scheduled LPV controller (runtime.controller.Controller protocol).
+    """The scheduled LPV controller (contracts.controller.Controller protocol).
 
     Parameters
     ----------

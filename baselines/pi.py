@@ -47,7 +47,7 @@ class PIStatus:
 
 
 class PIController:
-    """Discrete PI baseline implementing :class:`runtime.controller.Controller`.
+    """Discrete PI baseline implementing :class:`contracts.controller.Controller`.
 
     Parameters
     ----------
