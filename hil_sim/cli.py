@@ -1,6 +1,6 @@
 """``pressor scenarios`` and ``pressor trial``: the named scenarios and the in-silico cohort trial.
 
-``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--jobs J] --out DIR``
+``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--jobs J | --scheduler ADDRESS] --out DIR``
 prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
 (reachable patients; unreachable ones counted and listed apart) and of each disturbance event's
 peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
@@ -101,7 +101,16 @@ def _trial(argv: list[str]) -> int:
     p.add_argument("--patients", type=int, default=20, help="cohort size N (1..100000)")
     p.add_argument("--seed", type=int, default=1, help="cohort seed S (>= 0)")
     p.add_argument("--scenario", default="paper-disturbance", help="scenario name or .toml path")
-    p.add_argument("--jobs", type=int, default=1, help="worker processes (1..64)")
+    p.add_argument(
+        "--jobs", type=int, default=1, help="local worker processes, 1..64 (default: %(default)s)"
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the patients on a running Dask cluster, e.g. tcp://127.0.0.1:8786 "
+        "(default: local processes, see --jobs); same records either way",
+    )
     p.add_argument("--rate", type=float, default=10.0, help="loop rate in Hz (default 10)")
     p.add_argument("--out", required=True, type=Path, help="output directory")
     args = p.parse_args(argv)
@@ -114,6 +123,7 @@ def _trial(argv: list[str]) -> int:
     if not 0.1 <= args.rate <= 1000.0:
         p.error(f"field '--rate' = {args.rate} outside [0.1, 1000] Hz")
 
+    from hil_sim.backend import BackendError
     from hil_sim.scenario import ScenarioError, load_scenario
     from hil_sim.trial import run_trial, summarize, write_outputs
     from runtime.controller_loader import ControllerSpecError, load_controller
@@ -131,9 +141,19 @@ def _trial(argv: list[str]) -> int:
         return USAGE_EXIT
     try:
         records = run_trial(
-            scenario, args.controller, args.seed, args.patients, args.jobs, period, _progress_bar
+            scenario,
+            args.controller,
+            args.seed,
+            args.patients,
+            args.jobs,
+            period,
+            _progress_bar,
+            scheduler=args.scheduler,
         )
-    except ValueError as exc:  # e.g. a loop rate the scenario's patient step does not divide
+    except (
+        ValueError,
+        BackendError,
+    ) as exc:  # e.g. a loop rate the scenario's patient step does not divide
         print(f"pressor trial: {exc}", file=sys.stderr)
         return USAGE_EXIT
     summary = summarize(records, scenario, args.controller, args.seed)

@@ -2,7 +2,7 @@
 
 Each patient runs in the pure in-process simulator (:func:`hil_sim.closed_loop.simulate`) with a
 fresh controller from :func:`runtime.controller_loader.load_controller`. Patients are independent,
-so ``jobs`` worker processes change only the wall time: results are collected in patient order and
+so the worker processes (``jobs``) or the Dask cluster (``scheduler``) change only the wall time: results are collected in patient order and
 every output file is byte-identical whatever ``jobs`` is.
 
 Metrics judge the *true* MAP (what the patient experiences; a flushed or disconnected line must not
@@ -21,11 +21,9 @@ for a second one).
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import json
-import multiprocessing
 import os
 import tempfile
 from collections.abc import Callable, Sequence
@@ -41,6 +39,7 @@ from contracts.metrics import (
     event_labels,
     run_metrics,
 )
+from hil_sim.backend import run_ordered
 from hil_sim.closed_loop import simulate
 from hil_sim.cohort import cohort_seeds
 from hil_sim.scenario import Scenario
@@ -97,6 +96,7 @@ def run_trial(
     jobs: int = 1,
     sample_period_s: float = 0.1,
     progress: Callable[[int, int], None] | None = None,
+    scheduler: str | None = None,
 ) -> list[dict[str, Any]]:
     """Run the cohort ``(cohort_seed, n_patients)``; records in patient order.
 
@@ -109,23 +109,18 @@ def run_trial(
     cohort_seed, n_patients
         The cohort (:func:`hil_sim.cohort.cohort_seeds`).
     jobs
-        Worker processes (≥ 1); does not change the results.
+        Local worker processes (≥ 1); does not change the results.
     progress
         Called with (done, total) after each patient.
+    scheduler
+        Address of a Dask scheduler (``tcp://HOST:PORT``) to run the patients on instead of local
+        processes (:mod:`hil_sim.backend`); does not change the results.
     """
     tasks = [
         (scenario, controller_spec, s, sample_period_s)
         for s in cohort_seeds(cohort_seed, n_patients)
     ]
-    results: list[dict[str, Any]] = []
-    pool = multiprocessing.get_context("fork").Pool(processes=jobs) if jobs > 1 else None
-    with pool or contextlib.nullcontext():
-        records = pool.imap(_worker, tasks, chunksize=1) if pool else map(_worker, tasks)
-        for rec in records:
-            results.append(rec)
-            if progress:
-                progress(len(results), len(tasks))
-    return results
+    return run_ordered(_worker, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
 
 
 def summarize(
