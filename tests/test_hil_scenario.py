@@ -103,3 +103,18 @@ def test_invalid_toml_and_missing_file_and_unknown_name(tmp_path):
         load_scenario_file(tmp_path / "missing.toml")
     with pytest.raises(ScenarioError, match="must be one of"):
         load_scenario("not-a-scenario")
+
+
+def test_the_example_in_docs_scenarios_is_a_valid_scenario():
+    import re
+    import tomllib
+
+    from hil_sim.scenario import parse_scenario
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "SCENARIOS.md").read_text()
+    example = re.search(r"```toml\n(.*?)```", doc, re.S)
+    assert example is not None
+    sc = parse_scenario(tomllib.loads(example.group(1)), "docs/SCENARIOS.md")
+    assert sc.sensor.period_s == 1.0 and sc.sensor.quantum_mmhg == 1.0
+    assert [d.kind for d in sc.disturbances] == ["hemorrhage"]
+    assert [f.kind for f in sc.faults] == ["sensor-flush"]
