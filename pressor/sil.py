@@ -123,7 +123,8 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
     args = sil_parser().parse_args(argv)
     if args.rrd is None:
         args.rrd = Path(
-            f"pressor_sil_{Path(args.controller).stem}_{args.scenario}_seed{args.patient_seed}.rrd"
+            f"pressor_sil_{Path(args.controller).stem}_{Path(args.scenario).stem}"
+            f"_seed{args.patient_seed}.rrd"
         )
     run = run_config(args)
     try:

@@ -39,7 +39,9 @@ def test_device_cpu_must_be_an_allowed_cpu():
     allowed = sorted(os.sched_getaffinity(0))
     assert parse_cpu(str(allowed[-1])) == allowed[-1]
     for bad in (str(max(allowed) + 1), "x"):
-        with pytest.raises(argparse.ArgumentTypeError, match=rf"--cpu '{bad}': allowed one of the CPUs"):
+        with pytest.raises(
+            argparse.ArgumentTypeError, match=rf"--cpu '{bad}': allowed one of the CPUs"
+        ):
             parse_cpu(bad)
 
 
