@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from contracts.usage import USAGE_EXIT, UsageError, UsageParser, run_command
+from contracts.usage import UsageError, UsageParser, run_command, usage_exit
 
 
 def _scenarios(argv: Sequence[str]) -> int:
@@ -140,6 +140,5 @@ def main(command: str, argv: list[str]) -> int:
     """Entry point for the dispatcher: ``scenarios`` or ``trial`` (exit 2 on bad usage or input)."""
     handlers = {"scenarios": _scenarios, "trial": _trial}
     if command not in handlers:
-        print(f"hil_sim.cli: unknown command {command!r}", file=sys.stderr)
-        return USAGE_EXIT
+        return usage_exit("hil_sim.cli", f"unknown command {command!r}")
     return run_command(f"pressor {command}", handlers[command], argv)

@@ -17,10 +17,9 @@ failed), 2 bad usage or input (one line on stderr naming the option or file, val
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 
-from contracts.usage import USAGE_EXIT, UsageError, UsageParser
+from contracts.usage import UsageError, UsageParser, usage_exit
 from runtime.config import DEFAULT_RATE_HZ, MAX_RATE_HZ, add_run_options, positive, run_config
 
 
@@ -93,6 +92,5 @@ def main(command: str, argv: list[str]) -> int:
 
     handlers = {"run": _main_run, "faults": _main_faults}
     if command not in handlers:
-        print(f"runtime.cli: unknown command {command!r}", file=sys.stderr)
-        return USAGE_EXIT
+        return usage_exit("runtime.cli", f"unknown command {command!r}")
     return run_guarded(f"pressor {command}", handlers[command], argv)
