@@ -37,7 +37,7 @@ os.environ.setdefault("CI", "1")
 
 
 def _sil(args: list[str]) -> tuple[int, float, str]:
-    from runtime.cli import main
+    from pressor.sil import main
 
     out = io.StringIO()
     t0 = time.perf_counter()

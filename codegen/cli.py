@@ -6,16 +6,18 @@ ARTIFACT defaults to the shipped default design. Exit codes: 0 written (or alrea
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
+from contracts.usage import UsageError, UsageParser, run_command
 
-def _parser() -> argparse.ArgumentParser:
+
+def _parser() -> UsageParser:
     from codegen.pipeline import DEFAULT_ARTIFACT
 
-    p = argparse.ArgumentParser(
+    p = UsageParser(
         prog="pressor codegen",
         description="Emit a standalone scheduled LPV controller (Python or C99) from an artifact.",
     )
@@ -49,17 +51,17 @@ def _check_out_dir(out: Path) -> str | None:
 
 def main(command: str, argv: list[str]) -> int:
     """Run ``pressor codegen``; see the module docstring for the exit codes."""
-    try:
-        args = _parser().parse_args(argv)
-    except SystemExit as exc:
-        return 0 if exc.code == 0 else 2
+    return run_command(f"pressor {command}", _codegen, argv)
+
+
+def _codegen(argv: Sequence[str]) -> int:
+    args = _parser().parse_args(argv)
     from codegen.pipeline import CodegenError, generate
 
     out = Path(args.out)
     err = _check_out_dir(out)
     if err:
-        print(f"pressor codegen: {err}", file=sys.stderr)
-        return 2
+        raise UsageError(err)
     try:
         paths, skipped = generate(
             args.artifact,
@@ -70,11 +72,9 @@ def main(command: str, argv: list[str]) -> int:
             progress=lambda m: print(m, file=sys.stderr),
         )
     except CodegenError as exc:
-        print(f"pressor codegen: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
     except OSError as exc:
-        print(f"pressor codegen: --out {out}: cannot write ({exc})", file=sys.stderr)
-        return 2
+        raise UsageError(f"--out {out}: cannot write ({exc})") from None
     for p in paths:
         print(f"{'unchanged' if skipped else 'wrote'} {p}")
     return 0

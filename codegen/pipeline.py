@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from codegen.discretise import ContinuousController
 from codegen.fixed_point import FixedPointPlan, make_plan
 from codegen.tables import TabulationProof, choose_grid
+from contracts.files import write_atomic
 
 __all__ = [
     "BUDGETS",
@@ -313,7 +314,5 @@ def generate(
     gen = emit(design, proof, plan, target, sample_period_s, c_float)
     out.mkdir(parents=True, exist_ok=True)
     for name, text in gen.files.items():
-        tmp = out / (name + ".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(out / name)
+        write_atomic(out / name, text)
     return paths, False

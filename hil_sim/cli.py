@@ -10,24 +10,18 @@ peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``
 
 from __future__ import annotations
 
-import argparse
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-USAGE_EXIT = 2
+from contracts.usage import UsageError, UsageParser, run_command, usage_exit
 
 
-class _ArgParser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, exit 2
-        print(f"{self.prog}: {message}", file=sys.stderr)
-        raise SystemExit(USAGE_EXIT)
-
-
-def _scenarios(argv: list[str]) -> int:
+def _scenarios(argv: Sequence[str]) -> int:
     from hil_sim.scenario import ScenarioError, load_scenario, scenario_names
 
-    _ArgParser(prog="pressor scenarios", description="list the named scenarios").parse_args(argv)
+    UsageParser(prog="pressor scenarios", description="list the named scenarios").parse_args(argv)
     names = scenario_names()
     width = max(len(n) for n in names)
     for name in names:
@@ -91,8 +85,8 @@ def _progress_bar(done: int, total: int) -> None:
     )
 
 
-def _trial(argv: list[str]) -> int:
-    p = _ArgParser(prog="pressor trial", description="in-silico cohort trial of a controller")
+def _trial(argv: Sequence[str]) -> int:
+    p = UsageParser(prog="pressor trial", description="in-silico cohort trial of a controller")
     p.add_argument(
         "--controller",
         default="pi",
@@ -132,13 +126,11 @@ def _trial(argv: list[str]) -> int:
     try:
         scenario = load_scenario(args.scenario)
     except ScenarioError as exc:
-        print(f"pressor trial: {exc}", file=sys.stderr)
-        return USAGE_EXIT
+        raise UsageError(str(exc)) from None
     try:
         load_controller(args.controller, period)
     except ControllerSpecError as exc:
-        print(f"pressor trial: {exc}", file=sys.stderr)
-        return USAGE_EXIT
+        raise UsageError(str(exc)) from None
     try:
         records = run_trial(
             scenario,
@@ -150,12 +142,8 @@ def _trial(argv: list[str]) -> int:
             _progress_bar,
             scheduler=args.scheduler,
         )
-    except (
-        ValueError,
-        BackendError,
-    ) as exc:  # e.g. a loop rate the scenario's patient step does not divide
-        print(f"pressor trial: {exc}", file=sys.stderr)
-        return USAGE_EXIT
+    except (ValueError, BackendError) as exc:  # e.g. a rate the patient step does not divide
+        raise UsageError(str(exc)) from None
     summary = summarize(records, scenario, args.controller, args.seed)
     write_outputs(args.out, records, summary)
     print(format_table(summary))
@@ -166,13 +154,8 @@ def _trial(argv: list[str]) -> int:
 
 
 def main(command: str, argv: list[str]) -> int:
-    """Entry point for the dispatcher: ``scenarios`` or ``trial``."""
-    try:
-        if command == "scenarios":
-            return _scenarios(argv)
-        if command == "trial":
-            return _trial(argv)
-    except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
-        return int(exc.code or 0)
-    print(f"hil_sim.cli: unknown command {command!r}", file=sys.stderr)
-    return USAGE_EXIT
+    """Entry point for the dispatcher: ``scenarios`` or ``trial`` (exit 2 on bad usage or input)."""
+    handlers = {"scenarios": _scenarios, "trial": _trial}
+    if command not in handlers:
+        return usage_exit("hil_sim.cli", f"unknown command {command!r}")
+    return run_command(f"pressor {command}", handlers[command], argv)

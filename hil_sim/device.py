@@ -37,22 +37,20 @@ Exit codes: 0 run completed (or the runtime closed the link), 1 link lost / hand
 
 from __future__ import annotations
 
-import argparse
 import math
-import os
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
+
+from contracts.usage import UsageError, UsageParser, run_command
+from runtime.placement import parse_cpu, pin_thread
 
 #: default wall-clock timeouts (s)
 RETRANSMIT_S = 0.5
 LINK_TIMEOUT_S = 10.0
 HANDSHAKE_TIMEOUT_S = 30.0
-
-
-class _UsageError(Exception):
-    """Bad CLI input; the message is the one line to print."""
 
 
 @dataclass(frozen=True)
@@ -64,8 +62,8 @@ class DeviceResult:
     counters: dict[str, int]
 
 
-def _parser(command: str) -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+def _parser(command: str) -> UsageParser:
+    p = UsageParser(
         prog=f"pressor {command}",
         description="Run the simulated patient/pump/monitor device on a serial port.",
     )
@@ -88,7 +86,7 @@ def _parser(command: str) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--cpu",
-        type=int,
+        type=parse_cpu,
         default=None,
         help="run on this CPU only (pressor sil puts the lockstep ends on two CPUs)",
     )
@@ -106,26 +104,26 @@ def _check_range(name: str, value: float, lo: float, hi: float, unit: str, lo_op
     ok = (value > lo if lo_open else value >= lo) and value <= hi and math.isfinite(value)
     if not ok:
         bracket = "(" if lo_open else "["
-        raise _UsageError(f"{name}: value {value} outside {bracket}{lo}, {hi}] {unit}".rstrip())
+        raise UsageError(f"{name}: value {value} outside {bracket}{lo}, {hi}] {unit}".rstrip())
 
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point of ``pressor device`` (see the module docstring)."""
+    return run_command(f"pressor {command}", lambda args: _main(command, args), argv)
+
+
+def _main(command: str, argv: Sequence[str]) -> int:
     args = _parser(command).parse_args(argv)
-    try:
-        _check_range("--rate", args.rate, 0.0, 1000.0, "Hz", lo_open=True)
-        if args.duration is not None:
-            _check_range("--duration", args.duration, 0.0, 30 * 24 * 3600.0, "s", lo_open=True)
-        _check_range("--patient-seed", args.patient_seed, 0, 2**32 - 1, "", lo_open=False)
-        for opt in ("retransmit", "link_timeout", "handshake_timeout"):
-            _check_range(f"--{opt.replace('_', '-')}", getattr(args, opt), 0.0, 3600.0, "s", True)
-        faults = _parse_faults(args.fault)
-        _pin(args.cpu)
-        world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate, faults)
-        signing = _load_signing(args.signing_key)
-    except _UsageError as exc:
-        print(f"pressor {command}: {exc}", file=sys.stderr)
-        return 2
+    _check_range("--rate", args.rate, 0.0, 1000.0, "Hz", lo_open=True)
+    if args.duration is not None:
+        _check_range("--duration", args.duration, 0.0, 30 * 24 * 3600.0, "s", lo_open=True)
+    _check_range("--patient-seed", args.patient_seed, 0, 2**32 - 1, "", lo_open=False)
+    for opt in ("retransmit", "link_timeout", "handshake_timeout"):
+        _check_range(f"--{opt.replace('_', '-')}", getattr(args, opt), 0.0, 3600.0, "s", True)
+    faults = _parse_faults(args.fault)
+    pin_thread(args.cpu)  # the lockstep ends on their CPUs (runtime.placement)
+    world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate, faults)
+    signing = _load_signing(args.signing_key)
 
     from runtime.link import LinkClosedError, LinkEndpoint, LinkError, ManualClock, TlogWriter
     from runtime.link.transport import fast_port, open_port
@@ -133,8 +131,7 @@ def main(command: str, argv: list[str]) -> int:
     try:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises SerialException / ValueError for bad URLs
-        print(f"pressor {command}: --port: cannot open {args.port!r}: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--port: cannot open {args.port!r}: {exc}") from None
     from hil_sim.faults import LinkFaultPort, LinkFaults
 
     link_faults = LinkFaults(world.fault_specs, world.sample_period_s)
@@ -171,23 +168,13 @@ def main(command: str, argv: list[str]) -> int:
     return 0 if result.ended in ("completed", "runtime closed the link") else 1
 
 
-def _pin(cpu: int | None) -> None:
-    """Restrict this process to ``cpu`` (see ``runtime.cli.lockstep_cpus`` for why)."""
-    if cpu is None:
-        return
-    allowed = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
-    if cpu not in allowed:
-        raise _UsageError(f"--cpu: value {cpu} not one of the allowed CPUs {allowed}")
-    os.sched_setaffinity(0, {cpu})
-
-
 def _parse_faults(texts: list[str]) -> tuple:
     from contracts.faults import FaultSpecError, parse_faults
 
     try:
         return tuple(parse_faults(texts))
     except FaultSpecError as exc:
-        raise _UsageError(str(exc)) from exc
+        raise UsageError(str(exc)) from exc
 
 
 def _make_world(scenario: str, seed: int, period_s: float, faults: tuple = ()) -> Any:
@@ -197,9 +184,9 @@ def _make_world(scenario: str, seed: int, period_s: float, faults: tuple = ()) -
     try:
         return World(scenario, seed, period_s, faults=faults)
     except ScenarioError as exc:
-        raise _UsageError(str(exc)) from exc
+        raise UsageError(str(exc)) from exc
     except ValueError as exc:
-        raise _UsageError(f"--rate: {exc}") from exc
+        raise UsageError(f"--rate: {exc}") from exc
 
 
 def _load_signing(path: str | None) -> Any:
@@ -210,9 +197,9 @@ def _load_signing(path: str | None) -> Any:
     try:
         return Signing.from_file(path)
     except OSError as exc:
-        raise _UsageError(f"--signing-key: cannot read {path}: {exc.strerror}") from exc
+        raise UsageError(f"--signing-key: cannot read {path}: {exc.strerror}") from exc
     except ValueError as exc:
-        raise _UsageError(f"--signing-key: {exc}") from exc
+        raise UsageError(f"--signing-key: {exc}") from exc
 
 
 def run_device(

@@ -24,12 +24,11 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
-import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from contracts.files import write_atomic
 from contracts.metrics import (
     EVENT_KINDS,
     EVENT_METRICS,
@@ -167,23 +166,11 @@ def _csv_text(records: Sequence[dict[str, Any]]) -> str:
     return buf.getvalue()
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def write_outputs(
     out_dir: Path, records: Sequence[dict[str, Any]], summary: dict[str, Any]
 ) -> None:
     """Write ``patients.json``, ``patients.csv`` and ``summary.json`` atomically into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    _write_atomic(out_dir / "patients.json", json.dumps(list(records), indent=1) + "\n")
-    _write_atomic(out_dir / "patients.csv", _csv_text(records))
-    _write_atomic(out_dir / "summary.json", json.dumps(summary, indent=1) + "\n")
+    write_atomic(out_dir / "patients.json", json.dumps(list(records), indent=1) + "\n")
+    write_atomic(out_dir / "patients.csv", _csv_text(records))
+    write_atomic(out_dir / "summary.json", json.dumps(summary, indent=1) + "\n")

@@ -1,17 +1,22 @@
 """The ``pressor`` console script: a small dispatcher over the stages' own CLIs.
 
-Each stage owns its subcommands in its own ``cli.py`` (DESIGN.md §2). This module only knows which
-module serves which subcommand and imports that module when, and only when, the subcommand runs:
-``pressor run`` never loads the solver, ``pressor synth`` never loads serial or rerun.
+Each stage owns its subcommands in its own ``cli.py`` (docs/INTERFACES.md, "CLI"); ``pressor sil``,
+which needs both ends of the link, is served by the front door itself (:mod:`pressor.sil`). This
+module only knows which module serves which subcommand and imports that module when, and only
+when, the subcommand runs: ``pressor run`` never loads the solver, ``pressor synth`` never loads
+serial or rerun.
 
 A stage CLI module exposes ``main(command: str, argv: list[str]) -> int`` and parses ``argv`` itself.
-Exit codes: 0 success, 1 the run completed but a check failed, 2 bad usage or bad input.
+Exit codes: 0 success, 1 the run completed but a check failed, 2 bad usage or bad input
+(:mod:`contracts.usage`).
 """
 
 from __future__ import annotations
 
 import importlib
 import sys
+
+from contracts.usage import USAGE_EXIT, usage_exit
 
 #: subcommand -> (module that serves it, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -27,12 +32,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "scenarios": ("hil_sim.cli", "list the named SIL scenarios"),
     "trial": ("hil_sim.cli", "in-silico cohort trial of a controller on seeded patients"),
     "device": ("hil_sim.device", "run the simulated patient/pump/monitor device on a serial port"),
-    "sil": ("runtime.cli", "software-in-the-loop run: device process + runtime over a serial link"),
+    "sil": ("pressor.sil", "software-in-the-loop run: device process + runtime over a serial link"),
     "run": ("runtime.cli", "run the controller runtime alone on a serial port"),
     "faults": ("runtime.cli", "list the injectable fault kinds"),
 }
-
-USAGE_EXIT = 2
 
 
 def _usage() -> str:
@@ -62,10 +65,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0 if args else USAGE_EXIT
     command, rest = args[0], args[1:]
     if command not in COMMANDS:
-        print(
-            f"pressor: unknown command {command!r}; one of: {', '.join(COMMANDS)}", file=sys.stderr
-        )
-        return USAGE_EXIT
+        return usage_exit("pressor", f"unknown command {command!r}; one of: {', '.join(COMMANDS)}")
     module = importlib.import_module(COMMANDS[command][0])
     return int(module.main(command, rest))
 

@@ -21,7 +21,6 @@ the infusion rate, K/T/τ, loop timing and the safety state with its event log.
 from __future__ import annotations
 
 import math
-import os
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +28,8 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+
+from contracts.files import AtomicFile
 
 #: (entity path, legend label) — the column order of :meth:`Recorder.record`.
 CHANNELS: tuple[tuple[str, str], ...] = (
@@ -104,12 +105,12 @@ class Recorder:
         self.path = Path(path)
         if not self.path.parent.is_dir():
             raise FileNotFoundError(f"{self.path}: directory {self.path.parent} does not exist")
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        self._target = AtomicFile(self.path)
         rid = uuid.uuid5(uuid.NAMESPACE_URL, f"pressor:{run_label}")
         self._rec = rr.RecordingStream("pressor", recording_id=rid, send_properties=False)
         self._rec.set_log_time_enabled(False)
         self._rec.set_log_tick_enabled(False)
-        self._rec.save(str(self._tmp), default_blueprint=default_blueprint())
+        self._rec.save(str(self._target.tmp), default_blueprint=default_blueprint())
         self._rec.send_recording_name(run_label)
         for entity, label in CHANNELS:
             self._rec.log(entity, rr.SeriesLines(names=label), static=True)
@@ -162,7 +163,7 @@ class Recorder:
         self.flush()
         self._rec.flush()
         self._rec.disconnect()
-        os.replace(self._tmp, self.path)
+        self._target.commit()
         self._closed = True
         return self.path
 
@@ -174,7 +175,7 @@ class Recorder:
         try:
             self._rec.disconnect()
         finally:
-            self._tmp.unlink(missing_ok=True)
+            self._target.discard()
 
     def __enter__(self) -> Recorder:
         return self

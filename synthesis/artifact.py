@@ -25,7 +25,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from contracts.files import AtomicFile
 from synthesis.config import ModelConfig
 from synthesis.model import dims
 from synthesis.reference import ReferenceConfig
@@ -223,17 +223,10 @@ def save_artifact(artifact: ControllerArtifact, path: str | Path) -> Path:
         arrays[f"coef_{k}"] = np.ascontiguousarray(v, dtype="<f8")
     for k, v in artifact.nodes.items():
         arrays[f"node_{k}"] = np.ascontiguousarray(v, dtype="<f8")
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, p)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with AtomicFile(p) as target, open(target.tmp, "wb") as fh:
+        np.savez(fh, **arrays)
+        fh.flush()
+        os.fsync(fh.fileno())
     return p
 
 

@@ -15,16 +15,18 @@ allowed range).
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
+
+from contracts.usage import UsageError, UsageParser, run_command
 
 DEFAULT_OUT = "design.npz"
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+def _parser() -> UsageParser:
+    p = UsageParser(
         prog="pressor synth",
         description="Delay-dependent LPV output-feedback synthesis (Theorem 3, cvxpy + Clarabel).",
     )
@@ -70,14 +72,14 @@ def _without_wall_times(obj):
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point for ``pressor synth`` (see module docstring for exit codes)."""
+    return run_command(f"pressor {command}", _synth, argv)
+
+
+def _synth(argv: Sequence[str]) -> int:
     from synthesis.blas_threads import single_blas_thread
 
     single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
-    parser = _parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:
-        return 0 if exc.code == 0 else 2
+    args = _parser().parse_args(argv)
 
     from dataclasses import replace
 
@@ -95,12 +97,10 @@ def main(command: str, argv: list[str]) -> int:
         if args.grid is not None:
             g = _parse_grid(args.grid)
             if g is None:
-                print(
-                    f"pressor synth: --grid: field 'grid' = {args.grid!r}: must be three integers "
-                    "nK,nT,ntau each in [2, 15]",
-                    file=sys.stderr,
+                raise UsageError(
+                    f"--grid: field 'grid' = {args.grid!r}: must be three integers "
+                    "nK,nT,ntau each in [2, 15]"
                 )
-                return 2
             cfg = cfg.with_grid(g)
         if args.lambda2 is not None or args.lambda3 is not None:
             cfg = cfg.with_lambdas(
@@ -109,15 +109,12 @@ def main(command: str, argv: list[str]) -> int:
             )
         if args.backoff is not None:
             if not 0.0 <= args.backoff <= 1.0:
-                print(
-                    f"pressor synth: --backoff: field 'solver.backoff' = {args.backoff!r}: must be in [0, 1]",
-                    file=sys.stderr,
+                raise UsageError(
+                    f"--backoff: field 'solver.backoff' = {args.backoff!r}: must be in [0, 1]"
                 )
-                return 2
             cfg = replace(cfg, solver=replace(cfg.solver, backoff=args.backoff))
     except ConfigError as exc:
-        print(f"pressor synth: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
 
     out = Path(args.out)
     say(f"config {cfg.source}; grid {cfg.grid_points}; box {cfg.model.box.tolist()}")
@@ -161,11 +158,9 @@ def main(command: str, argv: list[str]) -> int:
     try:
         save_artifact(art, out)
     except OSError as exc:
-        print(
-            f"pressor synth: --out: field 'out' = {str(out)!r}: cannot write ({exc.strerror})",
-            file=sys.stderr,
-        )
-        return 2
+        raise UsageError(
+            f"--out: field 'out' = {str(out)!r}: cannot write ({exc.strerror})"
+        ) from None
     print(f"artifact         {out} (sha256 {art.sha256})")
     print(f"wall time        {time.perf_counter() - t0:.1f} s")
     return verdict_code

@@ -11,17 +11,19 @@ bad option value) with one line naming it.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
+
+from contracts.usage import UsageError, UsageParser, run_command
 
 DEFAULT_ARTIFACT = Path(__file__).resolve().parent / "data" / "default_design.npz"
 
 
-def _parser(command: str) -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+def _parser(command: str) -> UsageParser:
+    p = UsageParser(
         prog=f"pressor {command}",
         description="Independent checks of a controller artifact on a grid denser than the "
         "synthesis grid: analysis LMI, frozen delay-system stability, nominal step vs PI and "
@@ -54,31 +56,23 @@ def _fmt(value: object, unit: str = "") -> str:
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point used by the ``pressor`` dispatcher; returns the exit code."""
+    return run_command(f"pressor {command}", lambda args: _verify(command, args), argv)
+
+
+def _verify(command: str, argv: Sequence[str]) -> int:
     from synthesis.blas_threads import single_blas_thread
 
     single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
-    try:
-        args = _parser(command).parse_args(argv)
-    except SystemExit as exc:  # argparse: --help -> 0, bad usage -> 2
-        return int(exc.code or 0)
+    args = _parser(command).parse_args(argv)
     if args.density < 2 or args.density > 16:
-        print(
-            f"pressor verify: --density {args.density} outside the allowed range 2..16",
-            file=sys.stderr,
-        )
-        return 2
+        raise UsageError(f"--density {args.density} outside the allowed range 2..16")
     path = Path(args.artifact)
     if not path.is_file():
-        print(f"pressor verify: artifact {path}: file not found", file=sys.stderr)
-        return 2
+        raise UsageError(f"artifact {path}: file not found")
     if args.json:
         out_dir = Path(args.json).resolve().parent
         if not out_dir.is_dir():
-            print(
-                f"pressor verify: --json {args.json}: directory {out_dir} does not exist",
-                file=sys.stderr,
-            )
-            return 2
+            raise UsageError(f"--json {args.json}: directory {out_dir} does not exist")
 
     from synthesis.artifact import ArtifactError, load_artifact
     from synthesis.verify import verify_artifact
@@ -86,11 +80,9 @@ def main(command: str, argv: list[str]) -> int:
     try:
         artifact = load_artifact(path)
     except ArtifactError as exc:
-        print(f"pressor verify: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
     except (OSError, ValueError) as exc:
-        print(f"pressor verify: artifact {path}: unreadable ({exc})", file=sys.stderr)
-        return 2
+        raise UsageError(f"artifact {path}: unreadable ({exc})") from None
 
     t0 = time.perf_counter()
 
@@ -140,6 +132,5 @@ def main(command: str, argv: list[str]) -> int:
         try:
             Path(args.json).write_text(json.dumps(d, indent=2) + "\n")
         except OSError as exc:
-            print(f"pressor verify: --json {args.json}: cannot write ({exc})", file=sys.stderr)
-            return 2
+            raise UsageError(f"--json {args.json}: cannot write ({exc})") from None
     return 0 if report.passed else 1

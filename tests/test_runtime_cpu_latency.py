@@ -1,4 +1,4 @@
-"""CPU wake-up latency request (runtime.cpu_latency) and the lockstep CPU placement options."""
+"""CPU wake-up latency request (runtime.cpu_latency): the request, its option, its report."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from runtime.cli import UsageError, _sil_parser, lockstep_cpus
+from contracts.usage import UsageError, UsageParser
+from runtime.config import add_run_options
 from runtime.cpu_latency import QOS_DEVICE, CpuLatencyRequest
 from tests.sil_helpers import pressor
 
@@ -50,28 +51,10 @@ def test_latency_outside_range_is_refused(bad):
 
 @pytest.mark.parametrize("option", [["--cpu-latency", "-5"], ["--cpu-latency", "fast"]])
 def test_bad_cpu_latency_option_is_a_usage_error_naming_it(option):
+    p = UsageParser(prog="pressor run")
+    add_run_options(p)
     with pytest.raises(UsageError, match="--cpu-latency"):
-        _sil_parser().parse_args(option)
-
-
-def test_cpu_option_takes_one_or_two_allowed_cpus():
-    allowed = sorted(os.sched_getaffinity(0))
-    args = _sil_parser().parse_args(["--cpu", f"{allowed[0]},{allowed[-1]}"])
-    assert args.cpu == (allowed[0], allowed[-1])
-    assert _sil_parser().parse_args(["--cpu", str(allowed[0])]).cpu == (allowed[0], allowed[0])
-    with pytest.raises(UsageError, match="--cpu"):
-        _sil_parser().parse_args(["--cpu", f"{allowed[0]},{max(allowed) + 1}"])
-
-
-def test_auto_puts_the_two_lockstep_ends_on_different_cpus():
-    allowed = os.sched_getaffinity(0)
-    cpus = lockstep_cpus("auto", realtime=False)
-    if len(allowed) < 2:
-        assert cpus is None
-    else:
-        assert cpus is not None and cpus[0] != cpus[1] and set(cpus) <= allowed
-    assert lockstep_cpus("auto", realtime=True) is None
-    assert lockstep_cpus("none", realtime=False) is None
+        p.parse_args(option)
 
 
 def test_sil_timing_reports_the_wake_latency_request_and_placement(tmp_path: Path):

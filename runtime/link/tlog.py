@@ -26,6 +26,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import BinaryIO
 
+from contracts.files import AtomicFile
+
 _TS = struct.Struct(">Q")
 
 
@@ -45,8 +47,8 @@ class TlogWriter:
 
     def __init__(self, path: str | Path, buffer_bytes: int = 1 << 16) -> None:
         self.path = Path(path)
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        self._file: BinaryIO = open(self._tmp, "wb", buffering=buffer_bytes)  # noqa: SIM115
+        self._target = AtomicFile(self.path)
+        self._file: BinaryIO = open(self._target.tmp, "wb", buffering=buffer_bytes)  # noqa: SIM115
         self.frames = 0
 
     def write(self, frame: bytes | bytearray, time_s: float) -> None:
@@ -66,9 +68,9 @@ class TlogWriter:
             return
         self._file.close()
         if commit:
-            os.replace(self._tmp, self.path)
+            self._target.commit()
         else:
-            self._tmp.unlink(missing_ok=True)
+            self._target.discard()
 
     def __enter__(self) -> TlogWriter:
         return self

@@ -1,0 +1,273 @@
+"""``pressor sil``: the software-in-the-loop run, device process and runtime over a serial link.
+
+The front door knows both ends, so the two-process orchestration lives here: ``pressor sil``
+loads the scenario through the simulator's scenario API (:mod:`hil_sim.scenario`), starts the
+device as its own process (``python -m pressor device --port ...``), connects to it over a
+pseudo-terminal (a real tty to pyserial), signs the link (a fresh key per run unless
+``--signing-key``), runs the runtime in lockstep (or ``--realtime``) through
+:func:`runtime.session.run_runtime`, records everything to an ``.rrd``, prints the metric summary
+(:mod:`runtime.summary`, defined in docs/METRICS.md) and the ``rerun FILE.rrd`` command to replay
+it. The runtime itself never imports the simulator: the control path learns of the patient, and
+of any fault, only through what arrives on the link.
+
+Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
+Faults the scenario declares (``[[faults]]``) are injected by the device too; both are scored
+after the run (summary ``faults`` list, docs/METRICS.md). The scenario's hemorrhages and boluses
+are the disturbance events the metrics split the run at.
+
+Files. The ``.rrd``, ``.tlog``, ``--summary`` and ``--timing`` files are written to a hidden
+temporary name and renamed when the run succeeds; a failed run leaves earlier files untouched.
+
+Exit codes: 0 success, 1 the run completed but a check failed (or the device stalled, or the link
+failed), 2 bad usage or input (one line on stderr naming the option or file, value and range).
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from contracts.usage import USAGE_EXIT, UsageError, UsageParser
+from runtime.config import RunConfig, add_run_options, positive, run_config
+from runtime.placement import CpuChoice, parse_lockstep_cpus
+
+DEFAULT_SCENARIO = "paper-tracking"
+DEFAULT_PATIENT_SEED = 1
+DEFAULT_DURATION_S = 1800.0
+#: longest simulated run (s)
+MAX_DURATION_S = 7 * 86400.0
+
+
+@dataclass(frozen=True)
+class SilConfig:
+    """One ``pressor sil`` run, checked at the command line (:func:`sil_config`).
+
+    Attributes
+    ----------
+    run
+        The runtime end's configuration; its ``fault_specs`` include the scenario's faults.
+    scenario
+        Scenario name or ``.toml`` path, as passed to the device.
+    patient_seed
+        The device's patient seed.
+    duration_s
+        Simulated time (s).
+    link
+        ``pty`` (the only transport ``pressor sil`` creates).
+    signed
+        Whether the link is signed (``--no-signing`` turns a generated key off).
+    cpu
+        Lockstep CPU placement choice (:mod:`runtime.placement`).
+    events
+        The scenario's disturbance events ``(kind, start_s)`` for the metrics.
+    """
+
+    run: RunConfig
+    scenario: str
+    patient_seed: int
+    duration_s: float
+    link: str
+    signed: bool
+    cpu: CpuChoice
+    events: tuple[tuple[str, float], ...]
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--patient-seed {text!r}: not an integer") from None
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"--patient-seed {text!r}: allowed [0, 2**32)")
+    return value
+
+
+def sil_parser() -> UsageParser:
+    """The ``pressor sil`` option parser: the runtime's options plus the device's."""
+    p = UsageParser(prog="pressor sil", description="device process + runtime over a serial link")
+    add_run_options(p)
+    p.add_argument("--scenario", default=DEFAULT_SCENARIO, help="scenario name (pressor scenarios)")
+    p.add_argument("--patient-seed", type=_seed, default=DEFAULT_PATIENT_SEED)
+    p.add_argument(
+        "--duration",
+        type=positive("--duration", MAX_DURATION_S),
+        default=DEFAULT_DURATION_S,
+        help="simulated time in s (default 1800)",
+    )
+    p.add_argument("--link", default="pty", help="pty (default) or a pyserial URL / device path")
+    p.add_argument("--no-signing", action="store_true", help="run the link unsigned")
+    p.add_argument(
+        "--cpu",
+        type=parse_lockstep_cpus,
+        default="auto",
+        metavar="auto|none|N|N,M",
+        help="lockstep CPU placement: auto (default) the loop thread on the CPU it is on and the"
+        " device on another; N both on CPU N; N,M the loop on N and the device on M; none let"
+        " the scheduler place them. Ignored with --realtime",
+    )
+    return p
+
+
+def sil_config(argv: Sequence[str]) -> SilConfig:
+    """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
+    disturbance events (raises :class:`contracts.usage.UsageError`)."""
+    from hil_sim.scenario import ScenarioError, load_scenario
+    from hil_sim.trial import scenario_events
+
+    args = sil_parser().parse_args(argv)
+    if args.rrd is None:
+        args.rrd = Path(
+            f"pressor_sil_{Path(args.controller).stem}_{Path(args.scenario).stem}"
+            f"_seed{args.patient_seed}.rrd"
+        )
+    run = run_config(args)
+    try:
+        scenario = load_scenario(args.scenario)
+    except ScenarioError as exc:
+        raise UsageError(str(exc)) from None
+    if args.link != "pty":
+        raise UsageError(
+            f"--link {args.link}: pressor sil starts the device on a pty it creates; for a device"
+            " on another port run 'pressor device --port ...' there and 'pressor run --port"
+            f" {args.link}' here"
+        )
+    return SilConfig(
+        run=replace(run, fault_specs=run.fault_specs + scenario.faults),
+        scenario=args.scenario,
+        patient_seed=args.patient_seed,
+        duration_s=args.duration,
+        link=args.link,
+        signed=not args.no_signing,
+        cpu=args.cpu,
+        events=tuple(scenario_events(scenario)),
+    )
+
+
+def device_command(
+    config: SilConfig, port_path: str, cpu: int | None, key_file: Path | None
+) -> list[str]:
+    """The ``python -m pressor device`` command line of the device process for ``config``."""
+    run = config.run
+    cmd = [
+        sys.executable,
+        "-m",
+        "pressor",
+        "device",
+        "--port",
+        port_path,
+        "--scenario",
+        config.scenario,
+        "--patient-seed",
+        str(config.patient_seed),
+        "--duration",
+        repr(config.duration_s),
+        "--rate",
+        repr(run.rate_hz),
+    ]
+    if run.realtime:
+        cmd.append("--realtime")
+    if cpu is not None:
+        cmd += ["--cpu", str(cpu)]
+    for text in run.faults:
+        cmd += ["--fault", text]
+    if any(f.info.group == "link" for f in run.fault_specs):
+        cmd += ["--retransmit", "0.05"]  # wall-clock resend of lost ticks; trajectory-neutral
+    if key_file is not None:
+        cmd += ["--signing-key", str(key_file)]
+    return cmd
+
+
+def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
+    """Start the device process on a fresh pty, run the runtime against it; return
+    ``(summary, result)`` (:func:`runtime.session.run_runtime`).
+
+    A device that exits with a usage error turns into a :class:`UsageError` with its message;
+    any other device output is printed on stderr when the run fails or the device exits non-zero.
+    """
+    from runtime.config import load_signing
+    from runtime.link.transport import PtyPair
+    from runtime.placement import lockstep_cpus
+    from runtime.session import run_runtime
+
+    run = config.run
+    signing = load_signing(run, generate=config.signed)
+    identity = {
+        "controller": run.controller,
+        "link": config.link,
+        "mode": run.mode,
+        "rate_hz": run.rate_hz,
+        "duration_s": config.duration_s,
+        "signed": signing is not None,
+    }
+    cpus = lockstep_cpus(config.cpu, run.realtime)
+    pair = PtyPair.open()
+    with tempfile.TemporaryDirectory(prefix="pressor-sil-") as tmp:
+        key_file = signing.write(Path(tmp) / "signing.key") if signing is not None else None
+        cmd = device_command(
+            config, pair.follower_path, None if cpus is None else cpus[1], key_file
+        )
+        device_log = Path(tmp) / "device.log"
+        with open(device_log, "wb") as log:
+            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+        port = pair.leader_port()
+        try:
+            summary, result = run_runtime(
+                port,
+                run,
+                identity,
+                signing,
+                events=list(config.events),
+                cpus=cpus,
+                on_connected=pair.close_follower,
+                peer_alive=lambda: proc.poll() is None,
+            )
+        except Exception:
+            _stop(proc)
+            text = device_log.read_text(errors="replace").strip()
+            if proc.returncode == USAGE_EXIT and text:
+                line = text.splitlines()[-1]
+                raise UsageError(line.removeprefix("pressor device: ")) from None
+            if text:
+                print(f"device output:\n{text}", file=sys.stderr)
+            raise
+        finally:
+            pair.close()
+        code = _stop(proc, grace_s=10.0)
+        if code not in (0, None):
+            text = device_log.read_text(errors="replace").strip()
+            print(f"device exited with {code}:\n{text}", file=sys.stderr)
+    return summary, result
+
+
+def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:
+    """Wait for our device process; terminate it (by its pid) if it does not exit in time."""
+    try:
+        return proc.wait(timeout=grace_s)
+    except subprocess.TimeoutExpired:
+        proc.terminate()
+        try:
+            return proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            return proc.wait()
+
+
+def _main(argv: Sequence[str]) -> int:
+    from runtime.summary import finish
+
+    config = sil_config(argv)
+    summary, result = run_sil(config)
+    return finish(summary, result, config.run)
+
+
+def main(command: str, argv: list[str]) -> int:
+    """Entry point for ``pressor sil`` (see the module docstring for exit codes)."""
+    from runtime.session import run_guarded
+
+    return run_guarded(f"pressor {command}", _main, argv)

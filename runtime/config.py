@@ -1,0 +1,251 @@
+"""The runtime's typed run configuration, parsed and checked at the command line.
+
+``pressor run`` and ``pressor sil`` share the runtime's options (:func:`add_run_options`); the
+parsed namespace becomes a frozen :class:`RunConfig` in :func:`run_config`, which checks every
+value before anything starts (output directories, the controller, the fault specs). A bad value
+raises :class:`contracts.usage.UsageError` naming the option, the value and the allowed range;
+past this boundary the run code trusts its configuration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from contracts.faults import FaultSpec, FaultSpecError, parse_faults
+from contracts.usage import UsageError
+from runtime.cpu_latency import MAX_LATENCY_US
+
+DEFAULT_RATE_HZ = 10.0
+#: fastest loop rate accepted (Hz)
+MAX_RATE_HZ = 1000.0
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """One runtime run, as the command line asked for it (checked by :func:`run_config`).
+
+    Attributes
+    ----------
+    controller
+        The ``--controller`` spec (``lpv``, ``pi``, ``smith[:LAMBDA_S]`` or a generated module).
+    rate_hz
+        Loop rate (Hz).
+    realtime
+        Wall clock instead of lockstep.
+    rrd, tlog, summary, timing
+        Output files (``None``: not written); their directories exist.
+    signing_key
+        Key file of the signed link (``None``: none given).
+    sched_faults
+        ``advise`` or ``hold``: the supervisor's answer to scheduling outside the design box.
+    faults
+        The ``--fault`` texts as given (a device process gets them verbatim).
+    fault_specs
+        The faults to score after the run: the parsed ``--fault`` texts, then any the device's
+        scenario declares.
+    stall_timeout_s
+        Lockstep: wall seconds without a sample before giving up.
+    cpu_latency_us
+        CPU wake-up latency to hold during the run (µs; ``None``: no request).
+    ticks
+        Ticks to run (0: until the device ends).
+    """
+
+    controller: str
+    rate_hz: float
+    realtime: bool
+    rrd: Path | None
+    tlog: Path | None
+    summary: Path | None
+    timing: Path | None
+    signing_key: Path | None
+    sched_faults: str
+    faults: tuple[str, ...]
+    fault_specs: tuple[FaultSpec, ...]
+    stall_timeout_s: float
+    cpu_latency_us: int | None
+    ticks: int = 0
+
+    @property
+    def period_s(self) -> float:
+        """The sample period (s)."""
+        return 1.0 / self.rate_hz
+
+    @property
+    def mode(self) -> str:
+        """``realtime`` or ``lockstep``."""
+        return "realtime" if self.realtime else "lockstep"
+
+
+def positive(name: str, high: float) -> Callable[[str], float]:
+    """An argparse type: a number in (0, ``high``] for option ``name``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} {text!r}: not a number") from None
+        if not (math.isfinite(value) and 0.0 < value <= high):
+            raise argparse.ArgumentTypeError(f"{name} {text!r}: allowed (0, {high:g}]")
+        return value
+
+    return parse
+
+
+def _cpu_latency(text: str) -> int | None:
+    if text == "off":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--cpu-latency {text!r}: allowed off or an integer in [0, {MAX_LATENCY_US}] us"
+        ) from None
+    if not 0 <= value <= MAX_LATENCY_US:
+        raise argparse.ArgumentTypeError(
+            f"--cpu-latency {text!r}: allowed off or [0, {MAX_LATENCY_US}] us"
+        )
+    return value
+
+
+def add_run_options(p: argparse.ArgumentParser) -> None:
+    """Add the runtime's options (controller, rate, outputs, signing, faults, timing) to ``p``."""
+    p.add_argument(
+        "--controller",
+        default="lpv",
+        help="lpv (default), pi, smith[:LAMBDA_S] (Smith predictor, lambda 30 s), or a generated .py",
+    )
+    p.add_argument(
+        "--rate",
+        type=positive("--rate", MAX_RATE_HZ),
+        default=DEFAULT_RATE_HZ,
+        help="loop rate in Hz (default 10)",
+    )
+    p.add_argument("--realtime", action="store_true", help="wall clock instead of lockstep")
+    p.add_argument("--rrd", type=Path, help="rerun recording to write (FILE.rrd)")
+    p.add_argument("--tlog", type=Path, help="MAVLink telemetry log of every frame")
+    p.add_argument("--summary", type=Path, help="write the metric summary as JSON")
+    p.add_argument(
+        "--timing",
+        type=Path,
+        help="write loop timing (p50/p99/max), wall time and link counters as JSON"
+        " (host-dependent, unlike --summary)",
+    )
+    p.add_argument("--signing-key", type=Path, help="32-byte key file (raw or 64 hex chars)")
+    p.add_argument(
+        "--sched-faults",
+        choices=("advise", "hold"),
+        default="advise",
+        help="scheduling outside the design box / rate bounds: advisory alarm (default) or hold",
+    )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KIND[:ARGS]",
+        help="inject a fault (repeatable; 'pressor faults' lists kinds, arguments, defaults)",
+    )
+    p.add_argument(
+        "--stall-timeout",
+        type=positive("--stall-timeout", 3600.0),
+        default=10.0,
+        help="lockstep: give up after this many wall seconds without a sample (default 10)",
+    )
+    p.add_argument(
+        "--cpu-latency",
+        type=_cpu_latency,
+        default=0,
+        metavar="US|off",
+        help="hold the host's CPU wake-up latency at US microseconds during the run"
+        " (/dev/cpu_dma_latency, best effort, usually needs root; default 0: idle CPUs poll"
+        " instead of halting, 2x faster lockstep on a VM); off: make no request",
+    )
+
+
+def run_config(args: argparse.Namespace, ticks: int = 0) -> RunConfig:
+    """Check the options :func:`add_run_options` parsed and freeze them into a :class:`RunConfig`.
+
+    Parameters
+    ----------
+    args
+        The parsed namespace.
+    ticks
+        ``pressor run --ticks`` (0: until the device ends).
+
+    Raises
+    ------
+    contracts.usage.UsageError
+        A value out of range, an output directory that does not exist, a controller that does
+        not load, a bad fault spec.
+    """
+    if ticks < 0:
+        raise UsageError(f"--ticks {ticks}: allowed >= 0")
+    _check_out_path("--rrd", args.rrd, ".rrd")
+    _check_out_path("--tlog", args.tlog)
+    _check_out_path("--summary", args.summary)
+    _check_out_path("--timing", args.timing)
+    load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device starts
+    try:
+        specs = tuple(parse_faults(args.fault))
+    except FaultSpecError as exc:
+        raise UsageError(str(exc)) from None
+    return RunConfig(
+        controller=args.controller,
+        rate_hz=args.rate,
+        realtime=args.realtime,
+        rrd=args.rrd,
+        tlog=args.tlog,
+        summary=args.summary,
+        timing=args.timing,
+        signing_key=args.signing_key,
+        sched_faults=args.sched_faults,
+        faults=tuple(args.fault),
+        fault_specs=specs,
+        stall_timeout_s=args.stall_timeout,
+        cpu_latency_us=args.cpu_latency,
+        ticks=ticks,
+    )
+
+
+def _check_out_path(opt: str, path: Path | None, suffix: str | None = None) -> None:
+    if path is None:
+        return
+    if suffix and path.suffix != suffix:
+        raise UsageError(f"{opt} {path}: expected a {suffix} file name")
+    if not path.parent.resolve().is_dir():
+        raise UsageError(f"{opt} {path}: directory {path.parent} does not exist")
+
+
+def load_controller(spec: str, period_s: float) -> Any:
+    """The controller ``spec`` names at ``period_s`` (s); a :class:`UsageError` if it does not load."""
+    from runtime.controller_loader import ControllerSpecError
+    from runtime.controller_loader import load_controller as load
+
+    try:
+        return load(spec, sample_period_s=period_s)
+    except ControllerSpecError as exc:
+        hint = ""
+        if spec == "lpv":
+            hint = (
+                " (the shipped LPV module is generated by 'pressor codegen --target python"
+                " --out runtime/generated'; use --controller pi meanwhile)"
+            )
+        raise UsageError(f"--controller {spec}: {exc}{hint}") from None
+
+
+def load_signing(config: RunConfig, generate: bool) -> Any:
+    """The link's :class:`Signing`: from ``--signing-key``, else a fresh key if ``generate``,
+    else ``None`` (unsigned). A key file that cannot be read is a :class:`UsageError`."""
+    from runtime.link.endpoint import Signing
+
+    if config.signing_key is not None:
+        try:
+            return Signing.from_file(config.signing_key)
+        except (OSError, ValueError) as exc:
+            raise UsageError(f"--signing-key {config.signing_key}: {exc}") from None
+    return Signing.generate() if generate else None

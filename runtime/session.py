@@ -1,0 +1,175 @@
+"""One runtime run on an open port: handshake, controller, supervisor, recorder, loop, summary.
+
+:func:`run_runtime` is the runtime end of ``pressor run`` (a port it opened) and of ``pressor sil``
+(the leader of the pty whose follower the device process opened). Its outputs (``.rrd``,
+``.tlog``) are written to hidden temporary names and moved into place only when the run succeeds
+(:mod:`contracts.files`): a failed run leaves earlier files untouched. :func:`run_guarded` gives
+both commands their exit codes.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from contracts.usage import UsageError, run_command
+from runtime.config import RunConfig, load_controller
+from runtime.placement import Pinned
+from runtime.summary import build_summary
+
+
+def run_runtime(
+    port: Any,
+    config: RunConfig,
+    identity: dict[str, Any],
+    signing: Any,
+    *,
+    events: list[tuple[str, float]] | None = None,
+    cpus: tuple[int, int] | None = None,
+    on_connected: Callable[[], object] | None = None,
+    peer_alive: Callable[[], bool] | None = None,
+    handshake_timeout_s: float = 30.0,
+) -> tuple[dict[str, Any], Any]:
+    """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result).
+
+    Parameters
+    ----------
+    port
+        The open serial port (the runtime end of the link).
+    config
+        The checked run configuration.
+    identity
+        Run identity for the summary; the device's hello adds scenario, patient seed and noise.
+    signing
+        The link's :class:`Signing`, or ``None`` (unsigned).
+    events
+        The device scenario's disturbance events ``(kind, start_s)``; ``None`` when not known.
+    cpus
+        ``(loop CPU, device CPU)`` of a pinned lockstep run (:mod:`runtime.placement`), or
+        ``None``; the loop thread runs on the first.
+    on_connected
+        Called once the handshake succeeded.
+    peer_alive
+        Polled while waiting for the handshake: a device that died ends the wait at once.
+    handshake_timeout_s
+        Wall seconds to wait for the device's hello.
+
+    Returns
+    -------
+    tuple
+        The summary (:func:`runtime.summary.build_summary`) and the loop's result.
+    """
+    from runtime.cpu_latency import CpuLatencyRequest
+    from runtime.link.endpoint import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkEndpoint, LinkError
+    from runtime.link.tlog import TlogWriter
+    from runtime.loop import Loop, supervisor_config_for
+    from runtime.supervisor import Supervisor
+
+    period_s = config.period_s
+    controller = load_controller(config.controller, period_s)
+    tlog = TlogWriter(config.tlog) if config.tlog is not None else None
+    ok = False
+    ep = LinkEndpoint(port, "runtime", signing=signing, tlog=tlog)
+    recorder = None
+    try:
+        mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
+        spec = config.controller
+        name = Path(spec).stem if spec not in ("pi", "lpv") else spec
+        hello = Hello(name[:32], sample_period_s=period_s, link_mode=mode)
+        waited = 0.0
+        while True:  # short attempts, so a device process that died is noticed at once
+            try:
+                peer = ep.handshake(hello, timeout_s=0.25)
+                break
+            except LinkError:
+                waited += 0.25
+                if (peer_alive is not None and not peer_alive()) or waited >= handshake_timeout_s:
+                    raise
+        if on_connected is not None:
+            on_connected()
+        if abs(peer.sample_period_s - period_s) > 1e-9:
+            raise UsageError(
+                f"device sample_period_s {peer.sample_period_s} s differs from --rate"
+                f" {config.rate_hz} Hz (period {period_s} s)"
+            )
+        identity = {
+            **identity,
+            "scenario": peer.name,
+            "patient_seed": peer.patient_seed,
+            "sensor_noise_mmhg": float(peer.sensor_noise_mmhg),
+        }
+        sup = Supervisor(
+            supervisor_config_for(
+                controller, peer.sensor_noise_mmhg, sched_action=config.sched_faults
+            )
+        )
+        if config.rrd is not None:
+            from runtime.recorder import Recorder
+
+            label = (
+                f"{identity['controller']}|{peer.name}|seed{peer.patient_seed}|{config.rate_hz}Hz"
+                f"|{config.mode}"
+            )
+            recorder = Recorder(config.rrd, run_label=label)
+        loop = Loop(controller, sup, ep, recorder=recorder, heartbeat_every=round(config.rate_hz))
+        with CpuLatencyRequest(config.cpu_latency_us) as wake:
+            if config.realtime:
+                result = loop.run_realtime(peer.n_ticks if peer.n_ticks else config.ticks)
+            else:
+                n = config.ticks or peer.n_ticks
+                with Pinned(None if cpus is None else cpus[0]):  # rerun's threads exist already
+                    result = loop.run_lockstep(n, stall_timeout_s=config.stall_timeout_s)
+        result.host = {"cpu_latency": wake.status, "cpus": cpus}
+        if recorder is not None:
+            recorder.close()
+            recorder = None
+        report = None
+        if config.fault_specs:
+            from contracts.faults import fault_report
+            from runtime.loop import sched_limits_of
+            from runtime.supervisor import FAULT_BITS
+
+            report = fault_report(
+                list(config.fault_specs),
+                result.trajectory,
+                FAULT_BITS,
+                period_s,
+                scheduled=sched_limits_of(controller)[0] is not None,
+            )
+        summary = build_summary(
+            result,
+            identity,
+            controller.max_rate_ml_h,
+            noisy=peer.sensor_noise_mmhg > 0.0,
+            faults=report,
+            events=events,
+        )
+        ok = True
+        return summary, result
+    finally:
+        if recorder is not None:
+            recorder.abort()
+        ep.close()
+        if tlog is not None:
+            tlog.close(commit=ok)
+
+
+def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequence[str]) -> int:
+    """Run a runtime command with its exit codes.
+
+    0 success; 1 the run completed but a check failed, or the device stalled or the link failed
+    (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`).
+    """
+    from runtime.link.endpoint import LinkError
+    from runtime.loop import DeviceStalled
+
+    def guarded(args: Sequence[str]) -> int:
+        try:
+            return handler(args)
+        except (DeviceStalled, LinkError) as exc:
+            print(f"{prog}: {exc}", file=sys.stderr)
+            return 1
+
+    return run_command(prog, guarded, argv)

@@ -1,0 +1,242 @@
+"""The summary of a runtime run: built from the loop's result, printed, written as JSON.
+
+:func:`build_summary` gives the JSON-ready summary: run identity, the per-run metrics
+(:func:`contracts.metrics.run_metrics`, defined in docs/METRICS.md; with ``pressor sil`` the step
+metrics stop at the first disturbance and each hemorrhage or bolus of the scenario gets a
+``disturbances`` record; with ``pressor run`` the device's scenario is not known, so those are
+null) plus ``commands_out_of_range``, the supervisor's account, the link's error counts and, when
+faults were scheduled, the scored fault list (:func:`contracts.faults.fault_report`: ``kind``,
+``start_tick``, ``detected_tick``, ``latency_ticks`` and its documented bound, ``safe_state_s``,
+``max_reentry_step_ml_h``). It holds only values that are functions of the seed (no wall-clock
+timing), so two runs give identical files; loop timing (p50/p99/max) is printed, written with
+``--timing`` and recorded under ``/loop``.
+
+``reachable`` is inferred from the run, since the runtime does not know the patient: false when
+the pump sat at its limit for the whole final 10 % of the run with MAP still more than 5 mmHg
+below the target.
+
+:func:`finish` prints the summary and writes the ``--summary`` and ``--timing`` files atomically
+(:mod:`contracts.files`): a failed run leaves earlier files untouched.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from contracts.files import write_atomic
+from contracts.metrics import run_metrics
+from runtime.config import RunConfig
+
+
+def _step_of(
+    t: np.ndarray, map_mmhg: np.ndarray, target: np.ndarray
+) -> tuple[float | None, float | None]:
+    """The target step (time s, size mmHg) as the runtime sees it.
+
+    The first change of the target; or, if the target never changes, the distance from the first
+    MAP sample to the target at the first tick (a run that starts ≥ 1 mmHg away from its target,
+    like ``paper-tracking`` whose step is at t = 0). ``(None, None)`` otherwise.
+    """
+    finite = np.isfinite(target)
+    if not finite.any():
+        return None, None
+    i0 = int(np.argmax(finite))
+    first = target[i0]
+    changed = np.flatnonzero(finite & (target != first))
+    if changed.size:
+        i = int(changed[0])
+        return float(t[i]), float(target[i] - first)
+    d = float(first - map_mmhg[i0])
+    if math.isfinite(d) and abs(d) >= 1.0:
+        return float(t[i0]), d
+    return None, None
+
+
+def _reachable(map_mmhg: np.ndarray, target: np.ndarray, cmd: np.ndarray, umax: float) -> bool:
+    n_tail = max(1, int(round(0.1 * cmd.size)))
+    at_limit = bool(np.all(cmd[-n_tail:] >= umax * (1.0 - 1e-6)))
+    below = np.nanmedian(target[-n_tail:] - map_mmhg[-n_tail:]) > 5.0
+    return not (at_limit and below)
+
+
+def build_summary(
+    result: Any,
+    identity: dict[str, Any],
+    max_rate_ml_h: float,
+    noisy: bool,
+    faults: list[dict[str, Any]] | None = None,
+    events: list[tuple[str, float]] | None = None,
+) -> dict[str, Any]:
+    """The JSON-ready summary of a run (see the module docstring).
+
+    Parameters
+    ----------
+    result
+        The loop's :class:`runtime.loop.LoopResult`.
+    identity
+        Run identity (controller, scenario, seed, rate, ...), copied into the summary.
+    max_rate_ml_h
+        The controller's largest command (ml/h).
+    noisy
+        Whether the monitor adds noise (selects the 5 mmHg settling band).
+    faults
+        The scored fault list, or ``None`` when no fault was scheduled.
+    events
+        The scenario's disturbance events ``(kind, start_s)``; ``None`` when not known
+        (``pressor run``).
+    """
+    tr = result.trajectory
+    t, y, r, u = tr["sim_time_s"], tr["map_mmhg"], tr["target_mmhg"], tr["command_ml_h"]
+    if t.size < 2:
+        metrics: dict[str, Any] = {"error": "fewer than 2 ticks: no metrics"}
+    else:
+        step_t, step_d = _step_of(t, y, r)
+        metrics = run_metrics(
+            t,
+            y,
+            r,
+            u,
+            max_rate_ml_h,
+            step_time_s=step_t,
+            step_mmhg=step_d,
+            noisy=noisy,
+            reachable=_reachable(y, r, u, max_rate_ml_h),
+            events=events,
+        )
+    metrics["commands_out_of_range"] = result.commands_out_of_range
+    link = result.link
+    extra: dict[str, Any] = {}
+    if faults is not None:
+        extra["faults"] = faults
+    return {
+        **extra,
+        "commands_out_of_range": result.commands_out_of_range,
+        **identity,
+        "ticks": int(t.size),
+        "ended": result.ended,
+        "metrics": metrics,
+        "supervisor": {
+            "detections": result.detections,
+            "ticks_in_state": result.ticks_in_state,
+            "transitions": result.transitions[:100],
+        },
+        "link_errors": {
+            k: link[k]
+            for k in (
+                "bad_crc",
+                "seq_gaps",
+                "frames_lost",
+                "refused_unsigned",
+                "refused_bad_signature",
+            )
+        },
+    }
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "null"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = None) -> None:
+    """Human-readable summary (metrics, supervisor, loop timing) to ``out`` (default stdout)."""
+    out = sys.stdout if out is None else out
+    print(
+        f"run: controller {summary.get('controller')}  scenario {summary.get('scenario')}"
+        f"  patient seed {summary.get('patient_seed')}  {summary['ticks']} ticks"
+        f"  ({summary['ended']})",
+        file=out,
+    )
+    print("metrics (defined in docs/METRICS.md):", file=out)
+    metrics = summary["metrics"]
+    for k, v in metrics.items():
+        if k != "disturbances":
+            print(f"  {k:<24} {_fmt(v)}", file=out)
+    for d in metrics.get("disturbances") or []:
+        print(
+            f"  {d['kind']} at {_fmt(d['start_s'])} s: peak deviation"
+            f" {_fmt(d['peak_deviation_mmhg'])} mmHg, recovery {_fmt(d['recovery_s'])} s,"
+            f" IAE {_fmt(d['iae_mmhg_s'])} mmHg·s",
+            file=out,
+        )
+    sup = summary["supervisor"]
+    states = ", ".join(f"{k} {v}" for k, v in sup["ticks_in_state"].items() if v)
+    print(f"supervisor: ticks in state: {states}", file=out)
+    if sup["detections"]:
+        print(f"  faults detected: {sup['detections']}", file=out)
+    print(
+        "loop timing: exec p50/p99/max {exec_p50_us:.1f}/{exec_p99_us:.1f}/{exec_max_us:.1f} us;"
+        " lateness p50/p99/max {lateness_p50_us:.1f}/{lateness_p99_us:.1f}/{lateness_max_us:.1f}"
+        " us; overruns {overruns}; skipped {skipped_periods}".format(**timing),
+        file=out,
+    )
+    errs = {k: v for k, v in summary["link_errors"].items() if v}
+    print(f"link: {'clean' if not errs else errs}", file=out)
+    if summary.get("faults"):
+        print_fault_table(summary["faults"], summary["commands_out_of_range"], out)
+
+
+def print_fault_table(faults: list[dict[str, Any]], out_of_range: int, out: Any = None) -> None:
+    """The per-fault table: detection latency (ticks, bound), safe-state time, re-entry step."""
+    out = sys.stdout if out is None else out
+    print(
+        f"{'fault':<18} {'start':>6} {'detect':>6} {'lat':>4} {'bound':>5} {'ok':>3}"
+        f" {'safe_s':>7} {'reentry_ml_h':>12}  detected as",
+        file=out,
+    )
+    for f in faults:
+        if not f["applicable"]:
+            print(f"{f['kind']:<18} {f['start_tick']:>6}  n/a (controller not scheduled)", file=out)
+            continue
+        ok = {True: "yes", False: "NO", None: "-"}[f["within_bound"]]
+        print(
+            f"{f['kind']:<18} {f['start_tick']:>6} {_fmt(f['detected_tick']):>6}"
+            f" {_fmt(f['latency_ticks']):>4} {_fmt(f['bound_ticks']):>5} {ok:>3}"
+            f" {f['safe_state_s']:>7.1f} {f['max_reentry_step_ml_h']:>12.3f}"
+            f"  {','.join(f['detected_as']) or '-'}",
+            file=out,
+        )
+    print(f"commands out of [0, max]: {out_of_range}", file=out)
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write ``data`` to ``path`` as sorted, indented JSON, atomically (NaN refused)."""
+    write_atomic(path, json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
+
+
+def finish(summary: dict[str, Any], result: Any, config: RunConfig) -> int:
+    """Print the summary, write the ``--summary`` / ``--timing`` files; return the exit code.
+
+    Returns
+    -------
+    int
+        1 if a command left [0, max] (a check failed), else 0.
+    """
+    print_summary(summary, result.timing)
+    if result.host:
+        print(f"host: cpu wake-up latency {result.host['cpu_latency']}")
+    if config.summary is not None:
+        write_json(config.summary, summary)
+        print(f"summary: {config.summary}")
+    if config.timing is not None:
+        status = {
+            "loop": result.timing,
+            "run_wall_s": result.wall_s,
+            "sim_s": summary["ticks"] / summary["rate_hz"],
+            "link": result.link,
+            "host": result.host,
+        }
+        write_json(config.timing, status)
+        print(f"timing: {config.timing}")
+    if config.rrd is not None:
+        print(f"recording: {config.rrd}\nreplay:    rerun {config.rrd}")
+    return 1 if summary["metrics"].get("commands_out_of_range") else 0

@@ -1,0 +1,76 @@
+"""The front door's SIL orchestration (pressor.sil): configuration from the simulator's scenario
+API and the device process's command line. End-to-end runs are in test_runtime_sil.py."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from contracts.usage import UsageError
+from hil_sim.scenario import SCENARIO_DIR, load_scenario
+from pressor.sil import device_command, sil_config
+
+
+def test_scenario_events_and_faults_come_from_the_simulators_scenario(tmp_path: Path):
+    scenario = tmp_path / "s.toml"
+    text = (SCENARIO_DIR / "paper-disturbance.toml").read_text()
+    text += '\n[[faults]]\nkind = "sensor-flush"\nstart_s = 600.0\n'
+    scenario.write_text(text)
+    cfg = sil_config(
+        ["--controller", "pi", "--scenario", str(scenario), "--fault", "pump-empty:100"]
+    )
+    assert cfg.events == (("hemorrhage", 1200.0), ("bolus", 2100.0))
+    assert [(f.kind, f.start_s) for f in cfg.run.fault_specs] == [
+        ("pump-empty", 100.0),  # the command line's first, then the scenario's
+        ("sensor-flush", 600.0),
+    ]
+    assert cfg.run.faults == ("pump-empty:100",)  # only these are passed on to the device
+    assert load_scenario(str(scenario)).faults == cfg.run.fault_specs[1:]
+    assert cfg.run.rrd == Path("pressor_sil_pi_s_seed1.rrd")  # a scenario file: its stem
+
+
+def test_default_recording_name_names_controller_scenario_and_seed():
+    cfg = sil_config(["--controller", "pi", "--patient-seed", "7"])
+    assert cfg.run.rrd == Path("pressor_sil_pi_paper-tracking_seed7.rrd")
+    assert (cfg.scenario, cfg.duration_s, cfg.link, cfg.signed) == (
+        "paper-tracking",
+        1800.0,
+        "pty",
+        True,
+    )
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--scenario", "no-such"], "'no-such' must be one of"),
+        (["--link", "/dev/ttyS9"], "--link /dev/ttyS9"),
+        (["--patient-seed", "-1"], "--patient-seed '-1': allowed [0, 2**32)"),
+        (["--duration", "0"], "--duration '0': allowed (0, 604800]"),
+    ],
+)
+def test_bad_sil_input_is_a_usage_error_before_any_device_starts(argv, needle):
+    with pytest.raises(UsageError) as info:
+        sil_config(["--controller", "pi", *argv])
+    assert needle in str(info.value)
+
+
+def test_device_command_carries_scenario_seed_duration_rate_faults_cpu_and_key(tmp_path):
+    cfg = sil_config(
+        ["--controller", "pi", "--patient-seed", "3", "--duration", "60", "--fault", "link-drop:10"]
+    )
+    key = tmp_path / "k"
+    cmd = device_command(cfg, "/dev/pts/9", 1, key)
+    assert cmd[:4] == [sys.executable, "-m", "pressor", "device"]
+    args = cmd[4:]
+    pairs = dict(zip(args[::2], args[1::2], strict=False))
+    assert pairs["--port"] == "/dev/pts/9" and pairs["--scenario"] == "paper-tracking"
+    assert pairs["--patient-seed"] == "3" and pairs["--duration"] == "60.0"
+    assert pairs["--rate"] == "10.0" and pairs["--cpu"] == "1"
+    assert args[args.index("--fault") + 1] == "link-drop:10"
+    assert args[args.index("--retransmit") + 1] == "0.05"  # link faults: fast resend
+    assert args[-2:] == ["--signing-key", str(key)]
+    plain = device_command(sil_config(["--controller", "pi"]), "/dev/pts/9", None, None)
+    assert not {"--cpu", "--retransmit", "--signing-key", "--fault"} & set(plain)

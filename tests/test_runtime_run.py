@@ -1,0 +1,99 @@
+"""``pressor run``: the runtime alone on a serial port, against a device started by hand.
+
+The device and the runtime each open the follower of their own pty; a thread copies bytes
+between the two leaders (what ``socat`` does between two ports), so both ends are real ttys.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import subprocess
+import sys
+import threading
+import tty
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.sil_helpers import ROOT, pressor
+
+SEED = 4
+
+
+def _pty() -> tuple[int, int, str]:
+    leader, follower = os.openpty()
+    tty.setraw(follower)
+    return leader, follower, os.ttyname(follower)
+
+
+@pytest.fixture
+def bridged_ports() -> Iterator[tuple[str, str]]:
+    """Two tty paths whose bytes cross over, like a null-modem cable."""
+    (la, fa, pa), (lb, fb, pb) = _pty(), _pty()
+    stop = threading.Event()
+
+    def bridge() -> None:
+        while not stop.is_set():
+            ready, _, _ = select.select([la, lb], [], [], 0.05)
+            for fd in ready:
+                try:
+                    data = os.read(fd, 65536)
+                except OSError:
+                    continue
+                os.write(lb if fd == la else la, data)
+
+    thread = threading.Thread(target=bridge, daemon=True)
+    thread.start()
+    yield pa, pb
+    stop.set()
+    thread.join()
+    for fd in (la, fa, lb, fb):
+        os.close(fd)
+
+
+def test_run_against_a_hand_started_device_scores_its_faults_without_scenario_events(
+    bridged_ports, tmp_path: Path
+):
+    device_port, runtime_port = bridged_ports
+    fault = "pump-occlusion:5"
+    device = subprocess.Popen(
+        [sys.executable, "-m", "pressor", "device", "--port", device_port, "--duration", "20"]
+        + ["--patient-seed", str(SEED), "--fault", fault],
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT), CI="1"),
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        proc = pressor(
+            "run",
+            "--port",
+            runtime_port,
+            "--controller",
+            "pi",
+            "--fault",
+            fault,
+            "--summary",
+            str(tmp_path / "s.json"),
+            cwd=tmp_path,
+        )
+    finally:
+        assert device.wait(timeout=30) == 0
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert (summary["ticks"], summary["patient_seed"], summary["link"]) == (200, SEED, runtime_port)
+    assert summary["scenario"] == "paper-tracking" and summary["signed"] is False
+    [scored] = summary["faults"]
+    assert scored["kind"] == "pump-occlusion" and scored["start_tick"] == 50
+    assert scored["within_bound"] is True
+    assert summary["metrics"]["disturbances"] is None  # the device's scenario is not known
+    assert "pump-occlusion" in proc.stdout and "recording" not in proc.stdout
+
+
+def test_run_with_an_unopenable_port_exits_2_with_one_line(tmp_path: Path):
+    proc = pressor("run", "--controller", "pi", "--port", str(tmp_path / "no-tty"), cwd=tmp_path)
+    assert proc.returncode == 2
+    [line] = proc.stderr.strip().splitlines()
+    assert line.startswith(f"pressor run: --port {tmp_path / 'no-tty'}: cannot open")
