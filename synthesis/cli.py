@@ -82,7 +82,8 @@ def main(command: str, argv: list[str]) -> int:
     from dataclasses import replace
 
     from synthesis.artifact import save_artifact, with_verification
-    from synthesis.config import ConfigError, load_config
+    from synthesis.config import ConfigError
+    from synthesis.config_toml import load_config
     from synthesis.synthesize import SynthesisError, synthesize
 
     def say(msg: str) -> None:
