@@ -48,7 +48,8 @@ class AnalysisResult:
     p0_phys
         The constant term P0 of the certificate mapped back to the original (unscaled, untransformed)
         state coordinates, up to a positive factor (None when the solve failed); used to whiten
-        the state for a better-conditioned second solve (:func:`whitening_transform`).
+        the state for a better-conditioned second solve
+        (:func:`synthesis.state_transform.whitening_transform`).
     certificate
         The Lyapunov-Krasovskii matrices divided by gamma, with the state transform and time
         scale they live in, for analyses that return them (:mod:`synthesis.analysis_wirtinger`);

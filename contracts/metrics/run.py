@@ -1,4 +1,4 @@
-"""All metrics of one run: the step metrics, clinical band times, Varvel errors, drug use, stability.
+"""Every metric of one run: step response, clinical band, Varvel errors, drug use, stability.
 
 Definitions: the package docstring (:mod:`contracts.metrics`) and docs/METRICS.md.
 """
