@@ -41,7 +41,6 @@ def main() -> None:
     here = os.path.dirname(os.path.abspath(__file__))
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != here]
     sys.modules.pop("synthesis", None)
-    from synthesis.analysis_lmi import conditioning_transform
     from synthesis.analysis_wirtinger import analyse_wirtinger
     from synthesis.artifact import default_artifact_path, load_artifact
     from synthesis.closed_loop import close_loop
@@ -49,6 +48,7 @@ def main() -> None:
     from synthesis.model import plant_at
     from synthesis.reconstruct import scaling_of
     from synthesis.smith_lpv import SmithLPV
+    from synthesis.state_transform import conditioning_transform
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loop-gain", type=float, default=2.0, help="K*Kc = T/lambda (default 2)")

@@ -4,7 +4,7 @@ Each case runs in its own subprocess (so peak memory is its own ``ru_maxrss``), 
 run so machine load is comparable. Prints wall time, peak RSS and the outcome of each case, and the
 ratio of the straightforward formulation to the one ``pressor synth`` / ``pressor verify`` use:
 
-* synth: the batched sparse formulation (:func:`synthesis.lmi.solve`) vs the naive per-point
+* synth: the batched sparse formulation (:func:`synthesis.lmi_solve.solve`) vs the naive per-point
   cvxpy formulation (:mod:`synthesis.lmi_naive`), on the design's grid;
 * verify: :func:`synthesis.verify.verify_artifact` with the analysis LMI on a working set (the
   default) vs every dense point in one solve (``all_points_at_once``), on an artifact.
@@ -48,8 +48,8 @@ def _child(kind: str, args: argparse.Namespace) -> None:
             "detail": f"{lmi['n_lmis']} LMIs re-checked, analysis {lmi['solve_time_s']:.1f} s",
         }
     else:
-        from synthesis import lmi
-        from synthesis.config import load_config
+        from synthesis import lmi, lmi_solve
+        from synthesis.config_toml import load_config
 
         cfg = load_config(args.config)
         if args.grid:
@@ -60,7 +60,7 @@ def _child(kind: str, args: argparse.Namespace) -> None:
             cfg = replace(cfg, solver=replace(cfg.solver, rate_terms=args.rate_terms))
         prob = lmi.make_problem(cfg)
         if kind == "synth":
-            res = lmi.solve(prob)
+            res = lmi_solve.solve(prob)
         else:
             from synthesis.lmi_naive import solve_naive
 

@@ -237,7 +237,8 @@ def emit(
     c_float: bool = False,
 ) -> GeneratedFiles:
     """Stage 4: render the target's files."""
-    from codegen.emit_python import EmitSpec, emit_python
+    from codegen.emit_python import emit_python
+    from codegen.emit_spec import EmitSpec
 
     chash = content_hash(
         design.sha256, target + ("-float" if c_float else ""), plan.fmt, sample_period_s

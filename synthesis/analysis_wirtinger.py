@@ -51,15 +51,11 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from synthesis.analysis_lmi import (
-    AnalysisResult,
-    checked_inputs,
-    first_points,
-    grow_working_set,
-    transform_of,
-)
+from synthesis.analysis_interface import AnalysisResult, checked_inputs
 from synthesis.closed_loop import DelaySystem
 from synthesis.conic import solve_conic, svec_eye, svec_rows, unsvec
+from synthesis.state_transform import transform_of
+from synthesis.working_set import first_points, grow_working_set
 
 __all__ = ["analyse_wirtinger"]
 

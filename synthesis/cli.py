@@ -84,7 +84,8 @@ def _synth(argv: Sequence[str]) -> int:
     from dataclasses import replace
 
     from synthesis.artifact import save_artifact, with_verification
-    from synthesis.config import ConfigError, load_config
+    from synthesis.config import ConfigError
+    from synthesis.config_toml import load_config
     from synthesis.synthesize import SynthesisError, synthesize
 
     def say(msg: str) -> None:

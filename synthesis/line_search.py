@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from synthesis import lmi
+from synthesis import lmi, lmi_solve
 from synthesis.config import DesignConfig
 
 
@@ -48,7 +48,7 @@ def search(
             k += 1
             c = cfg.with_lambdas(l2, l3)
             say(f"lambda search {k}/{total}: lambda2={l2:g}, lambda3={l3:g} ...")
-            res = lmi.solve(lmi.make_problem(c), solver_opts)
+            res = lmi_solve.solve(lmi.make_problem(c), solver_opts)
             pts.append(LinePoint(l2, l3, res.status, res.gamma, res.solve_time_s))
             ok = res.status == "optimal"
             say(

@@ -46,8 +46,9 @@ time-varying ρ (for each *frozen* ρ the congruence is still exact). Three opti
   independent analysis LMI on the 5×5×5 grid fails for it (best common margin −0.0013, 104/125
   points fail the re-check), so it is not shipped.
 
-Between grid nodes nothing is certified by the synthesis itself; :func:`certificate_margins`
-evaluates the synthesis certificate at arbitrary points.
+Between grid nodes nothing is certified by the synthesis itself;
+:func:`synthesis.lmi_certificate.certificate_margins` evaluates the synthesis certificate at
+arbitrary points.
 
 Other choices
 -------------
@@ -66,136 +67,26 @@ Build
 The LMI is one numeric function of the decision vector, vectorised over grid points and rate
 vertices (:func:`lmi_blocks`). Because it is affine, evaluating it at 0 and at unit vectors (in
 chunks) gives its exact sparse affine map ``vec F(x) = F0 + A x``; cvxpy receives that as a single
-batched PSD constraint ``reshape(b − A x, (N, m, m)) ⪰ 0`` and compiles in well under a second.
+batched PSD constraint ``reshape(b − A x, (N, m, m)) ⪰ 0`` and compiles in well under a second
+(:mod:`synthesis.lmi_solve`); the decision vector's layout is :mod:`synthesis.lmi_layout`.
 """
 
 from __future__ import annotations
 
 import itertools
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from types import SimpleNamespace
 
 import numpy as np
 import scipy.sparse as sp
 
 from synthesis import basis
-from synthesis.closed_loop import close_loop
 from synthesis.config import DesignConfig
-from synthesis.model import N_STATE, PlantDims, dims, plant_batch
+from synthesis.lmi_layout import Layout
+from synthesis.model import N_STATE, dims, plant_batch
 from synthesis.scaling import Scaling
 
 N2 = 2 * N_STATE  # closed-loop order of the shipped ("integral") plant
-
-
-@dataclass(frozen=True)
-class Block:
-    """One decision matrix: ``nb`` basis coefficients of a ``rows × cols`` matrix."""
-
-    name: str
-    rows: int
-    cols: int
-    sym: bool
-    nb: int
-
-    @property
-    def size(self) -> int:
-        per = self.rows * (self.rows + 1) // 2 if self.sym else self.rows * self.cols
-        return per * self.nb
-
-
-class Layout:
-    """Positions of every decision matrix inside the decision vector."""
-
-    def __init__(
-        self,
-        xy_dependence: str,
-        rate_terms: str = "vertices",
-        n_nodes: int = 0,
-        plant_dims: PlantDims | None = None,
-    ) -> None:
-        nbx = basis.N_BASIS if xy_dependence in ("x", "xy") else 1
-        nby = basis.N_BASIS if xy_dependence == "xy" else 1
-        nb = basis.N_BASIS
-        d = plant_dims or PlantDims(N_STATE, 3, 2, 2, False, False)
-        n, n2, ny = d.n, 2 * d.n, d.ny
-        self.n = n
-        self.blocks = [
-            Block("P", n2, n2, True, nb),
-            Block("Q", n2, n2, True, 1),
-            Block("R", n2, n2, True, 1),
-            Block("X", n, n, True, nbx),
-            Block("Y", n, n, True, nby),
-            Block("Ah", n, n, False, nb),
-            Block("Adh", n, n, False, nb),
-            Block("Bh", n, ny, False, nb),
-            Block("Ch", 1, n, False, nb),
-            Block("Cdh", 1, n, False, nb),
-            Block("Dk", 1, ny, False, nb),
-            Block("gamma", 1, 1, False, 1),
-        ]
-        # per-node performance levels γ_g ≤ γ (the guarantee is γ = max γ_g)
-        self.blocks.append(Block("gnode", 1, 1, False, max(n_nodes, 1)))
-        if rate_terms == "bound":
-            # node-local bounds Z_{g,i} ⪰ ±∂P̃/∂ρ̂_i (3 per node), see module docstring
-            self.blocks.append(Block("Z", n2, n2, True, 3 * n_nodes))
-        self.offsets: dict[str, int] = {}
-        off = 0
-        for b in self.blocks:
-            self.offsets[b.name] = off
-            off += b.size
-        self.nvar = off
-        self.by_name = {b.name: b for b in self.blocks}
-
-    def free_mask(self, grid_points: tuple[int, int, int]) -> np.ndarray:
-        """Boolean mask of the identifiable decision entries on a grid.
-
-        The ½ρ̂i² coefficient (basis term 4 + i) of a parameter-dependent block other than P̃ is
-        fixed to zero when axis i has only two nodes.
-        """
-        mask = np.ones(self.nvar, dtype=bool)
-        for b in self.blocks:
-            # P̃ keeps them: its derivative P_i1 + ρ̂_i P_i2 still differs between the two nodes
-            if b.nb != basis.N_BASIS or b.name in ("P", "Z", "gnode"):
-                continue
-            per = b.size // b.nb
-            for i in range(3):
-                if grid_points[i] <= 2:
-                    start = self.offsets[b.name] + (4 + i) * per
-                    mask[start : start + per] = False
-        return mask
-
-    def unpack(self, x: np.ndarray) -> dict[str, np.ndarray]:
-        """Decision vectors (J, nvar) -> name -> (J, nb, rows, cols) coefficient arrays."""
-        x = np.atleast_2d(x)
-        j = x.shape[0]
-        out = {}
-        for b in self.blocks:
-            seg = x[:, self.offsets[b.name] : self.offsets[b.name] + b.size]
-            if b.sym:
-                iu = np.triu_indices(b.rows)
-                m = np.zeros((j, b.nb, b.rows, b.rows))
-                vals = seg.reshape(j, b.nb, -1)
-                m[:, :, iu[0], iu[1]] = vals
-                m[:, :, iu[1], iu[0]] = vals
-            else:
-                m = seg.reshape(j, b.nb, b.rows, b.cols)
-            out[b.name] = m
-        return out
-
-    def pack(self, coeffs: dict[str, np.ndarray]) -> np.ndarray:
-        """Inverse of :meth:`unpack` for one vector (coefficients (nb, rows, cols))."""
-        x = np.zeros(self.nvar)
-        for b in self.blocks:
-            c = np.asarray(coeffs[b.name], dtype=float).reshape(b.nb, b.rows, b.cols)
-            if b.sym:
-                iu = np.triu_indices(b.rows)
-                seg = c[:, iu[0], iu[1]].reshape(-1)
-            else:
-                seg = c.reshape(-1)
-            x[self.offsets[b.name] : self.offsets[b.name] + b.size] = seg
-        return x
 
 
 @dataclass(frozen=True)
@@ -478,274 +369,9 @@ def affine_map(
     return A, b, shape
 
 
-@dataclass
-class SolveResult:
-    """Outcome of one SDP solve."""
-
-    status: str
-    gamma: float
-    x: np.ndarray | None
-    solve_time_s: float
-    build_time_s: float
-    iterations: int | None
-    n_lmi: int
-    lmi_size: int
-
-
-#: Clarabel tolerances: slightly looser than its 1e-8 defaults, which end in "AlmostSolved" here;
-#: every LMI keeps the margin ``epsilon`` anyway and verification re-checks independently.
-DEFAULT_SOLVER_OPTS: dict = {"tol_gap_abs": 1e-7, "tol_gap_rel": 1e-6, "tol_feas": 1e-7}
-
-
-def _run(
-    problem, solver_opts: dict, progress: Callable[[str], None] | None = None
-) -> tuple[str, float, int | None]:
-    import warnings
-
-    import cvxpy as cp
-
-    from synthesis.conic import solve_cvxpy
-
-    t0 = time.perf_counter()
-    try:
-        with warnings.catch_warnings():
-            # batched (3-D) PSD expressions use cvxpy's SCIPY canonicalisation backend: expected
-            warnings.filterwarnings("ignore", message=".*dimension greater than 2.*")
-            # Clarabel called on cvxpy's own conic data, so each iteration can be reported
-            sol = solve_cvxpy(problem, solver_opts, progress, "solve")
-    except cp.error.SolverError as exc:  # numerical failure: report, do not crash
-        return f"solver_error: {exc}", time.perf_counter() - t0, None
-    return str(problem.status), time.perf_counter() - t0, sol.iterations
-
-
-def solve(
-    prob: Problem,
-    solver_opts: dict | None = None,
-    verbose: bool = False,
-    progress: Callable[[str], None] | None = None,
-) -> SolveResult:
-    """Build the batched SDP and minimise γ (then optionally back off, see ``solver.backoff``).
-
-    ``progress`` is called with one line per solver iteration (iteration, cost, gap, residuals).
-
-    Returns
-    -------
-    SolveResult
-        ``status`` is cvxpy's status string ("optimal", "infeasible", …); ``x`` the decision vector.
-    """
-    import cvxpy as cp
-
-    opts = {"verbose": verbose, **DEFAULT_SOLVER_OPTS}
-    if solver_opts:
-        opts.update(solver_opts)
-    t0 = time.perf_counter()
-    eps = prob.cfg.solver.epsilon
-    lay = prob.layout
-    A1, b1, shp1 = affine_map(prob, synthesis_lmi)  # F ≺ 0
-    A2, b2, shp2 = affine_map(prob, positivity)  # ≻ 0
-    m = shp1[-1]
-    n1 = int(np.prod(shp1[:-2]))
-    n2 = int(np.prod(shp2[:-2]))
-    # Quadratic basis terms of an axis with only two nodes equal a constant on the grid (ρ̂² = 1):
-    # they are not identifiable and make the optimal face non-unique, so they are fixed to zero.
-    free = lay.free_mask(prob.cfg.grid_points)
-    E = sp.identity(lay.nvar, format="csr")[:, np.flatnonzero(free)]
-    xf = cp.Variable(int(free.sum()))
-    x = E @ xf
-    eye1 = np.tile(np.eye(m).reshape(-1), n1)
-    k2 = shp2[-1]
-    eye2 = np.tile(np.eye(k2).reshape(-1), n2)
-    S1 = cp.reshape(-(A1 @ x) - b1 - eps * eye1, (n1, m, m), order="C")
-    S2 = cp.reshape(A2 @ x + b2 - eps * eye2, (n2, k2, k2), order="C")
-    gidx = lay.offsets["gamma"]
-    go = lay.offsets["gnode"]
-    gn = x[go : go + lay.by_name["gnode"].nb]
-    mu = prob.cfg.solver.mean_gamma_weight
-    # with μ = 0 the node levels are tied to γ (free γ_g below γ only blur the optimal face)
-    cons = [S1 >> 0, S2 >> 0, gn <= x[gidx] if mu > 0 else gn == x[gidx]]
-    objective = x[gidx] + mu * cp.sum(gn) / gn.shape[0] if mu > 0 else x[gidx]
-    problem = cp.Problem(cp.Minimize(objective), cons)
-    build = time.perf_counter() - t0
-    status, t_solve, its = _run(problem, opts, progress)
-    xval = None if xf.value is None else E @ np.array(xf.value, dtype=float)
-    gamma = float(xval[gidx]) if xval is not None else float("nan")
-    if xval is not None and status == "optimal" and prob.cfg.solver.backoff > 0.0:
-        # Back-off: accept γ ≤ (1+β)γ* and minimise the size of X, Y (better-conditioned
-        # N = I − XY and controller matrices).
-        t = cp.Variable()
-        Xmats = positivity_x(prob, x)
-        ycons = _y_matrix(x, lay)
-        cons2 = [*cons, x[gidx] <= (1.0 + prob.cfg.solver.backoff) * gamma]
-        cons2 += [t * np.eye(lay.n) - Xm >> 0 for Xm in Xmats]
-        cons2 += [t * np.eye(lay.n) - ycons >> 0]
-        p2 = cp.Problem(cp.Minimize(t), cons2)
-        st2, t2, its2 = _run(p2, opts, progress)
-        t_solve += t2
-        if st2 == "optimal" and xf.value is not None:
-            xval = E @ np.array(xf.value, dtype=float)
-            gamma = float(xval[gidx])
-            its = (its or 0) + (its2 or 0)
-        else:
-            status = f"{status} (backoff: {st2}, kept optimum)"
-    return SolveResult(
-        status=status,
-        gamma=gamma,
-        x=xval,
-        solve_time_s=t_solve,
-        build_time_s=build,
-        iterations=its,
-        n_lmi=n1,
-        lmi_size=m,
-    )
-
-
-def _sym_expr(x, off: int, n: int):
-    import cvxpy as cp
-
-    iu = np.triu_indices(n)
-    rows, cols = [], []
-    for t, (r, c) in enumerate(zip(iu[0], iu[1], strict=True)):
-        rows += [r * n + c]
-        cols += [off + t]
-        if r != c:
-            rows += [c * n + r]
-            cols += [off + t]
-    S = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(n * n, x.shape[0]))
-    return cp.reshape(S @ x, (n, n), order="C")
-
-
-def _y_matrix(x, lay: Layout):
-    return _sym_expr(x, lay.offsets["Y"], lay.n)
-
-
-def positivity_x(prob: Problem, x) -> list:
-    """X(ρ) at every node as cvxpy expressions (for the back-off objective)."""
-    import cvxpy as cp
-
-    off, blk = prob.layout.offsets["X"], prob.layout.by_name["X"]
-    n = prob.layout.n
-    per = n * (n + 1) // 2
-    mats = [_sym_expr(x, off + b * per, n) for b in range(blk.nb)]
-    if blk.nb == 1:
-        return mats
-    out = []
-    for g in range(prob.weights.shape[0]):
-        out.append(cp.sum([prob.weights[g, b] * mats[b] for b in range(blk.nb)]))
-    return out
-
-
 def max_eig(prob: Problem, x: np.ndarray) -> tuple[float, float]:
     """Largest eigenvalue of the synthesis LMI and smallest of the positivity set at a solution."""
     vals = prob.layout.unpack(x[None, :])
     F = synthesis_lmi(prob, vals)
     Pm = positivity(prob, vals)
     return float(np.linalg.eigvalsh(F).max()), float(np.linalg.eigvalsh(Pm).min())
-
-
-def closed_loop_analysis(
-    prob: Problem, coefs: dict[str, np.ndarray], ctrl: dict[str, np.ndarray], g: int, gamma: float
-) -> np.ndarray:
-    """The 5-block *analysis* matrix of the closed loop (plant + controller) at node ``g``.
-
-    Independent of the change of variables: the closed-loop matrices are built from the plant and
-    the controller ``ctrl`` (scaled coordinates, as from :func:`synthesis.reconstruct.reconstruct_scaled`),
-    and the certificate is carried back by Π1 = [[Y, I], [I, 0]] (M = I):
-    ``P = Π1⁻ᵀP̃Π1⁻¹`` (likewise Q, R, Ṗ) and the slack ``𝒳 = Π2 Π1⁻¹`` with Π2 = [[I, X], [0, Nᵀ]].
-    Ṗ is taken at the 2³ true rate vertices (not the Z bound), so this is the paper's condition.
-
-    Returns
-    -------
-    numpy.ndarray
-        (8, m, m), one matrix per rate vertex; the closed loop is certified at the node if all are
-        negative definite.
-    """
-    rh = prob.rho_hat[g : g + 1]
-    p = {k: v[g] for k, v in prob.plant.items()}
-    n = prob.layout.n
-    X = basis.evaluate(coefs["X"], rh)[0]
-    Y = basis.evaluate(coefs["Y"], rh)[0]
-    Pt = basis.evaluate(coefs["P"], rh)[0]
-    dW = prob.dweights[g]  # (3, nb)
-    dPt = np.einsum("ib,brc->irc", dW, coefs["P"])
-    Qt, Rt = coefs["Q"][0], coefs["R"][0]
-    # the delay value does not enter the matrices (the LMI uses τ̄ only)
-    cl = close_loop(SimpleNamespace(**p), SimpleNamespace(**ctrl), 0.0)
-    eye, zero = np.eye(n), np.zeros((n, n))
-    N = eye - X @ Y
-    Pi1 = np.block([[Y, eye], [eye, zero]])
-    Pi2 = np.block([[eye, X], [zero, N.T]])
-    Pi1i = np.linalg.inv(Pi1)
-    Xcl = Pi2 @ Pi1i
-    Xcl = 0.5 * (Xcl + Xcl.T)
-
-    def back(m: np.ndarray) -> np.ndarray:
-        return Pi1i.T @ m @ Pi1i
-
-    gam = float(gamma)
-    out = []
-    for s in prob.vertices:
-        pdot = back(np.einsum("i,irc->rc", s * prob.nu_hat, dPt))
-        out.append(
-            assemble(
-                Xcl,
-                back(Pt),
-                pdot,
-                back(Qt),
-                back(Rt),
-                Xcl @ cl.A,
-                Xcl @ cl.Ad,
-                Xcl @ cl.B,
-                cl.C,
-                cl.Cd,
-                cl.D,
-                np.array(gam),
-                np.array(s[2] * prob.nu_tau),
-                prob.tau_bar_hat,
-                prob.cfg.solver.lambda2,
-                prob.cfg.solver.lambda3,
-            )
-        )
-    return np.array(out)
-
-
-def certificate_margins(artifact, rho: np.ndarray) -> np.ndarray:
-    """Largest eigenvalue of the closed-loop analysis matrix (all rate vertices) at each ρ.
-
-    Evaluates the *synthesis* certificate (P̃(ρ), Q̃, R̃, X(ρ), Y from the artifact's basis
-    coefficients) with the reconstructed controller at arbitrary points, e.g. cell midpoints the
-    synthesis never saw. Negative everywhere means the same LKF certifies those frozen points too.
-    Not a substitute for the independent verification (:mod:`synthesis.verify`).
-
-    Parameters
-    ----------
-    artifact
-        A :class:`~synthesis.artifact.ControllerArtifact`.
-    rho
-        (G, 3) physical points inside the box.
-
-    Returns
-    -------
-    numpy.ndarray
-        (G,) largest eigenvalues (< 0: certified at that point).
-    """
-    from dataclasses import replace as _replace
-
-    from synthesis.config import SolverConfig
-    from synthesis.reconstruct import reconstruct_scaled
-
-    meta = artifact.metadata
-    solver = SolverConfig(**meta["design"]["solver"])
-    solver = _replace(solver, lambda2=float(meta["lambda2"]), lambda3=float(meta["lambda3"]))
-    cfg = DesignConfig(
-        model=artifact.model_config,
-        grid_points=tuple(len(g) for g in meta["grid"]),  # type: ignore[arg-type]
-        solver=solver,
-    )
-    prob = make_problem(cfg, rho=np.atleast_2d(rho))
-    ctrl = reconstruct_scaled(artifact.coefficients, prob.plant, prob.rho_hat)
-    out = np.empty(prob.rho.shape[0])
-    for g in range(prob.rho.shape[0]):
-        kg = {k: v[g] for k, v in ctrl.items()}
-        F = closed_loop_analysis(prob, artifact.coefficients, kg, g, artifact.gamma)
-        out[g] = np.linalg.eigvalsh(F).max()
-    return out

@@ -13,12 +13,14 @@ import time
 import cvxpy as cp
 import numpy as np
 
-from synthesis.lmi import DEFAULT_SOLVER_OPTS, N2, Layout, Problem, SolveResult
+from synthesis.lmi import N2, Problem
+from synthesis.lmi_layout import Layout
+from synthesis.lmi_solve import DEFAULT_SOLVER_OPTS, SolveResult
 from synthesis.model import N_STATE
 
 
 class NaiveVariables:
-    """cvxpy matrix variables mirroring a :class:`~synthesis.lmi.Layout` (one per basis term)."""
+    """cvxpy matrix variables mirroring a :class:`~synthesis.lmi_layout.Layout` (one per basis term)."""
 
     def __init__(self, layout: Layout) -> None:
         self.layout = layout

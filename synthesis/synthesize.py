@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from synthesis import basis, lmi
+from synthesis import basis, lmi, lmi_solve
 from synthesis.artifact import COEF_NAMES, FORMAT_VERSION, ControllerArtifact, make_artifact
 from synthesis.config import DesignConfig
 from synthesis.reconstruct import controllers_at
@@ -31,7 +31,7 @@ class DesignResult:
     """A solved design: the problem, the solve outcome and the artifact (None if it failed)."""
 
     cfg: DesignConfig
-    result: lmi.SolveResult
+    result: lmi_solve.SolveResult
     artifact: ControllerArtifact | None
     wall_s: float
 
@@ -43,13 +43,13 @@ def build(cfg: DesignConfig) -> lmi.Problem:
 
 def solve_design(
     prob: lmi.Problem, solver_opts: dict | None = None, progress: Progress | None = None
-) -> lmi.SolveResult:
+) -> lmi_solve.SolveResult:
     """Stage 2: the SDP (minimise γ, optional back-off); ``progress`` gets one line per iteration."""
-    return lmi.solve(prob, solver_opts, progress=progress)
+    return lmi_solve.solve(prob, solver_opts, progress=progress)
 
 
 def to_artifact(
-    prob: lmi.Problem, res: lmi.SolveResult, extra: dict | None = None
+    prob: lmi.Problem, res: lmi_solve.SolveResult, extra: dict | None = None
 ) -> ControllerArtifact:
     """Stage 3: coefficients + controller at the grid nodes + metadata -> artifact.
 

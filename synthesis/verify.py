@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.analysis_lmi import analyse, conditioning_transform
+from synthesis.analysis_lmi import analyse
 from synthesis.closed_loop import DelaySystem, close_loop
 from synthesis.delay_stability import rightmost_roots
 from synthesis.model import plant_at
@@ -52,6 +52,7 @@ from synthesis.pi_baseline import PIBaseline
 from synthesis.reconstruct import controller_at, scaling_of
 from synthesis.reference import ReferenceConfig, frozen_step_reference
 from synthesis.smith_baseline import smith_step_response
+from synthesis.state_transform import conditioning_transform
 from synthesis.step_response import (
     NOMINAL_K,
     NOMINAL_STEP_MMHG,

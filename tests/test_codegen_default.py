@@ -16,10 +16,11 @@ import pytest
 from codegen import pipeline as pl
 from codegen.discretise import discretise_node
 from codegen.emit_python import module_sha256
-from codegen.tables import frozen_loop_matrices, interpolate, unstable_root_count
+from codegen.frozen_loop import frozen_loop_matrices, unstable_root_count
+from codegen.tables import interpolate
 from contracts.module_hash import module_text_sha256
 from runtime.controller_loader import ControllerSpecError, load_controller
-from tests.test_codegen_core import (
+from tests.codegen_helpers import (
     CController,
     continuous_reference,
     fopdt_closed_loop,

@@ -17,17 +17,11 @@ import numpy as np
 import pytest
 
 from codegen import pipeline as pl
-from synthesis.config import ConfigError, parse_config
+from synthesis.config import ConfigError
+from synthesis.config_toml import parse_config
 from synthesis.reference import ReferenceConfig, frozen_step_reference
-from tests.test_codegen_core import (  # noqa: F401
-    BOX,
-    TS,
-    CController,
-    built,
-    emit_targets,
-    load_module,
-    random_inputs,
-)
+from tests.codegen_helpers import BOX, TS, CController, emit_targets, load_module, random_inputs
+from tests.test_codegen_core import built  # noqa: F401
 
 LAMBDA_S, FRACTION, K_MIN = 10.0, 0.9, 0.05
 COMMITTED = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
@@ -270,7 +264,7 @@ def test_shipped_module_tracks_mid_run_target_changes_without_overshoot():
 
 
 def _default_table() -> dict:
-    from synthesis.config import default_config_path
+    from synthesis.config_toml import default_config_path
 
     with open(default_config_path(), "rb") as fh:
         return tomllib.load(fh)

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthesis.analysis_lmi import analyse, conditioning_transform, whitening_transform
+from synthesis.analysis_lmi import analyse
 from synthesis.closed_loop import DelaySystem
 from synthesis.pi_baseline import PIBaseline
+from synthesis.state_transform import conditioning_transform
 
 
 def _scalar(a: float, ad: float, tau: float) -> DelaySystem:
@@ -74,14 +75,6 @@ def test_quadratic_p_certifies_what_affine_does_with_no_larger_gamma() -> None:
     quad = analyse(*args, p_dependence="quadratic", backoff=0.0)
     assert aff.certified and quad.certified
     assert quad.gamma <= aff.gamma * (1 + 1e-4)
-
-
-def test_whitening_maps_the_lyapunov_matrix_to_identity() -> None:
-    p = np.array([[4.0, 1.0], [1.0, 1e-3 + 0.25]])
-    t = whitening_transform(p)
-    assert np.allclose(t.T @ p @ t, np.eye(2), atol=1e-9)
-    with pytest.raises(ValueError, match="positive definite"):
-        whitening_transform(-p)
 
 
 def test_conditioning_transform_keeps_the_certificate_of_the_pi_loop() -> None:

@@ -7,10 +7,11 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from synthesis.analysis_lmi import AnalysisResult, analyse
+from synthesis.analysis_interface import AnalysisResult
+from synthesis.analysis_lmi import analyse
 from synthesis.analysis_wirtinger import analyse_wirtinger
 from synthesis.closed_loop import DelaySystem, close_loop
-from synthesis.config import parse_config
+from synthesis.config_toml import parse_config
 from synthesis.model import plant_at
 from synthesis.smith_lpv import SmithLPV
 

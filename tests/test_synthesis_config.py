@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis.config import NOMINAL_RHO, ConfigError, load_config
+from synthesis.config import NOMINAL_RHO, ConfigError
+from synthesis.config_toml import load_config
 
 
 def _write(tmp_path: Path, text: str) -> Path:

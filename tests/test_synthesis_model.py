@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from synthesis.config import load_config
+from synthesis.config_toml import load_config
 from synthesis.model import plant_at, plant_batch
 from synthesis.scaling import Scaling
 

@@ -7,7 +7,7 @@ import pytest
 from scipy import signal
 
 from synthesis.closed_loop import close_loop
-from synthesis.config import parse_config
+from synthesis.config_toml import parse_config
 from synthesis.delay_stability import rightmost_roots
 from synthesis.model import plant_at
 from synthesis.smith_lpv import SmithLPV

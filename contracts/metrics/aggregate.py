@@ -1,0 +1,96 @@
+"""Cohort summaries of per-run metrics: percentiles, reachable and unreachable patients apart."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from contracts.metrics.disturbance import event_labels
+from contracts.metrics.names import RUN_METRICS
+from contracts.metrics.signals import to_float
+
+
+def percentile_summary(values: Iterable[float | None]) -> dict[str, float | int | None]:
+    """Median and 90th percentile of the non-``None`` values, with counts.
+
+    Returns
+    -------
+    dict
+        ``median``, ``p90`` (``None`` when no value applies), ``n`` (values used),
+        ``n_null`` (``None`` values, e.g. never settled).
+    """
+    vals = list(values)
+    used = np.array([float(v) for v in vals if v is not None], dtype=float)
+    n_null = len(vals) - used.size
+    if used.size == 0:
+        return {"median": None, "p90": None, "n": 0, "n_null": n_null}
+    return {
+        "median": to_float(np.median(used)),
+        "p90": to_float(np.percentile(used, 90.0)),
+        "n": int(used.size),
+        "n_null": int(n_null),
+    }
+
+
+def aggregate_disturbances(per_run: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per-event summaries across runs of one scenario, keyed by :func:`event_labels`.
+
+    Returns
+    -------
+    dict
+        label → ``kind``, ``start_s`` (``None`` if the runs disagree), and
+        :func:`percentile_summary` of ``peak_abs_deviation_mmhg`` (|``peak_deviation_mmhg``|, so
+        the 90th percentile is the severe tail for a dip and a rise alike), ``recovery_s`` and
+        ``iae_mmhg_s``. Runs whose ``disturbances`` is ``None`` (events not known) are skipped.
+    """
+    by_label: dict[str, list[Mapping[str, Any]]] = {}
+    for run in per_run:
+        records = run.get("disturbances")
+        if records is None:
+            continue
+        for label, rec in zip(event_labels([d["kind"] for d in records]), records, strict=True):
+            by_label.setdefault(label, []).append(rec)
+    out: dict[str, dict[str, Any]] = {}
+    for label, recs in by_label.items():
+        starts = {d["start_s"] for d in recs}
+        peaks = [
+            None if d["peak_deviation_mmhg"] is None else abs(d["peak_deviation_mmhg"])
+            for d in recs
+        ]
+        out[label] = {
+            "kind": recs[0]["kind"],
+            "start_s": starts.pop() if len(starts) == 1 else None,
+            "peak_abs_deviation_mmhg": percentile_summary(peaks),
+            "recovery_s": percentile_summary(d["recovery_s"] for d in recs),
+            "iae_mmhg_s": percentile_summary(d["iae_mmhg_s"] for d in recs),
+        }
+    return out
+
+
+def aggregate(per_run: Sequence[Mapping[str, object]]) -> dict[str, object]:
+    """Aggregate per-run metric dicts: reachable and unreachable patients reported apart.
+
+    Returns
+    -------
+    dict
+        ``n``, ``n_reachable``, ``n_unreachable``, ``n_unstable``, ``reachable`` /
+        ``unreachable`` / ``all``: each a mapping metric → :func:`percentile_summary`, and
+        ``disturbances``: :func:`aggregate_disturbances` over the reachable runs.
+    """
+    groups = {
+        "reachable": [m for m in per_run if m.get("reachable", True)],
+        "unreachable": [m for m in per_run if not m.get("reachable", True)],
+        "all": list(per_run),
+    }
+    out: dict[str, object] = {
+        "n": len(per_run),
+        "n_reachable": len(groups["reachable"]),
+        "n_unreachable": len(groups["unreachable"]),
+        "n_unstable": sum(1 for m in per_run if not m.get("stable", True)),
+    }
+    for name, runs in groups.items():
+        out[name] = {k: percentile_summary(m.get(k) for m in runs) for k in RUN_METRICS}  # type: ignore[misc]
+    out["disturbances"] = aggregate_disturbances(groups["reachable"])
+    return out

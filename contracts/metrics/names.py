@@ -1,0 +1,43 @@
+"""The metric names, bands and event kinds every metric module and every caller agrees on."""
+
+from __future__ import annotations
+
+NOISY_BAND_MMHG = 5.0
+NOISE_FREE_BAND_FRACTION = 0.02
+CLINICAL_BAND_MMHG = 5.0
+
+STEP_METRICS = (
+    "overshoot_pct",
+    "rise_time_s",
+    "settling_time_s",
+    "steady_state_dev_mmhg",
+    "iae_mmhg_s",
+)
+STEP_WINDOW_METRICS = (
+    "step_overshoot_pct",
+    "step_rise_time_s",
+    "step_settling_time_s",
+    "step_iae_mmhg_s",
+)
+"""The step metrics over the window before the first disturbance event."""
+RUN_METRICS = (
+    STEP_METRICS
+    + (
+        "time_in_band_pct",
+        "time_below_pct",
+        "mdpe_pct",
+        "mdape_pct",
+        "wobble_pct",
+        "drug_total_ml",
+        "max_rate_ml_h",
+        "time_at_limit_pct",
+    )
+    + STEP_WINDOW_METRICS
+)
+EVENT_KINDS = ("hemorrhage", "bolus")
+"""Disturbance kinds that are events with a start; a sinusoid is continuous background."""
+EVENT_METRICS = ("peak_deviation_mmhg", "recovery_s", "iae_mmhg_s")
+"""The numbers of one disturbance record (besides ``kind``, ``start_s``, ``end_s``)."""
+
+Event = tuple[str, float]
+"""A disturbance event: ``(kind, start_s)``, kind in :data:`EVENT_KINDS`, start in s."""
