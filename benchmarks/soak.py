@@ -31,10 +31,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from contracts.faults import FAULT_KINDS, FaultScorer, parse_faults  # noqa: E402
+from link.endpoint import Hello, LinkEndpoint, Signing  # noqa: E402
+from link.transport import PtyPair  # noqa: E402
 from runtime.cli import print_fault_table  # noqa: E402
 from runtime.controller_loader import load_controller  # noqa: E402
-from runtime.link.endpoint import Hello, LinkEndpoint, Signing  # noqa: E402
-from runtime.link.transport import PtyPair  # noqa: E402
 from runtime.loop import Loop, sched_limits_of, supervisor_config_for  # noqa: E402
 from runtime.supervisor import Fault, Supervisor  # noqa: E402
 

@@ -1,6 +1,6 @@
 """``pressor device``: the simulated pump / patient monitor on a serial port.
 
-Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:`runtime.link`:
+Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:`link`:
 
 1. open the port (a pyserial URL or device path, e.g. the follower of the pty ``pressor sil``
    created, or one end of a ``socat`` pair), handshake: announce itself with a hello (scenario,
@@ -127,8 +127,8 @@ def main(command: str, argv: list[str]) -> int:
         print(f"pressor {command}: {exc}", file=sys.stderr)
         return 2
 
-    from runtime.link import LinkClosedError, LinkEndpoint, LinkError, ManualClock, TlogWriter
-    from runtime.link.transport import fast_port, open_port
+    from link import LinkClosedError, LinkEndpoint, LinkError, ManualClock, TlogWriter
+    from link.transport import fast_port, open_port
 
     try:
         port = fast_port(open_port(args.port))
@@ -205,7 +205,7 @@ def _make_world(scenario: str, seed: int, period_s: float, faults: tuple = ()) -
 def _load_signing(path: str | None) -> Any:
     if path is None:
         return None
-    from runtime.link import Signing
+    from link import Signing
 
     try:
         return Signing.from_file(path)
@@ -232,11 +232,11 @@ def run_device(
     Parameters
     ----------
     ep
-        A device-role :class:`runtime.link.LinkEndpoint` whose clock is ``clock``.
+        A device-role :class:`link.LinkEndpoint` whose clock is ``clock``.
     world
         A fresh :class:`hil_sim.world.World`.
     clock
-        The endpoint's :class:`runtime.link.ManualClock`; set to the world's sim time (s).
+        The endpoint's :class:`link.ManualClock`; set to the world's sim time (s).
     duration_s
         Simulated time (s); default the scenario's duration. ``round(duration / Ts)`` ticks.
     realtime
@@ -253,12 +253,12 @@ def run_device(
 
     Raises
     ------
-    runtime.link.LinkClosedError
+    link.LinkClosedError
         The runtime closed the link.
-    runtime.link.LinkError
+    link.LinkError
         The handshake failed.
     """
-    from runtime.link import (
+    from link import (
         LINK_LOCKSTEP,
         LINK_REALTIME,
         MODE_STOP,

@@ -461,7 +461,7 @@ def _check_out_path(opt: str, path: Path | None, suffix: str | None = None) -> N
 
 
 def _signing(args: argparse.Namespace, allow_generate: bool):
-    from runtime.link.endpoint import Signing
+    from link.endpoint import Signing
 
     if args.signing_key is not None:
         try:
@@ -483,9 +483,9 @@ def run_runtime(
     handshake_timeout_s: float = 30.0,
 ) -> tuple[dict[str, Any], Any, Path | None]:
     """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result, rrd)."""
+    from link.endpoint import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkEndpoint, LinkError
+    from link.tlog import TlogWriter
     from runtime.cpu_latency import CpuLatencyRequest
-    from runtime.link.endpoint import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkEndpoint, LinkError
-    from runtime.link.tlog import TlogWriter
     from runtime.loop import Loop, supervisor_config_for
     from runtime.supervisor import Supervisor
 
@@ -634,7 +634,7 @@ def _main_sil(argv: list[str]) -> int:
             " on another port run 'pressor device --port ...' there and 'pressor run --port"
             f" {args.link}' here"
         )
-    from runtime.link.transport import PtyPair
+    from link.transport import PtyPair
 
     pair = PtyPair.open()
     with tempfile.TemporaryDirectory(prefix="pressor-sil-") as tmp:
@@ -769,7 +769,7 @@ def _main_run(argv: list[str]) -> int:
     _load_controller(args.controller, 1.0 / args.rate)
     args.fault_specs = _fault_specs(args.fault)
     signing = _signing(args, allow_generate=False)
-    from runtime.link.transport import fast_port, open_port
+    from link.transport import fast_port, open_port
 
     try:
         port = fast_port(open_port(args.port))
@@ -821,7 +821,7 @@ def main(command: str, argv: list[str]) -> int:
     Returns 0 on success, 1 if the run completed but a check failed (or the device stalled),
     2 on bad usage or input (one line on stderr naming the option or file, value and range).
     """
-    from runtime.link.endpoint import LinkError
+    from link.endpoint import LinkError
     from runtime.loop import DeviceStalled
 
     handlers = {"sil": _main_sil, "run": _main_run, "faults": _main_faults}

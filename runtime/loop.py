@@ -47,8 +47,7 @@ from typing import Any
 import numpy as np
 
 from contracts.controller import Controller
-from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
-from runtime.link.endpoint import (
+from link.endpoint import (
     MODE_AUTO,
     MODE_SAFE,
     STATE_FINISHED,
@@ -57,6 +56,7 @@ from runtime.link.endpoint import (
     LinkEndpoint,
     TickInputs,
 )
+from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
 from runtime.recorder import CHANNEL_INDEX, CHANNELS, Recorder
 from runtime.supervisor import State, Supervisor, SupervisorConfig, fault_names
 from runtime.timing import TimingStats

@@ -14,7 +14,7 @@ os.environ["CI"] = "1"  # the rerun CLI writes analytics files otherwise
 import numpy as np  # noqa: E402
 from rerun.chunk import RrdReader  # noqa: E402
 
-from runtime.link import LinkClosedError, LinkEndpoint, PtyPair  # noqa: E402
+from link import LinkClosedError, LinkEndpoint, PtyPair  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

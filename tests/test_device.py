@@ -13,7 +13,7 @@ from baselines.pi import PIController
 from hil_sim.closed_loop import simulate
 from hil_sim.device import main as device_main
 from hil_sim.world import World
-from runtime.link import (
+from link import (
     STATE_FAULT,
     STATE_FINISHED,
     Hello,
@@ -213,7 +213,7 @@ def test_lockstep_over_a_corrupting_link_recovers_and_keeps_the_simulated_trajec
     import threading
 
     from hil_sim.device import run_device
-    from runtime.link import FaultyPort, ManualClock, loop_pair
+    from link import FaultyPort, ManualClock, loop_pair
 
     seed, duration = 4, 30.0
     a, b = loop_pair()

@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 
 from baselines.pi import PIController
 from hil_sim.world import World
-from runtime.link import LinkEndpoint, Signing, loop_pair
-from runtime.link.dialect import pressor as mavlink
+from link import LinkEndpoint, Signing, loop_pair
+from link.dialect import pressor as mavlink
 from runtime.loop import supervisor_config_for
 from runtime.supervisor import Supervisor
 

@@ -13,7 +13,7 @@ from hil_sim.faults import LinkFaultPort, LinkFaults, split_frames
 from hil_sim.pump import ALARM_OCCLUSION, ALARM_RESERVOIR_EMPTY
 from hil_sim.sensor import QUALITY_WAVEFORM
 from hil_sim.world import World
-from runtime.link import LinkEndpoint, loop_pair
+from link import LinkEndpoint, loop_pair
 
 TS = 0.1
 

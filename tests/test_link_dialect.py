@@ -9,16 +9,16 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from runtime.link import generate
-from runtime.link.dialect import pressor as mavlink
-from runtime.link.endpoint import LinkEndpoint, Signing
-from runtime.link.transport import open_port
+from link import generate
+from link.dialect import pressor as mavlink
+from link.endpoint import LinkEndpoint, Signing
+from link.transport import open_port
 
 
 def test_committed_module_matches_what_mavgen_generates_from_the_xml(tmp_path):
     fresh = generate.generate(generate.XML_PATH, tmp_path / "pressor.py")
     assert fresh.read_text() == generate.MODULE_PATH.read_text(), (
-        "runtime/link/dialect/pressor.py is stale: run `python -m runtime.link.generate`"
+        "link/dialect/pressor.py is stale: run `python -m link.generate`"
     )
 
 

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from runtime.link import (
+from link import (
     MODE_AUTO,
     MODE_SAFE,
     STATE_FINISHED,
@@ -24,7 +24,7 @@ from runtime.link import (
     read_tlog,
     register_dialect_with_mavutil,
 )
-from runtime.link.dialect import pressor as mavlink
+from link.dialect import pressor as mavlink
 
 
 def _collect(ep: LinkEndpoint) -> list:

@@ -10,7 +10,7 @@ import subprocess
 from pathlib import Path
 
 from contracts.faults import PUMP_ALARM_OUT_OF_RANGE, PUMP_ALARM_WATCHDOG
-from runtime.link import Hello, LinkEndpoint, PtyPair
+from link import Hello, LinkEndpoint, PtyPair
 from tests.sil_helpers import ROOT, poll_until_exit, spawn_device
 
 MAX_RATE_ML_H = 120.0

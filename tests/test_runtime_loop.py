@@ -16,7 +16,7 @@ import pytest
 os.environ.setdefault("CI", "1")
 
 from baselines.pi import PIController  # noqa: E402
-from runtime.link.endpoint import (  # noqa: E402
+from link.endpoint import (  # noqa: E402
     LINK_LOCKSTEP,
     STATE_FINISHED,
     Hello,
@@ -24,7 +24,7 @@ from runtime.link.endpoint import (  # noqa: E402
     LinkEndpoint,
     Signing,
 )
-from runtime.link.transport import PtyPair, loop_pair  # noqa: E402
+from link.transport import PtyPair, loop_pair  # noqa: E402
 from runtime.loop import DeviceStalled, Loop, supervisor_config_for  # noqa: E402
 from runtime.supervisor import State, Supervisor  # noqa: E402
 

@@ -1,7 +1,7 @@
 """One end of the pressor MAVLink link: typed send/receive over a byte port.
 
-A :class:`LinkEndpoint` owns a port (see :mod:`runtime.link.transport`), a generated ``MAVLink``
-object (``runtime.link.dialect.pressor``) used for packing, signing and decoding, a receive buffer,
+A :class:`LinkEndpoint` owns a port (see :mod:`link.transport`), a generated ``MAVLink``
+object (``link.dialect.pressor``) used for packing, signing and decoding, a receive buffer,
 and :class:`LinkCounters`. It never sleeps except inside a bounded wait on the port.
 
 Framing. The endpoint frames the byte stream itself and hands each complete candidate frame to the
@@ -54,8 +54,8 @@ from typing import Any
 
 import serial
 
-from runtime.link.dialect import pressor as mavlink
-from runtime.link.tlog import TlogWriter
+from link.dialect import pressor as mavlink
+from link.tlog import TlogWriter
 
 #: MAVLink role values (enum PRESSOR_ROLE) and default system ids.
 ROLE_RUNTIME = mavlink.PRESSOR_ROLE_RUNTIME
@@ -376,7 +376,7 @@ class LinkEndpoint:
     ----------
     port
         A pyserial port or anything with ``write``, ``read``, ``in_waiting`` (see
-        :mod:`runtime.link.transport`). Its ``timeout`` should be short (~10 ms): waits loop on it.
+        :mod:`link.transport`). Its ``timeout`` should be short (~10 ms): waits loop on it.
     role
         ``"runtime"`` or ``"device"``.
     signing

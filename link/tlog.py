@@ -12,7 +12,7 @@ counters record what was rejected.
 
 To read a log with pymavlink's own tools, make the dialect known to them first::
 
-    from runtime.link.tlog import register_dialect_with_mavutil
+    from link.tlog import register_dialect_with_mavutil
     mavutil = register_dialect_with_mavutil()
     log = mavutil.mavlink_connection("run.tlog", dialect="pressor")
 """
@@ -105,7 +105,7 @@ def register_dialect_with_mavutil() -> ModuleType:
     """
     import sys
 
-    from runtime.link.dialect import pressor
+    from link.dialect import pressor
 
     os.environ["MAVLINK20"] = "1"
     sys.modules["pymavlink.dialects.v20.pressor"] = pressor

@@ -5,7 +5,7 @@ Modules
 ``pressor.xml``
     The dialect (message ids 45000-45006, a block no dialect in pymavlink's ``all`` uses).
 ``dialect/pressor.py``
-    The module mavgen generates from it (committed; ``python -m runtime.link.generate``).
+    The module mavgen generates from it (committed; ``python -m link.generate``).
 ``transport``
     Ports: :func:`open_port` (pyserial URL or device path), :class:`PtyPair` (raw pty pair; the
     leader as an :class:`FdPort`, the follower path for pyserial in another process),
@@ -21,7 +21,7 @@ Runtime side (what the loop uses)
 ---------------------------------
 ::
 
-    from runtime.link import LinkEndpoint, Hello, Signing, PtyPair, MODE_AUTO
+    from link import LinkEndpoint, Hello, Signing, PtyPair, MODE_AUTO
 
     pty = PtyPair.open()                          # device process opens pty.follower_path
     ep = LinkEndpoint(pty.leader_port(), "runtime", signing=Signing.from_file(key), tlog=tlog)
@@ -56,7 +56,7 @@ Device side: ``ep.handshake(Hello(scenario, seed, Ts, noise, n_ticks), ...)``,
 Values are float32 on the wire (sim time is double), matching ``hil_sim.world``'s rounding.
 """
 
-from runtime.link.endpoint import (
+from link.endpoint import (
     LINK_LOCKSTEP,
     LINK_REALTIME,
     MODE_AUTO,
@@ -81,8 +81,8 @@ from runtime.link.endpoint import (
     Signing,
     TickInputs,
 )
-from runtime.link.tlog import TlogWriter, read_tlog, register_dialect_with_mavutil
-from runtime.link.transport import (
+from link.tlog import TlogWriter, read_tlog, register_dialect_with_mavutil
+from link.transport import (
     CrossedPort,
     FaultyPort,
     FdPort,
