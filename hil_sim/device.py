@@ -127,8 +127,15 @@ def main(command: str, argv: list[str]) -> int:
         print(f"pressor {command}: {exc}", file=sys.stderr)
         return 2
 
-    from link import LinkClosedError, LinkEndpoint, LinkError, ManualClock, TlogWriter
-    from link.transport import fast_port, open_port
+    from link import (
+        DeviceSession,
+        LinkClosedError,
+        LinkError,
+        ManualClock,
+        TlogWriter,
+        fast_port,
+        open_port,
+    )
 
     try:
         port = fast_port(open_port(args.port))
@@ -142,7 +149,7 @@ def main(command: str, argv: list[str]) -> int:
         port = LinkFaultPort(port, link_faults, lambda: world.tick)
     tlog = TlogWriter(args.tlog) if args.tlog else None
     clock = ManualClock()
-    ep = LinkEndpoint(port, "device", signing=signing, clock=clock, tlog=tlog)
+    ep = DeviceSession(port, signing=signing, clock=clock, tlog=tlog)
     ok = False
     try:
         result = run_device(
@@ -232,7 +239,7 @@ def run_device(
     Parameters
     ----------
     ep
-        A device-role :class:`link.LinkEndpoint` whose clock is ``clock``.
+        A :class:`link.DeviceSession` whose clock is ``clock``.
     world
         A fresh :class:`hil_sim.world.World`.
     clock
@@ -282,7 +289,7 @@ def run_device(
     ep.handshake(hello, timeout_s=handshake_timeout_s)
     hb_every = max(1, int(round(1.0 / ts)))
     observe, apply_command, advance = world.observe, world.apply_command, world.advance
-    send_obs, wait_cmd, send_status = ep.send_observation, ep.wait_for_command, ep.send_pump_status
+    send_obs, wait_cmd, send_status = ep.send_tick, ep.wait_for_command, ep.send_pump_status
     t0 = time.monotonic()
     down = link_faults.link_down if link_faults is not None and link_faults.down else None
     for k in range(n):
@@ -294,9 +301,7 @@ def run_device(
             status = advance()  # no command arrives: the pump keeps its rate and its watchdog
             clock.t = world.sim_time_s
             if link_faults.link_down(k + 1) is None:  # leaves with the first tick after the gap
-                send_status(
-                    status.tick, status.delivered_ml_h, status.volume_ml, status.alarms, flush=False
-                )
+                send_status(status, flush=False)
             continue
         if k % hb_every == 0:
             ep.send_heartbeat(k, STATE_RUNNING, flush=False)
@@ -322,9 +327,7 @@ def run_device(
             apply_command(0.0 if cmd.mode == MODE_STOP else cmd.rate_ml_h)
         status = advance()
         clock.t = world.sim_time_s
-        send_status(
-            status.tick, status.delivered_ml_h, status.volume_ml, status.alarms, flush=False
-        )
+        send_status(status, flush=False)
     if realtime:
         _sleep_until(ep, t0 + n * ts)
     ep.send_heartbeat(n, STATE_FINISHED)
@@ -346,7 +349,7 @@ def _link_down_tick(ep: Any, world: Any, faults: Any, k: int, obs: Any, hello: A
         return False
     if faults.starts_at(k) is spec:
         if spec.kind == "link-disconnect" and hasattr(ep.port, "cut_next_write"):
-            ep.send_observation(obs, flush=False)
+            ep.send_tick(obs, flush=False)
             ep.port.cut_next_write = True
             ep.flush()
         else:

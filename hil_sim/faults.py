@@ -27,7 +27,7 @@ from typing import Any
 
 from contracts.faults import FaultSpec
 from hil_sim.sensor import Artifact
-from link.transport import PortWrapper
+from link import PortWrapper
 
 __all__ = ["LinkFaultPort", "LinkFaults", "WorldFaults", "split_frames"]
 

@@ -461,7 +461,7 @@ def _check_out_path(opt: str, path: Path | None, suffix: str | None = None) -> N
 
 
 def _signing(args: argparse.Namespace, allow_generate: bool):
-    from link.endpoint import Signing
+    from link import Signing
 
     if args.signing_key is not None:
         try:
@@ -483,7 +483,7 @@ def run_runtime(
     handshake_timeout_s: float = 30.0,
 ) -> tuple[dict[str, Any], Any, Path | None]:
     """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result, rrd)."""
-    from link.endpoint import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkEndpoint, LinkError
+    from link import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkError, RuntimeSession
     from link.tlog import TlogWriter
     from runtime.cpu_latency import CpuLatencyRequest
     from runtime.loop import Loop, supervisor_config_for
@@ -493,7 +493,7 @@ def run_runtime(
     controller = _load_controller(args.controller, period_s)
     tlog = TlogWriter(args.tlog) if args.tlog is not None else None
     ok = False
-    ep = LinkEndpoint(port, "runtime", signing=signing, tlog=tlog)
+    ep = RuntimeSession(port, signing=signing, tlog=tlog)
     recorder = None
     try:
         mode = LINK_REALTIME if args.realtime else LINK_LOCKSTEP
@@ -634,7 +634,7 @@ def _main_sil(argv: list[str]) -> int:
             " on another port run 'pressor device --port ...' there and 'pressor run --port"
             f" {args.link}' here"
         )
-    from link.transport import PtyPair
+    from link import PtyPair
 
     pair = PtyPair.open()
     with tempfile.TemporaryDirectory(prefix="pressor-sil-") as tmp:
@@ -769,7 +769,7 @@ def _main_run(argv: list[str]) -> int:
     _load_controller(args.controller, 1.0 / args.rate)
     args.fault_specs = _fault_specs(args.fault)
     signing = _signing(args, allow_generate=False)
-    from link.transport import fast_port, open_port
+    from link import fast_port, open_port
 
     try:
         port = fast_port(open_port(args.port))
@@ -821,7 +821,7 @@ def main(command: str, argv: list[str]) -> int:
     Returns 0 on success, 1 if the run completed but a check failed (or the device stalled),
     2 on bad usage or input (one line on stderr naming the option or file, value and range).
     """
-    from link.endpoint import LinkError
+    from link import LinkError
     from runtime.loop import DeviceStalled
 
     handlers = {"sil": _main_sil, "run": _main_run, "faults": _main_faults}
