@@ -243,7 +243,7 @@ def run_device(
     world
         A fresh :class:`hil_sim.world.World`.
     clock
-        The endpoint's :class:`link.ManualClock`; set to the world's sim time (s).
+        The session's :class:`link.ManualClock`; set to the world's sim time (s).
     duration_s
         Simulated time (s); default the scenario's duration. ``round(duration / Ts)`` ticks.
     realtime

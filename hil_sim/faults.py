@@ -118,7 +118,7 @@ class WorldFaults:
 
 
 def split_frames(data: bytes) -> list[bytes]:
-    """Split a burst of well-formed MAVLink 2 frames (as the endpoint writes them)."""
+    """Split a burst of well-formed MAVLink 2 frames (as the session writes them)."""
     out = []
     i, n = 0, len(data)
     while i < n:

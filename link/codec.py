@@ -12,7 +12,7 @@ generated ``MAVLink.decode`` (what ``parse_buffer`` does internally, minus its w
   scanner moves on by one byte;
 - a frame that fails its CRC is counted (``bad_crc``) and the scanner resumes one byte after its
   start, not after its claimed length - so a corrupted length byte loses that frame only, instead
-  of swallowing the following ones as pymavlink's ``robust_parsing`` does (docs/INTERFACES.md);
+  of swallowing the following ones as pymavlink's ``robust_parsing`` does;
 - a corrupted length that claims *more* bytes than will ever come stalls the frame at the end of a
   burst; :meth:`FrameCodec.drop_stalled` (called when a wait times out) drops its first byte, then
   the session rescans

@@ -15,7 +15,7 @@ class LinkClosedError(LinkError):
 
 @dataclass(slots=True)
 class LinkCounters:
-    """What the endpoint saw and did; all counts since the endpoint was made.
+    """What the session saw and did; all counts since the session was made.
 
     Attributes
     ----------

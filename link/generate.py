@@ -6,7 +6,7 @@ validation on). ``tests/test_link_dialect.py`` regenerates into a temporary dire
 when the committed module and the XML disagree.
 
 Why wire protocol 2.0 explicitly: mavgen's ``Opts`` defaults to 1.0 and then silently drops every
-message with an id above 255 (DESIGN.md §5) - i.e. all of ours.
+message with an id above 255 - i.e. all of ours.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Everything here returns a *port*: an object with the small subset of the pyseria
 uses (``write(bytes)``, ``read(n)``, ``in_waiting``, ``close()``, ``timeout``). Real pyserial
 objects satisfy it; :mod:`link.ttyport` adds ports over tty descriptors (pty pairs, the fast path).
 
-Facts this package relies on (docs/INTERFACES.md):
+Facts this package relies on:
 
 - pyserial flushes its input when it opens a port, so a peer's bytes sent earlier are lost: the
   sessions handshake after both ends are open (repeated hellos, see ``Session.handshake``).

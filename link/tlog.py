@@ -7,7 +7,7 @@ mode), not the Unix wall clock, so two runs with the same seed give byte-identic
 print dates will show 1970.
 
 Only frames that decoded (sent by this end, or received and accepted) are logged: a corrupted
-frame in a .tlog would desynchronise readers that trust the timestamp/frame layout. The endpoint's
+frame in a .tlog would desynchronise readers that trust the timestamp/frame layout. The session's
 counters record what was rejected.
 
 To read a log with pymavlink's own tools, make the dialect known to them first::

@@ -1,6 +1,6 @@
 """Ports over tty descriptors: pty pairs and the hot path of a posix serial port.
 
-Facts this module relies on (docs/INTERFACES.md):
+Facts this module relies on:
 
 - A pty in cooked mode mangles bytes (CR/LF translation, echo, ^C...); both sides are put in raw
   mode at once, before anyone writes.

@@ -13,6 +13,7 @@ from link import (
     DeviceSession,
     Hello,
     LinkClosedError,
+    LinkError,
     ManualClock,
     PtyPair,
     PumpStatus,
@@ -171,3 +172,31 @@ def test_a_retransmitted_tick_is_answered_again_with_the_same_command():
     assert cmd is not None and cmd.rate_ml_h == 12.0
     assert rt.counters.duplicates == 1 and rt.counters.retransmits == 1
     assert mavlink.MAVLINK_MSG_ID_INFUSION_COMMAND == 45005
+
+
+def test_a_world_tick_and_pump_status_arrive_at_the_runtime_as_equal_messages():
+    # one type per message on both ends: what the world builds is what the runtime receives
+    from hil_sim.world import World
+
+    world = World("paper-tracking", 3, 0.1)
+    a, b = loop_pair()
+    dev, rt = DeviceSession(a), RuntimeSession(b)
+    for _ in range(3):
+        sent = world.observe()
+        dev.send_tick(sent)
+        assert rt.wait_for_sample(1.0) == sent
+        rt.send_command(sent.tick, 7.5)
+        cmd = dev.wait_for_command(sent.tick, 1.0)
+        assert cmd is not None
+        world.apply_command(cmd.rate_ml_h)
+        status = world.advance()
+        dev.send_pump_status(status)
+        drain(rt, 0.02)
+        assert rt.pump_status == status and status.delivered_ml_h == 7.5
+
+
+def test_a_handshake_with_a_peer_of_the_same_role_fails():
+    a, b = loop_pair()
+    DeviceSession(b).send_hello(Hello("twin"))  # a second device where the runtime should be
+    with pytest.raises(LinkError, match="peer announced role"):
+        DeviceSession(a).handshake(Hello("paper-tracking"), timeout_s=1.0)
