@@ -150,8 +150,9 @@ class FrameCodec:
         """Pack (and sign) a generated message object as the next frame."""
         if self.signed:
             self._stamp()
-        frame = msg.pack(self.mav)
-        self._next_seq()
+        mav = self.mav
+        frame = msg.pack(mav)
+        mav.seq = (mav.seq + 1) & 0xFF
         return frame
 
     def pack_fields(self, msgid: int, values: tuple) -> bytes:
@@ -183,16 +184,14 @@ class FrameCodec:
         frame = head + payload + _CRC.pack(_mcrf4xx(body + extra, 0xFFFF))
         if self.signed:
             sg = mav.signing
-            self._stamp()
+            ts = int(self.clock() * 100_000.0)  # run-clock timestamp, see _stamp()
+            if ts > sg.timestamp:
+                sg.timestamp = ts
             frame += _SIGN_STAMP.pack(sg.link_id, sg.timestamp)[:7]
             frame += _sha256(sg.secret_key + frame).digest()[:6]
             sg.timestamp += 1
-        self._next_seq()
-        return frame
-
-    def _next_seq(self) -> None:
-        mav = self.mav
         mav.seq = (mav.seq + 1) & 0xFF
+        return frame
 
     def restart(self) -> None:
         """Forget received bytes and number frames from 0 again (a new session on the wire)."""

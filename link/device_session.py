@@ -23,8 +23,14 @@ _ID_STATUS = mavlink.MAVLINK_MSG_ID_PUMP_STATUS
 
 
 class DeviceSession(Session):
-    """The pump/patient device's end of the link (parameters: :class:`~link.session.Session`;
-    its ``clock`` is the device's sim time, set by its owner)."""
+    """The pump/patient device's end of the link.
+
+    Parameters
+    ----------
+    port, signing, clock, tlog, system_id, component_id
+        As for :class:`~link.session.Session`; ``clock`` is the device's sim time (s), set by its
+        owner (a :class:`~link.session.ManualClock`).
+    """
 
     ROLE = ROLE_DEVICE
     PEER_ROLE = ROLE_RUNTIME

@@ -34,12 +34,14 @@ _ID_STATUS = mavlink.MAVLINK_MSG_ID_PUMP_STATUS
 class RuntimeSession(Session):
     """The controller runtime's end of the link.
 
-    Parameters are those of :class:`~link.session.Session`, plus:
-
+    Parameters
+    ----------
+    port, signing, tlog, system_id, component_id
+        As for :class:`~link.session.Session`.
     clock
-        Default: a :class:`~link.session.ManualClock` at 0 that follows the sim time of the
-        received MAP samples (lockstep virtual time); pass another (e.g. the monotonic clock in
-        real-time mode) to use it instead.
+        The run clock. Default: a :class:`~link.session.ManualClock` at 0 that follows the sim
+        time of the received MAP samples (lockstep virtual time); pass another (e.g. the monotonic
+        clock in real-time mode) to use it instead.
     complete_ticks
         Lockstep peers only: deliver a MAP sample only together with its own tick's scheduling
         parameters and target; a sample whose companions were lost is dropped and left unanswered
