@@ -31,9 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from contracts.faults import FAULT_KINDS, FaultScorer, parse_faults  # noqa: E402
+from link import Hello, PtyPair, RuntimeSession, Signing  # noqa: E402
 from runtime.controller_loader import load_controller  # noqa: E402
-from runtime.link.endpoint import Hello, LinkEndpoint, Signing  # noqa: E402
-from runtime.link.transport import PtyPair  # noqa: E402
 from runtime.loop import Loop, sched_limits_of, supervisor_config_for  # noqa: E402
 from runtime.summary import print_fault_table  # noqa: E402
 from runtime.supervisor import Fault, Supervisor  # noqa: E402
@@ -87,7 +86,7 @@ def main() -> int:
             cmd += ["--fault", t]
         log = open(Path(tmp) / "device.log", "wb")  # noqa: SIM115
         proc = subprocess.Popen(cmd, cwd=ROOT, stdout=log, stderr=subprocess.STDOUT)
-        ep = LinkEndpoint(pair.leader_port(), "runtime", signing=signing)
+        ep = RuntimeSession(pair.leader_port(), signing=signing)
         recorder = None
         try:
             peer = ep.handshake(Hello(args.controller[:32]), timeout_s=60.0)

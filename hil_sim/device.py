@@ -1,6 +1,6 @@
 """``pressor device``: the simulated pump / patient monitor on a serial port.
 
-Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:`runtime.link`:
+Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:`link`:
 
 1. open the port (a pyserial URL or device path, e.g. the follower of the pty ``pressor sil``
    created, or one end of a ``socat`` pair), handshake: announce itself with a hello (scenario,
@@ -125,8 +125,15 @@ def _main(command: str, argv: Sequence[str]) -> int:
     world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate, faults)
     signing = _load_signing(args.signing_key)
 
-    from runtime.link import LinkClosedError, LinkEndpoint, LinkError, ManualClock, TlogWriter
-    from runtime.link.transport import fast_port, open_port
+    from link import (
+        DeviceSession,
+        LinkClosedError,
+        LinkError,
+        ManualClock,
+        TlogWriter,
+        fast_port,
+        open_port,
+    )
 
     try:
         port = fast_port(open_port(args.port))
@@ -139,7 +146,7 @@ def _main(command: str, argv: Sequence[str]) -> int:
         port = LinkFaultPort(port, link_faults, lambda: world.tick)
     tlog = TlogWriter(args.tlog) if args.tlog else None
     clock = ManualClock()
-    ep = LinkEndpoint(port, "device", signing=signing, clock=clock, tlog=tlog)
+    ep = DeviceSession(port, signing=signing, clock=clock, tlog=tlog)
     ok = False
     try:
         result = run_device(
@@ -192,7 +199,7 @@ def _make_world(scenario: str, seed: int, period_s: float, faults: tuple = ()) -
 def _load_signing(path: str | None) -> Any:
     if path is None:
         return None
-    from runtime.link import Signing
+    from link import Signing
 
     try:
         return Signing.from_file(path)
@@ -219,11 +226,11 @@ def run_device(
     Parameters
     ----------
     ep
-        A device-role :class:`runtime.link.LinkEndpoint` whose clock is ``clock``.
+        A :class:`link.DeviceSession` whose clock is ``clock``.
     world
         A fresh :class:`hil_sim.world.World`.
     clock
-        The endpoint's :class:`runtime.link.ManualClock`; set to the world's sim time (s).
+        The session's :class:`link.ManualClock`; set to the world's sim time (s).
     duration_s
         Simulated time (s); default the scenario's duration. ``round(duration / Ts)`` ticks.
     realtime
@@ -240,12 +247,12 @@ def run_device(
 
     Raises
     ------
-    runtime.link.LinkClosedError
+    link.LinkClosedError
         The runtime closed the link.
-    runtime.link.LinkError
+    link.LinkError
         The handshake failed.
     """
-    from runtime.link import (
+    from link import (
         LINK_LOCKSTEP,
         LINK_REALTIME,
         MODE_STOP,
@@ -269,7 +276,7 @@ def run_device(
     ep.handshake(hello, timeout_s=handshake_timeout_s)
     hb_every = max(1, int(round(1.0 / ts)))
     observe, apply_command, advance = world.observe, world.apply_command, world.advance
-    send_obs, wait_cmd, send_status = ep.send_observation, ep.wait_for_command, ep.send_pump_status
+    send_obs, wait_cmd, send_status = ep.send_tick, ep.wait_for_command, ep.send_pump_status
     t0 = time.monotonic()
     down = link_faults.link_down if link_faults is not None and link_faults.down else None
     for k in range(n):
@@ -281,9 +288,7 @@ def run_device(
             status = advance()  # no command arrives: the pump keeps its rate and its watchdog
             clock.t = world.sim_time_s
             if link_faults.link_down(k + 1) is None:  # leaves with the first tick after the gap
-                send_status(
-                    status.tick, status.delivered_ml_h, status.volume_ml, status.alarms, flush=False
-                )
+                send_status(status, flush=False)
             continue
         if k % hb_every == 0:
             ep.send_heartbeat(k, STATE_RUNNING, flush=False)
@@ -309,9 +314,7 @@ def run_device(
             apply_command(0.0 if cmd.mode == MODE_STOP else cmd.rate_ml_h)
         status = advance()
         clock.t = world.sim_time_s
-        send_status(
-            status.tick, status.delivered_ml_h, status.volume_ml, status.alarms, flush=False
-        )
+        send_status(status, flush=False)
     if realtime:
         _sleep_until(ep, t0 + n * ts)
     ep.send_heartbeat(n, STATE_FINISHED)
@@ -333,7 +336,7 @@ def _link_down_tick(ep: Any, world: Any, faults: Any, k: int, obs: Any, hello: A
         return False
     if faults.starts_at(k) is spec:
         if spec.kind == "link-disconnect" and hasattr(ep.port, "cut_next_write"):
-            ep.send_observation(obs, flush=False)
+            ep.send_tick(obs, flush=False)
             ep.port.cut_next_write = True
             ep.flush()
         else:

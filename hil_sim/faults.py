@@ -27,7 +27,7 @@ from typing import Any
 
 from contracts.faults import FaultSpec
 from hil_sim.sensor import Artifact
-from runtime.link.transport import PortWrapper
+from link import PortWrapper
 
 __all__ = ["LinkFaultPort", "LinkFaults", "WorldFaults", "split_frames"]
 
@@ -118,7 +118,7 @@ class WorldFaults:
 
 
 def split_frames(data: bytes) -> list[bytes]:
-    """Split a burst of well-formed MAVLink 2 frames (as the endpoint writes them)."""
+    """Split a burst of well-formed MAVLink 2 frames (as the session writes them)."""
     out = []
     i, n = 0, len(data)
     while i < n:

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -35,6 +35,7 @@ from hil_sim.patient import FrozenParams, Patient, PatientParams
 from hil_sim.pump import Pump
 from hil_sim.scenario import Scenario, load_scenario
 from hil_sim.sensor import Sensor
+from link.messages import PumpStatus, TickInputs
 
 _F32 = struct.Struct("<f")
 
@@ -45,61 +46,6 @@ def f32(x: float, _pack=_F32.pack, _unpack=_F32.unpack) -> float:
         return _unpack(_pack(x))[0]
     except OverflowError:
         return math.copysign(math.inf, x)
-
-
-@dataclass(frozen=True, slots=True)
-class Observation:
-    """What the device reports for tick k (all floats already float32-rounded).
-
-    Attributes
-    ----------
-    tick
-        Sample index k.
-    sim_time_s
-        k · sample period (s).
-    map_mmhg
-        Measured MAP (mmHg); NaN when the monitor has no valid value.
-    quality
-        Monitor quality flags (:data:`hil_sim.sensor.QUALITY_INVALID`).
-    target_mmhg
-        The clinician's MAP target (mmHg).
-    K, T_s, tau_s
-        Scheduling parameters: sensitivity (mmHg/(ml/h)), lag (s), delay (s).
-    sched_valid
-        Whether the scheduling parameters are valid.
-    """
-
-    tick: int
-    sim_time_s: float
-    map_mmhg: float
-    quality: int
-    target_mmhg: float
-    K: float
-    T_s: float
-    tau_s: float
-    sched_valid: bool
-
-
-@dataclass(frozen=True, slots=True)
-class PumpStatus:
-    """The pump after an advance to tick k (floats float32-rounded).
-
-    Attributes
-    ----------
-    tick
-        The tick the world has advanced to.
-    delivered_ml_h
-        Rate flowing now (ml/h).
-    volume_ml
-        Volume delivered since the start (ml).
-    alarms
-        Pump alarm bit flags (:mod:`hil_sim.pump`).
-    """
-
-    tick: int
-    delivered_ml_h: float
-    volume_ml: float
-    alarms: int
 
 
 class World:
@@ -159,7 +105,7 @@ class World:
         self.tick = 0
         self.last_command_ml_h = math.nan
         self.last_mean_rate_ml_h = 0.0
-        self._obs: Observation | None = None
+        self._obs: TickInputs | None = None
         self._true_map = math.nan
 
     # -- the pinned API ---------------------------------------------------------------------------
@@ -179,7 +125,7 @@ class World:
             return self._true_map
         return self.patient.map_mmhg + self.disturbance(self.sim_time_s)
 
-    def observe(self) -> Observation:
+    def observe(self) -> TickInputs:
         """The observation of the current tick (computed once per tick; repeated calls agree)."""
         obs = self._obs
         if obs is not None and obs.tick == self.tick:
@@ -191,7 +137,7 @@ class World:
         K, T_s, tau_s, valid = p.K, p.T_s, p.tau_s, True
         if self._sched_faults:
             K, T_s, tau_s, valid = self.faults.scheduling(self.tick, K, T_s, tau_s, valid)
-        obs = Observation(
+        obs = TickInputs(
             self.tick,
             f32(t),
             f32(reading),
@@ -201,6 +147,8 @@ class World:
             f32(T_s),
             f32(tau_s),
             valid,
+            self.tick,
+            self.tick,
         )
         self._obs = obs
         return obs

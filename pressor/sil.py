@@ -190,8 +190,8 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     A device that exits with a usage error turns into a :class:`UsageError` with its message;
     any other device output is printed on stderr when the run fails or the device exits non-zero.
     """
+    from link import PtyPair
     from runtime.config import load_signing
-    from runtime.link.transport import PtyPair
     from runtime.placement import lockstep_cpus
     from runtime.session import run_runtime
 

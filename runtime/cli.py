@@ -34,8 +34,8 @@ def _run_parser() -> UsageParser:
 
 
 def _main_run(argv: Sequence[str]) -> int:
+    from link import fast_port, open_port
     from runtime.config import load_signing
-    from runtime.link.transport import fast_port, open_port
     from runtime.session import run_runtime
     from runtime.summary import finish
 

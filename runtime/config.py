@@ -241,7 +241,7 @@ def load_controller(spec: str, period_s: float) -> Any:
 def load_signing(config: RunConfig, generate: bool) -> Any:
     """The link's :class:`Signing`: from ``--signing-key``, else a fresh key if ``generate``,
     else ``None`` (unsigned). A key file that cannot be read is a :class:`UsageError`."""
-    from runtime.link.endpoint import Signing
+    from link import Signing
 
     if config.signing_key is not None:
         try:

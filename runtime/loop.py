@@ -47,16 +47,16 @@ from typing import Any
 import numpy as np
 
 from contracts.controller import Controller
-from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
-from runtime.link.endpoint import (
+from link import (
     MODE_AUTO,
     MODE_SAFE,
     STATE_FINISHED,
     STATE_RUNNING,
     LinkClosedError,
-    LinkEndpoint,
+    RuntimeSession,
     TickInputs,
 )
+from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
 from runtime.recorder import CHANNEL_INDEX, CHANNELS, Recorder
 from runtime.supervisor import State, Supervisor, SupervisorConfig, fault_names
 from runtime.timing import TimingStats
@@ -193,7 +193,7 @@ def supervisor_config_for(
 
 
 class Loop:
-    """The runtime loop over a connected :class:`LinkEndpoint`.
+    """The runtime loop over a connected :class:`~link.RuntimeSession`.
 
     Parameters
     ----------
@@ -219,7 +219,7 @@ class Loop:
         self,
         controller: Controller,
         supervisor: Supervisor,
-        endpoint: LinkEndpoint,
+        endpoint: RuntimeSession,
         recorder: Recorder | None = None,
         heartbeat_every: int = 10,
         history_ticks: int | None = None,

@@ -61,9 +61,9 @@ def run_runtime(
     tuple
         The summary (:func:`runtime.summary.build_summary`) and the loop's result.
     """
+    from link import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkError, RuntimeSession
+    from link.tlog import TlogWriter
     from runtime.cpu_latency import CpuLatencyRequest
-    from runtime.link.endpoint import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkEndpoint, LinkError
-    from runtime.link.tlog import TlogWriter
     from runtime.loop import Loop, supervisor_config_for
     from runtime.supervisor import Supervisor
 
@@ -71,7 +71,7 @@ def run_runtime(
     controller = load_controller(config.controller, period_s)
     tlog = TlogWriter(config.tlog) if config.tlog is not None else None
     ok = False
-    ep = LinkEndpoint(port, "runtime", signing=signing, tlog=tlog)
+    ep = RuntimeSession(port, signing=signing, tlog=tlog)
     recorder = None
     try:
         mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
@@ -162,7 +162,7 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
     0 success; 1 the run completed but a check failed, or the device stalled or the link failed
     (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`).
     """
-    from runtime.link.endpoint import LinkError
+    from link import LinkError
     from runtime.loop import DeviceStalled
 
     def guarded(args: Sequence[str]) -> int:

@@ -14,7 +14,7 @@ os.environ["CI"] = "1"  # the rerun CLI writes analytics files otherwise
 import numpy as np  # noqa: E402
 from rerun.chunk import RrdReader  # noqa: E402
 
-from runtime.link import LinkClosedError, LinkEndpoint, PtyPair  # noqa: E402
+from link import LinkClosedError, PtyPair, RuntimeSession  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -66,7 +66,7 @@ def spawn_device(pair: PtyPair, *args: str) -> subprocess.Popen:
     return subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
 
 
-def poll_until_exit(proc: subprocess.Popen, ep: LinkEndpoint, timeout_s: float) -> None:
+def poll_until_exit(proc: subprocess.Popen, ep: RuntimeSession, timeout_s: float) -> None:
     """Keep reading the link until the device process exits, the link closes or time runs out."""
     deadline = time.monotonic() + timeout_s
     while proc.poll() is None and time.monotonic() < deadline:

@@ -13,13 +13,14 @@ from baselines.pi import PIController
 from hil_sim.closed_loop import simulate
 from hil_sim.device import main as device_main
 from hil_sim.world import World
-from runtime.link import (
+from link import (
     STATE_FAULT,
     STATE_FINISHED,
+    DeviceSession,
     Hello,
     LinkClosedError,
-    LinkEndpoint,
     PtyPair,
+    RuntimeSession,
     Signing,
     TlogWriter,
     read_tlog,
@@ -27,7 +28,7 @@ from runtime.link import (
 from tests.sil_helpers import poll_until_exit, spawn_device
 
 
-def _run_pi_runtime(ep: LinkEndpoint, max_ticks: int = 10**9) -> tuple[list, list]:
+def _run_pi_runtime(ep: RuntimeSession, max_ticks: int = 10**9) -> tuple[list, list]:
     """A minimal runtime: PI controller, one command per sample, until the device finishes."""
     peer = ep.handshake(Hello("pi"), timeout_s=30.0)
     ctrl = PIController(sample_period_s=peer.sample_period_s)
@@ -56,7 +57,7 @@ def _run_pi_runtime(ep: LinkEndpoint, max_ticks: int = 10**9) -> tuple[list, lis
     return maps, cmds
 
 
-def _finish(proc: subprocess.Popen, pair: PtyPair, ep: LinkEndpoint) -> int:
+def _finish(proc: subprocess.Popen, pair: PtyPair, ep: RuntimeSession) -> int:
     rc = proc.wait(timeout=30)
     pair.close_follower()
     ep.close()
@@ -66,7 +67,7 @@ def _finish(proc: subprocess.Popen, pair: PtyPair, ep: LinkEndpoint) -> int:
 def test_device_process_in_lockstep_over_a_pty_matches_the_in_process_simulation():
     seed, duration = 3, 300.0
     pair = PtyPair.open()
-    ep = LinkEndpoint(pair.leader_port(), "runtime")
+    ep = RuntimeSession(pair.leader_port())
     proc = spawn_device(
         pair, "--scenario", "paper-tracking", "--patient-seed", str(seed), "--duration", "300"
     )
@@ -95,7 +96,7 @@ def test_device_process_in_lockstep_over_a_pty_matches_the_in_process_simulation
 def _signed_device_run(tmp_path: Path, tag: str, key: Path) -> tuple[bytes, bytes]:
     pair = PtyPair.open()
     rlog = TlogWriter(tmp_path / f"{tag}-runtime.tlog")
-    ep = LinkEndpoint(pair.leader_port(), "runtime", signing=Signing.from_file(key), tlog=rlog)
+    ep = RuntimeSession(pair.leader_port(), signing=Signing.from_file(key), tlog=rlog)
     dlog = tmp_path / f"{tag}-device.tlog"
     proc = spawn_device(
         pair,
@@ -123,7 +124,7 @@ def test_signed_device_runs_are_byte_identical_and_every_frame_is_signed(tmp_pat
 def test_device_refuses_an_unsigned_runtime_and_gives_up_after_the_link_timeout(tmp_path):
     key = Signing.generate(seed=12).write(tmp_path / "key.hex")
     pair = PtyPair.open()
-    ep = LinkEndpoint(pair.leader_port(), "runtime")  # no key: its hello and commands are unsigned
+    ep = RuntimeSession(pair.leader_port())  # no key: its hello and commands are unsigned
     proc = spawn_device(
         pair,
         *("--scenario", "paper-tracking", "--duration", "5", "--signing-key", str(key)),
@@ -137,7 +138,7 @@ def test_device_refuses_an_unsigned_runtime_and_gives_up_after_the_link_timeout(
 
 def test_device_retransmits_a_tick_without_answer_then_reports_fault():
     pair = PtyPair.open()
-    ep = LinkEndpoint(pair.leader_port(), "runtime")
+    ep = RuntimeSession(pair.leader_port())
     proc = spawn_device(
         pair,
         *("--scenario", "paper-tracking", "--duration", "5"),
@@ -155,7 +156,7 @@ def test_device_retransmits_a_tick_without_answer_then_reports_fault():
 
 def test_device_exits_cleanly_when_the_runtime_closes_the_link():
     pair = PtyPair.open()
-    ep = LinkEndpoint(pair.leader_port(), "runtime")
+    ep = RuntimeSession(pair.leader_port())
     proc = spawn_device(pair, "--scenario", "paper-tracking", "--duration", "100")
     maps, _ = _run_pi_runtime(ep, max_ticks=10)
     assert len(maps) == 10
@@ -189,7 +190,7 @@ def test_an_unopenable_port_exits_2(tmp_path, capsys):
 
 def test_realtime_device_paces_ticks_on_the_wall_clock_and_holds_the_rate_without_commands():
     pair = PtyPair.open()
-    ep = LinkEndpoint(pair.leader_port(), "runtime")
+    ep = RuntimeSession(pair.leader_port())
     statuses: list = []
     ep.on_message = lambda m: statuses.append(m) if m.get_type() == "PUMP_STATUS" else None
     proc = spawn_device(pair, "--scenario", "paper-tracking", "--duration", "1.0", "--realtime")
@@ -213,15 +214,16 @@ def test_lockstep_over_a_corrupting_link_recovers_and_keeps_the_simulated_trajec
     import threading
 
     from hil_sim.device import run_device
-    from runtime.link import FaultyPort, ManualClock, loop_pair
+    from link import ManualClock
+    from tests.link_doubles import FaultyPort, loop_pair
 
     seed, duration = 4, 30.0
     a, b = loop_pair()
     dev_port = FaultyPort(a, corrupt_every=7, seed=1)  # bursts of 3-5 frames per write
     rt_port = FaultyPort(b, corrupt_every=11, seed=2)  # one command per write
     clock = ManualClock()
-    dev = LinkEndpoint(dev_port, "device", clock=clock, signing=Signing.generate(seed=9))
-    rt = LinkEndpoint(rt_port, "runtime", signing=Signing.generate(seed=9))
+    dev = DeviceSession(dev_port, clock=clock, signing=Signing.generate(seed=9))
+    rt = RuntimeSession(rt_port, signing=Signing.generate(seed=9))
     out: dict = {}
 
     def device() -> None:

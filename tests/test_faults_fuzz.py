@@ -15,10 +15,11 @@ from hypothesis import strategies as st
 
 from baselines.pi import PIController
 from hil_sim.world import World
-from runtime.link import LinkEndpoint, Signing, loop_pair
-from runtime.link.dialect import pressor as mavlink
+from link import DeviceSession, RuntimeSession, Signing
+from link.dialect import pressor as mavlink
 from runtime.loop import supervisor_config_for
 from runtime.supervisor import Supervisor
+from tests.link_doubles import loop_pair
 
 MAX = 120.0
 _f32 = st.one_of(
@@ -75,7 +76,7 @@ def streams(draw):
 def runtime_side(data: bytes) -> None:
     """Runtime parser + supervisor + controller: never raises, commands stay in [0, MAX]."""
     a, _ = loop_pair()
-    ep = LinkEndpoint(a, "runtime", complete_ticks=False)
+    ep = RuntimeSession(a, complete_ticks=False)
     third = len(data) // 3  # two reads, as a port would deliver them
     ep.feed(data[:third])
     ep.feed(data[third:])
@@ -102,7 +103,7 @@ _WORLD = World("paper-tracking", 1, 0.1)
 def device_side(data: bytes) -> None:
     """Device parser + pump: whatever command got through, delivery stays in [0, pump max]."""
     a, _ = loop_pair()
-    ep = LinkEndpoint(a, "device")
+    ep = DeviceSession(a)
     ep.feed(data)
     pump = _WORLD.pump
     for cmd in ep._commands:

@@ -13,7 +13,8 @@ from hil_sim.faults import LinkFaultPort, LinkFaults, split_frames
 from hil_sim.pump import ALARM_OCCLUSION, ALARM_RESERVOIR_EMPTY
 from hil_sim.sensor import QUALITY_WAVEFORM
 from hil_sim.world import World
-from runtime.link import LinkEndpoint, loop_pair
+from link import DeviceSession, RuntimeSession
+from tests.link_doubles import loop_pair, tick_inputs
 
 TS = 0.1
 
@@ -99,10 +100,10 @@ def _link_bytes(kind: str, seed: int) -> bytes:
     tick = [0]
     faults = LinkFaults([parse_fault(f"{kind}:0,100,seed={seed}")], TS)
     port = LinkFaultPort(a, faults, lambda: tick[0])
-    ep = LinkEndpoint(port, "device")
+    ep = DeviceSession(port)
     for k in range(20):
         tick[0] = k
-        ep.send_tick(k, k * TS, 80.0, 0, 90.0, 0.5, 150.0, 30.0, True)
+        ep.send_tick(tick_inputs(k, k * TS, 80.0, 0, 90.0, 0.5, 150.0, 30.0, True))
     out = b""
     while b.in_waiting:
         out += b.read(b.in_waiting)
@@ -112,9 +113,9 @@ def _link_bytes(kind: str, seed: int) -> bytes:
 def test_link_faults_are_seeded_repeatable_and_first_write_is_always_hit():
     clean = _link_bytes("link-flip", 0)  # window from tick 0: compare with a no-fault stream
     a, b = loop_pair()
-    ep = LinkEndpoint(a, "device")
+    ep = DeviceSession(a)
     for k in range(20):
-        ep.send_tick(k, k * TS, 80.0, 0, 90.0, 0.5, 150.0, 30.0, True)
+        ep.send_tick(tick_inputs(k, k * TS, 80.0, 0, 90.0, 0.5, 150.0, 30.0, True))
     reference = b""
     while b.in_waiting:
         reference += b.read(b.in_waiting)
@@ -130,7 +131,7 @@ def test_runtime_parser_survives_every_link_fault_and_accepts_only_good_frames()
     for kind in ("link-flip", "link-drop", "link-duplicate", "link-garbage"):
         stream = _link_bytes(kind, 5)
         a, b = loop_pair()
-        rt = LinkEndpoint(a, "runtime", complete_ticks=False)
+        rt = RuntimeSession(a, complete_ticks=False)
         rt.feed(stream)
         ticks = []
         while (x := rt.next_sample()) is not None:

@@ -10,7 +10,8 @@ import pytest
 from baselines.pi import PIController
 from contracts.metrics import step_metrics
 from hil_sim.closed_loop import simulate
-from hil_sim.world import Observation, PumpStatus, World, f32
+from hil_sim.world import World, f32
+from link import PumpStatus, TickInputs
 
 
 def _reference_nominal_pi(duration_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -63,7 +64,7 @@ def test_nominal_step_metrics_close_to_design_reference_figures():
 def test_world_emits_float32_values_and_pinned_types():
     world = World("paper-disturbance", patient_seed=3)
     obs = world.observe()
-    assert isinstance(obs, Observation)
+    assert isinstance(obs, TickInputs)
     for v in (obs.sim_time_s, obs.map_mmhg, obs.target_mmhg, obs.K, obs.T_s, obs.tau_s):
         assert v == f32(v)
     world.apply_command(10.123456789)

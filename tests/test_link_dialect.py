@@ -9,16 +9,15 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from runtime.link import generate
-from runtime.link.dialect import pressor as mavlink
-from runtime.link.endpoint import LinkEndpoint, Signing
-from runtime.link.transport import open_port
+from link import DeviceSession, RuntimeSession, Signing, generate, open_port
+from link.dialect import pressor as mavlink
+from tests.link_doubles import tick_inputs
 
 
 def test_committed_module_matches_what_mavgen_generates_from_the_xml(tmp_path):
     fresh = generate.generate(generate.XML_PATH, tmp_path / "pressor.py")
     assert fresh.read_text() == generate.MODULE_PATH.read_text(), (
-        "runtime/link/dialect/pressor.py is stale: run `python -m runtime.link.generate`"
+        "link/dialect/pressor.py is stale: run `python -m link.generate`"
     )
 
 
@@ -99,7 +98,7 @@ def test_every_message_round_trips_through_a_real_frame(msg_id, signed, variant)
     cls = mavlink.mavlink_map[msg_id]
     port = open_port("loop://")
     sign = Signing.generate(seed=7) if signed else None
-    ep = LinkEndpoint(port, "runtime", signing=sign)
+    ep = RuntimeSession(port, signing=sign)
     got = []
     ep.on_message = got.append
     args = _sample_args(cls, variant)
@@ -120,10 +119,10 @@ def test_every_message_round_trips_through_a_real_frame(msg_id, signed, variant)
 
 def test_nan_map_sample_survives_the_wire():
     port = open_port("loop://")
-    ep = LinkEndpoint(port, "device")
+    ep = DeviceSession(port)
     got = []
     ep.on_message = got.append
-    ep.send_tick(5, 0.5, math.nan, 3, 90.0, 0.5, 150.0, 30.0, False)
+    ep.send_tick(tick_inputs(5, 0.5, math.nan, 3, 90.0, 0.5, 150.0, 30.0, False))
     ep.poll(0.5)
     sample = [m for m in got if m.id == mavlink.MAVLINK_MSG_ID_MAP_SAMPLE][0]
     assert math.isnan(sample.map_mmhg) and sample.quality == 3 and sample.tick == 5

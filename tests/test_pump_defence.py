@@ -10,7 +10,7 @@ import subprocess
 from pathlib import Path
 
 from contracts.faults import PUMP_ALARM_OUT_OF_RANGE, PUMP_ALARM_WATCHDOG
-from runtime.link import Hello, LinkEndpoint, PtyPair
+from link import Hello, PtyPair, RuntimeSession
 from tests.sil_helpers import ROOT, poll_until_exit, spawn_device
 
 MAX_RATE_ML_H = 120.0
@@ -24,9 +24,9 @@ def _scenario(tmp_path: Path, watchdog_s: float) -> Path:
     return path
 
 
-def _start(*args: str) -> tuple[subprocess.Popen, PtyPair, LinkEndpoint, list]:
+def _start(*args: str) -> tuple[subprocess.Popen, PtyPair, RuntimeSession, list]:
     pair = PtyPair.open()
-    ep = LinkEndpoint(pair.leader_port(), "runtime")
+    ep = RuntimeSession(pair.leader_port())
     statuses: list = []
     ep.on_message = lambda m: statuses.append(m) if m.get_type() == "PUMP_STATUS" else None
     proc = spawn_device(pair, *args)
@@ -34,7 +34,7 @@ def _start(*args: str) -> tuple[subprocess.Popen, PtyPair, LinkEndpoint, list]:
     return proc, pair, ep, statuses
 
 
-def _drain(proc: subprocess.Popen, pair: PtyPair, ep: LinkEndpoint) -> None:
+def _drain(proc: subprocess.Popen, pair: PtyPair, ep: RuntimeSession) -> None:
     poll_until_exit(proc, ep, timeout_s=10.0)
     proc.wait(timeout=30)
     pair.close_follower()

@@ -23,7 +23,7 @@ def runtime_modules() -> list[str]:
     return sorted(names)
 
 
-def test_runtime_module_list_covers_loop_cli_and_link():
+def test_runtime_module_list_covers_loop_cli_supervisor_and_recorder():
     names = runtime_modules()
     for expected in ("runtime.loop", "runtime.cli", "runtime.supervisor", "runtime.recorder"):
         assert expected in names

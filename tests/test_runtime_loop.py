@@ -1,6 +1,6 @@
 """The loop over a real link: lockstep handshake and ticks over a pty, supervisor in the loop.
 
-The device side here is a small first-order plant driven by a device-side ``LinkEndpoint`` in a
+The device side here is a small first-order plant driven by a ``DeviceSession`` in a
 thread (the real device process is exercised by tests/test_runtime_sil.py).
 """
 
@@ -16,17 +16,19 @@ import pytest
 os.environ.setdefault("CI", "1")
 
 from baselines.pi import PIController  # noqa: E402
-from runtime.link.endpoint import (  # noqa: E402
+from link import (  # noqa: E402
     LINK_LOCKSTEP,
     STATE_FINISHED,
+    DeviceSession,
     Hello,
     LinkClosedError,
-    LinkEndpoint,
+    PtyPair,  # noqa: E402
+    RuntimeSession,
     Signing,
 )
-from runtime.link.transport import PtyPair, loop_pair  # noqa: E402
 from runtime.loop import DeviceStalled, Loop, supervisor_config_for  # noqa: E402
 from runtime.supervisor import State, Supervisor  # noqa: E402
+from tests.link_doubles import loop_pair, tick_inputs  # noqa: E402
 
 TS = 0.1
 
@@ -37,7 +39,7 @@ def f32(x: float) -> float:
 
 def plant_device(port, n_ticks, nan_ticks=(), signing=None, stall_at=None, log=None):
     """Lockstep device: MAP' = (-(MAP-60) + 0.5·u)/30, target 80; sends tick k, waits for command k."""
-    ep = LinkEndpoint(port, "device", signing=signing)
+    ep = DeviceSession(port, signing=signing)
     ep.handshake(Hello("test-plant", 7, TS, 0.0, n_ticks, LINK_LOCKSTEP))
     x = 60.0
     for k in range(n_ticks):
@@ -45,7 +47,7 @@ def plant_device(port, n_ticks, nan_ticks=(), signing=None, stall_at=None, log=N
             return
         ep.clock.t = k * TS
         meas = math.nan if k in nan_ticks else x
-        ep.send_tick(k, k * TS, f32(meas), 0, 80.0, 0.55, 150.0, 40.0, True)
+        ep.send_tick(tick_inputs(k, k * TS, f32(meas), 0, 80.0, 0.55, 150.0, 40.0, True))
         cmd = ep.wait_for_command(k, 5.0)
         assert cmd is not None, f"no command for tick {k}"
         if log is not None:
@@ -72,7 +74,7 @@ def reference(n_ticks, nan_ticks=()):
 def run_runtime(port, signing=None, stall_timeout_s=10.0, device=None, **sup_overrides):
     """Run the loop; with ``device`` (its thread) wait for it before closing the port, so a
     closing leader never discards the last command before the device has read it."""
-    ep = LinkEndpoint(port, "runtime", signing=signing)
+    ep = RuntimeSession(port, signing=signing)
     peer = ep.handshake(Hello("pi", link_mode=LINK_LOCKSTEP), timeout_s=10.0)
     pi = PIController(sample_period_s=peer.sample_period_s)
     sup = Supervisor(supervisor_config_for(pi, peer.sensor_noise_mmhg, **sup_overrides))
@@ -165,11 +167,11 @@ def realtime_device(port, n_send, stop):
     """Real-time device on the wall clock: a sample every 0.1 s for ``n_send`` ticks, then silence."""
     import time
 
-    ep = LinkEndpoint(port, "device")
+    ep = DeviceSession(port)
     ep.handshake(Hello("rt-plant", 1, TS, 0.0, 0, LINK_LOCKSTEP))
     t0 = time.perf_counter()
     for k in range(n_send):
-        ep.send_tick(k, k * TS, 70.0, 0, 80.0, 0.55, 150.0, 40.0, True)
+        ep.send_tick(tick_inputs(k, k * TS, 70.0, 0, 80.0, 0.55, 150.0, 40.0, True))
         while time.perf_counter() < t0 + (k + 1) * TS:
             ep.poll(0.01)
     while not stop.is_set():  # keep the port open but send nothing: a silent, not a closed, link
@@ -181,7 +183,7 @@ def test_realtime_watchdogs_flag_stale_sample_then_link_loss_and_failsafe():
     stop = threading.Event()
     th = threading.Thread(target=realtime_device, args=(b, 10, stop), daemon=True)
     th.start()
-    ep = LinkEndpoint(a, "runtime")
+    ep = RuntimeSession(a)
     ep.handshake(Hello("pi"), timeout_s=10.0)
     pi = PIController(sample_period_s=TS)
     sup = Supervisor(supervisor_config_for(pi, 0.0, safe_rate_ml_h=0.0))

@@ -1,19 +1,9 @@
-"""Byte transports for the MAVLink link: pyserial URLs and device paths, pty pairs, ``loop://``.
+"""Ports over tty descriptors: pty pairs and the hot path of a posix serial port.
 
-Everything here returns a *port*: an object with the small subset of the pyserial API the
-endpoint uses (``write(bytes)``, ``read(n)``, ``in_waiting``, ``close()``, ``timeout``). Real
-pyserial objects satisfy it; :class:`FdPort` wraps the leader side of a pty (which has no device
-path pyserial could open) with the same subset.
-
-Facts this module relies on (DESIGN.md §5):
+Facts this module relies on:
 
 - A pty in cooked mode mangles bytes (CR/LF translation, echo, ^C...); both sides are put in raw
   mode at once, before anyone writes.
-- pyserial flushes its input when it opens a port, so a peer's bytes sent earlier are lost: the
-  endpoints handshake after both ends are open (repeated hellos, see ``endpoint.handshake``).
-- ``port.read(port.in_waiting or 1)`` returns as soon as anything is there; ``read(n)`` would wait
-  the whole timeout for n bytes. Changing ``timeout`` on an open posix port reconfigures the tty
-  (tcsetattr) - it is set once, at open.
 - A pty ignores the baud rate; link timing, if needed, is modelled in virtual time.
 
 Hot path (lockstep runs trade a frame burst per tick each way, so per-read overhead is the run's
@@ -22,9 +12,9 @@ port - offer ``read_some(timeout_s)``, which returns everything available in one
 follower (a real tty device) it waits for the first byte with the tty's own timer (``VMIN=0,
 VTIME=1``: one blocking syscall, no ``select``, no ``FIONREAD`` ioctl) when the wait is at least
 :data:`VTIME_S`; shorter waits, and the pty leader (whose termios calls act on the follower, so it
-has no timer of its own), use one ``select`` first. Measured on the 2-vCPU development VM: a ``FIONREAD`` right after the peer's write
-waits for the kernel's flip-buffer work (~100 µs), a blocking read does not; pyserial's ``read``
-adds ~20 µs of Python per call.
+has no timer of its own), use one ``select`` first. Measured on the 2-vCPU development VM: a
+``FIONREAD`` right after the peer's write waits for the kernel's flip-buffer work (~100 µs), a
+blocking read does not; pyserial's ``read`` adds ~20 µs of Python per call.
 """
 
 from __future__ import annotations
@@ -37,13 +27,11 @@ import struct
 import termios
 import tty
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import serial
 
-#: Default read timeout (s): how long one blocking ``read`` may wait for the first byte. Wait loops
-#: in the endpoint re-check their own deadline after each read, so this only bounds overshoot.
-DEFAULT_READ_TIMEOUT_S = 0.01
+from link.ports import DEFAULT_READ_TIMEOUT_S, PortWrapper, open_port
 
 #: The tty read timer of fast ports (s): ``VTIME`` is in tenths of a second; a ``read_some`` wait
 #: at least this long is one blocking ``os.read`` that returns on the first byte or after this.
@@ -51,68 +39,6 @@ VTIME_S = 0.1
 
 #: Bytes taken per ``os.read`` (a lockstep tick is ~200 B; a stall may leave a few kB queued).
 READ_CHUNK = 1 << 16
-
-
-class Port(Protocol):
-    """The subset of a pyserial port the link uses."""
-
-    timeout: float | None
-
-    def write(self, data: bytes, /) -> int | None: ...
-
-    def read(self, size: int = 1, /) -> bytes: ...
-
-    @property
-    def in_waiting(self) -> int: ...
-
-    def close(self) -> None: ...
-
-
-class PortWrapper:
-    """A port around another one (``self._port``): timeout, reads and close are the inner port's;
-    subclasses change the write path."""
-
-    _port: Any
-
-    @property
-    def timeout(self) -> float | None:
-        return self._port.timeout
-
-    @property
-    def in_waiting(self) -> int:
-        return self._port.in_waiting
-
-    def read(self, size: int = 1) -> bytes:
-        return self._port.read(size)
-
-    def close(self) -> None:
-        self._port.close()
-
-
-def open_port(spec: str, *, timeout_s: float = DEFAULT_READ_TIMEOUT_S, baudrate: int = 115200):
-    """Open a pyserial port from a URL (``loop://``, ``socket://host:port``, ...) or a device path.
-
-    Parameters
-    ----------
-    spec
-        A pyserial URL or a device path (``/dev/ttyUSB0``, ``/dev/pts/7``).
-    timeout_s
-        Read timeout (s) for one blocking read; set once here.
-    baudrate
-        Line rate for real UARTs (ignored by ptys and URLs without a line).
-
-    Returns
-    -------
-    serial.SerialBase
-        The open port.
-
-    Raises
-    ------
-    serial.SerialException
-        When the port cannot be opened (the message names ``spec``).
-    """
-    port = serial.serial_for_url(spec, baudrate=baudrate, timeout=timeout_s, write_timeout=None)
-    return port
 
 
 class FdPort:
@@ -356,91 +282,3 @@ class PtyPair:
         if not self._leader_taken:
             self._leader_taken = True
             os.close(self.leader_fd)
-
-
-class CrossedPort(PortWrapper):
-    """One end of an in-process link built from two pyserial ``loop://`` ports.
-
-    A ``loop://`` port reads back what is written to it; crossing two of them gives a full-duplex
-    pair: this end writes into the peer's loop and reads its own; closing it closes its own loop
-    (the peer then reads nothing more).
-    """
-
-    def __init__(self, own, peer) -> None:
-        self._port = own
-        self._peer = peer
-
-    def write(self, data: bytes) -> int | None:
-        return self._peer.write(data)
-
-    def flush(self) -> None:
-        """Nothing buffered on this side."""
-
-
-def loop_pair(
-    timeout_s: float = DEFAULT_READ_TIMEOUT_S, buffer_size: int = 1 << 16
-) -> tuple[CrossedPort, CrossedPort]:
-    """Two connected in-process ports over pyserial ``loop://`` (for tests and ``--link loop``).
-
-    Parameters
-    ----------
-    timeout_s
-        Read timeout (s) of both ends.
-    buffer_size
-        Bytes each direction holds before a writer blocks (use a reader thread per end).
-    """
-    a = serial.serial_for_url("loop://", timeout=timeout_s, do_not_open=True)
-    b = serial.serial_for_url("loop://", timeout=timeout_s, do_not_open=True)
-    for p in (a, b):
-        p.buffer_size = buffer_size
-        p.open()
-    return CrossedPort(a, b), CrossedPort(b, a)
-
-
-class FaultyPort(PortWrapper):
-    """Fault injection on the write path of a port: corrupt or drop whole writes deterministically.
-
-    Every ``corrupt_every``-th write has one byte flipped (position chosen by a seeded generator,
-    XOR with a non-zero mask); every ``drop_every``-th write is discarded. Writes are frames or
-    bursts of frames as the endpoint emits them, so "every N frames" holds when the endpoint flushes
-    per frame. 0 disables a fault.
-
-    Parameters
-    ----------
-    port
-        The port to wrap.
-    corrupt_every, drop_every
-        Period (writes) of each fault; 0 = never.
-    seed
-        Seed of the byte-position generator.
-    """
-
-    def __init__(self, port, *, corrupt_every: int = 0, drop_every: int = 0, seed: int = 0) -> None:
-        import random
-
-        if corrupt_every < 0 or drop_every < 0:
-            raise ValueError("corrupt_every and drop_every must be >= 0")
-        self._port = port
-        self.corrupt_every = corrupt_every
-        self.drop_every = drop_every
-        self._rng = random.Random(seed)
-        self.writes = 0
-        self.corrupted = 0
-        self.dropped = 0
-
-    def write(self, data: bytes) -> int | None:
-        self.writes += 1
-        if self.drop_every and self.writes % self.drop_every == 0:
-            self.dropped += 1
-            return len(data)
-        if self.corrupt_every and self.writes % self.corrupt_every == 0 and data:
-            buf = bytearray(data)
-            buf[self._rng.randrange(len(buf))] ^= self._rng.randrange(1, 256)
-            self.corrupted += 1
-            data = bytes(buf)
-        return self._port.write(data)
-
-    def flush(self) -> None:
-        flush = getattr(self._port, "flush", None)
-        if flush is not None:
-            flush()

@@ -7,12 +7,12 @@ mode), not the Unix wall clock, so two runs with the same seed give byte-identic
 print dates will show 1970.
 
 Only frames that decoded (sent by this end, or received and accepted) are logged: a corrupted
-frame in a .tlog would desynchronise readers that trust the timestamp/frame layout. The endpoint's
+frame in a .tlog would desynchronise readers that trust the timestamp/frame layout. The session's
 counters record what was rejected.
 
 To read a log with pymavlink's own tools, make the dialect known to them first::
 
-    from runtime.link.tlog import register_dialect_with_mavutil
+    from link.tlog import register_dialect_with_mavutil
     mavutil = register_dialect_with_mavutil()
     log = mavutil.mavlink_connection("run.tlog", dialect="pressor")
 """
@@ -107,7 +107,7 @@ def register_dialect_with_mavutil() -> ModuleType:
     """
     import sys
 
-    from runtime.link.dialect import pressor
+    from link.dialect import pressor
 
     os.environ["MAVLINK20"] = "1"
     sys.modules["pymavlink.dialects.v20.pressor"] = pressor

@@ -1,0 +1,155 @@
+"""The typed messages of the pressor link, one per frame (or frame bundle), used by both ends.
+
+The device (``hil_sim``) builds them and the runtime receives them: the same types on both sides,
+so a value never changes shape between the world, the wire and the loop. Floats are float32 on the
+wire (sim time is double); the world rounds to float32 before it builds a message, so a message
+reads back from the wire exactly as it was sent.
+
+The constants are the dialect's enums (``link/pressor.xml``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from link.dialect import pressor as mavlink
+
+#: MAVLink role values (enum PRESSOR_ROLE), also the default system ids.
+ROLE_RUNTIME = mavlink.PRESSOR_ROLE_RUNTIME
+ROLE_DEVICE = mavlink.PRESSOR_ROLE_DEVICE
+
+#: Command modes (enum PRESSOR_COMMAND_MODE).
+MODE_AUTO = mavlink.PRESSOR_COMMAND_MODE_AUTO
+MODE_SAFE = mavlink.PRESSOR_COMMAND_MODE_SAFE
+MODE_STOP = mavlink.PRESSOR_COMMAND_MODE_STOP
+MODE_MANUAL = mavlink.PRESSOR_COMMAND_MODE_MANUAL
+
+#: Node states (enum PRESSOR_STATE).
+STATE_BOOT = mavlink.PRESSOR_STATE_BOOT
+STATE_RUNNING = mavlink.PRESSOR_STATE_RUNNING
+STATE_FINISHED = mavlink.PRESSOR_STATE_FINISHED
+STATE_FAULT = mavlink.PRESSOR_STATE_FAULT
+
+#: Link modes (enum PRESSOR_LINK_MODE).
+LINK_LOCKSTEP = mavlink.PRESSOR_LINK_MODE_LOCKSTEP
+LINK_REALTIME = mavlink.PRESSOR_LINK_MODE_REALTIME
+
+#: Dialect semantics version both ends must announce.
+PROTOCOL_VERSION = 1
+
+
+@dataclass(frozen=True, slots=True)
+class Hello:
+    """The announcement each end sends on connect (frame PRESSOR_HELLO).
+
+    Attributes
+    ----------
+    name
+        Scenario name (device) or controller name (runtime), at most 32 ASCII characters.
+    patient_seed
+        Seed of the simulated patient (device; 0 from the runtime).
+    sample_period_s
+        Sample period (s).
+    sensor_noise_mmhg
+        MAP sensor noise standard deviation (mmHg).
+    n_ticks
+        Ticks the device will send (0 = unbounded).
+    link_mode
+        ``LINK_LOCKSTEP`` or ``LINK_REALTIME``.
+    role
+        Sender's role (``ROLE_RUNTIME`` / ``ROLE_DEVICE``); filled in on receipt.
+    protocol_version
+        Dialect semantics version of the sender.
+    """
+
+    name: str
+    patient_seed: int = 0
+    sample_period_s: float = 0.1
+    sensor_noise_mmhg: float = 0.0
+    n_ticks: int = 0
+    link_mode: int = LINK_LOCKSTEP
+    role: int = 0
+    protocol_version: int = PROTOCOL_VERSION
+
+
+class Heartbeat(NamedTuple):
+    """A peer's heartbeat (frame PRESSOR_HEARTBEAT): last tick handled and its ``STATE_*``.
+
+    A named tuple: it also reads as the plain ``(tick, state)`` pair.
+    """
+
+    tick: int
+    state: int
+
+
+@dataclass(frozen=True, slots=True)
+class TickInputs:
+    """Everything the device reports for tick k (frames SCHEDULING_PARAMS, MAP_TARGET and
+    MAP_SAMPLE, sent in that order): what the world observes and what the runtime's loop consumes.
+
+    Attributes
+    ----------
+    tick
+        Tick k of the MAP sample.
+    sim_time_s
+        Device time of the sample: k · sample period (s).
+    map_mmhg
+        Measured MAP (mmHg); NaN when the monitor has no valid value.
+    quality
+        Monitor quality flags (0 = good; :data:`contracts.faults` sensor-quality bits).
+    target_mmhg
+        The clinician's MAP target (mmHg); NaN on the runtime side if none received yet.
+    K, T_s, tau_s
+        Scheduling parameters: sensitivity (mmHg/(ml/h)), lag (s), delay (s); NaN on the runtime
+        side if none received yet.
+    sched_valid
+        The device marked the scheduling parameters valid.
+    sched_tick, target_tick
+        Tick the scheduling parameters / target belong to (-1 if none): equal to ``tick`` as the
+        world builds it; on the runtime side they differ when those frames were lost and the
+        values are stale ones from an earlier tick.
+    """
+
+    tick: int
+    sim_time_s: float
+    map_mmhg: float
+    quality: int
+    target_mmhg: float
+    K: float
+    T_s: float
+    tau_s: float
+    sched_valid: bool
+    sched_tick: int
+    target_tick: int
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """An infusion command (frame INFUSION_COMMAND): tick answered, rate (ml/h), ``MODE_*``."""
+
+    tick: int
+    rate_ml_h: float
+    mode: int
+
+
+@dataclass(frozen=True, slots=True)
+class PumpStatus:
+    """The pump after an advance to tick k (frame PUMP_STATUS).
+
+    Attributes
+    ----------
+    tick
+        The tick the world has advanced to.
+    delivered_ml_h
+        Rate flowing now (ml/h).
+    volume_ml
+        Volume delivered since the start (ml).
+    alarms
+        Pump alarm bit flags (:mod:`contracts.faults`).
+    """
+
+    tick: int
+    delivered_ml_h: float
+    volume_ml: float
+    alarms: int
