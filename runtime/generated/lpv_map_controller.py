@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  ceddb4037f0f1ab83aa568112b7086b347b0bb64e2f2824d85b846137276c810
-Content hash:     55a548cca37c4a80f490f7ff6aafa0d6b396461cc6a307f5faf7dd20ec952dac
+Content hash:     4c93b6d5e47ea16d43147a4ec25ede62c280afb074770c3fc3d6d8b997880b47
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -47,9 +47,9 @@ Error budgets (asserted by tests/test_codegen_*.py):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '1f6c4204c76c9c2dcbf8e3e0af0a1b820ee20ee330d6dcfd8c89bfb78d70b33e'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '8426ee543eea07afed55ad081f572088778482fe9dc515717e31337472f43eaa'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'ceddb4037f0f1ab83aa568112b7086b347b0bb64e2f2824d85b846137276c810'
-CONTENT_HASH = '55a548cca37c4a80f490f7ff6aafa0d6b396461cc6a307f5faf7dd20ec952dac'
+CONTENT_HASH = '4c93b6d5e47ea16d43147a4ec25ede62c280afb074770c3fc3d6d8b997880b47'
 TABLES_SHA256 = 'cb12f22719a954ceba680f370d4758eee69eafac4984829574fc6c30d1d8c32e'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
