@@ -1,11 +1,9 @@
 """Constant state transforms of an analysis LMI (congruences: feasibility and gamma unchanged).
 
-The default is a diagonal power-of-two balancing of the centre system; a known Lyapunov matrix
-gives a whitening (:func:`whitening_transform`) and whitening followed by balancing
-(:func:`conditioning_transform`), the transform ``pressor verify`` uses. Measured on the shipped
-designs: the diagonal balancing alone gave a bogus "optimal" (re-check margin -64 on 27 points,
-gamma 265 on 125), whitening alone a Clarabel NumericalError, whitening then balancing a clean
-certificate.
+The default is a diagonal power-of-two balancing of the centre system (:func:`transform_of`); a
+known Lyapunov matrix gives a whitening (:func:`whitening_transform`) and whitening followed by
+balancing (:func:`conditioning_transform`, with the measurements that chose it), the transform
+``pressor verify`` uses.
 """
 
 from __future__ import annotations
