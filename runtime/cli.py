@@ -305,8 +305,10 @@ def build_summary(
 ):
     """The JSON-ready summary of a run: identity, §3 metrics, supervisor and link account, and
     the scored fault list when faults were scheduled. ``events`` are the scenario's disturbance
-    events (``contracts.metrics.run_metrics``); ``None`` when not known (``pressor run``)."""
+    events (``contracts.metrics.run_metrics``); ``None`` when not known (``pressor run``). The
+    rate metrics (drug total, max rate, time at limit) use the rate the pump reported delivering."""
     from contracts.metrics import run_metrics
+    from runtime.trajectory import held_delivered_ml_h
 
     tr = result.trajectory
     t, y, r, u = tr["sim_time_s"], tr["map_mmhg"], tr["target_mmhg"], tr["command_ml_h"]
@@ -318,7 +320,7 @@ def build_summary(
             t,
             y,
             r,
-            u,
+            held_delivered_ml_h(tr["delivered_ml_h"]),
             max_rate_ml_h,
             step_time_s=step_t,
             step_mmhg=step_d,
@@ -486,8 +488,9 @@ def run_runtime(
     from runtime.cpu_latency import CpuLatencyRequest
     from runtime.link.endpoint import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkEndpoint, LinkError
     from runtime.link.tlog import TlogWriter
-    from runtime.loop import Loop, supervisor_config_for
+    from runtime.loop import Loop
     from runtime.supervisor import Supervisor
+    from runtime.supervisor_config import supervisor_config_for
 
     period_s = 1.0 / args.rate
     controller = _load_controller(args.controller, period_s)
@@ -555,8 +558,7 @@ def run_runtime(
         report = None
         if specs:
             from contracts.faults import fault_report
-            from runtime.loop import sched_limits_of
-            from runtime.supervisor import FAULT_BITS
+            from runtime.supervisor_config import FAULT_BITS, sched_limits_of
 
             report = fault_report(
                 specs,
@@ -788,7 +790,7 @@ def _main_run(argv: list[str]) -> int:
 
 def _main_faults(argv: list[str]) -> int:
     from contracts.faults import catalogue_rows
-    from runtime.supervisor import SupervisorConfig, detection_bounds
+    from runtime.supervisor_config import SupervisorConfig, detection_bounds
 
     p = _Parser(prog="pressor faults", description="fault kinds the supervisor detects")
     p.add_argument("--rate", type=_positive("--rate", 1000.0), default=DEFAULT_RATE_HZ)

@@ -25,8 +25,9 @@ from runtime.link.endpoint import (  # noqa: E402
     Signing,
 )
 from runtime.link.transport import PtyPair, loop_pair  # noqa: E402
-from runtime.loop import DeviceStalled, Loop, supervisor_config_for  # noqa: E402
-from runtime.supervisor import State, Supervisor  # noqa: E402
+from runtime.loop import DeviceStalled, Loop  # noqa: E402
+from runtime.supervisor import Supervisor  # noqa: E402
+from runtime.supervisor_config import State, supervisor_config_for  # noqa: E402
 
 TS = 0.1
 
