@@ -19,8 +19,7 @@ the same supervisor states, tick for tick.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 from contracts.controller import Controller
 from runtime.link.endpoint import TickInputs
@@ -35,9 +34,8 @@ class PumpReading(Protocol):
     alarms: int
 
 
-@dataclass(frozen=True, slots=True)
-class LinkHealth:
-    """The link's state at a tick, as the supervisor's watchdogs need it.
+class LinkHealth(NamedTuple):
+    """The link's state at a tick, as the supervisor's watchdogs need it (immutable).
 
     Attributes
     ----------
@@ -58,9 +56,8 @@ class LinkHealth:
 CLEAN_LINK = LinkHealth(sample_age_s=0.0, link_silence_s=0.0, link_errors=0)
 
 
-@dataclass(frozen=True, slots=True)
-class TickRecord:
-    """One tick of the closed loop.
+class TickRecord(NamedTuple):
+    """One tick of the closed loop (immutable; a named tuple for the per-tick cost).
 
     Attributes
     ----------
@@ -124,21 +121,21 @@ class ClosedLoopCore:
         fresh = pump is not None and pump.tick == inp.tick
         delivered = pump.delivered_ml_h if fresh else math.nan  # type: ignore[union-attr]
         sup = self.supervisor
-        run = sup.assess(
+        run = sup.assess(  # positional: this is the per-tick path (fields in declaration order)
             SupervisorInput(
-                now_s=now_s,
-                map_mmhg=inp.map_mmhg,
-                quality=inp.quality,
-                K=inp.K,
-                T_s=inp.T_s,
-                tau_s=inp.tau_s,
-                sched_valid=inp.sched_valid,
-                sample_age_s=link.sample_age_s,
-                link_silence_s=link.link_silence_s,
-                target_mmhg=inp.target_mmhg,
-                link_errors=link.link_errors,
-                pump_delivered_ml_h=delivered,
-                pump_alarms=pump.alarms if fresh else 0,  # type: ignore[union-attr]
+                now_s,
+                inp.map_mmhg,
+                inp.quality,
+                inp.K,
+                inp.T_s,
+                inp.tau_s,
+                inp.sched_valid,
+                link.sample_age_s,
+                link.link_silence_s,
+                inp.target_mmhg,
+                link.link_errors,
+                delivered,
+                pump.alarms if fresh else 0,  # type: ignore[union-attr]
             )
         )
         raw = (

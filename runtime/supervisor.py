@@ -36,7 +36,7 @@ Deviation from the paper: the paper has no supervisor; this is the IEC 60601-1-1
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from contracts.faults import PUMP_ALARM_WATCHDOG
 from runtime.supervisor_config import (
@@ -53,9 +53,11 @@ from runtime.supervisor_config import (
 _EPS_S = 1e-9
 
 
-@dataclass(frozen=True, slots=True)
-class SupervisorInput:
+class SupervisorInput(NamedTuple):
     """Everything the supervisor checks at one tick (every field required: nothing fails open).
+
+    Immutable; a named tuple rather than a frozen dataclass because one is built every tick of
+    every trial patient (~0.3 µs against ~1.4 µs).
 
     Attributes
     ----------
@@ -92,9 +94,8 @@ class SupervisorInput:
     pump_alarms: int
 
 
-@dataclass(frozen=True, slots=True)
-class SupervisorOutput:
-    """What the supervisor decided at one tick.
+class SupervisorOutput(NamedTuple):
+    """What the supervisor decided at one tick (immutable; a named tuple for the per-tick cost).
 
     Attributes
     ----------
@@ -206,27 +207,34 @@ class Supervisor:
         return faults
 
     def _check_sched(self, now_s: float, K: float, T_s: float, tau_s: float, valid: bool) -> int:
+        # written out for the three parameters: this runs every tick of every trial patient
         cfg = self.config
         if not (cfg.sched_required or cfg.sched_box or cfg.sched_rate_bounds):
             return 0
-        rho = (K, T_s, tau_s)
-        if not valid or not all(math.isfinite(v) for v in rho):
+        isfinite = math.isfinite
+        if not (valid and isfinite(K) and isfinite(T_s) and isfinite(tau_s)):
             self._prev_sched = None
             return Fault.SCHED_INVALID
         faults = 0
-        if cfg.sched_box is not None and any(
-            not lo <= v <= hi for v, (lo, hi) in zip(rho, cfg.sched_box, strict=True)
-        ):
-            faults |= Fault.SCHED_OUT_OF_BOX
-        if cfg.sched_rate_bounds is not None and self._prev_sched is not None:
+        box = cfg.sched_box
+        if box is not None:
+            (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
+            if not (k_lo <= K <= k_hi and t_lo <= T_s <= t_hi and d_lo <= tau_s <= d_hi):
+                faults |= Fault.SCHED_OUT_OF_BOX
+        prev = self._prev_sched
+        if cfg.sched_rate_bounds is not None and prev is not None:
             dt = now_s - self._prev_sched_s
-            if dt > 0.0 and any(
-                abs(v - p) > cfg.sched_rate_tolerance * b * dt
-                for v, p, b in zip(rho, self._prev_sched, cfg.sched_rate_bounds, strict=True)
-            ):
-                faults |= Fault.SCHED_RATE
-        if self._prev_sched is None or now_s > self._prev_sched_s:
-            self._prev_sched = rho
+            if dt > 0.0:
+                tol = cfg.sched_rate_tolerance
+                b_k, b_t, b_d = cfg.sched_rate_bounds
+                if (
+                    abs(K - prev[0]) > tol * b_k * dt
+                    or abs(T_s - prev[1]) > tol * b_t * dt
+                    or abs(tau_s - prev[2]) > tol * b_d * dt
+                ):
+                    faults |= Fault.SCHED_RATE
+        if prev is None or now_s > self._prev_sched_s:
+            self._prev_sched = (K, T_s, tau_s)
             self._prev_sched_s = now_s
         return faults
 
