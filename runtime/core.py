@@ -118,8 +118,10 @@ class ClosedLoopCore:
         link
             The link's health at this tick.
         """
-        fresh = pump is not None and pump.tick == inp.tick
-        delivered = pump.delivered_ml_h if fresh else math.nan  # type: ignore[union-attr]
+        if pump is not None and pump.tick == inp.tick:
+            delivered, alarms = pump.delivered_ml_h, pump.alarms
+        else:
+            delivered, alarms = math.nan, 0
         sup = self.supervisor
         run = sup.assess(  # positional: this is the per-tick path (fields in declaration order)
             SupervisorInput(
@@ -135,7 +137,7 @@ class ClosedLoopCore:
                 inp.target_mmhg,
                 link.link_errors,
                 delivered,
-                pump.alarms if fresh else 0,  # type: ignore[union-attr]
+                alarms,
             )
         )
         raw = (

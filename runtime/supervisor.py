@@ -358,6 +358,7 @@ class Supervisor:
             for name in fault_names(rising):
                 self.detections[name] = self.detections.get(name, 0) + 1
         self._prev_faults = faults
+        alarm = state == State.HOLD or state == State.FAILSAFE or bool(faults & ALARM_FAULTS)
         return SupervisorOutput(
-            self._run_controller, state, faults, rising, transition, command, self.alarm
+            self._run_controller, state, faults, rising, transition, command, alarm
         )
