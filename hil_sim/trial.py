@@ -1,8 +1,7 @@
 """In-silico cohort trial: one controller, one scenario, n seeded patients, §3 metrics.
 
 Each patient runs in the pure in-process simulator (:func:`hil_sim.closed_loop.simulate`) with a
-fresh controller from :func:`runtime.controller_loader.load_controller` under the runtime's safety
-supervisor: the closed-loop core (:mod:`runtime.core`) that ``pressor sil`` runs. Patients are independent,
+fresh controller from :func:`runtime.controller_loader.load_controller`. Patients are independent,
 so ``jobs`` worker processes change only the wall time: results are collected in patient order and
 every output file is byte-identical whatever ``jobs`` is.
 
