@@ -33,9 +33,14 @@ sys.path.insert(0, str(ROOT))
 from contracts.faults import FAULT_KINDS, FaultScorer, parse_faults  # noqa: E402
 from link import Hello, PtyPair, RuntimeSession, Signing  # noqa: E402
 from runtime.controller_loader import load_controller  # noqa: E402
-from runtime.loop import Loop, sched_limits_of, supervisor_config_for  # noqa: E402
+from runtime.loop import Loop  # noqa: E402
 from runtime.summary import print_fault_table  # noqa: E402
-from runtime.supervisor import Fault, Supervisor  # noqa: E402
+from runtime.supervisor import Supervisor  # noqa: E402
+from runtime.supervisor_config import (  # noqa: E402
+    Fault,
+    sched_limits_of,
+    supervisor_config_for,
+)
 
 
 def rss_mb(pid: int | str = "self") -> float:

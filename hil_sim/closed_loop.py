@@ -1,8 +1,10 @@
-"""Pure in-process closed-loop simulator: World + controller, ticked in lockstep, no I/O.
+"""Pure in-process closed-loop simulator: World + the runtime's closed-loop core, no I/O.
 
-Per tick k: ``obs = world.observe()`` → ``u = controller.step(obs.map_mmhg, obs.target_mmhg, obs.K,
-obs.T_s, obs.tau_s)`` → ``world.apply_command(u)`` → ``world.advance()``: exactly the order the
-serial SIL uses, on the same float32-rounded numbers, so both give the same trajectory.
+Per tick k: ``obs = world.observe()`` → ``rec = core.step(obs, ...)`` (the runtime's
+:class:`~runtime.core.ClosedLoopCore`: the supervisor, then the controller if allowed, given the
+pump status of tick k and a clean link) → ``world.apply_command(rec.command_ml_h)`` →
+``world.advance()``: exactly the order and the core the serial SIL uses, on the same
+float32-rounded numbers, so both give the same trajectory and the same supervisor states.
 """
 
 from __future__ import annotations
@@ -13,6 +15,9 @@ import numpy as np
 
 from contracts.controller import Controller
 from hil_sim.world import World
+from runtime.core import CLEAN_LINK, ClosedLoopCore
+from runtime.supervisor import Supervisor
+from runtime.supervisor_config import supervisor_config_for
 
 
 @dataclass(frozen=True)
@@ -30,13 +35,17 @@ class Trajectory:
     target_mmhg
         Target (mmHg).
     command_ml_h
-        Controller command (ml/h, float32 as received).
+        Command sent to the pump (ml/h, float32 as received).
     rate_ml_h
         Mean delivered rate over the tick (ml/h).
+    delivered_ml_h
+        Delivered rate (ml/h) the pump reports after the tick (the next tick's pump status).
     K, T_s, tau_s
         True scheduling parameters at the tick.
     quality, alarms
         Monitor quality flags at the tick; pump alarms after the tick.
+    state, faults
+        Supervisor state (:class:`runtime.supervisor_config.State`) and fault bits at the tick.
     """
 
     t_s: np.ndarray
@@ -45,15 +54,23 @@ class Trajectory:
     target_mmhg: np.ndarray
     command_ml_h: np.ndarray
     rate_ml_h: np.ndarray
+    delivered_ml_h: np.ndarray
     K: np.ndarray
     T_s: np.ndarray
     tau_s: np.ndarray
     quality: np.ndarray
     alarms: np.ndarray
+    state: np.ndarray
+    faults: np.ndarray
 
 
-def simulate(world: World, controller: Controller, duration_s: float | None = None) -> Trajectory:
-    """Run ``world`` under ``controller`` for ``duration_s`` (default: the scenario's duration).
+def simulate(
+    world: World,
+    controller: Controller,
+    duration_s: float | None = None,
+    supervisor: Supervisor | None = None,
+) -> Trajectory:
+    """Run ``world`` under ``controller`` and its supervisor for ``duration_s``.
 
     Parameters
     ----------
@@ -62,7 +79,10 @@ def simulate(world: World, controller: Controller, duration_s: float | None = No
     controller
         Any :class:`~contracts.controller.Controller` at the world's sample period.
     duration_s
-        Simulated time (s); ``round(duration / Ts)`` ticks.
+        Simulated time (s); ``round(duration / Ts)`` ticks; default the scenario's duration.
+    supervisor
+        A fresh supervisor; default the one ``pressor sil`` builds for this controller and the
+        scenario's sensor (:func:`runtime.supervisor_config.supervisor_config_for`).
 
     Returns
     -------
@@ -74,18 +94,25 @@ def simulate(world: World, controller: Controller, duration_s: float | None = No
             f"controller sample_period_s={controller.sample_period_s} s differs from the world's {ts} s"
         )
     duration = world.scenario.duration_s if duration_s is None else duration_s
+    if supervisor is None:
+        noise = world.scenario.sensor.noise_std_mmhg
+        supervisor = Supervisor(supervisor_config_for(controller, noise))
+    core = ClosedLoopCore(controller, supervisor)
     n = int(round(duration / ts))
-    cols = {name: [0.0] * n for name in ("map", "true", "target", "cmd", "rate", "K", "T", "tau")}
-    quality = [0] * n
-    alarms = [0] * n
-    m, tr, tg, cm, rt = cols["map"], cols["true"], cols["target"], cols["cmd"], cols["rate"]
+    names = ("map", "true", "target", "cmd", "rate", "delivered", "K", "T", "tau")
+    cols = {name: [0.0] * n for name in names}
+    ints = {name: [0] * n for name in ("quality", "alarms", "state", "faults")}
+    m, tr, tg, cm = cols["map"], cols["true"], cols["target"], cols["cmd"]
+    rt, dl = cols["rate"], cols["delivered"]
     kk, tt, ta = cols["K"], cols["T"], cols["tau"]
+    quality, alarms, state, faults = ints["quality"], ints["alarms"], ints["state"], ints["faults"]
     observe, apply_command, advance = world.observe, world.apply_command, world.advance
-    step = controller.step
+    step = core.step
+    status = None  # no pump status before the first advance
     for k in range(n):
         obs = observe()
-        u = step(obs.map_mmhg, obs.target_mmhg, obs.K, obs.T_s, obs.tau_s)
-        apply_command(u)
+        rec = step(obs, obs.sim_time_s, status, CLEAN_LINK)
+        apply_command(rec.command_ml_h)
         m[k] = obs.map_mmhg
         tr[k] = world.true_map_mmhg()
         tg[k] = obs.target_mmhg
@@ -93,9 +120,12 @@ def simulate(world: World, controller: Controller, duration_s: float | None = No
         tt[k] = obs.T_s
         ta[k] = obs.tau_s
         quality[k] = obs.quality
+        state[k] = rec.supervisor.state
+        faults[k] = rec.supervisor.faults
         status = advance()
         cm[k] = world.last_command_ml_h
         rt[k] = world.last_mean_rate_ml_h
+        dl[k] = status.delivered_ml_h
         alarms[k] = status.alarms
     t = np.arange(n, dtype=float) * ts
     arr = {k: np.asarray(v, dtype=float) for k, v in cols.items()}
@@ -106,9 +136,9 @@ def simulate(world: World, controller: Controller, duration_s: float | None = No
         target_mmhg=arr["target"],
         command_ml_h=arr["cmd"],
         rate_ml_h=arr["rate"],
+        delivered_ml_h=arr["delivered"],
         K=arr["K"],
         T_s=arr["T"],
         tau_s=arr["tau"],
-        quality=np.asarray(quality, dtype=np.int64),
-        alarms=np.asarray(alarms, dtype=np.int64),
+        **{name: np.asarray(v, dtype=np.int64) for name, v in ints.items()},
     )

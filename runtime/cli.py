@@ -59,7 +59,7 @@ def _main_run(argv: Sequence[str]) -> int:
 
 def _main_faults(argv: Sequence[str]) -> int:
     from contracts.faults import catalogue_rows
-    from runtime.supervisor import SupervisorConfig, detection_bounds
+    from runtime.supervisor_config import SupervisorConfig, detection_bounds
 
     p = UsageParser(prog="pressor faults", description="fault kinds the supervisor detects")
     p.add_argument("--rate", type=positive("--rate", MAX_RATE_HZ), default=DEFAULT_RATE_HZ)

@@ -1,8 +1,10 @@
 """The fixed-rate loop: the shell around the controller step (PX4 module style).
 
-Each tick: read the newest MAP sample, target and scheduling parameters from the link, pass them
-through the :class:`~runtime.supervisor.Supervisor`, step the controller (a pure call), send the
-command, record. The loop counts its own timing (:class:`~runtime.timing.TimingStats`).
+Each tick: read the newest MAP sample, target and scheduling parameters from the link, hand them
+with the pump status and the link's health to the closed-loop core (:mod:`runtime.core`: the
+supervisor and the controller, the same core the in-process trial runs), send the command, record.
+The loop itself holds only link I/O, timing and recording; it counts its own timing
+(:class:`~runtime.timing.TimingStats`).
 
 Two ways to keep time (injected clocks, :mod:`runtime.clock`):
 
@@ -40,11 +42,8 @@ fixed 20 µs piece of Python measured 40-54 µs when run once every 100 ms.
 from __future__ import annotations
 
 import math
-import sys
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
-
-import numpy as np
 
 from contracts.controller import Controller
 from link import (
@@ -57,139 +56,18 @@ from link import (
     TickInputs,
 )
 from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
-from runtime.recorder import CHANNEL_INDEX, CHANNELS, Recorder
-from runtime.supervisor import State, Supervisor, SupervisorConfig, fault_names
+from runtime.core import ClosedLoopCore, LinkHealth, TickRecord
+from runtime.recorder import Recorder
+from runtime.supervisor import Supervisor
+from runtime.supervisor_config import State, fault_names
 from runtime.timing import TimingStats
+from runtime.trajectory import LoopResult, Trajectory
 
 _NAN = math.nan
 
 
 class DeviceStalled(RuntimeError):
     """The device sent no sample for ``stall_timeout_s`` (wall clock) in lockstep."""
-
-
-@dataclass
-class Trajectory:
-    """Per-tick signals of a run, in preallocated arrays that grow by doubling.
-
-    Attributes (after :meth:`arrays`): ``tick``, ``sim_time_s``, ``map_mmhg`` (as measured),
-    ``target_mmhg``, ``command_ml_h`` (sent to the pump), ``controller_ml_h`` (the controller's raw
-    output, NaN when it did not run), ``faults`` (supervisor fault bits), ``state``.
-    """
-
-    capacity: int = 1 << 14
-    n: int = 0
-    ring: bool = False
-    data: np.ndarray = field(init=False)
-
-    FIELDS = (
-        "tick",
-        "sim_time_s",
-        "map_mmhg",
-        "target_mmhg",
-        "command_ml_h",
-        "controller_ml_h",
-        "faults",
-    )
-
-    def __post_init__(self) -> None:
-        shape = (self.capacity, len(self.FIELDS) + 1)
-        # a ring is written to once up front, so its pages count in RSS from the start
-        self.data = np.full(shape, np.nan) if self.ring else np.empty(shape, dtype=np.float64)
-
-    def append(self, row: tuple[float, ...]) -> None:
-        """Store one tick (FIELDS order, then the state); a ring keeps the last ``capacity``."""
-        cap = self.data.shape[0]
-        if self.n >= cap:
-            if self.ring:
-                self.data[self.n % cap] = row
-                self.n += 1
-                return
-            self.data = np.concatenate([self.data, np.empty_like(self.data)])
-        self.data[self.n] = row
-        self.n += 1
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Copies of the recorded columns by name (a ring: the last ``capacity`` ticks)."""
-        if self.ring and self.n > self.capacity:
-            i = self.n % self.capacity
-            d = np.concatenate([self.data[i:], self.data[:i]])
-        else:
-            d = self.data[: self.n]
-        out = {name: d[:, i].copy() for i, name in enumerate(self.FIELDS)}
-        out["tick"] = out["tick"].astype(np.int64)
-        out["faults"] = out["faults"].astype(np.int64)
-        out["state"] = d[:, -1].astype(np.int64)
-        return out
-
-
-@dataclass
-class LoopResult:
-    """What a run produced: the trajectory, timing, link counters and supervisor account."""
-
-    trajectory: dict[str, np.ndarray]
-    timing: dict[str, float | int]
-    link: dict[str, int]
-    detections: dict[str, int]
-    ticks_in_state: dict[str, int]
-    transitions: list[dict[str, Any]]
-    commands_out_of_range: int
-    ended: str
-    wall_s: float = 0.0
-    #: where the run executed (filled by the CLI: CPU wake-up latency request, CPU pinning)
-    host: dict[str, Any] = field(default_factory=dict)
-
-
-def sched_limits_of(controller: Controller) -> tuple[Any, Any]:
-    """The design box and rate bounds a generated controller declares, else ``(None, None)``.
-
-    Looked up on the instance, then on its module: ``GRID_LO``/``GRID_HI`` (3 values: K, T s,
-    τ s) and ``RATE_BOUNDS`` (3 values per s) as ``codegen`` emits them. The PI baseline
-    declares none (it is not scheduled), so its scheduling inputs are not checked.
-    """
-    module = sys.modules.get(type(controller).__module__)
-    sources = (controller, module)
-
-    def find(name: str) -> Any:
-        for src in sources:
-            if src is not None and hasattr(src, name):
-                return getattr(src, name)
-        return None
-
-    lo, hi, rate = find("GRID_LO"), find("GRID_HI"), find("RATE_BOUNDS")
-    box = None
-    if lo is not None and hi is not None and len(lo) == 3 and len(hi) == 3:
-        box = tuple((float(a), float(b)) for a, b in zip(lo, hi, strict=True))
-    rates = tuple(float(r) for r in rate) if rate is not None and len(rate) == 3 else None
-    return box, rates
-
-
-def supervisor_config_for(
-    controller: Controller, sensor_noise_mmhg: float, **overrides: Any
-) -> SupervisorConfig:
-    """A supervisor configuration matched to ``controller`` and the device's sensor.
-
-    Sample period and pump limit come from the controller; the scheduling box and rates from
-    :func:`sched_limits_of`; the flatline check is on only when the sensor is noisy (a noise-free
-    simulated sensor legitimately repeats values). Leaving the design box or rate bounds is
-    advisory by default (``sched_action="advise"``): the generated controller clamps and
-    rate-limits ρ itself (DESIGN.md §2), and the simulated patients routinely leave the envelope
-    (paper-tracking seed 3: K down to 0.18 < 0.25; τ moving ~1 s/s against a 0.1 s/s bound), so
-    holding would stop LPV control of most patients. ``overrides`` replace any field.
-    """
-    box, rates = sched_limits_of(controller)
-    cfg: dict[str, Any] = {
-        "sample_period_s": float(controller.sample_period_s),
-        "max_rate_ml_h": float(controller.max_rate_ml_h),
-        "flatline_enabled": sensor_noise_mmhg > 0.0,
-        "sched_required": box is not None,
-        "sched_box": box,
-        "sched_rate_bounds": rates,
-        "sched_action": "advise",
-        "stale_after_s": 3.5 * float(controller.sample_period_s),
-    }
-    cfg.update(overrides)
-    return SupervisorConfig(**cfg)
 
 
 class Loop:
@@ -225,7 +103,7 @@ class Loop:
         history_ticks: int | None = None,
         on_tick: Any = None,
     ) -> None:
-        self.controller = controller
+        self.core = ClosedLoopCore(controller, supervisor)
         self.sup = supervisor
         self.ep = endpoint
         self.recorder = recorder
@@ -239,7 +117,6 @@ class Loop:
         self.ticks_in_state = [0] * len(State)
         self.transitions: list[dict[str, Any]] = []
         self.out_of_range = 0
-        self._row = [_NAN] * len(CHANNELS)
         self._count = 0
         self._wall0 = perf_counter_s()
         self._link_errors_seen = 0
@@ -262,49 +139,41 @@ class Loop:
         ``send=False`` (a silent tick of a stalled link, see the module docstring) skips the
         link and records MAP as NaN (no sample arrived for this tick).
         """
-        sup = self.sup
-        errors = self._link_errors()
-        pump = self.ep.pump_status
-        fresh = send and pump is not None and pump.tick == inp.tick
-        run = sup.assess(
-            now_s,
-            inp.map_mmhg,
-            inp.quality,
-            inp.K,
-            inp.T_s,
-            inp.tau_s,
-            inp.sched_valid,
-            sample_age_s,
-            link_silence_s,
-            inp.target_mmhg,
-            errors,
-            pump.delivered_ml_h if fresh else _NAN,
-            pump.alarms if fresh else 0,
+        ep = self.ep
+        pump = ep.pump_status if send else None
+        if pump is not None and pump.tick == inp.tick:
+            self.trajectory.delivered(pump.tick, pump.delivered_ml_h)
+        rec = self.core.step(
+            inp, now_s, pump, LinkHealth(sample_age_s, link_silence_s, self._link_errors())
         )
-        raw = (
-            self.controller.step(inp.map_mmhg, inp.target_mmhg, inp.K, inp.T_s, inp.tau_s)
-            if run
-            else None
-        )
-        command = sup.finalize(raw)
-        state = sup.state
+        out = rec.supervisor
+        command, state = out.command_ml_h, out.state
         if send:
             if self._count % self.heartbeat_every == 0:
-                self.ep.send_heartbeat(inp.tick, STATE_RUNNING, flush=False)
-            self.ep.send_command(inp.tick, command, MODE_AUTO if state == State.AUTO else MODE_SAFE)
+                ep.send_heartbeat(inp.tick, STATE_RUNNING, flush=False)
+            ep.send_command(inp.tick, command, MODE_AUTO if state == State.AUTO else MODE_SAFE)
         exec_s = perf_counter_s() - release_wall_s
         self._count += 1
         self.timing.record(exec_s, lateness_s, skipped)
-        if not 0.0 <= command <= sup.config.max_rate_ml_h:  # by construction never; counted anyway
+        if not 0.0 <= command <= self.sup.config.max_rate_ml_h:  # by construction never; counted
             self.out_of_range += 1
         self.ticks_in_state[state] += 1
-        raw_f = _NAN if raw is None else raw
         map_rec = inp.map_mmhg if send else _NAN
-        self.trajectory.append(
-            (inp.tick, inp.sim_time_s, map_rec, inp.target_mmhg, command, raw_f, sup.faults, state)
-        )
-        if sup.transition is not None:
-            old, new, faults = sup.transition
+        self.trajectory.append(rec, map_rec)
+        self._log_events(rec)
+        if self.recorder is not None:
+            c = ep.counters
+            bad = c.bad_crc + c.refused_unsigned + c.refused_bad_signature + c.resyncs
+            self.recorder.record_tick(rec, map_rec, ep.pump_status, bad, exec_s, lateness_s)
+        if self.on_tick is not None:
+            self.on_tick(inp.tick, int(state), int(out.faults), command)
+        return command
+
+    def _log_events(self, rec: TickRecord) -> None:
+        """Keep state transitions; log them and rising advisory faults to the recording."""
+        inp, out = rec.inputs, rec.supervisor
+        if out.transition is not None:
+            old, new, faults = out.transition
             event = {
                 "tick": inp.tick,
                 "sim_time_s": inp.sim_time_s,
@@ -320,18 +189,13 @@ class Loop:
                     f"{old.name} -> {new.name}: {', '.join(event['faults']) or 'inputs good'}",
                     warn=new in (State.HOLD, State.FAILSAFE),
                 )
-        elif sup.new_faults and self.recorder is not None:  # advisory faults: log, no transition
+        elif out.new_faults and self.recorder is not None:  # advisory faults: no transition
             self.recorder.event(
                 inp.tick,
                 inp.sim_time_s,
-                f"{state.name}: advisory {', '.join(fault_names(sup.new_faults))}",
+                f"{out.state.name}: advisory {', '.join(fault_names(out.new_faults))}",
                 warn=False,
             )
-        if self.recorder is not None:
-            self._record(inp, raw_f, command, state, exec_s, lateness_s, map_rec)
-        if self.on_tick is not None:
-            self.on_tick(inp.tick, int(state), int(sup.faults), command)
-        return command
 
     def _link_errors(self) -> int:
         """Frames the link layer discarded since the previous tick."""
@@ -348,40 +212,6 @@ class Loop:
         new = total - self._link_errors_seen
         self._link_errors_seen = total
         return new
-
-    def _record(
-        self,
-        inp: TickInputs,
-        raw: float,
-        command: float,
-        state: State,
-        exec_s: float,
-        lateness_s: float,
-        map_mmhg: float,
-    ) -> None:
-        row = self._row
-        ix = CHANNEL_INDEX
-        pump = self.ep.pump_status
-        c = self.ep.counters
-        row[ix["/patient/map_mmhg"]] = map_mmhg
-        row[ix["/controller/target_mmhg"]] = inp.target_mmhg
-        row[ix["/controller/command_ml_h"]] = raw
-        row[ix["/pump/command_ml_h"]] = command
-        row[ix["/pump/rate_ml_h"]] = pump.delivered_ml_h if pump is not None else _NAN
-        row[ix["/pump/volume_ml"]] = pump.volume_ml if pump is not None else _NAN
-        row[ix["/schedule/K"]] = inp.K
-        row[ix["/schedule/T_s"]] = inp.T_s
-        row[ix["/schedule/tau_s"]] = inp.tau_s
-        row[ix["/loop/exec_us"]] = exec_s * 1e6
-        row[ix["/loop/lateness_us"]] = lateness_s * 1e6
-        row[ix["/safety/state"]] = float(state)
-        row[ix["/safety/faults"]] = float(self.sup.faults)
-        row[ix["/safety/alarm"]] = 1.0 if self.sup.alarm else 0.0
-        row[ix["/link/bad_frames"]] = float(
-            c.bad_crc + c.refused_unsigned + c.refused_bad_signature + c.resyncs
-        )
-        assert self.recorder is not None
-        self.recorder.record(inp.tick, inp.sim_time_s, row)
 
     # ------------------------------------------------------------------ drivers
     def run_lockstep(self, n_ticks: int, stall_timeout_s: float = 10.0) -> LoopResult:
@@ -429,8 +259,32 @@ class Loop:
             self.tick(inp, clock.now_s(), release)
             last = inp
             answered += 1
+        if last is not None and ended != "device closed the link":
+            self._await_final_status(last.tick + 1, stall_timeout_s)
         self._finish()
         return self.result(ended)
+
+    def _await_final_status(self, status_tick: int, timeout_s: float) -> None:
+        """Read the pump status that follows the last answered tick (the rate delivered over it).
+
+        Waits until it arrives, the device finishes or closes the link, or ``timeout_s`` (s, wall).
+        """
+        ep = self.ep
+        waited, poll_s = 0.0, min(0.05, timeout_s)
+        try:
+            while waited < timeout_s:
+                status = ep.pump_status
+                if status is not None and status.tick >= status_tick:
+                    break
+                if ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FINISHED:
+                    break
+                ep.poll(poll_s)
+                waited += poll_s
+        except LinkClosedError:
+            pass
+        status = ep.pump_status
+        if status is not None and status.tick == status_tick:
+            self.trajectory.delivered(status.tick, status.delivered_ml_h)
 
     def _silent_ticks(self, last: TickInputs, resume_tick: int, clock: VirtualClock) -> None:
         """Run ticks last.tick+1 … resume_tick−1 (nothing arrived) on the virtual clock."""
@@ -508,9 +362,7 @@ class Loop:
 
     def _finish(self) -> None:
         try:
-            tr = self.trajectory
-            last = int(tr.data[(tr.n - 1) % tr.data.shape[0], 0]) if tr.n else 0
-            self.ep.send_heartbeat(last, STATE_FINISHED)
+            self.ep.send_heartbeat(self.trajectory.last_tick() or 0, STATE_FINISHED)
         except LinkClosedError:
             pass
 

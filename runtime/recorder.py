@@ -1,6 +1,8 @@
 """The rerun recorder: every loop signal to an ``.rrd`` file, batched off the hot path.
 
-Per tick the loop calls :meth:`Recorder.record` with one float per channel; the row goes into a
+Per tick the loop calls :meth:`Recorder.record_tick` with the closed-loop core's
+:class:`~runtime.core.TickRecord` (or :meth:`Recorder.record` with one float per channel); the
+row goes into a
 preallocated ``float64`` array (``chunk_ticks`` rows). When the array is full — and at
 :meth:`Recorder.close` — each channel is sent as one column with ``send_columns`` on two timelines,
 ``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call and
@@ -24,12 +26,14 @@ import math
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
 from contracts.files import AtomicFile
+from runtime.core import TickRecord
 
 #: (entity path, legend label) — the column order of :meth:`Recorder.record`.
 CHANNELS: tuple[tuple[str, str], ...] = (
@@ -118,6 +122,7 @@ class Recorder:
         self._times = np.zeros(chunk_ticks, dtype=np.float64)
         self._values = np.full((chunk_ticks, len(CHANNELS)), math.nan, dtype=np.float64)
         self._n = 0
+        self._row = [math.nan] * len(CHANNELS)
         self.rows_written = 0
         self._closed = False
 
@@ -130,6 +135,50 @@ class Recorder:
         self._n = n + 1
         if self._n == self._ticks.shape[0]:
             self.flush()
+
+    def record_tick(
+        self,
+        rec: TickRecord,
+        map_mmhg: float,
+        pump: Any,
+        bad_frames: int,
+        exec_s: float,
+        lateness_s: float,
+    ) -> None:
+        """Buffer one tick of the loop.
+
+        Parameters
+        ----------
+        rec
+            The closed-loop core's record of the tick.
+        map_mmhg
+            MAP as recorded (mmHg; NaN on a silent tick).
+        pump
+            Newest pump status (``delivered_ml_h``, ``volume_ml``), ``None`` before the first.
+        bad_frames
+            Frames the link refused so far (bad CRC, refused signatures, resyncs).
+        exec_s, lateness_s
+            The tick's execution time and release lateness (s).
+        """
+        inp, out = rec.inputs, rec.supervisor
+        row = self._row
+        ix = CHANNEL_INDEX
+        row[ix["/patient/map_mmhg"]] = map_mmhg
+        row[ix["/controller/target_mmhg"]] = inp.target_mmhg
+        row[ix["/controller/command_ml_h"]] = rec.controller_ml_h
+        row[ix["/pump/command_ml_h"]] = out.command_ml_h
+        row[ix["/pump/rate_ml_h"]] = pump.delivered_ml_h if pump is not None else math.nan
+        row[ix["/pump/volume_ml"]] = pump.volume_ml if pump is not None else math.nan
+        row[ix["/schedule/K"]] = inp.K
+        row[ix["/schedule/T_s"]] = inp.T_s
+        row[ix["/schedule/tau_s"]] = inp.tau_s
+        row[ix["/loop/exec_us"]] = exec_s * 1e6
+        row[ix["/loop/lateness_us"]] = lateness_s * 1e6
+        row[ix["/safety/state"]] = float(out.state)
+        row[ix["/safety/faults"]] = float(out.faults)
+        row[ix["/safety/alarm"]] = 1.0 if out.alarm else 0.0
+        row[ix["/link/bad_frames"]] = float(bad_frames)
+        self.record(inp.tick, inp.sim_time_s, row)
 
     def event(self, tick: int, sim_time_s: float, text: str, warn: bool = True) -> None:
         """Log a supervisor transition or alarm to ``/safety/events`` (rare; not batched)."""

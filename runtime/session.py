@@ -64,8 +64,9 @@ def run_runtime(
     from link import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkError, RuntimeSession
     from link.tlog import TlogWriter
     from runtime.cpu_latency import CpuLatencyRequest
-    from runtime.loop import Loop, supervisor_config_for
+    from runtime.loop import Loop
     from runtime.supervisor import Supervisor
+    from runtime.supervisor_config import supervisor_config_for
 
     period_s = config.period_s
     controller = load_controller(config.controller, period_s)
@@ -128,8 +129,7 @@ def run_runtime(
         report = None
         if config.fault_specs:
             from contracts.faults import fault_report
-            from runtime.loop import sched_limits_of
-            from runtime.supervisor import FAULT_BITS
+            from runtime.supervisor_config import FAULT_BITS, sched_limits_of
 
             report = fault_report(
                 list(config.fault_specs),

@@ -32,6 +32,7 @@ import numpy as np
 from contracts.files import write_atomic
 from contracts.metrics import run_metrics
 from runtime.config import RunConfig
+from runtime.trajectory import held_delivered_ml_h
 
 
 def _step_of(
@@ -78,7 +79,8 @@ def build_summary(
     Parameters
     ----------
     result
-        The loop's :class:`runtime.loop.LoopResult`.
+        The loop's :class:`runtime.trajectory.LoopResult`. The rate metrics (drug total, max
+        rate, time at limit) use the rate the pump reported delivering (its ``delivered_ml_h``).
     identity
         Run identity (controller, scenario, seed, rate, ...), copied into the summary.
     max_rate_ml_h
@@ -101,7 +103,7 @@ def build_summary(
             t,
             y,
             r,
-            u,
+            held_delivered_ml_h(tr["delivered_ml_h"]),
             max_rate_ml_h,
             step_time_s=step_t,
             step_mmhg=step_d,

@@ -17,8 +17,9 @@ from baselines.pi import PIController
 from hil_sim.world import World
 from link import DeviceSession, RuntimeSession, Signing
 from link.dialect import pressor as mavlink
-from runtime.loop import supervisor_config_for
+from runtime.core import CLEAN_LINK, ClosedLoopCore
 from runtime.supervisor import Supervisor
+from runtime.supervisor_config import supervisor_config_for
 from tests.link_doubles import loop_pair
 
 MAX = 120.0
@@ -74,26 +75,18 @@ def streams(draw):
 
 
 def runtime_side(data: bytes) -> None:
-    """Runtime parser + supervisor + controller: never raises, commands stay in [0, MAX]."""
+    """Runtime parser + closed-loop core: never raises, commands stay in [0, MAX]."""
     a, _ = loop_pair()
     ep = RuntimeSession(a, complete_ticks=False)
     third = len(data) // 3  # two reads, as a port would deliver them
     ep.feed(data[:third])
     ep.feed(data[third:])
     pi = PIController(0.1)
-    sup = Supervisor(supervisor_config_for(pi, 0.0))
+    core = ClosedLoopCore(pi, Supervisor(supervisor_config_for(pi, 0.0)))
     t = 0.0
     while (x := ep.next_sample()) is not None:
         t += 0.1
-        pump = ep.pump_status
-        run = sup.assess(
-            t, x.map_mmhg, x.quality, x.K, x.T_s, x.tau_s, x.sched_valid, 0.0, 0.0,
-            x.target_mmhg, 0,
-            pump.delivered_ml_h if pump is not None else math.nan,
-            pump.alarms if pump is not None else 0,
-        )  # fmt: skip
-        raw = pi.step(x.map_mmhg, x.target_mmhg, x.K, x.T_s, x.tau_s) if run else None
-        u = sup.finalize(raw)
+        u = core.step(x, t, ep.pump_status, CLEAN_LINK).command_ml_h
         assert 0.0 <= u <= MAX and math.isfinite(u)
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from runtime.supervisor import Fault, State, SupervisorConfig
+from runtime.supervisor_config import Fault, State, SupervisorConfig
 from tests.sil_helpers import rrd_columns
 
 REENTRY_STEP = SupervisorConfig().reentry_step_ml_h

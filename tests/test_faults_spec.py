@@ -16,7 +16,7 @@ from contracts.faults import (
 )
 from hil_sim.device import main as device_main
 from hil_sim.scenario import ScenarioError, load_scenario_file
-from runtime.supervisor import Fault
+from runtime.supervisor_config import Fault
 from tests.sil_helpers import pressor
 
 REQUIRED = (

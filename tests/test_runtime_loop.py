@@ -26,8 +26,9 @@ from link import (  # noqa: E402
     RuntimeSession,
     Signing,
 )
-from runtime.loop import DeviceStalled, Loop, supervisor_config_for  # noqa: E402
-from runtime.supervisor import State, Supervisor  # noqa: E402
+from runtime.loop import DeviceStalled, Loop  # noqa: E402
+from runtime.supervisor import Supervisor  # noqa: E402
+from runtime.supervisor_config import State, supervisor_config_for  # noqa: E402
 from tests.link_doubles import loop_pair, tick_inputs  # noqa: E402
 
 TS = 0.1

@@ -8,12 +8,32 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from runtime.supervisor import Fault, State, Supervisor, SupervisorConfig
+from runtime.supervisor import Supervisor, SupervisorInput, SupervisorOutput
+from runtime.supervisor_config import Fault, State, SupervisorConfig
 
 TS = 0.1
 GOOD_MAP = 80.0
 BOX = ((0.45, 0.66), (100.0, 200.0), (10.0, 35.0))
 RATES = (2e-4, 0.06, 0.06)
+
+
+def good_inputs(now_s: float) -> dict:
+    """Every supervisor input at a good value (no pump status this tick)."""
+    return dict(
+        now_s=now_s,
+        map_mmhg=GOOD_MAP,
+        quality=0,
+        K=0.55,
+        T_s=150.0,
+        tau_s=20.0,
+        sched_valid=True,
+        sample_age_s=0.0,
+        link_silence_s=0.0,
+        target_mmhg=80.0,
+        link_errors=0,
+        pump_delivered_ml_h=math.nan,
+        pump_alarms=0,
+    )
 
 
 class Rig:
@@ -22,14 +42,16 @@ class Rig:
     def __init__(self, cfg: SupervisorConfig | None = None) -> None:
         self.sup = Supervisor(cfg or SupervisorConfig(sample_period_s=TS))
         self.k = 0
+        self.out: SupervisorOutput | None = None
 
     def tick(self, controller_command: float = 30.0, **inputs) -> float:
-        now = self.k * TS
-        self.k += 1
-        args = dict(map_mmhg=GOOD_MAP, K=0.55, T_s=150.0, tau_s=20.0)
+        """One tick of good inputs except ``inputs``; returns the command (ml/h)."""
+        args = good_inputs(self.k * TS)
         args.update(inputs)
-        run = self.sup.assess(now, **args)
-        return self.sup.finalize(controller_command if run else None)
+        self.k += 1
+        run = self.sup.assess(SupervisorInput(**args))
+        self.out = self.sup.finalize(controller_command if run else None)
+        return self.out.command_ml_h
 
     def ticks(self, n: int, **kw) -> list[float]:
         return [self.tick(**kw) for _ in range(n)]
@@ -76,7 +98,7 @@ def test_sensor_fault_is_detected_same_tick_and_holds_last_command_with_alarm(ba
     assert rig.sup.state == State.HOLD
     assert rig.sup.alarm
     assert out == 42.0
-    assert rig.sup.transition == (State.AUTO, State.HOLD, rig.sup.faults)
+    assert rig.out.transition == (State.AUTO, State.HOLD, rig.sup.faults)
     assert rig.sup.detections[fault.name] == 1
 
 
@@ -247,8 +269,17 @@ def test_command_is_always_finite_and_within_pump_limits(rows, safe_rate):
     )
     sup = Supervisor(cfg)
     for k, (map_mmhg, cmd, quality, age, silence, K, valid) in enumerate(rows):
-        run = sup.assess(k * TS, map_mmhg, quality, K, 150.0, 20.0, valid, age, silence)
-        out = sup.finalize(cmd if run else None)
+        inputs = good_inputs(k * TS)
+        inputs.update(
+            map_mmhg=map_mmhg,
+            quality=quality,
+            K=K,
+            sched_valid=valid,
+            sample_age_s=age,
+            link_silence_s=silence,
+        )
+        run = sup.assess(SupervisorInput(**inputs))
+        out = sup.finalize(cmd if run else None).command_ml_h
         assert math.isfinite(out) and 0.0 <= out <= 120.0
         assert out == sup.command_ml_h
 
@@ -258,8 +289,16 @@ def test_advisory_sched_action_flags_envelope_exit_but_keeps_auto_and_passes_com
     rig.ticks(5, controller_command=25.0)
     out = rig.tick(controller_command=80.0, K=0.2)  # below the box
     assert rig.sup.faults & Fault.SCHED_OUT_OF_BOX
-    assert rig.sup.new_faults & Fault.SCHED_OUT_OF_BOX
+    assert rig.out.new_faults & Fault.SCHED_OUT_OF_BOX
     assert rig.sup.state == State.AUTO and out == 80.0
     assert rig.sup.detections["SCHED_OUT_OF_BOX"] == 1
     out = rig.tick(controller_command=81.0, sched_valid=False)  # invalid is never advisory
     assert rig.sup.state == State.HOLD and out == 80.0
+
+
+def test_supervisor_input_has_no_defaults_so_a_missing_input_cannot_fail_open():
+    full = good_inputs(0.0)
+    for name in full:
+        partial = {k: v for k, v in full.items() if k != name}
+        with pytest.raises(TypeError, match=name):
+            SupervisorInput(**partial)

@@ -1,0 +1,141 @@
+"""The one closed-loop core: supervisor, scheduling source and controller stepped in one place.
+
+Per tick the caller hands over what arrived for the tick (:class:`link.TickInputs`: MAP sample,
+target and the scheduling parameters the device sent - the scheduling source), the pump status of
+the tick (:class:`link.PumpStatus`, if one arrived) and the link's health; :meth:`ClosedLoopCore.step`
+assesses the inputs, steps the controller if the supervisor allows it, finalizes the command and
+returns a :class:`TickRecord`. The caller sends ``record.command_ml_h`` to the pump.
+
+Two callers drive the same core, so they cannot drift apart:
+
+- the runtime loop (:mod:`runtime.loop`), which adds only link I/O, timing and recording;
+- the in-process trial (:func:`hil_sim.closed_loop.simulate`), which feeds it the world's
+  observations and pump statuses directly, with a perfect link (:data:`CLEAN_LINK`).
+
+A lockstep SIL run and an in-process run of the same seed therefore give the same commands and
+the same supervisor states, tick for tick.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from contracts.controller import Controller
+from link import PumpStatus, TickInputs
+from runtime.supervisor import Supervisor, SupervisorInput, SupervisorOutput
+
+
+class LinkHealth(NamedTuple):
+    """The link's state at a tick, as the supervisor's watchdogs need it (immutable).
+
+    Attributes
+    ----------
+    sample_age_s
+        Time (s) since the newest MAP sample was received.
+    link_silence_s
+        Time (s) since any frame was received from the device.
+    link_errors
+        Frames the link layer discarded since the previous tick.
+    """
+
+    sample_age_s: float
+    link_silence_s: float
+    link_errors: int
+
+
+#: a link that delivers every tick on time and loses nothing (the in-process trial)
+CLEAN_LINK = LinkHealth(sample_age_s=0.0, link_silence_s=0.0, link_errors=0)
+
+
+class TickRecord(NamedTuple):
+    """One tick of the closed loop (immutable; a named tuple for the per-tick cost).
+
+    Attributes
+    ----------
+    inputs
+        What the tick was given.
+    controller_ml_h
+        The controller's raw command (ml/h); NaN when the supervisor did not step it.
+    pump_delivered_ml_h
+        Delivered rate (ml/h) of the tick's pump status; NaN when none arrived for the tick.
+    supervisor
+        The supervisor's decision; ``supervisor.command_ml_h`` is the command for the pump.
+    """
+
+    inputs: TickInputs
+    controller_ml_h: float
+    pump_delivered_ml_h: float
+    supervisor: SupervisorOutput
+
+    @property
+    def command_ml_h(self) -> float:
+        """The command (ml/h) for the pump."""
+        return self.supervisor.command_ml_h
+
+
+class ClosedLoopCore:
+    """Supervisor and controller stepped together, once per tick.
+
+    Parameters
+    ----------
+    controller
+        Any :class:`~contracts.controller.Controller`.
+    supervisor
+        The safety supervisor (its config's period must match the controller's).
+    """
+
+    def __init__(self, controller: Controller, supervisor: Supervisor) -> None:
+        if abs(supervisor.config.sample_period_s - controller.sample_period_s) > 1e-12:
+            raise ValueError(
+                f"supervisor sample_period_s={supervisor.config.sample_period_s} s differs from"
+                f" the controller's {controller.sample_period_s} s"
+            )
+        self.controller = controller
+        self.supervisor = supervisor
+
+    def step(
+        self, inp: TickInputs, now_s: float, pump: PumpStatus | None, link: LinkHealth
+    ) -> TickRecord:
+        """Run one tick and return its record.
+
+        Parameters
+        ----------
+        inp
+            The tick's inputs (newest sample, target, scheduling parameters).
+        now_s
+            Time (s) of the tick on the loop's clock.
+        pump
+            The pump status that arrived for this tick (``pump.tick == inp.tick``), else ``None``.
+        link
+            The link's health at this tick.
+        """
+        if pump is not None and pump.tick == inp.tick:
+            delivered, alarms = pump.delivered_ml_h, pump.alarms
+        else:
+            delivered, alarms = math.nan, 0
+        sup = self.supervisor
+        run = sup.assess(  # positional: this is the per-tick path (fields in declaration order)
+            SupervisorInput(
+                now_s,
+                inp.map_mmhg,
+                inp.quality,
+                inp.K,
+                inp.T_s,
+                inp.tau_s,
+                inp.sched_valid,
+                link.sample_age_s,
+                link.link_silence_s,
+                inp.target_mmhg,
+                link.link_errors,
+                delivered,
+                alarms,
+            )
+        )
+        raw = (
+            self.controller.step(inp.map_mmhg, inp.target_mmhg, inp.K, inp.T_s, inp.tau_s)
+            if run
+            else None
+        )
+        out = sup.finalize(raw)
+        return TickRecord(inp, math.nan if raw is None else raw, delivered, out)

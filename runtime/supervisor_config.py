@@ -1,0 +1,305 @@
+"""What the safety supervisor checks and with which limits: states, fault kinds, configuration.
+
+The state machine itself is :mod:`runtime.supervisor`; this module holds what it is configured
+with and what ``pressor faults`` prints.
+
+Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults):
+
+- ``MAP_NAN`` non-finite MAP — same tick;
+- ``MAP_RANGE`` MAP outside [``map_min_mmhg``, ``map_max_mmhg``] (catches line disconnect ~0 and
+  flush ~300) — same tick;
+- ``MAP_SPIKE`` |MAP_k − MAP_{k−1}| > ``spike_mmhg`` between consecutive plausible samples — same
+  tick; a real level change is a single spike and is accepted after ``recover_after_s``;
+- ``MAP_FLATLINE`` MAP within ±``flatline_eps_mmhg`` of an anchor for ``flatline_s`` — only when
+  the sensor is known to be noisy (``flatline_enabled``): a noise-free simulator legitimately
+  produces constant samples;
+- ``SENSOR_QUALITY`` the monitor flags the sample (any bit of ``quality`` in ``quality_mask``);
+- ``STALE_SAMPLE`` newest sample older than ``stale_after_s``;
+- ``LINK_LOSS`` no frame at all for ``link_loss_after_s``;
+- ``SCHED_INVALID`` scheduling marked invalid or non-finite (when ``sched_required``);
+- ``SCHED_OUT_OF_BOX`` K, T or τ outside ``sched_box``;
+- ``SCHED_RATE`` |Δρ|/Δt above ``sched_rate_tolerance`` × ``sched_rate_bounds``;
+  with ``sched_action="advise"`` these two are advisory (flagged, counted, logged; the state and
+  the command are unchanged) — for a generated controller that clamps ρ to its box and limits its
+  rate itself (docs/INTERFACES.md), so that leaving the design envelope is reported, not fought;
+- ``TARGET_INVALID`` the MAP target is non-finite or outside the plausible MAP range;
+- ``COMMAND_INVALID`` the controller returned a non-finite command (held, → HOLD);
+- ``COMMAND_CLAMPED`` the controller returned a command outside [0, max] (clamped; an alarm, not a
+  state change);
+- ``LINK_ERRORS`` the link layer discarded something since the last tick (bad CRC, junk bytes,
+  sequence gaps, abandoned partial frames, incomplete ticks, refused signatures) - advisory:
+  what got through passed its CRC (and signature), lockstep resends lost ticks; same tick;
+- ``PUMP_ALARM`` the pump reports occlusion, empty reservoir or its own watchdog
+  (``pump_alarm_mask``) - on the tick its status arrives (the status of tick k follows the
+  advance to k, one tick after the cause). After a pump watchdog trip the held command is re-based
+  on the pump's delivered (safe) rate, so re-entry slews from what the pump actually does;
+- ``PUMP_MISMATCH`` the delivered rate differs from the command sent one tick earlier by more than
+  max(``pump_mismatch_abs_ml_h``, ``pump_mismatch_rel`` × command) for ``pump_mismatch_s``.
+
+The pump checks need a pump status of this tick (``pump_delivered_ml_h`` not NaN); a missing one is
+not a fault (the link watchdogs cover silence).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from enum import IntEnum, IntFlag
+from typing import Any
+
+from contracts.controller import Controller
+from contracts.faults import PUMP_ALARM_OCCLUSION, PUMP_ALARM_RESERVOIR_EMPTY, PUMP_ALARM_WATCHDOG
+
+
+class State(IntEnum):
+    """Supervisor states (the integer is what the recording logs under ``/safety/state``)."""
+
+    STARTUP = 0
+    AUTO = 1
+    HOLD = 2
+    FAILSAFE = 3
+    RECOVERING = 4
+
+
+class Fault(IntFlag):
+    """Fault kinds detected by the supervisor (bit flags; see the module docstring for bounds)."""
+
+    NONE = 0
+    MAP_NAN = 1 << 0
+    MAP_RANGE = 1 << 1
+    MAP_SPIKE = 1 << 2
+    MAP_FLATLINE = 1 << 3
+    SENSOR_QUALITY = 1 << 4
+    STALE_SAMPLE = 1 << 5
+    LINK_LOSS = 1 << 6
+    SCHED_INVALID = 1 << 7
+    SCHED_OUT_OF_BOX = 1 << 8
+    SCHED_RATE = 1 << 9
+    COMMAND_INVALID = 1 << 10
+    COMMAND_CLAMPED = 1 << 11
+    TARGET_INVALID = 1 << 12
+    LINK_ERRORS = 1 << 13
+    PUMP_ALARM = 1 << 14
+    PUMP_MISMATCH = 1 << 15
+
+
+#: faults that never change the state (the command is clamped and the event logged)
+ADVISORY = Fault.COMMAND_CLAMPED | Fault.LINK_ERRORS
+#: pump alarm bits that count as a pump fault
+PUMP_ALARM_MASK = PUMP_ALARM_OCCLUSION | PUMP_ALARM_RESERVOIR_EMPTY | PUMP_ALARM_WATCHDOG
+#: scheduling faults that are advisory when ``sched_action == "advise"``
+SCHED_ENVELOPE = Fault.SCHED_OUT_OF_BOX | Fault.SCHED_RATE
+#: fault name -> bit, as plain ints (IntFlag arithmetic runs Python-level enum code)
+FAULT_BITS: dict[str, int] = {f.name: int(f) for f in Fault}
+#: the faults that raise the alarm (plain int, for the per-tick path)
+ALARM_FAULTS = ~int(Fault.COMMAND_CLAMPED)
+
+
+def fault_names(faults: int) -> list[str]:
+    """The names of the bits set in ``faults`` (e.g. ``['MAP_NAN', 'STALE_SAMPLE']``)."""
+    return [name for name, bit in FAULT_BITS.items() if faults & bit]
+
+
+@dataclass(frozen=True)
+class SupervisorConfig:
+    """Limits and timings of the supervisor (units in the names).
+
+    Raises
+    ------
+    ValueError
+        On construction, naming the field, its value and the allowed range.
+    """
+
+    sample_period_s: float = 0.1
+    max_rate_ml_h: float = 120.0
+    map_min_mmhg: float = 20.0
+    map_max_mmhg: float = 250.0
+    spike_mmhg: float = 20.0
+    flatline_enabled: bool = False
+    flatline_s: float = 10.0
+    flatline_eps_mmhg: float = 0.05
+    quality_mask: int = 0xFFFFFFFF
+    stale_after_s: float = 0.35
+    link_loss_after_s: float = 1.0
+    sched_required: bool = False
+    sched_box: tuple[tuple[float, float], ...] | None = None
+    sched_rate_bounds: tuple[float, ...] | None = None
+    sched_rate_tolerance: float = 1.5
+    sched_action: str = "hold"
+    hold_max_s: float = 10.0
+    safe_rate_ml_h: float | None = None
+    failsafe_ramp_ml_h_per_s: float = 1.0
+    recover_after_s: float = 5.0
+    reentry_step_ml_h: float = 0.5
+    pump_alarm_mask: int = PUMP_ALARM_MASK
+    pump_mismatch_s: float = 1.0
+    pump_mismatch_abs_ml_h: float = 1.0
+    pump_mismatch_rel: float = 0.05
+
+    def __post_init__(self) -> None:
+        def need(name: str, ok: bool, allowed: str) -> None:
+            if not ok:
+                raise ValueError(
+                    f"supervisor field '{name}' = {getattr(self, name)!r}; allowed {allowed}"
+                )
+
+        need("sample_period_s", 0.0 < self.sample_period_s <= 10.0, "(0, 10] s")
+        need("max_rate_ml_h", 0.0 < self.max_rate_ml_h <= 10000.0, "(0, 10000] ml/h")
+        need("map_min_mmhg", 0.0 <= self.map_min_mmhg < self.map_max_mmhg, "[0, map_max_mmhg)")
+        need("map_max_mmhg", self.map_max_mmhg <= 400.0, "(map_min_mmhg, 400] mmHg")
+        need("spike_mmhg", self.spike_mmhg > 0.0, "> 0 mmHg")
+        need("flatline_s", self.flatline_s > 0.0, "> 0 s")
+        need("flatline_eps_mmhg", self.flatline_eps_mmhg >= 0.0, ">= 0 mmHg")
+        need("stale_after_s", self.stale_after_s > 0.0, "> 0 s")
+        need("link_loss_after_s", self.link_loss_after_s > 0.0, "> 0 s")
+        need("sched_rate_tolerance", self.sched_rate_tolerance >= 1.0, ">= 1")
+        need("sched_action", self.sched_action in ("hold", "advise"), "'hold' or 'advise'")
+        need("hold_max_s", self.hold_max_s >= 0.0, ">= 0 s")
+        need(
+            "safe_rate_ml_h",
+            self.safe_rate_ml_h is None or 0.0 <= self.safe_rate_ml_h <= self.max_rate_ml_h,
+            "None or [0, max_rate_ml_h] ml/h",
+        )
+        need("failsafe_ramp_ml_h_per_s", self.failsafe_ramp_ml_h_per_s > 0.0, "> 0 ml/h/s")
+        need("recover_after_s", self.recover_after_s >= 0.0, ">= 0 s")
+        need("reentry_step_ml_h", self.reentry_step_ml_h > 0.0, "> 0 ml/h per tick")
+        need("pump_mismatch_s", self.pump_mismatch_s >= 0.0, ">= 0 s")
+        need("pump_mismatch_abs_ml_h", self.pump_mismatch_abs_ml_h > 0.0, "> 0 ml/h")
+        need("pump_mismatch_rel", 0.0 <= self.pump_mismatch_rel <= 1.0, "[0, 1]")
+        if self.sched_box is not None:
+            need(
+                "sched_box",
+                len(self.sched_box) == 3 and all(lo <= hi for lo, hi in self.sched_box),
+                "three (low, high) pairs for K, T_s, tau_s",
+            )
+        if self.sched_rate_bounds is not None:
+            need(
+                "sched_rate_bounds",
+                len(self.sched_rate_bounds) == 3 and all(b > 0 for b in self.sched_rate_bounds),
+                "three positive rates for K (1/s·mmHg/(ml/h)), T (s/s), tau (s/s)",
+            )
+
+
+def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
+    """Each detectable fault kind with its detection rule and bound under ``cfg`` (for ``pressor faults``)."""
+    ts = cfg.sample_period_s
+    box = (
+        "not checked (controller not scheduled)"
+        if cfg.sched_box is None
+        else f"K, T, tau outside {cfg.sched_box}; same tick"
+    )
+    rates = (
+        "not checked"
+        if cfg.sched_rate_bounds is None
+        else f"|drho/dt| > {cfg.sched_rate_tolerance} x {cfg.sched_rate_bounds}; same tick"
+    )
+    return [
+        ("MAP_NAN", f"non-finite MAP sample; same tick ({ts} s)"),
+        (
+            "MAP_RANGE",
+            f"MAP outside [{cfg.map_min_mmhg}, {cfg.map_max_mmhg}] mmHg (line disconnect, flush);"
+            " same tick",
+        ),
+        ("MAP_SPIKE", f"|MAP step| > {cfg.spike_mmhg} mmHg between samples; same tick"),
+        (
+            "MAP_FLATLINE",
+            f"MAP within +/-{cfg.flatline_eps_mmhg} mmHg for {cfg.flatline_s} s"
+            " (only when the device reports sensor noise > 0)",
+        ),
+        ("SENSOR_QUALITY", "monitor flags the sample (quality bits); same tick"),
+        ("STALE_SAMPLE", f"newest sample older than {cfg.stale_after_s} s"),
+        ("LINK_LOSS", f"no frame for {cfg.link_loss_after_s} s -> FAILSAFE at once"),
+        ("SCHED_INVALID", "scheduling marked invalid or non-finite; same tick"),
+        ("SCHED_OUT_OF_BOX", box),
+        ("SCHED_RATE", rates),
+        (
+            "sched action",
+            "SCHED_OUT_OF_BOX / SCHED_RATE "
+            + (
+                "advisory: flagged and logged, the controller clamps/rate-limits itself"
+                if cfg.sched_action == "advise"
+                else "hold like any other fault"
+            ),
+        ),
+        ("TARGET_INVALID", "target non-finite or outside the MAP range; same tick"),
+        ("COMMAND_INVALID", "controller returned a non-finite command; same tick, held"),
+        ("COMMAND_CLAMPED", f"controller command outside [0, {cfg.max_rate_ml_h}] ml/h; clamped"),
+        (
+            "LINK_ERRORS",
+            "bad CRC / junk / sequence gap / incomplete tick / refused signature since the last"
+            " tick; same tick; advisory (bad frames are discarded, lost ticks resent)",
+        ),
+        (
+            "PUMP_ALARM",
+            "pump status reports occlusion, empty reservoir or pump watchdog; the tick the status"
+            " arrives (1 tick after the cause)",
+        ),
+        (
+            "PUMP_MISMATCH",
+            f"|delivered - command| > max({cfg.pump_mismatch_abs_ml_h} ml/h,"
+            f" {cfg.pump_mismatch_rel:g} x command) for {cfg.pump_mismatch_s} s",
+        ),
+        (
+            "reaction",
+            f"HOLD last command (alarm); FAILSAFE after {cfg.hold_max_s} s, ramping"
+            f" {cfg.failsafe_ramp_ml_h_per_s} ml/h/s to "
+            + ("the held rate" if cfg.safe_rate_ml_h is None else f"{cfg.safe_rate_ml_h} ml/h"),
+        ),
+        (
+            "re-entry",
+            f"inputs good for {cfg.recover_after_s} s -> RECOVERING, command slews"
+            f" <= {cfg.reentry_step_ml_h} ml/h per tick to the controller's, then AUTO",
+        ),
+    ]
+
+
+def sched_limits_of(controller: Controller) -> tuple[Any, Any]:
+    """The design box and rate bounds a generated controller declares, else ``(None, None)``.
+
+    Looked up on the instance, then on its module: ``GRID_LO``/``GRID_HI`` (3 values: K, T s,
+    τ s) and ``RATE_BOUNDS`` (3 values per s) as ``codegen`` emits them. The PI baseline
+    declares none (it is not scheduled), so its scheduling inputs are not checked.
+    """
+    module = sys.modules.get(type(controller).__module__)
+    sources = (controller, module)
+
+    def find(name: str) -> Any:
+        for src in sources:
+            if src is not None and hasattr(src, name):
+                return getattr(src, name)
+        return None
+
+    lo, hi, rate = find("GRID_LO"), find("GRID_HI"), find("RATE_BOUNDS")
+    box = None
+    if lo is not None and hi is not None and len(lo) == 3 and len(hi) == 3:
+        box = tuple((float(a), float(b)) for a, b in zip(lo, hi, strict=True))
+    rates = tuple(float(r) for r in rate) if rate is not None and len(rate) == 3 else None
+    return box, rates
+
+
+def supervisor_config_for(
+    controller: Controller, sensor_noise_mmhg: float, **overrides: Any
+) -> SupervisorConfig:
+    """A supervisor configuration matched to ``controller`` and the device's sensor.
+
+    Sample period and pump limit come from the controller; the scheduling box and rates from
+    :func:`sched_limits_of`; the flatline check is on only when the sensor is noisy (a noise-free
+    simulated sensor legitimately repeats values). Leaving the design box or rate bounds is
+    advisory by default (``sched_action="advise"``): the generated controller clamps and
+    rate-limits ρ itself (docs/INTERFACES.md), and the simulated patients routinely leave the envelope
+    (paper-tracking seed 3: K down to 0.18 < 0.25; τ moving ~1 s/s against a 0.1 s/s bound), so
+    holding would stop LPV control of most patients. ``overrides`` replace any field.
+    """
+    box, rates = sched_limits_of(controller)
+    cfg: dict[str, Any] = {
+        "sample_period_s": float(controller.sample_period_s),
+        "max_rate_ml_h": float(controller.max_rate_ml_h),
+        "flatline_enabled": sensor_noise_mmhg > 0.0,
+        "sched_required": box is not None,
+        "sched_box": box,
+        "sched_rate_bounds": rates,
+        "sched_action": "advise",
+        "stale_after_s": 3.5 * float(controller.sample_period_s),
+    }
+    cfg.update(overrides)
+    return SupervisorConfig(**cfg)
