@@ -168,7 +168,7 @@ class DelayBankEstimator:
         prior: tuple[float, float, float] = NOMINAL_PLANT,
         prior_rel_std: float = 0.6,
         q_a: float = 2e-5,
-        q_b: float = 1e-5,
+        q_b: float = 2e-5,
         q_c: float = 0.1,
         r_mmhg: float = 0.05,
         jump_sigma: float = 4.0,
