@@ -84,7 +84,7 @@ class Staircase:
 
 
 def shadow_patient(job: tuple[str, str, int]) -> dict[str, float]:
-    """One patient under the oracle-scheduled controller with the estimator in shadow mode."""
+    """One patient under the oracle-scheduled controller (or the staircase), estimator in shadow."""
     scenario, controller_spec, seed = job
     world = World(scenario, seed, TS)
     controller = (
