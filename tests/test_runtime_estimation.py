@@ -201,3 +201,12 @@ def test_per_tick_work_allocates_nothing_that_grows():
 def test_constructor_rejects_bad_parameters_with_a_clear_error(kwargs, match):
     with pytest.raises(ValueError, match=match):
         DelayBankEstimator(**kwargs)
+
+
+@pytest.mark.parametrize(("K", "inside"), [(0.5, True), (0.2, False)])
+def test_estimate_says_whether_it_lies_in_the_design_box(K, inside):
+    u = staircase(10, 2400.0)
+    estimates = run(DelayBankEstimator(TS), fopdt_map(u, np.full(u.size, K), 150.0, 30.0, 10), u)
+    last = estimates[-1]
+    assert not last.from_prior and abs(last.K - K) / K < 0.15
+    assert last.in_box is inside

@@ -39,7 +39,8 @@ class FilterSettings:
     forget
         Per-window forgetting factor of the log-likelihood.
     a_lo, a_hi
-        Range a is kept in (the plausible T range, strictly inside).
+        Range a is kept in (T within [T_lo/2, 2 T_hi]: wider than the plausible range, so the
+        health check sees an estimate that escapes it).
     """
 
     window_s: float

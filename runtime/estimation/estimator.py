@@ -229,9 +229,9 @@ class DelayBankEstimator:
             r2=r_mmhg * r_mmhg,
             jump2=jump_sigma * jump_sigma,
             forget=math.exp(-window_s / memory_s),
-            # a strictly inside the plausible T range (the check rejects only what escapes it)
-            a_lo=math.exp(-window_s / (T_plausible_s[0] * 1.001)),
-            a_hi=math.exp(-window_s / (T_plausible_s[1] * 0.999)),
+            # a kept within T in [T_lo / 2, 2 T_hi]: beyond the plausible range, so the check sees it
+            a_lo=math.exp(-window_s / (T_plausible_s[0] * 0.5)),
+            a_hi=math.exp(-window_s / (T_plausible_s[1] * 2.0)),
         )
         self._bank = tuple(DelayModel(d, settings) for d in range(d_lo, d_hi + 1))
         n = len(self._bank)
