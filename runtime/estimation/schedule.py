@@ -1,0 +1,184 @@
+"""Scheduling sources: where the controller's K, T, τ come from, one tick at a time.
+
+Every source has the same method::
+
+    update(map_mmhg, quality, delivered_ml_h, device_K, device_T_s, device_tau_s, device_valid)
+        -> Schedule
+
+with the tick's MAP sample (mmHg) and monitor quality bits, the pump's delivered rate (ml/h, from
+PUMP_STATUS) and whatever scheduling parameters the device sent (K mmHg/(ml/h), T s, τ s; NaN and
+``device_valid=False`` when it sent none). Units and ranges of the result: K > 0 mmHg/(ml/h),
+T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
+
+:class:`OracleSchedule`
+    The device's values (a simulator's truth; research comparisons only). ``valid`` is False when
+    the device sent none or sent non-finite values, and the values are then NaN: the controller's
+    own invalid-input handling applies, exactly as before this module existed.
+:class:`NominalSchedule`
+    Constant prior values (default: the nominal patient, :data:`NOMINAL_PLANT`); always valid.
+:class:`EstimatedSchedule`
+    The online estimator (:class:`runtime.estimation.estimator.DelayBankEstimator`); always valid:
+    it reports the prior until it has learned and whenever its health check rejects an estimate,
+    with ``healthy`` and ``reason`` saying so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from runtime.estimation.estimator import NOMINAL_PLANT, DelayBankEstimator, Estimate
+
+SOURCES = ("oracle", "estimated", "nominal")
+
+
+@dataclass(frozen=True, slots=True)
+class Schedule:
+    """The scheduling parameters of one tick.
+
+    Attributes
+    ----------
+    K, T_s, tau_s
+        Sensitivity (mmHg/(ml/h)), lag (s), delay (s); NaN only from an oracle without values.
+    source
+        ``"oracle"``, ``"estimated"`` or ``"nominal"``.
+    valid
+        Whether K, T, τ are usable (finite, positive).
+    healthy
+        False when the estimator's health check rejected its latest estimate (always True for the
+        other sources).
+    from_prior
+        True when the values are the prior's (the nominal source, or the estimator learning or
+        falling back).
+    reason
+        ``"ok"``, or why the values are not a fresh estimate (``"learning"``, ``"diverged"``,
+        ``"K implausible"``, ``"T implausible"``, ``"no device values"``, ``"prior"``).
+    estimate
+        The estimator's full report (uncertainty, confidence, design-box flag); None for the
+        other sources.
+    """
+
+    K: float
+    T_s: float
+    tau_s: float
+    source: str
+    valid: bool
+    healthy: bool
+    from_prior: bool
+    reason: str
+    estimate: Estimate | None = None
+
+
+class OracleSchedule:
+    """Schedule on the device's K, T, τ (the simulator's truth)."""
+
+    source = "oracle"
+
+    def update(
+        self,
+        map_mmhg: float,
+        quality: int,
+        delivered_ml_h: float,
+        device_K: float,
+        device_T_s: float,
+        device_tau_s: float,
+        device_valid: bool,
+    ) -> Schedule:
+        """The device's values; ``valid`` only if it sent finite ones and flagged them valid."""
+        ok = device_valid and math.isfinite(device_K + device_T_s + device_tau_s)
+        if not ok:
+            return Schedule(math.nan, math.nan, math.nan, "oracle", False, True, False,
+                            "no device values")  # fmt: skip
+        return Schedule(device_K, device_T_s, device_tau_s, "oracle", True, True, False, "ok")
+
+
+class NominalSchedule:
+    """Schedule on constant values (a fixed-gain controller at that point).
+
+    Parameters
+    ----------
+    K, T_s, tau_s
+        Sensitivity (mmHg/(ml/h)) > 0, lag (s) > 0, delay (s) >= 0; default the nominal patient.
+    """
+
+    source = "nominal"
+
+    def __init__(
+        self,
+        K: float = NOMINAL_PLANT[0],
+        T_s: float = NOMINAL_PLANT[1],
+        tau_s: float = NOMINAL_PLANT[2],
+    ) -> None:
+        if not (math.isfinite(K) and K > 0.0):
+            raise ValueError(f"K={K!r} mmHg/(ml/h) must be finite and > 0")
+        if not (math.isfinite(T_s) and T_s > 0.0):
+            raise ValueError(f"T_s={T_s!r} s must be finite and > 0")
+        if not (math.isfinite(tau_s) and tau_s >= 0.0):
+            raise ValueError(f"tau_s={tau_s!r} s must be finite and >= 0")
+        self._schedule = Schedule(float(K), float(T_s), float(tau_s), "nominal", True, True, True,
+                                  "prior")  # fmt: skip
+
+    def update(
+        self,
+        map_mmhg: float,
+        quality: int,
+        delivered_ml_h: float,
+        device_K: float,
+        device_T_s: float,
+        device_tau_s: float,
+        device_valid: bool,
+    ) -> Schedule:
+        """The constant values (the same object every tick)."""
+        return self._schedule
+
+
+class EstimatedSchedule:
+    """Schedule on the online estimate; the device's values are ignored.
+
+    Parameters
+    ----------
+    estimator
+        The estimator to feed (default: :class:`DelayBankEstimator` at ``sample_period_s``).
+    sample_period_s
+        Tick period (s), > 0; used only to build the default estimator.
+    """
+
+    source = "estimated"
+
+    def __init__(
+        self, estimator: DelayBankEstimator | None = None, sample_period_s: float = 0.1
+    ) -> None:
+        self.estimator = estimator if estimator is not None else DelayBankEstimator(sample_period_s)
+        self._last: Estimate | None = None
+        self._schedule: Schedule | None = None
+
+    def update(
+        self,
+        map_mmhg: float,
+        quality: int,
+        delivered_ml_h: float,
+        device_K: float,
+        device_T_s: float,
+        device_tau_s: float,
+        device_valid: bool,
+    ) -> Schedule:
+        """Feed the estimator one tick and schedule on its report."""
+        est = self.estimator.update(map_mmhg, quality, delivered_ml_h)
+        if est is not self._last or self._schedule is None:
+            self._last = est
+            self._schedule = Schedule(est.K, est.T_s, est.tau_s, "estimated", True, est.healthy,
+                                      est.from_prior, est.reason, est)  # fmt: skip
+        return self._schedule
+
+
+def make_schedule(
+    source: str, sample_period_s: float = 0.1
+) -> OracleSchedule | NominalSchedule | EstimatedSchedule:
+    """The scheduling source named ``source`` (one of :data:`SOURCES`) at ``sample_period_s`` (s)."""
+    if source == "oracle":
+        return OracleSchedule()
+    if source == "nominal":
+        return NominalSchedule()
+    if source == "estimated":
+        return EstimatedSchedule(sample_period_s=sample_period_s)
+    raise ValueError(f"schedule source {source!r} not one of {SOURCES}")
