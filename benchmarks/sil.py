@@ -15,7 +15,7 @@ prints, in this order:
 3. real time: release lateness and execution time p50/p99/max at 10 Hz over ``--realtime-s``
    seconds of wall time (default 600 = 10 min; ``--quick``: 30 s; 0 skips it), first controller
    only — target p99 <= 1 ms. This machine shows 10-20 ms host stalls whatever the sleep method
-   (DESIGN.md §5): read the max with that in mind.
+   (docs/PLATFORM-NOTES.md): read the max with that in mind.
 
 Usage: ``python benchmarks/sil.py [--quick] [--controller lpv,pi] [--sim-hours H]
 [--realtime-s S] [--cpu auto|none|N|N,M]``.

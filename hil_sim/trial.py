@@ -7,7 +7,7 @@ every output file is byte-identical whatever ``jobs`` is.
 
 Metrics judge the *true* MAP (what the patient experiences; a flushed or disconnected line must not
 count as hypertension), with the settling band chosen by whether the scenario's monitor is noisy
-(DESIGN.md §3). ``reachable`` compares the largest ΔMAP the scenario asks for (target step minus
+(docs/METRICS.md). ``reachable`` compares the largest ΔMAP the scenario asks for (target step minus
 disturbances) with the largest steady-state ΔMAP the pump's maximum rate gives at this patient's
 sensitivity (max over i ≤ max of k0·i·e^(−k1·i)).
 

@@ -15,7 +15,7 @@ The loop never calls ``time`` itself; it asks a clock. Two clocks offer the same
     absolute deadlines ``t0 + k·period`` — never ``previous + period`` — so lateness does not
     accumulate. ``wait_until`` sleeps for the bulk of the interval and spins only the last
     ``spin_s`` (default 0.2 ms) to trade a little CPU for sub-millisecond release accuracy. Host
-    stalls of 10–20 ms happen whatever the sleep method (DESIGN.md §5); they show up as lateness
+    stalls of 10–20 ms happen whatever the sleep method (docs/PLATFORM-NOTES.md); they show up as lateness
     and skipped periods in :mod:`runtime.timing`, never as drift.
 
 Both return seconds as float. ``perf_counter_s`` (always the wall clock) is used to measure the

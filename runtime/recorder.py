@@ -6,7 +6,7 @@ row goes into a
 preallocated ``float64`` array (``chunk_ticks`` rows). When the array is full — and at
 :meth:`Recorder.close` — each channel is sent as one column with ``send_columns`` on two timelines,
 ``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call and
-``send_columns`` ~0.3 µs a scalar (DESIGN.md §5), so a 15-channel tick costs about a microsecond
+``send_columns`` ~0.3 µs a scalar (docs/PLATFORM-NOTES.md), so a 15-channel tick costs about a microsecond
 amortised. Rare events (supervisor transitions, alarms) go to ``/safety/events`` as ``TextLog``.
 
 Reproducibility: the wall-clock ``log_time`` and ``log_tick`` timelines are disabled, recording
@@ -58,7 +58,7 @@ EVENTS_ENTITY = "/safety/events"
 
 
 def default_blueprint() -> rrb.Blueprint:
-    """The layout the viewer opens on (DESIGN.md §2 "rerun recording")."""
+    """The layout the viewer opens on (docs/INTERFACES.md)."""
     return rrb.Blueprint(
         rrb.Vertical(
             rrb.TimeSeriesView(

@@ -1,4 +1,4 @@
-"""The controller artifact: one self-describing ``.npz`` file (DESIGN.md §2).
+"""The controller artifact: one self-describing ``.npz`` file (docs/ARCHITECTURE.md).
 
 Layout (``numpy.savez``, no pickled objects):
 

@@ -9,7 +9,7 @@ weight states…]``, scheduling ``ρ = (K [mmHg/(ml/h)], T [s], τ [s])``::
     z       = C1 x_a + C1d x_a(t − τ) + D11 w + D12 u_a
     y       = C2 x_a + C2d x_a(t − τ) + D21 w
 
-Deviations from the paper (DESIGN.md §4):
+Deviations from the paper (docs/DESIGN-CHOICES.md):
 
 * ``w = [r, d_o, n_xe]``: a third input, the measurement noise on the x_e channel, weighted by η.
 * ``y = [e; x_e + η n_xe]`` instead of the printed ``C2 = [1 0 0], D21 = [0 1]``: with the printed

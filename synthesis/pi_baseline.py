@@ -11,7 +11,7 @@ synthesis-side checks need:
   K e^{-tau s}/(T s + 1) (no input filter: the filter Omega/(s+Lambda) belongs to the LPV design)
   for :func:`synthesis.step_response.simulate_step`, i.e. the same step interface as the LPV loop.
 
-With the nominal plant this reproduces the independent reference figures of DESIGN.md §4
+With the nominal plant this reproduces the independent reference figures of docs/DESIGN-CHOICES.md
 (overshoot 0 %, rise 109.5 s, settling 418.8 s).
 """
 

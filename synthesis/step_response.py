@@ -1,6 +1,6 @@
 """Frozen-parameter step responses of the closed loop (continuous time, exact delay buffer).
 
-The nominal step of DESIGN.md §4: K = 0.55 mmHg/(ml/h), T = 150 s, tau = 40 s, a +20 mmHg target
+The nominal step of docs/DESIGN-CHOICES.md: K = 0.55 mmHg/(ml/h), T = 150 s, tau = 40 s, a +20 mmHg target
 step at t = 0 from rest, no noise, no pump saturation (the linear loop the paper plots; the
 largest and smallest commanded rate are reported so a reader sees whether the pump limits would
 have been touched).
@@ -268,7 +268,7 @@ def simulate_prefiltered_step(
 
 
 def response_metrics(response: StepResponse, max_rate_ml_h: float = 120.0) -> dict[str, object]:
-    """DESIGN.md §3 metrics of a noise-free step (computed by :mod:`contracts.metrics`).
+    """The metrics (docs/METRICS.md) of a noise-free step (computed by :mod:`contracts.metrics`).
 
     Returns the step metrics (``overshoot_pct``, ``rise_time_s``, ``settling_time_s``,
     ``steady_state_dev_mmhg``, ``iae_mmhg_s``; 2 % band) plus ``max_rate_ml_h``,

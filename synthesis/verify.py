@@ -24,7 +24,7 @@ the synthesis never saw), then:
     of the LPV loop, of the PI baseline Gc(s) = 3 + 0.017/s and of the scheduled Smith predictor
     (``smith``: the discrete runtime controller at Ts = 0.1 s, lambda 30 s, pump clamped to
     the artifact's limit, against the exact ZOH plant with the delay;
-    :mod:`synthesis.smith_baseline`), with DESIGN.md §3 metric names, and whether the paper's
+    :mod:`synthesis.smith_baseline`), with the metric names of docs/METRICS.md, and whether the paper's
     claim (overshoot < 1 %, settling < 200 s) holds for the LPV loop.
     When the artifact carries an enabled ``reference`` prefilter (:mod:`synthesis.reference`), the
     LPV step is the shipped two-degree-of-freedom structure (the continuous-time prefilter law

@@ -4,7 +4,7 @@ Runs :func:`synthesis.verify.verify_artifact` on ARTIFACT (default: the shipped
 ``synthesis/data/default_design.npz``), prints progress on stderr (one line per stage and per
 solver iteration: iteration, cost, relative gap, residuals) and a summary on stdout, and
 optionally writes the full report as JSON (``nominal_step.lpv`` / ``.pi`` / ``.smith`` carry the
-DESIGN.md §3 metric names; ``smith`` is the scheduled Smith predictor, lambda 30 s). Exit codes:
+metric names of docs/METRICS.md; ``smith`` is the scheduled Smith predictor, lambda 30 s). Exit codes:
 0 every check passed, 1 a check failed, 2 bad input (a missing, unreadable or corrupt artifact, a
 bad option value) with one line naming it.
 """

@@ -1,4 +1,4 @@
-"""The runtime package never loads the solver stack or the simulated patient (DESIGN.md §1)."""
+"""The runtime package never loads the solver stack or the simulated patient (docs/ARCHITECTURE.md)."""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ from baselines.pi import PIController
 from synthesis.pi_baseline import PIBaseline
 from synthesis.step_response import StepLoop, response_metrics, simulate_step
 
-# DESIGN.md §4: PI baseline, nominal plant, +20 mmHg, no noise, computed two independent ways
+# docs/DESIGN-CHOICES.md: PI baseline, nominal plant, +20 mmHg, no noise, computed two independent ways
 REF_OVERSHOOT_PCT = 0.0
 REF_RISE_S = 109.5
 REF_SETTLING_S = 418.8
