@@ -10,6 +10,7 @@ peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -90,7 +91,14 @@ def _trial(argv: Sequence[str]) -> int:
     p.add_argument(
         "--controller",
         default="pi",
-        help="pi | smith[:LAMBDA_S] (Smith predictor, lambda 30 s) | lpv | PATH to a generated module",
+        help="pi | smith[:LAMBDA_S] (Smith predictor, lambda 30 s) | lpv | PATH to a generated "
+        "module; several, comma-separated (lpv,pi,smith), run the same cohort under each and "
+        "compare them per patient (default: %(default)s)",
+    )
+    p.add_argument(
+        "--report",
+        action="store_true",
+        help="also write OUT/report.html (plots, paired table) and the per-patient trajectories",
     )
     p.add_argument("--patients", type=int, default=20, help="cohort size N (1..100000)")
     p.add_argument("--seed", type=int, default=1, help="cohort seed S (>= 0)")
@@ -117,9 +125,18 @@ def _trial(argv: Sequence[str]) -> int:
     if not 0.1 <= args.rate <= 1000.0:
         p.error(f"field '--rate' = {args.rate} outside [0.1, 1000] Hz")
 
+    from contracts.files import write_atomic
     from hil_sim.backend import BackendError
+    from hil_sim.paired import compare_controllers, format_comparison
+    from hil_sim.report import write_report
     from hil_sim.scenario import ScenarioError, load_scenario
-    from hil_sim.trial import run_trial, summarize, write_outputs
+    from hil_sim.trial import (
+        controller_dir_name,
+        run_trial,
+        run_trial_traced,
+        summarize,
+        write_outputs,
+    )
     from runtime.controller_loader import ControllerSpecError, load_controller
 
     period = 1.0 / args.rate
@@ -127,29 +144,50 @@ def _trial(argv: Sequence[str]) -> int:
         scenario = load_scenario(args.scenario)
     except ScenarioError as exc:
         raise UsageError(str(exc)) from None
-    try:
-        load_controller(args.controller, period)
-    except ControllerSpecError as exc:
-        raise UsageError(str(exc)) from None
-    try:
-        records = run_trial(
-            scenario,
-            args.controller,
-            args.seed,
-            args.patients,
-            args.jobs,
-            period,
-            _progress_bar,
-            scheduler=args.scheduler,
+    specs = [c.strip() for c in args.controller.split(",")]
+    if "" in specs or len(set(specs)) != len(specs):
+        raise UsageError(
+            f"field '--controller' = {args.controller!r}: name each controller once, comma-separated"
         )
-    except (ValueError, BackendError) as exc:  # e.g. a rate the patient step does not divide
-        raise UsageError(str(exc)) from None
-    summary = summarize(records, scenario, args.controller, args.seed)
-    write_outputs(args.out, records, summary)
-    print(format_table(summary))
-    print(
-        f"wrote {args.out / 'patients.json'}, {args.out / 'patients.csv'}, {args.out / 'summary.json'}"
-    )
+    for spec in specs:
+        try:
+            load_controller(spec, period)
+        except ControllerSpecError as exc:
+            raise UsageError(str(exc)) from None
+    records: dict[str, list[dict[str, Any]]] = {}
+    trajectories: dict[str, dict[str, Any]] = {}
+    for spec in specs:
+        out = args.out if len(specs) == 1 else args.out / controller_dir_name(spec)
+        run = run_trial_traced if args.report else run_trial
+        try:
+            result = run(
+                scenario,
+                spec,
+                args.seed,
+                args.patients,
+                args.jobs,
+                period,
+                _progress_bar,
+                scheduler=args.scheduler,
+            )
+        except (ValueError, BackendError) as exc:  # e.g. a rate the patient step does not divide
+            raise UsageError(str(exc)) from None
+        records[spec], trajectory = result if args.report else (result, None)
+        if trajectory is not None:
+            trajectories[spec] = trajectory
+        summary = summarize(records[spec], scenario, spec, args.seed)
+        write_outputs(out, records[spec], summary)
+        print(format_table(summary))
+        print(f"wrote {out / 'patients.json'}, {out / 'patients.csv'}, {out / 'summary.json'}")
+    comparison = compare_controllers(records) if len(specs) > 1 else {}
+    if comparison:
+        write_atomic(args.out / "comparison.json", json.dumps(comparison, indent=1) + "\n")
+        print(format_comparison(comparison))
+        print(f"wrote {args.out / 'comparison.json'}")
+    if args.report:
+        title = f"{scenario.name}: {', '.join(specs)}; cohort seed {args.seed}, {args.patients} patients"
+        path = write_report(args.out, title, records, trajectories, comparison)
+        print(f"report: {path}")
     return 0
 
 

@@ -142,3 +142,20 @@ def compare_controllers(
     return {
         f"{head} vs {other}": compare_pair(records[head], records[other]) for other in names[1:]
     }
+
+
+def format_comparison(comparison: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
+    """A terminal table of :func:`compare_controllers`: one block per pair, one row per metric."""
+    lines = []
+    for pair, metrics in comparison.items():
+        lines.append(f"paired: {pair} (reachable patients; win = first better)")
+        lines.append(f"  {'metric':<34} {'n':>4} {'win %':>6} {'ratio':>7} {'diff':>9} {'p':>8}")
+        for metric, st in metrics.items():
+            cells = [
+                "—" if st[k] is None else f"{st[k]:.3g}"
+                for k in ("win_rate_pct", "median_ratio", "median_difference", "wilcoxon_p")
+            ]
+            lines.append(
+                f"  {metric:<34} {st['n']:>4} {cells[0]:>6} {cells[1]:>7} {cells[2]:>9} {cells[3]:>8}"
+            )
+    return "\n".join(lines)

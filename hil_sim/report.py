@@ -8,8 +8,8 @@
   were drawn from: ``t_s`` (n,), ``map_true_mmhg``, ``target_mmhg``, ``rate_ml_h`` (patients × n),
   and ``patient_seed`` (patients,).
 
-Figures: MAP and infusion envelopes over time (median with the p10–p90 band over patients, one
-colour per controller), the distribution of each headline metric per controller, and a paired
+Figures: MAP and infusion envelopes over time (median with the p10–p90 band over the reachable
+patients, one colour per controller), the distribution of each headline metric per controller, and a paired
 scatter of the first controller's IAE against each other controller's (points below the diagonal are
 patients the first controller served better). Matplotlib draws them with its non-interactive Agg
 backend, so no display is needed. Same inputs, same bytes: the PNGs carry no timestamp.
@@ -20,7 +20,6 @@ from __future__ import annotations
 import base64
 import html
 import io
-import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -29,6 +28,7 @@ import matplotlib
 import numpy as np
 
 from contracts.files import write_atomic
+from hil_sim.trial import controller_dir_name
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
@@ -52,12 +52,19 @@ def _png(fig: Any) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def _envelope_figure(trajectories: Mapping[str, Mapping[str, np.ndarray]]) -> str:
+def _envelope_figure(
+    trajectories: Mapping[str, Mapping[str, np.ndarray]],
+    records: Mapping[str, Sequence[Mapping[str, Any]]],
+) -> str:
     fig, (ax_map, ax_rate) = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
     for colour, (name, tr) in zip(_COLOURS, trajectories.items(), strict=False):
         t_min = np.asarray(tr["t_s"]) / 60.0
+        reachable = np.array([r["reachable"] for r in records[name]], dtype=bool)
+        if not reachable.any():
+            continue
         for ax, key in ((ax_map, "map_true_mmhg"), (ax_rate, "rate_ml_h")):
-            p10, p50, p90 = np.nanpercentile(np.asarray(tr[key]), [10, 50, 90], axis=0)
+            rows = np.asarray(tr[key])[reachable]
+            p10, p50, p90 = np.nanpercentile(rows, [10, 50, 90], axis=0)
             ax.fill_between(t_min, p10, p90, color=colour, alpha=0.2, linewidth=0)
             ax.plot(t_min, p50, color=colour, label=f"{name} (median, p10–p90)")
     first = next(iter(trajectories.values()))
@@ -69,7 +76,7 @@ def _envelope_figure(trajectories: Mapping[str, Mapping[str, np.ndarray]]) -> st
     ax_rate.set_ylabel("infusion delivered (ml/h)")
     ax_rate.set_xlabel("time (min)")
     ax_map.legend(loc="lower right", fontsize=8)
-    ax_map.set_title("MAP and infusion over the cohort")
+    ax_map.set_title("MAP and infusion over the cohort (reachable patients)")
     fig.tight_layout()
     return _png(fig)
 
@@ -135,10 +142,6 @@ def _comparison_table(comparison: Mapping[str, Mapping[str, Mapping[str, Any]]])
     return f"<table><tr>{head}</tr>{''.join(rows)}</table>"
 
 
-def _safe_name(spec: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(spec).name if "/" in spec else spec)
-
-
 def write_report(
     out_dir: Path,
     title: str,
@@ -165,8 +168,8 @@ def write_report(
     for name, tr in trajectories.items():
         buf = io.BytesIO()
         np.savez_compressed(buf, **{k: np.asarray(tr[k]) for k in TRAJECTORY_KEYS})
-        write_atomic(out_dir / f"trajectories_{_safe_name(name)}.npz", buf.getvalue())
-    figures = [_envelope_figure(trajectories), _distribution_figure(records)]
+        write_atomic(out_dir / f"trajectories_{controller_dir_name(name)}.npz", buf.getvalue())
+    figures = [_envelope_figure(trajectories, records), _distribution_figure(records)]
     if len(records) > 1:
         figures.append(_paired_figure(records))
     body = [f"<h1>{html.escape(title)}</h1>"]

@@ -24,9 +24,12 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from contracts.files import write_atomic
 from contracts.metrics import (
@@ -46,15 +49,31 @@ from hil_sim.world import World
 from runtime.controller_loader import load_controller
 
 
+def controller_dir_name(spec: str) -> str:
+    """A file-name-safe name for a controller spec (``smith:45`` -> ``smith_45``, a path -> stem)."""
+    base = Path(spec).stem if spec.endswith(".py") else spec
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", base)
+
+
 def scenario_events(scenario: Scenario) -> list[Event]:
     """The scenario's disturbance events ``(kind, start_s)``: its hemorrhages and boluses."""
     return [(d.kind, d.start_s) for d in scenario.disturbances if d.kind in EVENT_KINDS]
+
+
+#: sample period (s) of the trajectories kept for a report (the loop's 10 Hz thinned to 1 Hz)
+REPORT_SAMPLE_S = 1.0
 
 
 def run_patient(
     scenario: Scenario, controller_spec: str, patient_seed: int, sample_period_s: float = 0.1
 ) -> dict[str, Any]:
     """Simulate one patient and return its JSON-ready record (seed, coefficients, metrics)."""
+    return _simulate_patient(scenario, controller_spec, patient_seed, sample_period_s)[0]
+
+
+def _simulate_patient(
+    scenario: Scenario, controller_spec: str, patient_seed: int, sample_period_s: float
+) -> tuple[dict[str, Any], Any]:
     world = World(scenario, patient_seed, sample_period_s)
     controller = load_controller(controller_spec, sample_period_s)
     traj = simulate(world, controller)
@@ -80,11 +99,23 @@ def run_patient(
     }
     record.update(metrics)
     record["commands_out_of_range"] = int(world.pump.commands_out_of_range)
-    return record
+    return record, traj
 
 
 def _worker(args: tuple[Scenario, str, int, float]) -> dict[str, Any]:
     return run_patient(*args)
+
+
+def _worker_traced(args: tuple[Scenario, str, int, float]) -> tuple[dict[str, Any], dict]:
+    record, traj = _simulate_patient(*args)
+    every = max(1, int(round(REPORT_SAMPLE_S / args[3])))
+    thinned = {
+        "t_s": traj.t_s[::every],
+        "map_true_mmhg": traj.map_true_mmhg[::every],
+        "target_mmhg": traj.target_mmhg[::every],
+        "rate_ml_h": traj.rate_ml_h[::every],
+    }
+    return record, thinned
 
 
 def run_trial(
@@ -115,11 +146,45 @@ def run_trial(
         Address of a Dask scheduler (``tcp://HOST:PORT``) to run the patients on instead of local
         processes (:mod:`hil_sim.backend`); does not change the results.
     """
-    tasks = [
-        (scenario, controller_spec, s, sample_period_s)
-        for s in cohort_seeds(cohort_seed, n_patients)
-    ]
+    tasks = _tasks(scenario, controller_spec, cohort_seed, n_patients, sample_period_s)
     return run_ordered(_worker, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
+
+
+def _tasks(
+    scenario: Scenario, spec: str, cohort_seed: int, n_patients: int, sample_period_s: float
+) -> list[tuple[Scenario, str, int, float]]:
+    return [(scenario, spec, s, sample_period_s) for s in cohort_seeds(cohort_seed, n_patients)]
+
+
+def run_trial_traced(
+    scenario: Scenario,
+    controller_spec: str,
+    cohort_seed: int,
+    n_patients: int,
+    jobs: int = 1,
+    sample_period_s: float = 0.1,
+    progress: Callable[[int, int], None] | None = None,
+    scheduler: str | None = None,
+) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+    """:func:`run_trial` that also keeps every patient's trajectory, thinned to 1 Hz, for a report.
+
+    Returns
+    -------
+    records, trajectories
+        The records (as :func:`run_trial` returns them) and the arrays
+        :data:`hil_sim.report.TRAJECTORY_KEYS` names: ``t_s`` (ticks,), ``map_true_mmhg``,
+        ``target_mmhg``, ``rate_ml_h`` (patients × ticks; mmHg, mmHg, ml/h) and ``patient_seed``.
+    """
+    tasks = _tasks(scenario, controller_spec, cohort_seed, n_patients, sample_period_s)
+    runs = run_ordered(_worker_traced, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
+    records = [r for r, _ in runs]
+    arrays = {
+        key: np.stack([tr[key] for _, tr in runs])
+        for key in ("map_true_mmhg", "target_mmhg", "rate_ml_h")
+    }
+    arrays["t_s"] = runs[0][1]["t_s"]
+    arrays["patient_seed"] = np.array([r["patient_seed"] for r in records], dtype=np.int64)
+    return records, arrays
 
 
 def summarize(

@@ -117,3 +117,30 @@ def test_scenarios_lists_required_names_one_line_each(capsys):
     for required in ("nominal-step", "paper-tracking", "paper-disturbance"):
         assert required in names
     assert all("INVALID" not in line for line in lines)
+
+
+def test_two_controllers_write_their_own_files_a_paired_comparison_and_a_report(
+    tmp_path: Path, short_scenario: Path, capsys
+):
+    out = tmp_path / "cmp"
+    argv = ["--controller", "pi,smith", "--patients", "3", "--seed", "1"]
+    argv += ["--scenario", str(short_scenario), "--report", "--out", str(out)]
+    assert main("trial", argv) == 0
+    single = _run(tmp_path, short_scenario, 1, "single")  # the same cohort under the PI alone
+    assert (
+        json.loads((out / "pi" / "patients.json").read_text())[:3]
+        == json.loads((single / "patients.json").read_text())[:3]
+    )
+    smith = json.loads((out / "smith" / "patients.json").read_text())
+    comparison = json.loads((out / "comparison.json").read_text())
+    iae = comparison["pi vs smith"]["iae_mmhg_s"]
+    assert iae["n"] == sum(r["reachable"] for r in smith)
+    assert "pi vs smith" in (out / "report.html").read_text()
+    assert (out / "trajectories_pi.npz").is_file() and (out / "trajectories_smith.npz").is_file()
+    assert "paired: pi vs smith" in capsys.readouterr().out
+
+
+def test_a_controller_named_twice_is_refused_with_exit_2(tmp_path, short_scenario, capsys):
+    argv = ["--controller", "pi,pi", "--patients", "2", "--scenario", str(short_scenario)]
+    assert main("trial", argv + ["--out", str(tmp_path / "o")]) == 2
+    assert "name each controller once" in capsys.readouterr().err
