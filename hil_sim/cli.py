@@ -41,8 +41,11 @@ def _fmt(v: Any) -> str:
 
 
 def format_table(summary: dict[str, Any]) -> str:
-    """The terminal table: median and p90 of every metric, reachable patients first."""
-    from contracts.metrics import RUN_METRICS
+    """The terminal table: median and the bad 10 % tail of every metric, reachable patients first.
+
+    The tail is p90 for errors and times and p10 where higher is better (time in band).
+    """
+    from contracts.metrics import HIGHER_IS_BETTER, RUN_METRICS
 
     m = summary["metrics"]
     lines = [
@@ -50,15 +53,16 @@ def format_table(summary: dict[str, Any]) -> str:
         f" seed={summary['cohort_seed']} patients={summary['n_patients']}"
         f" (reachable {m['n_reachable']}, unreachable {m['n_unreachable']},"
         f" unstable {m['n_unstable']})",
-        f"{'metric':<24}{'median':>10}{'p90':>10}{'n':>5}{'null':>5}"
-        f" | {'unreach. median':>15}{'p90':>10}",
+        f"{'metric':<24}{'median':>10}{'worst 10%':>10}{'n':>5}{'null':>5}"
+        f" | {'unreach. median':>15}{'worst 10%':>10}",
     ]
     for key in RUN_METRICS:
         r = m["reachable"][key]
         u = m["unreachable"][key]
+        tail = "p10" if key in HIGHER_IS_BETTER else "p90"
         lines.append(
-            f"{key:<24}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}{r['n']:>5}{r['n_null']:>5}"
-            f" | {_fmt(u['median']):>15}{_fmt(u['p90']):>10}"
+            f"{key:<24}{_fmt(r['median']):>10}{_fmt(r[tail]):>10}{r['n']:>5}{r['n_null']:>5}"
+            f" | {_fmt(u['median']):>15}{_fmt(u[tail]):>10}"
         )
     for label, d in m["disturbances"].items():
         lines.append(f"{label} at {_fmt(d['start_s'])} s (reachable patients):")

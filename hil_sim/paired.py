@@ -7,7 +7,7 @@ where both runs have a value (reachable in both, metric not null):
 
 * ``n`` — the number of such pairs;
 * ``win_rate_pct`` — the share of pairs where the first controller is strictly better (lower, or
-  higher for the metrics in :data:`HIGHER_IS_BETTER`);
+  higher for :data:`contracts.metrics.HIGHER_IS_BETTER`);
 * ``median_ratio`` — the median over pairs of first/second (pairs whose second value is 0 are left
   out of the ratio; ``None`` when none is left);
 * ``median_difference`` — the median of first − second, in the metric's unit;
@@ -25,6 +25,8 @@ from typing import Any
 import numpy as np
 from scipy.stats import wilcoxon
 
+from contracts.metrics import HIGHER_IS_BETTER
+
 #: scalar metrics compared (``docs/METRICS.md`` defines each), lower is better unless listed below
 PAIRED_METRICS: tuple[str, ...] = (
     "iae_mmhg_s",
@@ -35,7 +37,6 @@ PAIRED_METRICS: tuple[str, ...] = (
     "time_below_pct",
     "drug_total_ml",
 )
-HIGHER_IS_BETTER = frozenset({"time_in_band_pct"})
 #: per-disturbance metrics compared, per event label (``hemorrhage``, ``bolus``, …)
 EVENT_PAIRED_METRICS: tuple[str, ...] = ("peak_deviation_mmhg", "recovery_s", "iae_mmhg_s")
 #: pairs below this count get no p-value (the signed-rank test has no power there)

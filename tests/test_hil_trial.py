@@ -62,7 +62,7 @@ def test_trial_outputs_name_seed_coefficients_and_metrics(tmp_path, short_scenar
     assert summary["n_patients"] == 4
     m = summary["metrics"]
     assert m["n_reachable"] + m["n_unreachable"] == 4
-    assert set(m["reachable"]["settling_time_s"]) == {"median", "p90", "n", "n_null"}
+    assert set(m["reachable"]["settling_time_s"]) == {"median", "p10", "p90", "n", "n_null"}
     csv_lines = (out / "patients.csv").read_text().splitlines()
     assert csv_lines[0].startswith("patient_seed,a_k,k0") and len(csv_lines) == 5
     text = capsys.readouterr()
@@ -91,7 +91,13 @@ def test_trial_records_and_csv_carry_step_window_and_disturbance_fields(
     hem_summary = summary["disturbances"]["hemorrhage"]
     assert hem_summary["start_s"] == 120.0
     assert hem_summary["iae_mmhg_s"]["n"] == summary["n_reachable"]
-    assert set(summary["reachable"]["step_overshoot_pct"]) == {"median", "p90", "n", "n_null"}
+    assert set(summary["reachable"]["step_overshoot_pct"]) == {
+        "median",
+        "p10",
+        "p90",
+        "n",
+        "n_null",
+    }
     text = capsys.readouterr().out
     assert "step_overshoot_pct" in text and "hemorrhage at 120 s" in text
     assert "peak_abs_deviation_mmhg" in text

@@ -137,10 +137,18 @@ def test_aggregate_reports_unreachable_apart_and_percentiles_skip_none():
     s = agg["reachable"]["settling_time_s"]
     assert s["median"] == pytest.approx(5.5)
     assert s["p90"] == pytest.approx(9.1)
+    assert s["p10"] == pytest.approx(1.9)  # linear interpolation between 1 and 2 at 0.9 of the gap
     assert agg["unreachable"]["settling_time_s"] == {
         "median": None,
+        "p10": None,
         "p90": None,
         "n": 0,
         "n_null": 1,
     }
-    assert percentile_summary([]) == {"median": None, "p90": None, "n": 0, "n_null": 0}
+    assert percentile_summary([]) == {
+        "median": None,
+        "p10": None,
+        "p90": None,
+        "n": 0,
+        "n_null": 0,
+    }

@@ -13,21 +13,25 @@ from contracts.metrics.signals import to_float
 
 
 def percentile_summary(values: Iterable[float | None]) -> dict[str, float | int | None]:
-    """Median and 90th percentile of the non-``None`` values, with counts.
+    """Median, 10th and 90th percentiles of the non-``None`` values, with counts.
+
+    Which tail is the bad one depends on the metric: p90 for errors and times, p10 for
+    ``time_in_band_pct`` (:data:`contracts.metrics.names.HIGHER_IS_BETTER`).
 
     Returns
     -------
     dict
-        ``median``, ``p90`` (``None`` when no value applies), ``n`` (values used),
+        ``median``, ``p10``, ``p90`` (``None`` when no value applies), ``n`` (values used),
         ``n_null`` (``None`` values, e.g. never settled).
     """
     vals = list(values)
     used = np.array([float(v) for v in vals if v is not None], dtype=float)
     n_null = len(vals) - used.size
     if used.size == 0:
-        return {"median": None, "p90": None, "n": 0, "n_null": n_null}
+        return {"median": None, "p10": None, "p90": None, "n": 0, "n_null": n_null}
     return {
         "median": to_float(np.median(used)),
+        "p10": to_float(np.percentile(used, 10.0)),
         "p90": to_float(np.percentile(used, 90.0)),
         "n": int(used.size),
         "n_null": int(n_null),

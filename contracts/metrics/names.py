@@ -34,6 +34,9 @@ RUN_METRICS = (
     )
     + STEP_WINDOW_METRICS
 )
+HIGHER_IS_BETTER = frozenset({"time_in_band_pct"})
+"""Run metrics where a larger value is better; for every other metric a smaller one is (or, for
+the signed ``mdpe_pct``, closer to zero), so the bad tail of a cohort is p10 here and p90 elsewhere."""
 EVENT_KINDS = ("hemorrhage", "bolus")
 """Disturbance kinds that are events with a start; a sinusoid is continuous background."""
 EVENT_METRICS = ("peak_deviation_mmhg", "recovery_s", "iae_mmhg_s")
