@@ -89,6 +89,22 @@ class PatientParams:
         return self.k0 * i_best * math.exp(-self.k1 * i_best)
 
 
+#: unit of every coefficient a trial record carries (``coefficients`` of PatientParams/FrozenParams)
+COEFFICIENT_UNITS: dict[str, str] = {
+    "a_k": "s",
+    "k0": "mmHg/(ml/h)",
+    "k1": "1/(ml/h)",
+    "b_T": "s/((ml/h)·s)",
+    "a_tau1": "min",
+    "a_tau2": "min²",
+    "b_tau1": "min",
+    "baseline_mmhg": "mmHg",
+    "K": "mmHg/(ml/h)",
+    "T_s": "s",
+    "tau_s": "s",
+}
+
+
 @dataclass(frozen=True)
 class FrozenParams:
     """A linear time-invariant patient K e^(−τs)/(Ts + 1) (frozen nominal-step mode).

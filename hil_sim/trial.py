@@ -44,6 +44,7 @@ from contracts.metrics import (
 from hil_sim.backend import run_ordered
 from hil_sim.closed_loop import simulate
 from hil_sim.cohort import cohort_seeds
+from hil_sim.patient import COEFFICIENT_UNITS
 from hil_sim.scenario import Scenario
 from hil_sim.world import World
 from runtime.controller_loader import load_controller
@@ -94,12 +95,25 @@ def _simulate_patient(
     record: dict[str, Any] = {
         "patient_seed": int(patient_seed),
         "coefficients": world.params.to_dict(),
+        "schedule_range": _schedule_range(traj),
         "required_delta_mmhg": world.required_delta_mmhg(),
         "max_delta_mmhg": world.params.max_delta_map_mmhg(scenario.pump.max_rate_ml_h),
     }
     record.update(metrics)
     record["commands_out_of_range"] = int(world.pump.commands_out_of_range)
     return record, traj
+
+
+def _schedule_range(traj: Any) -> dict[str, list[float]]:
+    """The patient's true K (mmHg/(ml/h)), T (s) and τ (s) over the run, as [min, max] each."""
+    return {
+        name: [float(np.min(values)), float(np.max(values))]
+        for name, values in (
+            ("K_mmhg_per_ml_h", traj.K),
+            ("T_s", traj.T_s),
+            ("tau_s", traj.tau_s),
+        )
+    }
 
 
 def _worker(args: tuple[Scenario, str, int, float]) -> dict[str, Any]:
@@ -198,6 +212,9 @@ def summarize(
         "n_patients": len(records),
         "unreachable_patient_seeds": [r["patient_seed"] for r in records if not r["reachable"]],
         "unstable_patient_seeds": [r["patient_seed"] for r in records if not r["stable"]],
+        "coefficient_units": {
+            k: COEFFICIENT_UNITS[k] for k in (records[0]["coefficients"] if records else {})
+        },
         "metrics": aggregate(records),
     }
 
@@ -214,9 +231,11 @@ def _csv_text(records: Sequence[dict[str, Any]]) -> str:
     )
     # Every patient of a trial runs the same scenario, so the first one's events name the columns.
     labels = event_labels([d["kind"] for d in records[0]["disturbances"]]) if records else []
+    ranges = list(records[0]["schedule_range"]) if records else []
     header = (
         ["patient_seed"]
-        + coeff_keys
+        + [f"{k} ({COEFFICIENT_UNITS[k]})" for k in coeff_keys]
+        + [f"{name}_{end}" for name in ranges for end in ("min", "max")]
         + scalar_keys
         + [f"{label}_{col}" for label in labels for col in _EVENT_COLUMNS]
     )
@@ -225,6 +244,7 @@ def _csv_text(records: Sequence[dict[str, Any]]) -> str:
     writer.writerow(header)
     for r in records:
         row = [r["patient_seed"]] + [r["coefficients"][k] for k in coeff_keys]
+        row += [v for name in ranges for v in r["schedule_range"][name]]
         row += [r[k] for k in scalar_keys]
         row += [d[col] for d in r["disturbances"] for col in _EVENT_COLUMNS]
         writer.writerow(["" if v is None else repr(v) if isinstance(v, float) else v for v in row])

@@ -56,6 +56,12 @@ def test_trial_outputs_name_seed_coefficients_and_metrics(tmp_path, short_scenar
     assert [p["patient_seed"] for p in patients] == [1000000, 1000001, 1000002, 1000003]
     for p in patients:
         assert 0.1 <= p["coefficients"]["k0"] <= 1.0
+        k_lo, k_hi = p["schedule_range"]["K_mmhg_per_ml_h"]
+        assert (
+            0.0 < k_lo <= k_hi <= p["coefficients"]["k0"] * (1 + 1e-6)
+        )  # K falls from k0 (float32)
+        t_lo, t_hi = p["schedule_range"]["T_s"]
+        assert t_lo <= t_hi
         assert isinstance(p["reachable"], bool) and isinstance(p["stable"], bool)
         assert p["reachable"] == (p["required_delta_mmhg"] <= p["max_delta_mmhg"])
     summary = json.loads((out / "summary.json").read_text())
@@ -63,8 +69,10 @@ def test_trial_outputs_name_seed_coefficients_and_metrics(tmp_path, short_scenar
     m = summary["metrics"]
     assert m["n_reachable"] + m["n_unreachable"] == 4
     assert set(m["reachable"]["settling_time_s"]) == {"median", "p10", "p90", "n", "n_null"}
+    assert summary["coefficient_units"]["k0"] == "mmHg/(ml/h)"
     csv_lines = (out / "patients.csv").read_text().splitlines()
-    assert csv_lines[0].startswith("patient_seed,a_k,k0") and len(csv_lines) == 5
+    assert csv_lines[0].startswith("patient_seed,a_k (s),k0 (mmHg/(ml/h))") and len(csv_lines) == 5
+    assert "K_mmhg_per_ml_h_min,K_mmhg_per_ml_h_max,T_s_min" in csv_lines[0]
     text = capsys.readouterr()
     assert "settling_time_s" in text.out and "median" in text.out
     assert "4/4 patients" in text.err
