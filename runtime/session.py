@@ -114,6 +114,13 @@ def run_runtime(
                 f"|{config.mode}"
             )
             recorder = Recorder(config.rrd, run_label=label)
+            recorder.plan_markers(
+                [(t, "disturbance", f"disturbance: {kind} at {t:g} s") for kind, t in events or ()]
+                + [
+                    (f.start_s, "fault", f"fault: {f.kind} at {f.start_s:g} s")
+                    for f in config.fault_specs
+                ]
+            )
         loop = Loop(controller, sup, ep, recorder=recorder, heartbeat_every=round(config.rate_hz))
         with CpuLatencyRequest(config.cpu_latency_us) as wake:
             if config.realtime:
