@@ -39,7 +39,6 @@ from runtime.placement import CpuChoice, parse_lockstep_cpus
 
 DEFAULT_SCENARIO = "paper-tracking"
 DEFAULT_PATIENT_SEED = 1
-DEFAULT_DURATION_S = 1800.0
 #: longest simulated run (s)
 MAX_DURATION_S = 7 * 86400.0
 
@@ -97,8 +96,8 @@ def sil_parser() -> UsageParser:
     p.add_argument(
         "--duration",
         type=positive("--duration", MAX_DURATION_S),
-        default=DEFAULT_DURATION_S,
-        help="simulated time in s (default 1800)",
+        default=None,
+        help="simulated time in s (default: the scenario's duration_s)",
     )
     p.add_argument("--link", default="pty", help="pty (default) or a pyserial URL / device path")
     p.add_argument("--no-signing", action="store_true", help="run the link unsigned")
@@ -141,7 +140,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         run=replace(run, fault_specs=run.fault_specs + scenario.faults),
         scenario=args.scenario,
         patient_seed=args.patient_seed,
-        duration_s=args.duration,
+        duration_s=scenario.duration_s if args.duration is None else args.duration,
         link=args.link,
         signed=not args.no_signing,
         cpu=args.cpu,

@@ -31,12 +31,23 @@ def test_scenario_events_and_faults_come_from_the_simulators_scenario(tmp_path: 
     assert cfg.run.rrd == Path("pressor_sil_pi_s_seed1.rrd")  # a scenario file: its stem
 
 
+def test_sil_runs_the_scenarios_duration_unless_duration_is_given():
+    assert load_scenario("paper-disturbance").duration_s == 3600.0
+    assert sil_config(["--scenario", "paper-disturbance"]).duration_s == 3600.0
+    assert sil_config(["--scenario", "paper-disturbance", "--duration", "60"]).duration_s == 60.0
+    cfg = sil_config(["--scenario", "paper-disturbance"])
+    cmd = device_command(cfg, "/dev/null", None, None)
+    assert (
+        cmd[cmd.index("--duration") + 1] == "3600.0"
+    )  # the bolus at 2100 s happens in sil as in trial
+
+
 def test_default_recording_name_names_controller_scenario_and_seed():
     cfg = sil_config(["--controller", "pi", "--patient-seed", "7"])
     assert cfg.run.rrd == Path("pressor_sil_pi_paper-tracking_seed7.rrd")
     assert (cfg.scenario, cfg.duration_s, cfg.link, cfg.signed) == (
         "paper-tracking",
-        1800.0,
+        load_scenario("paper-tracking").duration_s,
         "pty",
         True,
     )
