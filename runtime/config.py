@@ -98,18 +98,18 @@ def positive(name: str, high: float) -> Callable[[str], float]:
 
 
 def _cpu_latency(text: str) -> int | None:
+    """``off`` -> None (no request), ``hold`` -> 0 µs, else an integer in [0, MAX_LATENCY_US] µs."""
     if text == "off":
         return None
+    if text == "hold":
+        return 0
+    allowed = f"allowed off, hold (0 us) or an integer in [0, {MAX_LATENCY_US}] us"
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--cpu-latency {text!r}: allowed off or an integer in [0, {MAX_LATENCY_US}] us"
-        ) from None
+        raise argparse.ArgumentTypeError(f"--cpu-latency {text!r}: {allowed}") from None
     if not 0 <= value <= MAX_LATENCY_US:
-        raise argparse.ArgumentTypeError(
-            f"--cpu-latency {text!r}: allowed off or [0, {MAX_LATENCY_US}] us"
-        )
+        raise argparse.ArgumentTypeError(f"--cpu-latency {text!r}: {allowed}")
     return value
 
 
@@ -159,11 +159,12 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--cpu-latency",
         type=_cpu_latency,
-        default=0,
-        metavar="US|off",
-        help="hold the host's CPU wake-up latency at US microseconds during the run"
-        " (/dev/cpu_dma_latency, best effort, usually needs root; default 0: idle CPUs poll"
-        " instead of halting, 2x faster lockstep on a VM); off: make no request",
+        default=None,
+        metavar="off|hold|US",
+        help="host-wide CPU wake-up latency request while the run lasts (/dev/cpu_dma_latency,"
+        " best effort, usually needs root): off (default) makes none; hold keeps idle CPUs"
+        " polling (0 us; ~5 %% faster lockstep on a quiet 2-core host); US holds that many"
+        " microseconds",
     )
 
 
