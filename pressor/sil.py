@@ -91,8 +91,17 @@ def sil_parser() -> UsageParser:
     """The ``pressor sil`` option parser: the runtime's options plus the device's."""
     p = UsageParser(prog="pressor sil", description="device process + runtime over a serial link")
     add_run_options(p)
-    p.add_argument("--scenario", default=DEFAULT_SCENARIO, help="scenario name (pressor scenarios)")
-    p.add_argument("--patient-seed", type=_seed, default=DEFAULT_PATIENT_SEED)
+    p.add_argument(
+        "--scenario",
+        default=DEFAULT_SCENARIO,
+        help="scenario name ('pressor scenarios' lists them) or a .toml path",
+    )
+    p.add_argument(
+        "--patient-seed",
+        type=_seed,
+        default=DEFAULT_PATIENT_SEED,
+        help="seed of the simulated patient, [0, 2**32)",
+    )
     p.add_argument(
         "--duration",
         type=positive("--duration", MAX_DURATION_S),
@@ -100,7 +109,9 @@ def sil_parser() -> UsageParser:
         help="simulated time in s (default: the scenario's duration_s)",
     )
     p.add_argument("--link", default="pty", help="pty (default) or a pyserial URL / device path")
-    p.add_argument("--no-signing", action="store_true", help="run the link unsigned")
+    p.add_argument(
+        "--no-signing", action="store_true", help="run the link unsigned (default: signed)"
+    )
     p.add_argument(
         "--cpu",
         type=parse_lockstep_cpus,
