@@ -7,7 +7,8 @@ pseudo-terminal (a real tty to pyserial), signs the link (a fresh key per run un
 ``--signing-key``), runs the runtime in lockstep (or ``--realtime``) through
 :func:`runtime.session.run_runtime`, records everything to an ``.rrd``, prints the metric summary
 (:mod:`runtime.summary`, defined in docs/METRICS.md) and the ``rerun FILE.rrd`` command to replay
-it. The runtime itself never imports the simulator: the control path learns of the patient, and
+it. The run lasts the scenario's ``duration_s`` unless ``--duration`` is given; on a terminal a
+status line shows simulated time and the real-time factor (:mod:`runtime.progress`). The runtime itself never imports the simulator: the control path learns of the patient, and
 of any fault, only through what arrives on the link.
 
 Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
@@ -203,6 +204,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     from link import PtyPair
     from runtime.config import load_signing
     from runtime.placement import lockstep_cpus
+    from runtime.progress import TerminalProgress
     from runtime.session import run_runtime
 
     run = config.run
@@ -226,6 +228,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
         with open(device_log, "wb") as log:
             proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
         port = pair.leader_port()
+        progress = TerminalProgress(run.period_s, round(config.duration_s / run.period_s))
         try:
             summary, result = run_runtime(
                 port,
@@ -236,6 +239,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 cpus=cpus,
                 on_connected=pair.close_follower,
                 peer_alive=lambda: proc.poll() is None,
+                on_tick=progress if progress.enabled else None,
             )
         except Exception:
             _stop(proc)
@@ -247,6 +251,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 print(f"device output:\n{text}", file=sys.stderr)
             raise
         finally:
+            progress.close()
             pair.close()
         code = _stop(proc, grace_s=10.0)
         if code not in (0, None):
