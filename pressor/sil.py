@@ -53,7 +53,7 @@ class SilConfig:
     run
         The runtime end's configuration; its ``fault_specs`` include the scenario's faults.
     scenario
-        Scenario name or ``.toml`` path, as passed to the device.
+        Scenario name, or the absolute path of a scenario file, as passed to the device.
     patient_seed
         The device's patient seed.
     duration_s
@@ -128,7 +128,7 @@ def sil_parser() -> UsageParser:
 def sil_config(argv: Sequence[str]) -> SilConfig:
     """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
     disturbance events (raises :class:`contracts.usage.UsageError`)."""
-    from hil_sim.scenario import ScenarioError, load_scenario
+    from hil_sim.scenario import ScenarioError, is_scenario_path, load_scenario
     from hil_sim.trial import scenario_events
 
     args = sil_parser().parse_args(argv)
@@ -150,7 +150,9 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         )
     return SilConfig(
         run=replace(run, fault_specs=run.fault_specs + scenario.faults),
-        scenario=args.scenario,
+        scenario=str(Path(args.scenario).resolve())  # the device may start elsewhere
+        if is_scenario_path(args.scenario)
+        else args.scenario,
         patient_seed=args.patient_seed,
         duration_s=scenario.duration_s if args.duration is None else args.duration,
         link=args.link,

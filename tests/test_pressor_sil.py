@@ -85,3 +85,16 @@ def test_device_command_carries_scenario_seed_duration_rate_faults_cpu_and_key(t
     assert args[-2:] == ["--signing-key", str(key)]
     plain = device_command(sil_config(["--controller", "pi"]), "/dev/pts/9", None, None)
     assert not {"--cpu", "--retransmit", "--signing-key", "--fault"} & set(plain)
+
+
+def test_relative_scenario_path_reaches_the_device_as_an_absolute_path(tmp_path, monkeypatch):
+    (tmp_path / "sc").mkdir()
+    (tmp_path / "sc" / "mine.toml").write_text((SCENARIO_DIR / "paper-tracking.toml").read_text())
+    monkeypatch.chdir(tmp_path)
+    cfg = sil_config(["--controller", "pi", "--scenario", "sc/mine.toml"])
+    assert cfg.scenario == str(tmp_path / "sc" / "mine.toml")
+    assert cfg.run.rrd == Path("pressor_sil_pi_mine_seed1.rrd")
+    cmd = device_command(cfg, "/dev/null", None, None)
+    assert cmd[cmd.index("--scenario") + 1] == str(tmp_path / "sc" / "mine.toml")
+    with pytest.raises(UsageError, match="nope.toml"):
+        sil_config(["--controller", "pi", "--scenario", "sc/nope.toml"])
