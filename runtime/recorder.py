@@ -2,12 +2,12 @@
 
 Per tick the loop calls :meth:`Recorder.record_tick` with the closed-loop core's
 :class:`~runtime.core.TickRecord` (or :meth:`Recorder.record` with one float per channel); the
-row goes into a
-preallocated ``float64`` array (``chunk_ticks`` rows). When the array is full — and at
-:meth:`Recorder.close` — each channel is sent as one column with ``send_columns`` on two timelines,
-``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call and
-``send_columns`` ~0.3 µs a scalar (docs/ARCHITECTURE.md), so a 15-channel tick costs about a microsecond
-amortised. Rare events (supervisor transitions, alarms) go to ``/safety/events`` as ``TextLog``.
+row goes into a preallocated ``float64`` array (``chunk_ticks`` rows). When the array is full —
+and at :meth:`Recorder.close` — each channel is sent as one column with ``send_columns`` on two
+timelines, ``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call and
+``send_columns`` ~0.3 µs a scalar (docs/PLATFORM-NOTES.md), so a 15-channel tick costs about a
+microsecond amortised. Rare events (supervisor transitions, alarms, event markers) are logged one
+by one: ``/safety/events`` and ``/events/log`` as ``TextLog``.
 
 Reproducibility: the wall-clock ``log_time`` and ``log_tick`` timelines are disabled, recording
 properties (which carry the wall-clock start time) are not sent, and the recording id is derived from
