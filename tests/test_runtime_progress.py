@@ -4,8 +4,17 @@ from __future__ import annotations
 
 import io
 import os
+import select
 
 from runtime.progress import TerminalProgress
+
+
+def read_all(fd: int) -> str:
+    """Everything written to the terminal so far (it arrives in pieces)."""
+    data = b""
+    while select.select([fd], [], [], 0.5)[0]:
+        data += os.read(fd, 65536)
+    return data.decode()
 
 
 def drive(progress: TerminalProgress, ticks: int) -> None:
@@ -27,7 +36,7 @@ def test_progress_is_drawn_on_a_real_terminal_and_cleared_at_the_end():
             assert p.enabled
             drive(p, 1000)
             p.close()
-        text = os.read(leader, 65536).decode()
+        text = read_all(leader)
     finally:
         os.close(leader)
         os.close(follower)
