@@ -181,7 +181,7 @@ def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = No
             print(f"  {k:<24} {_fmt(v, k)}", file=out)
     for d in metrics.get("disturbances") or []:
         print(
-            f"  {d['kind']} at {_fmt(d['start_s'], 'start_s')}: peak deviation"
+            f"  {d['kind']} at {d['start_s']:g} s: peak deviation"
             f" {_fmt(d['peak_deviation_mmhg'], 'peak_deviation_mmhg')},"
             f" recovery {_fmt(d['recovery_s'], 'recovery_s')},"
             f" IAE {_fmt(d['iae_mmhg_s'], 'iae_mmhg_s')}",

@@ -63,7 +63,7 @@ def test_terminal_summary_rounds_each_metric_to_its_unit():
     assert lines["drug_total_ml"] == "6.47 ml"
     assert lines["max_rate_ml_h"] == "108.0 ml/h"
     assert lines["rise_time_s"] == "null" and lines["reachable"] == "True"
-    assert "hemorrhage at 1200.0 s: peak deviation 3.14 mmHg, recovery 85.0 s, IAE 100.3" in (
+    assert "hemorrhage at 1200 s: peak deviation 3.14 mmHg, recovery 85.0 s, IAE 100.3" in (
         out.getvalue()
     )
 
