@@ -27,10 +27,20 @@ def _parser() -> UsageParser:
         default=str(DEFAULT_ARTIFACT),
         help="artifact .npz (default: shipped)",
     )
-    p.add_argument("--target", choices=("python", "c"), required=True)
-    p.add_argument("--fixed-point", choices=("q15", "q31"), default="q31", dest="fixed_point")
     p.add_argument(
-        "--c-float", action="store_true", help="C target: emit the double-precision step instead"
+        "--target", choices=("python", "c"), required=True, help="language of the emitted module"
+    )
+    p.add_argument(
+        "--fixed-point",
+        choices=("q15", "q31"),
+        default="q31",
+        dest="fixed_point",
+        help="integer data path word: q15 (16-bit) or q31 (32-bit) fixed point",
+    )
+    p.add_argument(
+        "--c-float",
+        action="store_true",
+        help="C target: emit the double-precision step instead of fixed point",
     )
     p.add_argument("--out", required=True, help="output directory")
     return p

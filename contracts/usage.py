@@ -11,9 +11,10 @@ and exit code :data:`USAGE_EXIT` (docs/INTERFACES.md, "CLI"). A command raises
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from collections.abc import Callable, Sequence
-from typing import NoReturn, TextIO
+from typing import Any, NoReturn, TextIO
 
 #: exit code of bad usage or bad input
 USAGE_EXIT = 2
@@ -24,13 +25,42 @@ class UsageError(Exception):
     allowed range (without the program name, which :func:`run_command` puts in front)."""
 
 
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """Help that shows every option's default: ``(default: VALUE)`` is appended to an option's
+    help unless the help already says what its default is (the word "default"); a required
+    option's reads ``(required)``. A flag's default
+    reads ``off``; an option without a value (``None``, an empty list) reads ``none``."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        if not action.option_strings or action.default is argparse.SUPPRESS:
+            return text
+        if re.search(r"\bdefault\b", text, re.IGNORECASE):
+            return text
+        if action.required:
+            return f"{text} (required)".lstrip()
+        value = action.default
+        if isinstance(action, argparse._StoreTrueAction):
+            shown = "off"
+        elif value is None or value == []:
+            shown = "none"
+        else:
+            shown = str(value).replace("%", "%%")
+        return f"{text} (default: {shown})".lstrip()
+
+
 class UsageParser(argparse.ArgumentParser):
     """An :class:`argparse.ArgumentParser` whose errors raise :class:`UsageError`.
 
     argparse's own error prints the usage block and exits; this one leaves the reporting to
     :func:`run_command`, so a bad option gives the same one line as any other bad input.
-    ``--help`` still prints the help and raises :class:`SystemExit` (code 0).
+    ``--help`` still prints the help and raises :class:`SystemExit` (code 0); it shows every
+    option's default (:class:`DefaultsHelpFormatter`).
     """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", DefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         """Raise :class:`UsageError` with argparse's message (e.g. ``argument --rate: ...``)."""

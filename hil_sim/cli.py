@@ -20,17 +20,23 @@ from contracts.usage import UsageError, UsageParser, run_command, usage_exit
 
 
 def _scenarios(argv: Sequence[str]) -> int:
-    from hil_sim.scenario import ScenarioError, load_scenario, scenario_names
+    from hil_sim.scenario import SCENARIO_DIR, ScenarioError, load_scenario, scenario_names
 
-    UsageParser(prog="pressor scenarios", description="list the named scenarios").parse_args(argv)
+    UsageParser(
+        prog="pressor scenarios",
+        description="list the named scenarios: name, file, description (any other .toml file"
+        " with the same fields can be passed by path: --scenario path/to/file.toml)",
+    ).parse_args(argv)
     names = scenario_names()
     width = max(len(n) for n in names)
+    files = {name: str(SCENARIO_DIR / f"{name}.toml") for name in names}
+    file_width = max(len(f) for f in files.values())
     for name in names:
         try:
             desc = load_scenario(name).description
         except ScenarioError as exc:
             desc = f"INVALID: {exc}"
-        print(f"{name:<{width}}  {desc}")
+        print(f"{name:<{width}}  {files[name]:<{file_width}}  {desc}")
     return 0
 
 

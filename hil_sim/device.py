@@ -69,26 +69,48 @@ def _parser(command: str) -> UsageParser:
     )
     p.add_argument("--port", required=True, help="device path or pyserial URL (e.g. /dev/pts/7)")
     p.add_argument("--scenario", default="paper-tracking", help="scenario name or .toml path")
-    p.add_argument("--patient-seed", type=int, default=0, help="patient seed (0..2^32-1)")
-    p.add_argument("--duration", type=float, default=None, help="s (default: the scenario's)")
-    p.add_argument("--rate", type=float, default=10.0, help="sample rate, Hz (default 10)")
-    p.add_argument("--realtime", action="store_true", help="run on the wall clock")
-    p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file (32 B / hex)")
-    p.add_argument("--tlog", default=None, help="write every link frame to this .tlog")
+    p.add_argument("--patient-seed", type=int, default=0, help="patient seed, [0, 2**32)")
     p.add_argument(
-        "--retransmit", type=float, default=RETRANSMIT_S, help="s without a command before resend"
+        "--duration",
+        type=float,
+        default=None,
+        help="simulated time (s; default: the scenario's duration_s)",
+    )
+    p.add_argument("--rate", type=float, default=10.0, help="sample rate (Hz)")
+    p.add_argument(
+        "--realtime", action="store_true", help="run on the wall clock (default: lockstep)"
     )
     p.add_argument(
-        "--link-timeout", type=float, default=LINK_TIMEOUT_S, help="s without a command: give up"
+        "--signing-key",
+        default=None,
+        help="MAVLink 2 signing key file (32 B / hex; default: unsigned)",
     )
     p.add_argument(
-        "--handshake-timeout", type=float, default=HANDSHAKE_TIMEOUT_S, help="s to wait for hello"
+        "--tlog", default=None, help="write every link frame to this .tlog (default: none)"
+    )
+    p.add_argument(
+        "--retransmit",
+        type=float,
+        default=RETRANSMIT_S,
+        help="wall-clock s without a command before resending a tick (s)",
+    )
+    p.add_argument(
+        "--link-timeout",
+        type=float,
+        default=LINK_TIMEOUT_S,
+        help="wall-clock s without a command before giving up (s)",
+    )
+    p.add_argument(
+        "--handshake-timeout",
+        type=float,
+        default=HANDSHAKE_TIMEOUT_S,
+        help="wall-clock s to wait for the runtime's hello (s)",
     )
     p.add_argument(
         "--cpu",
         type=parse_cpu,
         default=None,
-        help="run on this CPU only (pressor sil puts the lockstep ends on two CPUs)",
+        help="run on this CPU only (default: any; pressor sil puts the lockstep ends on two CPUs)",
     )
     p.add_argument(
         "--fault",

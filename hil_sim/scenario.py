@@ -318,10 +318,17 @@ def scenario_names() -> list[str]:
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
 
 
-def load_scenario(name_or_path: str | Path) -> Scenario:
-    """A shipped scenario by name, or any scenario file by path (``.toml``)."""
+def is_scenario_path(name_or_path: str | Path) -> bool:
+    """Whether ``--scenario`` names a file (a ``.toml`` name or a path) rather than a shipped one."""
     s = str(name_or_path)
-    if s.endswith(".toml") or "/" in s:
+    return s.endswith(".toml") or "/" in s
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """A shipped scenario by name, or any scenario file by path (``.toml``; relative paths are
+    relative to the working directory)."""
+    s = str(name_or_path)
+    if is_scenario_path(s):
         return load_scenario_file(s)
     path = SCENARIO_DIR / f"{s}.toml"
     if not path.is_file():

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+from importlib.metadata import version
 
 from contracts.usage import USAGE_EXIT, usage_exit
 
@@ -42,7 +43,10 @@ def _usage() -> str:
     width = max(len(name) for name in COMMANDS)
     lines = ["usage: pressor COMMAND [ARGS...]", "", "commands:"]
     lines += [f"  {name:<{width}}  {text}" for name, (_, text) in COMMANDS.items()]
-    lines += ["", "'pressor COMMAND --help' shows a command's options."]
+    lines += [
+        "",
+        "'pressor COMMAND --help' shows a command's options; 'pressor --version' the version.",
+    ]
     return "\n".join(lines)
 
 
@@ -63,6 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     if not args or args[0] in ("-h", "--help", "help"):
         print(_usage())
         return 0 if args else USAGE_EXIT
+    if args[0] in ("--version", "-V"):
+        print(f"pressor {version('pressor')}")
+        return 0
     command, rest = args[0], args[1:]
     if command not in COMMANDS:
         return usage_exit("pressor", f"unknown command {command!r}; one of: {', '.join(COMMANDS)}")

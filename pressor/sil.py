@@ -7,7 +7,8 @@ pseudo-terminal (a real tty to pyserial), signs the link (a fresh key per run un
 ``--signing-key``), runs the runtime in lockstep (or ``--realtime``) through
 :func:`runtime.session.run_runtime`, records everything to an ``.rrd``, prints the metric summary
 (:mod:`runtime.summary`, defined in docs/METRICS.md) and the ``rerun FILE.rrd`` command to replay
-it. The runtime itself never imports the simulator: the control path learns of the patient, and
+it. The run lasts the scenario's ``duration_s`` unless ``--duration`` is given; on a terminal a
+status line shows simulated time and the real-time factor (:mod:`runtime.progress`). The runtime itself never imports the simulator: the control path learns of the patient, and
 of any fault, only through what arrives on the link.
 
 Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
@@ -39,7 +40,6 @@ from runtime.placement import CpuChoice, parse_lockstep_cpus
 
 DEFAULT_SCENARIO = "paper-tracking"
 DEFAULT_PATIENT_SEED = 1
-DEFAULT_DURATION_S = 1800.0
 #: longest simulated run (s)
 MAX_DURATION_S = 7 * 86400.0
 
@@ -53,7 +53,7 @@ class SilConfig:
     run
         The runtime end's configuration; its ``fault_specs`` include the scenario's faults.
     scenario
-        Scenario name or ``.toml`` path, as passed to the device.
+        Scenario name, or the absolute path of a scenario file, as passed to the device.
     patient_seed
         The device's patient seed.
     duration_s
@@ -92,16 +92,27 @@ def sil_parser() -> UsageParser:
     """The ``pressor sil`` option parser: the runtime's options plus the device's."""
     p = UsageParser(prog="pressor sil", description="device process + runtime over a serial link")
     add_run_options(p)
-    p.add_argument("--scenario", default=DEFAULT_SCENARIO, help="scenario name (pressor scenarios)")
-    p.add_argument("--patient-seed", type=_seed, default=DEFAULT_PATIENT_SEED)
+    p.add_argument(
+        "--scenario",
+        default=DEFAULT_SCENARIO,
+        help="scenario name ('pressor scenarios' lists them) or a .toml path",
+    )
+    p.add_argument(
+        "--patient-seed",
+        type=_seed,
+        default=DEFAULT_PATIENT_SEED,
+        help="seed of the simulated patient, [0, 2**32)",
+    )
     p.add_argument(
         "--duration",
         type=positive("--duration", MAX_DURATION_S),
-        default=DEFAULT_DURATION_S,
-        help="simulated time in s (default 1800)",
+        default=None,
+        help="simulated time in s (default: the scenario's duration_s)",
     )
     p.add_argument("--link", default="pty", help="pty (default) or a pyserial URL / device path")
-    p.add_argument("--no-signing", action="store_true", help="run the link unsigned")
+    p.add_argument(
+        "--no-signing", action="store_true", help="run the link unsigned (default: signed)"
+    )
     p.add_argument(
         "--cpu",
         type=parse_lockstep_cpus,
@@ -117,7 +128,7 @@ def sil_parser() -> UsageParser:
 def sil_config(argv: Sequence[str]) -> SilConfig:
     """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
     disturbance events (raises :class:`contracts.usage.UsageError`)."""
-    from hil_sim.scenario import ScenarioError, load_scenario
+    from hil_sim.scenario import ScenarioError, is_scenario_path, load_scenario
     from hil_sim.trial import scenario_events
 
     args = sil_parser().parse_args(argv)
@@ -139,9 +150,11 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         )
     return SilConfig(
         run=replace(run, fault_specs=run.fault_specs + scenario.faults),
-        scenario=args.scenario,
+        scenario=str(Path(args.scenario).resolve())  # the device may start elsewhere
+        if is_scenario_path(args.scenario)
+        else args.scenario,
         patient_seed=args.patient_seed,
-        duration_s=args.duration,
+        duration_s=scenario.duration_s if args.duration is None else args.duration,
         link=args.link,
         signed=not args.no_signing,
         cpu=args.cpu,
@@ -193,6 +206,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     from link import PtyPair
     from runtime.config import load_signing
     from runtime.placement import lockstep_cpus
+    from runtime.progress import TerminalProgress
     from runtime.session import run_runtime
 
     run = config.run
@@ -216,6 +230,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
         with open(device_log, "wb") as log:
             proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
         port = pair.leader_port()
+        progress = TerminalProgress(run.period_s, round(config.duration_s / run.period_s))
         try:
             summary, result = run_runtime(
                 port,
@@ -226,6 +241,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 cpus=cpus,
                 on_connected=pair.close_follower,
                 peer_alive=lambda: proc.poll() is None,
+                on_tick=progress if progress.enabled else None,
             )
         except Exception:
             _stop(proc)
@@ -237,6 +253,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 print(f"device output:\n{text}", file=sys.stderr)
             raise
         finally:
+            progress.close()
             pair.close()
         code = _stop(proc, grace_s=10.0)
         if code not in (0, None):

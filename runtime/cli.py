@@ -28,7 +28,10 @@ def _run_parser() -> UsageParser:
     add_run_options(p)
     p.add_argument("--port", required=True, help="device path or pyserial URL")
     p.add_argument(
-        "--ticks", type=int, default=0, help="stop after N ticks (0: when the device ends)"
+        "--ticks",
+        type=int,
+        default=0,
+        help="stop after N ticks, one per sample period (default 0: when the device ends)",
     )
     return p
 
@@ -62,7 +65,12 @@ def _main_faults(argv: Sequence[str]) -> int:
     from runtime.supervisor_config import SupervisorConfig, detection_bounds
 
     p = UsageParser(prog="pressor faults", description="fault kinds the supervisor detects")
-    p.add_argument("--rate", type=positive("--rate", MAX_RATE_HZ), default=DEFAULT_RATE_HZ)
+    p.add_argument(
+        "--rate",
+        type=positive("--rate", MAX_RATE_HZ),
+        default=DEFAULT_RATE_HZ,
+        help="loop rate the detection bounds are given at (Hz)",
+    )
     args = p.parse_args(argv)
     cfg = SupervisorConfig(sample_period_s=1.0 / args.rate, stale_after_s=3.5 / args.rate)
     print(

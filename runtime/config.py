@@ -98,18 +98,18 @@ def positive(name: str, high: float) -> Callable[[str], float]:
 
 
 def _cpu_latency(text: str) -> int | None:
+    """``off`` -> None (no request), ``hold`` -> 0 µs, else an integer in [0, MAX_LATENCY_US] µs."""
     if text == "off":
         return None
+    if text == "hold":
+        return 0
+    allowed = f"allowed off, hold (0 us) or an integer in [0, {MAX_LATENCY_US}] us"
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"--cpu-latency {text!r}: allowed off or an integer in [0, {MAX_LATENCY_US}] us"
-        ) from None
+        raise argparse.ArgumentTypeError(f"--cpu-latency {text!r}: {allowed}") from None
     if not 0 <= value <= MAX_LATENCY_US:
-        raise argparse.ArgumentTypeError(
-            f"--cpu-latency {text!r}: allowed off or [0, {MAX_LATENCY_US}] us"
-        )
+        raise argparse.ArgumentTypeError(f"--cpu-latency {text!r}: {allowed}")
     return value
 
 
@@ -118,25 +118,40 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--controller",
         default="lpv",
-        help="lpv (default), pi, smith[:LAMBDA_S] (Smith predictor, lambda 30 s), or a generated .py",
+        help="lpv (default: the shipped LPV module), pi, smith[:LAMBDA_S] (Smith predictor,"
+        " closed-loop time constant LAMBDA_S in s, default 30 s), or a generated .py",
     )
     p.add_argument(
         "--rate",
         type=positive("--rate", MAX_RATE_HZ),
         default=DEFAULT_RATE_HZ,
-        help="loop rate in Hz (default 10)",
+        help="loop rate (Hz)",
     )
-    p.add_argument("--realtime", action="store_true", help="wall clock instead of lockstep")
-    p.add_argument("--rrd", type=Path, help="rerun recording to write (FILE.rrd)")
-    p.add_argument("--tlog", type=Path, help="MAVLink telemetry log of every frame")
-    p.add_argument("--summary", type=Path, help="write the metric summary as JSON")
+    p.add_argument(
+        "--realtime",
+        action="store_true",
+        help="wall clock instead of lockstep (as fast as possible)",
+    )
+    p.add_argument(
+        "--rrd",
+        type=Path,
+        help="rerun recording to write (FILE.rrd; default: pressor sil writes"
+        " pressor_sil_CONTROLLER_SCENARIO_seedN.rrd, pressor run none)",
+    )
+    p.add_argument("--tlog", type=Path, help="MAVLink telemetry log of every frame (FILE.tlog)")
+    p.add_argument("--summary", type=Path, help="write the metric summary as JSON (FILE.json)")
     p.add_argument(
         "--timing",
         type=Path,
         help="write loop timing (p50/p99/max), wall time and link counters as JSON"
         " (host-dependent, unlike --summary)",
     )
-    p.add_argument("--signing-key", type=Path, help="32-byte key file (raw or 64 hex chars)")
+    p.add_argument(
+        "--signing-key",
+        type=Path,
+        help="32-byte key file (raw or 64 hex chars); default: pressor sil generates a fresh key"
+        " per run, pressor run leaves the link unsigned",
+    )
     p.add_argument(
         "--sched-faults",
         choices=("advise", "hold"),
@@ -154,16 +169,17 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         "--stall-timeout",
         type=positive("--stall-timeout", 3600.0),
         default=10.0,
-        help="lockstep: give up after this many wall seconds without a sample (default 10)",
+        help="lockstep: give up after this many wall-clock seconds without a sample (s)",
     )
     p.add_argument(
         "--cpu-latency",
         type=_cpu_latency,
-        default=0,
-        metavar="US|off",
-        help="hold the host's CPU wake-up latency at US microseconds during the run"
-        " (/dev/cpu_dma_latency, best effort, usually needs root; default 0: idle CPUs poll"
-        " instead of halting, 2x faster lockstep on a VM); off: make no request",
+        default=None,
+        metavar="off|hold|US",
+        help="host-wide CPU wake-up latency request while the run lasts (/dev/cpu_dma_latency,"
+        " best effort, usually needs root): off (default) makes none; hold keeps idle CPUs"
+        " polling (0 us; ~5 %% faster lockstep on a quiet 2-core host); US holds that many"
+        " microseconds",
     )
 
 

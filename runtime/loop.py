@@ -107,6 +107,8 @@ class Loop:
         self.sup = supervisor
         self.ep = endpoint
         self.recorder = recorder
+        if recorder is not None:
+            recorder.use_controller(controller)
         self.period_s = float(controller.sample_period_s)
         self.timing = TimingStats(self.period_s)
         self.trajectory = (
@@ -188,6 +190,7 @@ class Loop:
                     inp.sim_time_s,
                     f"{old.name} -> {new.name}: {', '.join(event['faults']) or 'inputs good'}",
                     warn=new in (State.HOLD, State.FAILSAFE),
+                    state=int(new),
                 )
         elif out.new_faults and self.recorder is not None:  # advisory faults: no transition
             self.recorder.event(

@@ -2,12 +2,12 @@
 
 Per tick the loop calls :meth:`Recorder.record_tick` with the closed-loop core's
 :class:`~runtime.core.TickRecord` (or :meth:`Recorder.record` with one float per channel); the
-row goes into a
-preallocated ``float64`` array (``chunk_ticks`` rows). When the array is full — and at
-:meth:`Recorder.close` — each channel is sent as one column with ``send_columns`` on two timelines,
-``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call and
-``send_columns`` ~0.3 µs a scalar (docs/PLATFORM-NOTES.md), so a 15-channel tick costs about a microsecond
-amortised. Rare events (supervisor transitions, alarms) go to ``/safety/events`` as ``TextLog``.
+row goes into a preallocated ``float64`` array (``chunk_ticks`` rows). When the array is full —
+and at :meth:`Recorder.close` — each channel is sent as one column with ``send_columns`` on two
+timelines, ``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call and
+``send_columns`` ~0.3 µs a scalar (docs/PLATFORM-NOTES.md), so a 15-channel tick costs about a
+microsecond amortised. Rare events (supervisor transitions, alarms, event markers) are logged one
+by one: ``/safety/events`` and ``/events/log`` as ``TextLog``.
 
 Reproducibility: the wall-clock ``log_time`` and ``log_tick`` timelines are disabled, recording
 properties (which carry the wall-clock start time) are not sent, and the recording id is derived from
@@ -16,8 +16,11 @@ the run's label, so two runs with the same seed log the same values on the same 
 The file is written to a hidden temporary name next to the target and renamed on :meth:`close`; a
 run that fails (:meth:`abort`) never leaves a half-written or clobbered ``FILE.rrd``.
 
-Entities (units in the names): see :data:`CHANNELS`. The default blueprint opens on MAP vs target,
-the infusion rate, K/T/τ, loop timing and the safety state with its event log.
+Entities (units in the names): see :data:`CHANNELS`; besides them, the design box of a scheduled
+controller (:meth:`Recorder.use_controller`, two points per bound: first and last tick), markers on
+the MAP plot where a disturbance or fault starts (:meth:`Recorder.plan_markers`) and on the safety
+plot at each supervisor transition. The viewer's layout is :func:`runtime.blueprint.default_blueprint`
+(docs/VIEWER.md).
 """
 
 from __future__ import annotations
@@ -30,10 +33,22 @@ from typing import Any
 
 import numpy as np
 import rerun as rr
-import rerun.blueprint as rrb
 
+from contracts.controller import Controller
 from contracts.files import AtomicFile
+from runtime.blueprint import (
+    BOX_COLOR,
+    BOX_ENTITIES,
+    DISTURBANCE_MARKERS,
+    EVENTS_ENTITY,
+    FAULT_MARKERS,
+    MARKERS_LOG,
+    SERIES_COLORS,
+    TRANSITION_MARKERS,
+    default_blueprint,
+)
 from runtime.core import TickRecord
+from runtime.supervisor_config import sched_limits_of
 
 #: (entity path, legend label) — the column order of :meth:`Recorder.record`.
 CHANNELS: tuple[tuple[str, str], ...] = (
@@ -46,6 +61,9 @@ CHANNELS: tuple[tuple[str, str], ...] = (
     ("/schedule/K", "K (mmHg/(ml/h))"),
     ("/schedule/T_s", "T (s)"),
     ("/schedule/tau_s", "tau (s)"),
+    ("/controller/rho/K", "K as the controller used it (mmHg/(ml/h))"),
+    ("/controller/rho/T_s", "T as the controller used it (s)"),
+    ("/controller/rho/tau_s", "tau as the controller used it (s)"),
     ("/loop/exec_us", "execution time (us)"),
     ("/loop/lateness_us", "release lateness (us)"),
     ("/safety/state", "supervisor state (0 STARTUP 1 AUTO 2 HOLD 3 FAILSAFE 4 RECOVERING)"),
@@ -54,39 +72,7 @@ CHANNELS: tuple[tuple[str, str], ...] = (
     ("/link/bad_frames", "bad frames (count)"),
 )
 CHANNEL_INDEX: dict[str, int] = {path: i for i, (path, _) in enumerate(CHANNELS)}
-EVENTS_ENTITY = "/safety/events"
-
-
-def default_blueprint() -> rrb.Blueprint:
-    """The layout the viewer opens on (docs/INTERFACES.md)."""
-    return rrb.Blueprint(
-        rrb.Vertical(
-            rrb.TimeSeriesView(
-                name="MAP vs target (mmHg)",
-                origin="/",
-                contents=["/patient/map_mmhg", "/controller/target_mmhg"],
-            ),
-            rrb.TimeSeriesView(
-                name="Infusion (ml/h)",
-                origin="/",
-                contents=["/controller/command_ml_h", "/pump/command_ml_h", "/pump/rate_ml_h"],
-            ),
-            rrb.Horizontal(
-                rrb.TimeSeriesView(name="K (mmHg/(ml/h))", origin="/schedule/K"),
-                rrb.TimeSeriesView(name="T (s)", origin="/schedule/T_s"),
-                rrb.TimeSeriesView(name="tau (s)", origin="/schedule/tau_s"),
-            ),
-            rrb.Horizontal(
-                rrb.TimeSeriesView(name="Loop timing (us)", origin="/loop"),
-                rrb.TimeSeriesView(
-                    name="Safety state", origin="/", contents=["/safety/state", "/safety/alarm"]
-                ),
-                rrb.TextLogView(name="Safety events", origin=EVENTS_ENTITY),
-            ),
-            row_shares=[3, 2, 2, 2],
-        ),
-        collapse_panels=True,
-    )
+_NO_RHO = (math.nan, math.nan, math.nan)
 
 
 class Recorder:
@@ -117,7 +103,21 @@ class Recorder:
         self._rec.save(str(self._target.tmp), default_blueprint=default_blueprint())
         self._rec.send_recording_name(run_label)
         for entity, label in CHANNELS:
-            self._rec.log(entity, rr.SeriesLines(names=label), static=True)
+            self._rec.log(
+                entity, rr.SeriesLines(names=label, colors=SERIES_COLORS.get(entity)), static=True
+            )
+        for entity, label in (
+            (DISTURBANCE_MARKERS, "disturbance starts"),
+            (FAULT_MARKERS, "fault starts"),
+            (TRANSITION_MARKERS, "supervisor transition"),
+        ):
+            style = rr.SeriesPoints(names=label, colors=SERIES_COLORS[entity], marker_sizes=6.0)
+            self._rec.log(entity, style, static=True)
+        self._box: tuple[tuple[float, float], ...] | None = None
+        self._rho_of: Any = None
+        self._markers: list[tuple[float, str, str]] = []
+        self._first_tick: tuple[int, float] | None = None
+        self._last_tick: tuple[int, float] | None = None
         self._ticks = np.zeros(chunk_ticks, dtype=np.int64)
         self._times = np.zeros(chunk_ticks, dtype=np.float64)
         self._values = np.full((chunk_ticks, len(CHANNELS)), math.nan, dtype=np.float64)
@@ -126,8 +126,40 @@ class Recorder:
         self.rows_written = 0
         self._closed = False
 
+    def use_controller(self, controller: Controller) -> None:
+        """Record what ``controller`` declares: its design box (``/schedule/box/*``) and, for a
+        generated LPV module, the K, T, τ it scheduled on after its own clamp and rate limit
+        (``/controller/rho/*``, the last three values of its ``state()``). Call before the first
+        tick; other controllers leave those channels NaN."""
+        self._box = sched_limits_of(controller)[0]
+        state = getattr(controller, "state", None)
+        self._rho_of = state if self._box is not None and callable(state) else None
+        if self._box is not None:
+            for lo_entity, hi_entity in BOX_ENTITIES:
+                for entity, side in ((lo_entity, "low"), (hi_entity, "high")):
+                    style = rr.SeriesLines(names=f"design box {side}", colors=BOX_COLOR)
+                    self._rec.log(entity, style, static=True)
+
+    def plan_markers(self, markers: Sequence[tuple[float, str, str]]) -> None:
+        """Mark events on the MAP plot when the run reaches them.
+
+        Parameters
+        ----------
+        markers
+            ``(start_s, kind, text)``: sim time (s), ``disturbance`` or ``fault``, and the text
+            logged to ``/events/log``. The marker sits on the measured MAP of the first tick at or
+            after ``start_s`` (on the target when MAP is missing).
+        """
+        self._markers = sorted(markers, reverse=True)
+
     def record(self, tick: int, sim_time_s: float, values: Sequence[float]) -> None:
         """Buffer one tick: ``values`` in :data:`CHANNELS` order (NaN for "not available")."""
+        if self._first_tick is None:
+            self._first_tick = (tick, sim_time_s)
+            self._log_box(tick, sim_time_s)
+        self._last_tick = (tick, sim_time_s)
+        if self._markers and self._markers[-1][0] <= sim_time_s:
+            self._log_markers(tick, sim_time_s, values)
         n = self._n
         self._ticks[n] = tick
         self._times[n] = sim_time_s
@@ -172,6 +204,11 @@ class Recorder:
         row[ix["/schedule/K"]] = inp.K
         row[ix["/schedule/T_s"]] = inp.T_s
         row[ix["/schedule/tau_s"]] = inp.tau_s
+        stepped = self._rho_of is not None and rec.controller_ml_h == rec.controller_ml_h
+        used = self._rho_of()[-3:] if stepped else _NO_RHO  # NaN: controller not stepped
+        row[ix["/controller/rho/K"]] = used[0]
+        row[ix["/controller/rho/T_s"]] = used[1]
+        row[ix["/controller/rho/tau_s"]] = used[2]
         row[ix["/loop/exec_us"]] = exec_s * 1e6
         row[ix["/loop/lateness_us"]] = lateness_s * 1e6
         row[ix["/safety/state"]] = float(out.state)
@@ -180,12 +217,42 @@ class Recorder:
         row[ix["/link/bad_frames"]] = float(bad_frames)
         self.record(inp.tick, inp.sim_time_s, row)
 
-    def event(self, tick: int, sim_time_s: float, text: str, warn: bool = True) -> None:
-        """Log a supervisor transition or alarm to ``/safety/events`` (rare; not batched)."""
-        self._rec.set_time("tick", sequence=tick)
-        self._rec.set_time("sim_time", duration=sim_time_s)
+    def event(
+        self, tick: int, sim_time_s: float, text: str, warn: bool = True, state: int | None = None
+    ) -> None:
+        """Log a supervisor transition or alarm to ``/safety/events`` (rare; not batched); a
+        transition (``state``: the new state) is also marked on the safety plot."""
+        self._at(tick, sim_time_s)
         level = rr.TextLogLevel.WARN if warn else rr.TextLogLevel.INFO
         self._rec.log(EVENTS_ENTITY, rr.TextLog(text, level=level))
+        if state is not None:
+            self._rec.log(TRANSITION_MARKERS, rr.Scalars(float(state)))
+
+    def _log_markers(self, tick: int, sim_time_s: float, values: Sequence[float]) -> None:
+        """Log every planned marker due by ``sim_time_s`` on this tick's MAP (else target)."""
+        y = values[CHANNEL_INDEX["/patient/map_mmhg"]]
+        if y != y:
+            y = values[CHANNEL_INDEX["/controller/target_mmhg"]]
+        self._at(tick, sim_time_s)
+        markers = self._markers
+        while markers and markers[-1][0] <= sim_time_s:
+            _, kind, text = markers.pop()
+            entity = DISTURBANCE_MARKERS if kind == "disturbance" else FAULT_MARKERS
+            self._rec.log(entity, rr.Scalars(y))
+            self._rec.log(MARKERS_LOG, rr.TextLog(text, level=rr.TextLogLevel.INFO))
+
+    def _at(self, tick: int, sim_time_s: float) -> None:
+        self._rec.set_time("tick", sequence=tick)
+        self._rec.set_time("sim_time", duration=sim_time_s)
+
+    def _log_box(self, tick: int, sim_time_s: float) -> None:
+        """Log the design box's bounds at this tick (the first and the last of the run)."""
+        if self._box is None:
+            return
+        self._at(tick, sim_time_s)
+        for (lo, hi), (lo_entity, hi_entity) in zip(self._box, BOX_ENTITIES, strict=True):
+            self._rec.log(lo_entity, rr.Scalars(lo))
+            self._rec.log(hi_entity, rr.Scalars(hi))
 
     def flush(self) -> None:
         """Send the buffered rows as one column per channel."""
@@ -210,6 +277,8 @@ class Recorder:
         if self._closed:
             return self.path
         self.flush()
+        if self._last_tick is not None and self._last_tick != self._first_tick:
+            self._log_box(*self._last_tick)
         self._rec.flush()
         self._rec.disconnect()
         self._target.commit()

@@ -31,6 +31,7 @@ def run_runtime(
     on_connected: Callable[[], object] | None = None,
     peer_alive: Callable[[], bool] | None = None,
     handshake_timeout_s: float = 30.0,
+    on_tick: Callable[[int, int, int, float], object] | None = None,
 ) -> tuple[dict[str, Any], Any]:
     """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result).
 
@@ -55,6 +56,9 @@ def run_runtime(
         Polled while waiting for the handshake: a device that died ends the wait at once.
     handshake_timeout_s
         Wall seconds to wait for the device's hello.
+    on_tick
+        The loop's per-tick callback ``(tick, state, fault bits, command ml/h)``, e.g. a
+        :class:`runtime.progress.TerminalProgress`.
 
     Returns
     -------
@@ -114,7 +118,21 @@ def run_runtime(
                 f"|{config.mode}"
             )
             recorder = Recorder(config.rrd, run_label=label)
-        loop = Loop(controller, sup, ep, recorder=recorder, heartbeat_every=round(config.rate_hz))
+            recorder.plan_markers(
+                [(t, "disturbance", f"disturbance: {kind} at {t:g} s") for kind, t in events or ()]
+                + [
+                    (f.start_s, "fault", f"fault: {f.kind} at {f.start_s:g} s")
+                    for f in config.fault_specs
+                ]
+            )
+        loop = Loop(
+            controller,
+            sup,
+            ep,
+            recorder=recorder,
+            heartbeat_every=round(config.rate_hz),
+            on_tick=on_tick,
+        )
         with CpuLatencyRequest(config.cpu_latency_us) as wake:
             if config.realtime:
                 result = loop.run_realtime(peer.n_ticks if peer.n_ticks else config.ticks)

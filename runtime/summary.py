@@ -141,12 +141,28 @@ def build_summary(
     }
 
 
-def _fmt(v: Any) -> str:
+#: metric-name suffix -> (unit shown, decimals): the resolution worth reading on a terminal
+#: (the JSON summary keeps full precision); longest suffix first
+_UNITS: tuple[tuple[str, str, int], ...] = (
+    ("_mmhg_s", "mmHg·s", 1),
+    ("_ml_h", "ml/h", 1),
+    ("_mmhg", "mmHg", 2),
+    ("_pct", "%", 2),
+    ("_ml", "ml", 2),
+    ("_s", "s", 1),
+)
+
+
+def _fmt(v: Any, key: str = "") -> str:
+    """``v`` for a human: a float rounded to its metric's resolution, with the unit its name
+    ends in (``settling_time_s`` 465.15000000000003 -> ``465.2 s``); else 4 significant digits."""
     if v is None:
         return "null"
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    return str(v)
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        for suffix, unit, decimals in _UNITS:
+            if key.endswith(suffix):
+                return f"{v:.{decimals}f} {unit}"
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
 def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = None) -> None:
@@ -162,12 +178,13 @@ def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = No
     metrics = summary["metrics"]
     for k, v in metrics.items():
         if k != "disturbances":
-            print(f"  {k:<24} {_fmt(v)}", file=out)
+            print(f"  {k:<24} {_fmt(v, k)}", file=out)
     for d in metrics.get("disturbances") or []:
         print(
-            f"  {d['kind']} at {_fmt(d['start_s'])} s: peak deviation"
-            f" {_fmt(d['peak_deviation_mmhg'])} mmHg, recovery {_fmt(d['recovery_s'])} s,"
-            f" IAE {_fmt(d['iae_mmhg_s'])} mmHg·s",
+            f"  {d['kind']} at {d['start_s']:g} s: peak deviation"
+            f" {_fmt(d['peak_deviation_mmhg'], 'peak_deviation_mmhg')},"
+            f" recovery {_fmt(d['recovery_s'], 'recovery_s')},"
+            f" IAE {_fmt(d['iae_mmhg_s'], 'iae_mmhg_s')}",
             file=out,
         )
     sup = summary["supervisor"]

@@ -31,14 +31,25 @@ def _parser() -> UsageParser:
         description="Delay-dependent LPV output-feedback synthesis (Theorem 3, cvxpy + Clarabel).",
     )
     p.add_argument("--config", help="design TOML (default: the shipped default design)")
-    p.add_argument("--grid", help="synthesis grid nK,nT,ntau (each 2..15); overrides the config")
-    p.add_argument("--out", default=DEFAULT_OUT, help=f"artifact path (default {DEFAULT_OUT})")
+    p.add_argument(
+        "--grid",
+        help="synthesis grid nK,nT,ntau, nodes per axis (each 2..15; default: the config's)",
+    )
+    p.add_argument("--out", default=DEFAULT_OUT, help="artifact path (.npz)")
     p.add_argument(
         "--lambda-search", action="store_true", help="line search over (lambda2, lambda3)"
     )
-    p.add_argument("--lambda2", type=float, help="fixed lambda2 (overrides the config)")
-    p.add_argument("--lambda3", type=float, help="fixed lambda3 (overrides the config)")
-    p.add_argument("--backoff", type=float, help="accept gamma up to (1+B) gamma* (0..1)")
+    p.add_argument(
+        "--lambda2", type=float, help="fixed lambda2, dimensionless (default: the config's)"
+    )
+    p.add_argument(
+        "--lambda3", type=float, help="fixed lambda3, dimensionless (default: the config's)"
+    )
+    p.add_argument(
+        "--backoff",
+        type=float,
+        help="accept gamma up to (1+B) gamma*, B dimensionless in [0, 1] (default: the config's)",
+    )
     p.add_argument("--no-verify", action="store_true", help="skip the independent verification")
     p.add_argument("--quiet", action="store_true", help="no progress lines (stderr)")
     return p

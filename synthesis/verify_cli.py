@@ -30,12 +30,14 @@ def _parser(command: str) -> UsageParser:
         "Smith predictor.",
     )
     p.add_argument("artifact", nargs="?", default=str(DEFAULT_ARTIFACT), help="artifact .npz")
-    p.add_argument("--json", metavar="FILE", help="write the full report as JSON to FILE")
+    p.add_argument(
+        "--json", metavar="FILE", help="write the full report as JSON to FILE (default: none)"
+    )
     p.add_argument(
         "--density",
         type=int,
         default=2,
-        help="subdivisions of each synthesis-grid cell per axis (>= 2, default 2)",
+        help="subdivisions of each synthesis-grid cell per axis (count, >= 2)",
     )
     p.add_argument(
         "--p-dependence",

@@ -31,12 +31,23 @@ def test_scenario_events_and_faults_come_from_the_simulators_scenario(tmp_path: 
     assert cfg.run.rrd == Path("pressor_sil_pi_s_seed1.rrd")  # a scenario file: its stem
 
 
+def test_sil_runs_the_scenarios_duration_unless_duration_is_given():
+    assert load_scenario("paper-disturbance").duration_s == 3600.0
+    assert sil_config(["--scenario", "paper-disturbance"]).duration_s == 3600.0
+    assert sil_config(["--scenario", "paper-disturbance", "--duration", "60"]).duration_s == 60.0
+    cfg = sil_config(["--scenario", "paper-disturbance"])
+    cmd = device_command(cfg, "/dev/null", None, None)
+    assert (
+        cmd[cmd.index("--duration") + 1] == "3600.0"
+    )  # the bolus at 2100 s happens in sil as in trial
+
+
 def test_default_recording_name_names_controller_scenario_and_seed():
     cfg = sil_config(["--controller", "pi", "--patient-seed", "7"])
     assert cfg.run.rrd == Path("pressor_sil_pi_paper-tracking_seed7.rrd")
     assert (cfg.scenario, cfg.duration_s, cfg.link, cfg.signed) == (
         "paper-tracking",
-        1800.0,
+        load_scenario("paper-tracking").duration_s,
         "pty",
         True,
     )
@@ -74,3 +85,16 @@ def test_device_command_carries_scenario_seed_duration_rate_faults_cpu_and_key(t
     assert args[-2:] == ["--signing-key", str(key)]
     plain = device_command(sil_config(["--controller", "pi"]), "/dev/pts/9", None, None)
     assert not {"--cpu", "--retransmit", "--signing-key", "--fault"} & set(plain)
+
+
+def test_relative_scenario_path_reaches_the_device_as_an_absolute_path(tmp_path, monkeypatch):
+    (tmp_path / "sc").mkdir()
+    (tmp_path / "sc" / "mine.toml").write_text((SCENARIO_DIR / "paper-tracking.toml").read_text())
+    monkeypatch.chdir(tmp_path)
+    cfg = sil_config(["--controller", "pi", "--scenario", "sc/mine.toml"])
+    assert cfg.scenario == str(tmp_path / "sc" / "mine.toml")
+    assert cfg.run.rrd == Path("pressor_sil_pi_mine_seed1.rrd")
+    cmd = device_command(cfg, "/dev/null", None, None)
+    assert cmd[cmd.index("--scenario") + 1] == str(tmp_path / "sc" / "mine.toml")
+    with pytest.raises(UsageError, match="nope.toml"):
+        sil_config(["--controller", "pi", "--scenario", "sc/nope.toml"])

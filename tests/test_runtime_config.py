@@ -24,7 +24,7 @@ def test_options_become_a_frozen_config_with_defaults_and_units(tmp_path: Path):
     assert (cfg.controller, cfg.rate_hz, cfg.period_s, cfg.mode) == ("pi", 10.0, 0.1, "lockstep")
     assert cfg.faults == ("pump-occlusion:300",)
     assert [(f.kind, f.start_s) for f in cfg.fault_specs] == [("pump-occlusion", 300.0)]
-    assert cfg.cpu_latency_us == 0 and cfg.stall_timeout_s == 10.0 and cfg.ticks == 0
+    assert cfg.cpu_latency_us is None and cfg.stall_timeout_s == 10.0 and cfg.ticks == 0
     assert cfg.rrd == tmp_path / "r.rrd" and cfg.summary is None
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.rate_hz = 20.0  # type: ignore[misc]

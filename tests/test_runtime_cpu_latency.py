@@ -49,6 +49,16 @@ def test_latency_outside_range_is_refused(bad):
         CpuLatencyRequest(bad)
 
 
+@pytest.mark.parametrize(
+    ("option", "latency_us"),
+    [([], None), (["--cpu-latency", "hold"], 0), (["--cpu-latency", "50"], 50)],
+)
+def test_cpu_latency_request_is_opt_in(option, latency_us):
+    p = UsageParser(prog="pressor run")
+    add_run_options(p)
+    assert p.parse_args(option).cpu_latency == latency_us
+
+
 @pytest.mark.parametrize("option", [["--cpu-latency", "-5"], ["--cpu-latency", "fast"]])
 def test_bad_cpu_latency_option_is_a_usage_error_naming_it(option):
     p = UsageParser(prog="pressor run")
@@ -64,6 +74,8 @@ def test_sil_timing_reports_the_wake_latency_request_and_placement(tmp_path: Pat
         "pi",
         "--duration",
         "20",
+        "--cpu-latency",
+        "hold",
         "--rrd",
         str(tmp_path / "r.rrd"),
         "--timing",
