@@ -28,6 +28,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from contracts.files import write_atomic
 from contracts.metrics import (
     EVENT_KINDS,
@@ -39,11 +41,12 @@ from contracts.metrics import (
     run_metrics,
 )
 from hil_sim.backend import run_ordered
-from hil_sim.closed_loop import simulate
+from hil_sim.closed_loop import Trajectory, simulate
 from hil_sim.cohort import cohort_seeds
 from hil_sim.scenario import Scenario
 from hil_sim.world import World
 from runtime.controller_loader import load_controller
+from runtime.estimation.schedule import make_schedule
 
 
 def scenario_events(scenario: Scenario) -> list[Event]:
@@ -51,13 +54,37 @@ def scenario_events(scenario: Scenario) -> list[Event]:
     return [(d.kind, d.start_s) for d in scenario.disturbances if d.kind in EVENT_KINDS]
 
 
+def estimation_errors(traj: Trajectory) -> dict[str, float]:
+    """How far the schedule was from the simulator's truth: the median absolute errors over the
+    second half of the run of K (% of K), T (% of T) and τ (s)."""
+    half = traj.t_s.size // 2
+    return {
+        "K_rel_err_pct": float(
+            np.median(np.abs(traj.sched_K[half:] - traj.K[half:]) / traj.K[half:] * 100.0)
+        ),
+        "T_rel_err_pct": float(
+            np.median(np.abs(traj.sched_T_s[half:] - traj.T_s[half:]) / traj.T_s[half:] * 100.0)
+        ),
+        "tau_abs_err_s": float(np.median(np.abs(traj.sched_tau_s[half:] - traj.tau_s[half:]))),
+    }
+
+
 def run_patient(
-    scenario: Scenario, controller_spec: str, patient_seed: int, sample_period_s: float = 0.1
+    scenario: Scenario,
+    controller_spec: str,
+    patient_seed: int,
+    sample_period_s: float = 0.1,
+    schedule: str = "oracle",
 ) -> dict[str, Any]:
-    """Simulate one patient and return its JSON-ready record (seed, coefficients, metrics)."""
+    """Simulate one patient and return its JSON-ready record (seed, coefficients, metrics).
+
+    ``schedule`` names the scheduling source (:func:`runtime.estimation.schedule.make_schedule`),
+    run by the runtime's core exactly as ``pressor run``/``sil`` run it; when it is not the oracle
+    the record gains ``estimation`` (:func:`estimation_errors`).
+    """
     world = World(scenario, patient_seed, sample_period_s)
     controller = load_controller(controller_spec, sample_period_s)
-    traj = simulate(world, controller)
+    traj = simulate(world, controller, schedule=make_schedule(schedule, sample_period_s))
     has_step = scenario.step_mmhg != 0.0
     metrics = run_metrics(
         traj.t_s,
@@ -80,10 +107,12 @@ def run_patient(
     }
     record.update(metrics)
     record["commands_out_of_range"] = int(world.pump.commands_out_of_range)
+    if schedule != "oracle":  # oracle records keep their bytes
+        record["estimation"] = estimation_errors(traj)
     return record
 
 
-def _worker(args: tuple[Scenario, str, int, float]) -> dict[str, Any]:
+def _worker(args: tuple[Scenario, str, int, float, str]) -> dict[str, Any]:
     return run_patient(*args)
 
 
@@ -96,6 +125,7 @@ def run_trial(
     sample_period_s: float = 0.1,
     progress: Callable[[int, int], None] | None = None,
     scheduler: str | None = None,
+    schedule: str = "oracle",
 ) -> list[dict[str, Any]]:
     """Run the cohort ``(cohort_seed, n_patients)``; records in patient order.
 
@@ -114,19 +144,27 @@ def run_trial(
     scheduler
         Address of a Dask scheduler (``tcp://HOST:PORT``) to run the patients on instead of local
         processes (:mod:`hil_sim.backend`); does not change the results.
+    schedule
+        The scheduling source (``oracle``, ``estimated``, ``nominal``; :func:`run_patient`).
     """
     tasks = [
-        (scenario, controller_spec, s, sample_period_s)
+        (scenario, controller_spec, s, sample_period_s, schedule)
         for s in cohort_seeds(cohort_seed, n_patients)
     ]
     return run_ordered(_worker, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
 
 
 def summarize(
-    records: Sequence[dict[str, Any]], scenario: Scenario, controller_spec: str, cohort_seed: int
+    records: Sequence[dict[str, Any]],
+    scenario: Scenario,
+    controller_spec: str,
+    cohort_seed: int,
+    schedule: str = "oracle",
 ) -> dict[str, Any]:
-    """The ``summary.json`` document: trial identity and the aggregated metrics."""
-    return {
+    """The ``summary.json`` document: trial identity and the aggregated metrics; with a schedule
+    other than the oracle also ``schedule`` and ``estimation`` (median over patients of each
+    record's ``estimation`` figure)."""
+    doc: dict[str, Any] = {
         "scenario": scenario.name,
         "controller": controller_spec,
         "cohort_seed": int(cohort_seed),
@@ -135,6 +173,13 @@ def summarize(
         "unstable_patient_seeds": [r["patient_seed"] for r in records if not r["stable"]],
         "metrics": aggregate(records),
     }
+    if schedule != "oracle":  # oracle summaries keep their bytes
+        doc["schedule"] = schedule
+        doc["estimation"] = {
+            key: float(np.median([r["estimation"][key] for r in records]))
+            for key in ("K_rel_err_pct", "T_rel_err_pct", "tau_abs_err_s")
+        }
+    return doc
 
 
 _EVENT_COLUMNS = ("start_s",) + EVENT_METRICS

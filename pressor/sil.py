@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.usage import USAGE_EXIT, UsageError, UsageParser
-from runtime.config import RunConfig, add_run_options, positive, run_config
+from runtime.config import ORACLE_DEFAULT_WHY, RunConfig, add_run_options, positive, run_config
 from runtime.placement import CpuChoice, parse_lockstep_cpus
 
 DEFAULT_SCENARIO = "paper-tracking"
@@ -91,7 +91,7 @@ def _seed(text: str) -> int:
 def sil_parser() -> UsageParser:
     """The ``pressor sil`` option parser: the runtime's options plus the device's."""
     p = UsageParser(prog="pressor sil", description="device process + runtime over a serial link")
-    add_run_options(p)
+    add_run_options(p, "oracle", ORACLE_DEFAULT_WHY)
     p.add_argument("--scenario", default=DEFAULT_SCENARIO, help="scenario name (pressor scenarios)")
     p.add_argument("--patient-seed", type=_seed, default=DEFAULT_PATIENT_SEED)
     p.add_argument(

@@ -20,12 +20,20 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from contracts.usage import UsageError, UsageParser, usage_exit
-from runtime.config import DEFAULT_RATE_HZ, MAX_RATE_HZ, add_run_options, positive, run_config
+from runtime.config import (
+    DEFAULT_RATE_HZ,
+    MAX_RATE_HZ,
+    add_run_options,
+    positive,
+    run_config,
+)
 
 
 def _run_parser() -> UsageParser:
     p = UsageParser(prog="pressor run", description="the controller runtime alone on a serial port")
-    add_run_options(p)
+    add_run_options(
+        p, "estimated", "; default estimated: a real device sends no scheduling parameters"
+    )
     p.add_argument("--port", required=True, help="device path or pyserial URL")
     p.add_argument(
         "--ticks", type=int, default=0, help="stop after N ticks (0: when the device ends)"
