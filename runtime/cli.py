@@ -3,7 +3,9 @@
 ``pressor run --port DEV`` is the runtime end alone, on a device started by hand (a real cable or
 a ``socat`` pty). It parses its options into a :class:`runtime.config.RunConfig`, opens the port,
 signs the link if ``--signing-key`` is given, runs the loop (:func:`runtime.session.run_runtime`)
-and prints the summary (:mod:`runtime.summary`). ``pressor run --fault ...`` scores a schedule
+and prints the summary (:mod:`runtime.summary`). It schedules on its own online estimate by
+default (``--schedule estimated``): a real monitor and pump send no K, T, τ, and a device that
+never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs a device that sends them. ``pressor run --fault ...`` scores a schedule
 injected by that device; the device's scenario is not known here, so the step-window metrics and
 ``disturbances`` are null. ``pressor sil``, which also starts the device, is served by the front
 door (:mod:`pressor.sil`).

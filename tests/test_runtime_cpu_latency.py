@@ -52,7 +52,7 @@ def test_latency_outside_range_is_refused(bad):
 @pytest.mark.parametrize("option", [["--cpu-latency", "-5"], ["--cpu-latency", "fast"]])
 def test_bad_cpu_latency_option_is_a_usage_error_naming_it(option):
     p = UsageParser(prog="pressor run")
-    add_run_options(p)
+    add_run_options(p, "oracle", "")
     with pytest.raises(UsageError, match="--cpu-latency"):
         p.parse_args(option)
 
