@@ -5,10 +5,10 @@ a ``socat`` pty). It parses its options into a :class:`runtime.config.RunConfig`
 signs the link if ``--signing-key`` is given, runs the loop (:func:`runtime.session.run_runtime`)
 and prints the summary (:mod:`runtime.summary`). It schedules on its own online estimate by
 default (``--schedule estimated``): a real monitor and pump send no K, T, τ, and a device that
-never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs a device that sends them. ``pressor run --fault ...`` scores a schedule
-injected by that device; the device's scenario is not known here, so the step-window metrics and
-``disturbances`` are null. ``pressor sil``, which also starts the device, is served by the front
-door (:mod:`pressor.sil`).
+never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs a device that sends them.
+``pressor run --fault ...`` scores a schedule injected by that device; the device's scenario is not
+known here, so the step-window metrics and ``disturbances`` are null. ``pressor sil``, which also
+starts the device, is served by the front door (:mod:`pressor.sil`).
 
 ``pressor faults`` lists the injectable fault kinds (``--fault KIND[:ARGS]``) with their arguments,
 defaults, detection bounds and safe states, then what the supervisor detects.

@@ -4,7 +4,9 @@ Per tick the caller hands over what arrived for the tick (:class:`link.TickInput
 target and whatever scheduling parameters the device sent), the pump status of the tick
 (:class:`link.PumpStatus`, if one arrived) and the link's health; :meth:`ClosedLoopCore.step`
 feeds the scheduling source (:mod:`runtime.estimation.schedule`: oracle, estimated or nominal)
-the MAP sample, its quality bits and the pump's latest delivered rate (0 ml/h before any status),
+the MAP sample (NaN when no new sample arrived for the tick, ``link.sample_age_s > 0``: a repeated
+sample is no measurement), its quality bits and the pump's latest delivered rate (0 ml/h before
+any status),
 assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source returned -
 steps the controller with those K, T, τ if the supervisor allows it, finalizes the command and
 returns a :class:`TickRecord`. The caller sends ``record.command_ml_h`` to the pump.
@@ -137,7 +139,7 @@ class ClosedLoopCore:
         else:
             delivered, alarms = math.nan, 0
         sched = self.schedule.update(
-            inp.map_mmhg,
+            inp.map_mmhg if link.sample_age_s == 0.0 else math.nan,
             inp.quality,
             self._latest_delivered_ml_h,
             inp.K,

@@ -20,7 +20,7 @@ from link import DeviceSession, ManualClock, PtyPair, TickInputs, open_port
 from link.dialect import pressor as mavlink
 from runtime.config import RunConfig
 from runtime.controller_loader import load_controller
-from runtime.core import CLEAN_LINK, ClosedLoopCore
+from runtime.core import CLEAN_LINK, ClosedLoopCore, LinkHealth
 from runtime.estimation.estimator import NOMINAL_PLANT
 from runtime.estimation.schedule import Schedule, make_schedule
 from runtime.session import run_runtime
@@ -239,3 +239,13 @@ def test_an_estimate_outside_the_box_raises_the_advisory_after_the_documented_ti
     assert first == round(60.0 / TS) and all(flagged[first:])
     assert sup.detections["ESTIMATE_OUT_OF_BOX"] == 1
     assert not math.isnan(rec.controller_ml_h)
+
+
+def test_a_repeated_sample_of_a_silent_link_is_not_fed_to_the_source_as_a_measurement():
+    ctl = PIController(TS)
+    spy = SpySchedule((0.5, 150.0, 30.0), healthy=True)
+    core = ClosedLoopCore(ctl, Supervisor(supervisor_config_for(ctl, 0.0)), spy)
+    obs = World(SCENARIO, SEED, TS).observe()
+    core.step(obs, 0.0, None, CLEAN_LINK)
+    core.step(obs, 0.1, None, LinkHealth(sample_age_s=0.1, link_silence_s=0.1, link_errors=0))
+    assert spy.fed[0][0] == obs.map_mmhg and math.isnan(spy.fed[1][0])
