@@ -6,10 +6,9 @@ target and whatever scheduling parameters the device sent), the pump status of t
 feeds the scheduling source (:mod:`runtime.estimation.schedule`: oracle, estimated or nominal)
 the MAP sample (NaN when no new sample arrived for the tick, ``link.sample_age_s > 0``: a repeated
 sample is no measurement), its quality bits and the pump's latest delivered rate (0 ml/h before
-any status),
-assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source returned -
-steps the controller with those K, T, τ if the supervisor allows it, finalizes the command and
-returns a :class:`TickRecord`. The caller sends ``record.command_ml_h`` to the pump.
+any status), assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source
+returned - steps the controller with those K, T, τ if the supervisor allows it, finalizes the
+command and returns a :class:`TickRecord`. The caller sends ``record.command_ml_h`` to the pump.
 
 Two callers drive the same core, so they cannot drift apart:
 
