@@ -8,17 +8,18 @@ prints, in this order:
    wake-up latency request (:mod:`runtime.cpu_latency`): the real-time factor no lockstep run
    over this pty on this machine can exceed;
 2. lockstep: simulated seconds per wall second (real-time factor) for ``--sim-hours`` of patient
-   time (default 1 h) at 10 Hz, per controller, with the wake-up latency request held
-   (``--cpu-latency hold``) and without it (``--cpu-latency off``, the default of ``pressor
-   sil``) — target >= 500x (1 h in <= 7.2 s). Two figures: the loop alone (first sample to last
+   time (default 1 h) at 10 Hz, per controller and scheduling source (``--schedule``: the device's
+   values, the online estimator, ...), with the wake-up latency request held (``--cpu-latency
+   hold``) and without it (``--cpu-latency off``, the default of ``pressor sil``) — target >= 500x
+   (1 h in <= 7.2 s). Two figures: the loop alone (first sample to last
    command) and the whole command (process start, handshake, recording written and renamed);
 3. real time: release lateness and execution time p50/p99/max at 10 Hz over ``--realtime-s``
    seconds of wall time (default 600 = 10 min; ``--quick``: 30 s; 0 skips it), first controller
    only — target p99 <= 1 ms. This machine shows 10-20 ms host stalls whatever the sleep method
    (docs/PLATFORM-NOTES.md): read the max with that in mind.
 
-Usage: ``python benchmarks/sil.py [--quick] [--controller lpv,pi] [--sim-hours H]
-[--realtime-s S] [--cpu auto|none|N|N,M]``.
+Usage: ``python benchmarks/sil.py [--quick] [--controller lpv,pi] [--schedule oracle,estimated]
+[--sim-hours H] [--realtime-s S] [--cpu auto|none|N|N,M]``.
 """
 
 from __future__ import annotations
@@ -137,9 +138,10 @@ def _timed_sil(d: Path, name: str, controller: str, rate: float, extra: list[str
     return json.loads(timing.read_text()), wall, rrd.stat().st_size / 1e6
 
 
-def lockstep(d: Path, controller: str, a: argparse.Namespace, latency: str) -> int:
-    """One lockstep run over the pty; print its real-time factors."""
+def lockstep(d: Path, controller: str, a: argparse.Namespace, latency: str, schedule: str) -> int:
+    """One lockstep run over the pty with ``--schedule schedule``; print its real-time factors."""
     extra = ["--duration", str(a.sim_hours * 3600.0), "--cpu", a.cpu, "--cpu-latency", latency]
+    extra += ["--schedule", schedule]
     run = _timed_sil(d, "lockstep", controller, a.rate, extra)
     if run is None:
         return 1
@@ -147,7 +149,8 @@ def lockstep(d: Path, controller: str, a: argparse.Namespace, latency: str) -> i
     sim_s = t["sim_s"]
     lp = t["loop"]
     print(
-        f"  {controller:3s} cpu wake-up latency {t['host']['cpu_latency']}, cpus (loop, device)"
+        f"  {controller:3s} --schedule {schedule}, cpu wake-up latency"
+        f" {t['host']['cpu_latency']}, cpus (loop, device)"
         f" {t['host']['cpus']}:"
     )
     print(
@@ -197,6 +200,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--controller", default="lpv,pi", help="comma-separated: lpv, pi or generated .py files"
     )
+    p.add_argument(
+        "--schedule",
+        default="oracle",
+        help="comma-separated scheduling sources for the lockstep runs: oracle, estimated, nominal",
+    )
     p.add_argument("--sim-hours", type=float, default=None)
     p.add_argument("--realtime-s", type=float, default=None)
     p.add_argument("--rate", type=float, default=10.0)
@@ -214,8 +222,9 @@ def main(argv: list[str] | None = None) -> int:
         )
         for latency in ("hold", "off"):
             for controller in controllers:
-                if code := lockstep(d, controller, a, latency):
-                    return code
+                for schedule in a.schedule.split(","):
+                    if code := lockstep(d, controller, a, latency, schedule):
+                        return code
         if a.realtime_s > 0:
             return realtime(d, controllers[0], a)
     return 0

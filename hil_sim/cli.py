@@ -1,6 +1,6 @@
 """``pressor scenarios`` and ``pressor trial``: the named scenarios and the in-silico cohort trial.
 
-``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--jobs J | --scheduler ADDRESS] --out DIR``
+``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal] [--jobs J | --scheduler ADDRESS] --out DIR``
 prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
 (reachable patients; unreachable ones counted and listed apart) and of each disturbance event's
 peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
@@ -77,6 +77,12 @@ def format_table(summary: dict[str, Any]) -> str:
             lines.append(
                 f"  {key:<22}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}{r['n']:>5}{r['n_null']:>5}"
             )
+    if "estimation" in summary:
+        e = summary["estimation"]
+        lines.append(
+            f"schedule {summary['schedule']}: median second-half error K {_fmt(e['K_rel_err_pct'])} %,"
+            f" T {_fmt(e['T_rel_err_pct'])} %, tau {_fmt(e['tau_abs_err_s'])} s"
+        )
     if summary["unreachable_patient_seeds"]:
         lines.append(f"unreachable patient seeds: {summary['unreachable_patient_seeds']}")
     if summary["unstable_patient_seeds"]:
@@ -97,6 +103,9 @@ def _progress_bar(done: int, total: int) -> None:
 
 
 def _trial(argv: Sequence[str]) -> int:
+    from runtime.config import ORACLE_DEFAULT_WHY, SCHEDULE_HELP
+    from runtime.estimation.schedule import SOURCES
+
     p = UsageParser(prog="pressor trial", description="in-silico cohort trial of a controller")
     p.add_argument(
         "--controller",
@@ -122,6 +131,9 @@ def _trial(argv: Sequence[str]) -> int:
         metavar="ADDRESS",
         help="run the patients on a running Dask cluster, e.g. tcp://127.0.0.1:8786 "
         "(default: local processes, see --jobs); same records either way",
+    )
+    p.add_argument(
+        "--schedule", choices=SOURCES, default="oracle", help=f"{SCHEDULE_HELP}{ORACLE_DEFAULT_WHY}"
     )
     p.add_argument("--rate", type=float, default=10.0, help="loop rate in Hz (default 10)")
     p.add_argument("--out", required=True, type=Path, help="output directory")
@@ -179,13 +191,14 @@ def _trial(argv: Sequence[str]) -> int:
                 period,
                 _progress_bar,
                 scheduler=args.scheduler,
+                schedule=args.schedule,
             )
         except (ValueError, BackendError) as exc:  # e.g. a rate the patient step does not divide
             raise UsageError(str(exc)) from None
         records[spec], trajectory = result if args.report else (result, None)
         if trajectory is not None:
             trajectories[spec] = trajectory
-        summary = summarize(records[spec], scenario, spec, args.seed)
+        summary = summarize(records[spec], scenario, spec, args.seed, args.schedule)
         write_outputs(out, records[spec], summary)
         print(format_table(summary))
         print(f"wrote {out / 'patients.json'}, {out / 'patients.csv'}, {out / 'summary.json'}")

@@ -4,7 +4,8 @@ Per tick k: ``obs = world.observe()`` → ``rec = core.step(obs, ...)`` (the run
 :class:`~runtime.core.ClosedLoopCore`: the supervisor, then the controller if allowed, given the
 pump status of tick k and a clean link) → ``world.apply_command(rec.command_ml_h)`` →
 ``world.advance()``: exactly the order and the core the serial SIL uses, on the same
-float32-rounded numbers, so both give the same trajectory and the same supervisor states.
+float32-rounded numbers, so both give the same trajectory and the same supervisor states - with any
+scheduling source (``schedule``: the core feeds it, as in the runtime).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 from contracts.controller import Controller
 from hil_sim.world import World
 from runtime.core import CLEAN_LINK, ClosedLoopCore
+from runtime.estimation.schedule import ScheduleSource
 from runtime.supervisor import Supervisor
 from runtime.supervisor_config import supervisor_config_for
 
@@ -42,6 +44,9 @@ class Trajectory:
         Delivered rate (ml/h) the pump reports after the tick (the next tick's pump status).
     K, T_s, tau_s
         True scheduling parameters at the tick.
+    sched_K, sched_T_s, sched_tau_s
+        The K (mmHg/(ml/h)), T (s), τ (s) the controller was scheduled on at the tick (the
+        scheduling source's report; the truth with the oracle).
     quality, alarms
         Monitor quality flags at the tick; pump alarms after the tick.
     state, faults
@@ -58,6 +63,9 @@ class Trajectory:
     K: np.ndarray
     T_s: np.ndarray
     tau_s: np.ndarray
+    sched_K: np.ndarray
+    sched_T_s: np.ndarray
+    sched_tau_s: np.ndarray
     quality: np.ndarray
     alarms: np.ndarray
     state: np.ndarray
@@ -69,6 +77,7 @@ def simulate(
     controller: Controller,
     duration_s: float | None = None,
     supervisor: Supervisor | None = None,
+    schedule: ScheduleSource | None = None,
 ) -> Trajectory:
     """Run ``world`` under ``controller`` and its supervisor for ``duration_s``.
 
@@ -83,6 +92,9 @@ def simulate(
     supervisor
         A fresh supervisor; default the one ``pressor sil`` builds for this controller and the
         scenario's sensor (:func:`runtime.supervisor_config.supervisor_config_for`).
+    schedule
+        A fresh scheduling source (:func:`runtime.estimation.schedule.make_schedule`); default
+        the oracle (the world's true K, T, τ).
 
     Returns
     -------
@@ -97,14 +109,15 @@ def simulate(
     if supervisor is None:
         noise = world.scenario.sensor.noise_std_mmhg
         supervisor = Supervisor(supervisor_config_for(controller, noise))
-    core = ClosedLoopCore(controller, supervisor)
+    core = ClosedLoopCore(controller, supervisor, schedule)
     n = int(round(duration / ts))
-    names = ("map", "true", "target", "cmd", "rate", "delivered", "K", "T", "tau")
+    names = ("map", "true", "target", "cmd", "rate", "delivered", "K", "T", "tau", "sK", "sT", "sd")
     cols = {name: [0.0] * n for name in names}
     ints = {name: [0] * n for name in ("quality", "alarms", "state", "faults")}
     m, tr, tg, cm = cols["map"], cols["true"], cols["target"], cols["cmd"]
     rt, dl = cols["rate"], cols["delivered"]
     kk, tt, ta = cols["K"], cols["T"], cols["tau"]
+    sk, st, sd = cols["sK"], cols["sT"], cols["sd"]
     quality, alarms, state, faults = ints["quality"], ints["alarms"], ints["state"], ints["faults"]
     observe, apply_command, advance = world.observe, world.apply_command, world.advance
     step = core.step
@@ -119,6 +132,10 @@ def simulate(
         kk[k] = obs.K
         tt[k] = obs.T_s
         ta[k] = obs.tau_s
+        sched = rec.schedule
+        sk[k] = sched.K
+        st[k] = sched.T_s
+        sd[k] = sched.tau_s
         quality[k] = obs.quality
         state[k] = rec.supervisor.state
         faults[k] = rec.supervisor.faults
@@ -140,5 +157,8 @@ def simulate(
         K=arr["K"],
         T_s=arr["T"],
         tau_s=arr["tau"],
+        sched_K=arr["sK"],
+        sched_T_s=arr["sT"],
+        sched_tau_s=arr["sd"],
         **{name: np.asarray(v, dtype=np.int64) for name, v in ints.items()},
     )

@@ -42,12 +42,13 @@ from contracts.metrics import (
     run_metrics,
 )
 from hil_sim.backend import run_ordered
-from hil_sim.closed_loop import simulate
+from hil_sim.closed_loop import Trajectory, simulate
 from hil_sim.cohort import cohort_seeds
 from hil_sim.patient import COEFFICIENT_UNITS
 from hil_sim.scenario import Scenario
 from hil_sim.world import World
 from runtime.controller_loader import load_controller
+from runtime.estimation.schedule import make_schedule
 
 
 def controller_dir_name(spec: str) -> str:
@@ -65,19 +66,47 @@ def scenario_events(scenario: Scenario) -> list[Event]:
 REPORT_SAMPLE_S = 1.0
 
 
+def estimation_errors(traj: Trajectory) -> dict[str, float]:
+    """How far the schedule was from the simulator's truth: the median absolute errors over the
+    second half of the run of K (% of K), T (% of T) and τ (s)."""
+    half = traj.t_s.size // 2
+    return {
+        "K_rel_err_pct": float(
+            np.median(np.abs(traj.sched_K[half:] - traj.K[half:]) / traj.K[half:] * 100.0)
+        ),
+        "T_rel_err_pct": float(
+            np.median(np.abs(traj.sched_T_s[half:] - traj.T_s[half:]) / traj.T_s[half:] * 100.0)
+        ),
+        "tau_abs_err_s": float(np.median(np.abs(traj.sched_tau_s[half:] - traj.tau_s[half:]))),
+    }
+
+
 def run_patient(
-    scenario: Scenario, controller_spec: str, patient_seed: int, sample_period_s: float = 0.1
+    scenario: Scenario,
+    controller_spec: str,
+    patient_seed: int,
+    sample_period_s: float = 0.1,
+    schedule: str = "oracle",
 ) -> dict[str, Any]:
-    """Simulate one patient and return its JSON-ready record (seed, coefficients, metrics)."""
-    return _simulate_patient(scenario, controller_spec, patient_seed, sample_period_s)[0]
+    """Simulate one patient and return its JSON-ready record (seed, coefficients, metrics).
+
+    ``schedule`` names the scheduling source (:func:`runtime.estimation.schedule.make_schedule`),
+    run by the runtime's core exactly as ``pressor run``/``sil`` run it; when it is not the oracle
+    the record gains ``estimation`` (:func:`estimation_errors`).
+    """
+    return _simulate_patient(scenario, controller_spec, patient_seed, sample_period_s, schedule)[0]
 
 
 def _simulate_patient(
-    scenario: Scenario, controller_spec: str, patient_seed: int, sample_period_s: float
-) -> tuple[dict[str, Any], Any]:
+    scenario: Scenario,
+    controller_spec: str,
+    patient_seed: int,
+    sample_period_s: float,
+    schedule: str,
+) -> tuple[dict[str, Any], Trajectory]:
     world = World(scenario, patient_seed, sample_period_s)
     controller = load_controller(controller_spec, sample_period_s)
-    traj = simulate(world, controller)
+    traj = simulate(world, controller, schedule=make_schedule(schedule, sample_period_s))
     has_step = scenario.step_mmhg != 0.0
     metrics = run_metrics(
         traj.t_s,
@@ -101,10 +130,12 @@ def _simulate_patient(
     }
     record.update(metrics)
     record["commands_out_of_range"] = int(world.pump.commands_out_of_range)
+    if schedule != "oracle":  # oracle records keep their bytes
+        record["estimation"] = estimation_errors(traj)
     return record, traj
 
 
-def _schedule_range(traj: Any) -> dict[str, list[float]]:
+def _schedule_range(traj: Trajectory) -> dict[str, list[float]]:
     """The patient's true K (mmHg/(ml/h)), T (s) and τ (s) over the run, as [min, max] each."""
     return {
         name: [float(np.min(values)), float(np.max(values))]
@@ -116,11 +147,11 @@ def _schedule_range(traj: Any) -> dict[str, list[float]]:
     }
 
 
-def _worker(args: tuple[Scenario, str, int, float]) -> dict[str, Any]:
+def _worker(args: tuple[Scenario, str, int, float, str]) -> dict[str, Any]:
     return run_patient(*args)
 
 
-def _worker_traced(args: tuple[Scenario, str, int, float]) -> tuple[dict[str, Any], dict]:
+def _worker_traced(args: tuple[Scenario, str, int, float, str]) -> tuple[dict[str, Any], dict]:
     record, traj = _simulate_patient(*args)
     every = max(1, int(round(REPORT_SAMPLE_S / args[3])))
     thinned = {
@@ -141,6 +172,7 @@ def run_trial(
     sample_period_s: float = 0.1,
     progress: Callable[[int, int], None] | None = None,
     scheduler: str | None = None,
+    schedule: str = "oracle",
 ) -> list[dict[str, Any]]:
     """Run the cohort ``(cohort_seed, n_patients)``; records in patient order.
 
@@ -159,15 +191,25 @@ def run_trial(
     scheduler
         Address of a Dask scheduler (``tcp://HOST:PORT``) to run the patients on instead of local
         processes (:mod:`hil_sim.backend`); does not change the results.
+    schedule
+        The scheduling source (``oracle``, ``estimated``, ``nominal``; :func:`run_patient`).
     """
-    tasks = _tasks(scenario, controller_spec, cohort_seed, n_patients, sample_period_s)
+    tasks = _tasks(scenario, controller_spec, cohort_seed, n_patients, sample_period_s, schedule)
     return run_ordered(_worker, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
 
 
 def _tasks(
-    scenario: Scenario, spec: str, cohort_seed: int, n_patients: int, sample_period_s: float
-) -> list[tuple[Scenario, str, int, float]]:
-    return [(scenario, spec, s, sample_period_s) for s in cohort_seeds(cohort_seed, n_patients)]
+    scenario: Scenario,
+    spec: str,
+    cohort_seed: int,
+    n_patients: int,
+    sample_period_s: float,
+    schedule: str,
+) -> list[tuple[Scenario, str, int, float, str]]:
+    return [
+        (scenario, spec, s, sample_period_s, schedule)
+        for s in cohort_seeds(cohort_seed, n_patients)
+    ]
 
 
 def run_trial_traced(
@@ -179,6 +221,7 @@ def run_trial_traced(
     sample_period_s: float = 0.1,
     progress: Callable[[int, int], None] | None = None,
     scheduler: str | None = None,
+    schedule: str = "oracle",
 ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """:func:`run_trial` that also keeps every patient's trajectory, thinned to 1 Hz, for a report.
 
@@ -189,7 +232,7 @@ def run_trial_traced(
         :data:`hil_sim.report.TRAJECTORY_KEYS` names: ``t_s`` (ticks,), ``map_true_mmhg``,
         ``target_mmhg``, ``rate_ml_h`` (patients × ticks; mmHg, mmHg, ml/h) and ``patient_seed``.
     """
-    tasks = _tasks(scenario, controller_spec, cohort_seed, n_patients, sample_period_s)
+    tasks = _tasks(scenario, controller_spec, cohort_seed, n_patients, sample_period_s, schedule)
     runs = run_ordered(_worker_traced, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
     records = [r for r, _ in runs]
     arrays = {
@@ -202,10 +245,16 @@ def run_trial_traced(
 
 
 def summarize(
-    records: Sequence[dict[str, Any]], scenario: Scenario, controller_spec: str, cohort_seed: int
+    records: Sequence[dict[str, Any]],
+    scenario: Scenario,
+    controller_spec: str,
+    cohort_seed: int,
+    schedule: str = "oracle",
 ) -> dict[str, Any]:
-    """The ``summary.json`` document: trial identity and the aggregated metrics."""
-    return {
+    """The ``summary.json`` document: trial identity and the aggregated metrics; with a schedule
+    other than the oracle also ``schedule`` and ``estimation`` (median over patients of each
+    record's ``estimation`` figure)."""
+    doc: dict[str, Any] = {
         "scenario": scenario.name,
         "controller": controller_spec,
         "cohort_seed": int(cohort_seed),
@@ -217,6 +266,13 @@ def summarize(
         },
         "metrics": aggregate(records),
     }
+    if schedule != "oracle":  # oracle summaries keep their bytes
+        doc["schedule"] = schedule
+        doc["estimation"] = {
+            key: float(np.median([r["estimation"][key] for r in records]))
+            for key in ("K_rel_err_pct", "T_rel_err_pct", "tau_abs_err_s")
+        }
+    return doc
 
 
 _EVENT_COLUMNS = ("start_s",) + EVENT_METRICS

@@ -1,7 +1,8 @@
 """The runtime's end of the link: assemble each tick's inputs, send commands and heartbeats.
 
 The device sends tick k as scheduling parameters, target, then MAP sample - the sample last, so
-its arrival means the tick is complete. :meth:`RuntimeSession.wait_for_sample` returns the tick as
+its arrival means the tick is complete (scheduling parameters are required only when the runtime
+schedules on them, ``require_sched``: a device may send none). :meth:`RuntimeSession.wait_for_sample` returns the tick as
 a :class:`~link.messages.TickInputs`; :meth:`RuntimeSession.send_command` answers it. When the
 device retransmits a tick the runtime has already answered (the command was lost), the session
 re-sends the same command by itself and counts it.
@@ -48,6 +49,12 @@ class RuntimeSession(Session):
         so the device retransmits the tick (the trajectory then stays identical to the in-process
         simulation). With a real-time peer samples are always delivered and
         ``TickInputs.sched_tick`` / ``target_tick`` tell the loop which values are stale.
+    require_sched
+        Whether a lockstep tick is complete only with its own SCHEDULING_PARAMS (default True:
+        the runtime schedules on the device's values, ``--schedule oracle``). False when the
+        runtime schedules on its own estimate or constants (``--schedule estimated|nominal``):
+        a tick is then complete with its target and MAP sample, and a device that never sends
+        scheduling parameters works (``TickInputs`` then carries NaN and ``sched_valid=False``).
     """
 
     ROLE = ROLE_RUNTIME
@@ -55,10 +62,17 @@ class RuntimeSession(Session):
     PEER_NAME = "device"
 
     def __init__(
-        self, port: Any, *, clock: Any = None, complete_ticks: bool = True, **kw: Any
+        self,
+        port: Any,
+        *,
+        clock: Any = None,
+        complete_ticks: bool = True,
+        require_sched: bool = True,
+        **kw: Any,
     ) -> None:
         super().__init__(port, clock=clock, **kw)
         self.complete_ticks = complete_ticks
+        self.require_sched = require_sched
         self._follow_samples = clock is None
         #: the device's latest pump status (or None)
         self.pump_status: PumpStatus | None = None
@@ -125,7 +139,11 @@ class RuntimeSession(Session):
             if (
                 peer is not None
                 and peer.link_mode == LINK_LOCKSTEP
-                and (sched is None or sched[0] != tick or target is None or target[0] != tick)
+                and (
+                    (self.require_sched and (sched is None or sched[0] != tick))
+                    or target is None
+                    or target[0] != tick
+                )
             ):
                 # in lockstep a stale value would change the trajectory: wait for the resend
                 self.counters.incomplete_ticks += 1

@@ -8,8 +8,11 @@ pseudo-terminal (a real tty to pyserial), signs the link (a fresh key per run un
 :func:`runtime.session.run_runtime`, records everything to an ``.rrd``, prints the metric summary
 (:mod:`runtime.summary`, defined in docs/METRICS.md) and the ``rerun FILE.rrd`` command to replay
 it. The run lasts the scenario's ``duration_s`` unless ``--duration`` is given; on a terminal a
-status line shows simulated time and the real-time factor (:mod:`runtime.progress`). The runtime itself never imports the simulator: the control path learns of the patient, and
-of any fault, only through what arrives on the link.
+status line shows simulated time and the real-time factor (:mod:`runtime.progress`). The runtime
+itself never imports the simulator: the control path learns of the patient, and of any fault, only
+through what arrives on the link. ``--schedule`` picks where the controller's K, T, τ come from
+(:mod:`runtime.estimation.schedule`); the default here is still the oracle (the device's truth),
+because the online estimator's figures do not all hold yet (README).
 
 Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
 Faults the scenario declares (``[[faults]]``) are injected by the device too; both are scored
@@ -35,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.usage import USAGE_EXIT, UsageError, UsageParser
-from runtime.config import RunConfig, add_run_options, positive, run_config
+from runtime.config import ORACLE_DEFAULT_WHY, RunConfig, add_run_options, positive, run_config
 from runtime.placement import CpuChoice, parse_lockstep_cpus
 
 DEFAULT_SCENARIO = "paper-tracking"
@@ -91,7 +94,7 @@ def _seed(text: str) -> int:
 def sil_parser() -> UsageParser:
     """The ``pressor sil`` option parser: the runtime's options plus the device's."""
     p = UsageParser(prog="pressor sil", description="device process + runtime over a serial link")
-    add_run_options(p)
+    add_run_options(p, "oracle", ORACLE_DEFAULT_WHY)
     p.add_argument(
         "--scenario",
         default=DEFAULT_SCENARIO,

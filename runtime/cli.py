@@ -3,10 +3,12 @@
 ``pressor run --port DEV`` is the runtime end alone, on a device started by hand (a real cable or
 a ``socat`` pty). It parses its options into a :class:`runtime.config.RunConfig`, opens the port,
 signs the link if ``--signing-key`` is given, runs the loop (:func:`runtime.session.run_runtime`)
-and prints the summary (:mod:`runtime.summary`). ``pressor run --fault ...`` scores a schedule
-injected by that device; the device's scenario is not known here, so the step-window metrics and
-``disturbances`` are null. ``pressor sil``, which also starts the device, is served by the front
-door (:mod:`pressor.sil`).
+and prints the summary (:mod:`runtime.summary`). It schedules on its own online estimate by
+default (``--schedule estimated``): a real monitor and pump send no K, T, τ, and a device that
+never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs a device that sends them.
+``pressor run --fault ...`` scores a schedule injected by that device; the device's scenario is not
+known here, so the step-window metrics and ``disturbances`` are null. ``pressor sil``, which also
+starts the device, is served by the front door (:mod:`pressor.sil`).
 
 ``pressor faults`` lists the injectable fault kinds (``--fault KIND[:ARGS]``) with their arguments,
 defaults, detection bounds and safe states, then what the supervisor detects.
@@ -20,12 +22,20 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from contracts.usage import UsageError, UsageParser, usage_exit
-from runtime.config import DEFAULT_RATE_HZ, MAX_RATE_HZ, add_run_options, positive, run_config
+from runtime.config import (
+    DEFAULT_RATE_HZ,
+    MAX_RATE_HZ,
+    add_run_options,
+    positive,
+    run_config,
+)
 
 
 def _run_parser() -> UsageParser:
     p = UsageParser(prog="pressor run", description="the controller runtime alone on a serial port")
-    add_run_options(p)
+    add_run_options(
+        p, "estimated", "; default estimated: a real device sends no scheduling parameters"
+    )
     p.add_argument("--port", required=True, help="device path or pyserial URL")
     p.add_argument(
         "--ticks",

@@ -19,6 +19,21 @@ from typing import Any
 from contracts.faults import FaultSpec, FaultSpecError, parse_faults
 from contracts.usage import UsageError
 from runtime.cpu_latency import MAX_LATENCY_US
+from runtime.estimation.schedule import SOURCES
+
+#: what ``--schedule`` means, for the help of every command that takes it
+SCHEDULE_HELP = (
+    "where the controller's K, T, tau come from: oracle = the device's SCHEDULING_PARAMS (a"
+    " simulator's truth; research comparisons, needs a device that sends them), estimated ="
+    " the runtime's online estimator from MAP and the delivered rate (falls back to the nominal"
+    " patient until it has learned or when its health check rejects an estimate), nominal ="
+    " the nominal patient's constants (a fixed-gain controller)"
+)
+#: why ``pressor sil`` and ``pressor trial`` still default to the oracle
+ORACLE_DEFAULT_WHY = (
+    "; default oracle here, because the estimator's T and tau figures still miss their targets"
+    " once the closed loop settles (README, 'Scheduling sources')"
+)
 
 DEFAULT_RATE_HZ = 10.0
 #: fastest loop rate accepted (Hz)
@@ -54,6 +69,9 @@ class RunConfig:
         CPU wake-up latency to hold during the run (µs; ``None``: no request).
     ticks
         Ticks to run (0: until the device ends).
+    schedule
+        The scheduling source (``oracle``, ``estimated``, ``nominal``;
+        :mod:`runtime.estimation.schedule`).
     """
 
     controller: str
@@ -70,6 +88,7 @@ class RunConfig:
     stall_timeout_s: float
     cpu_latency_us: int | None
     ticks: int = 0
+    schedule: str = "oracle"
 
     @property
     def period_s(self) -> float:
@@ -113,13 +132,20 @@ def _cpu_latency(text: str) -> int | None:
     return value
 
 
-def add_run_options(p: argparse.ArgumentParser) -> None:
-    """Add the runtime's options (controller, rate, outputs, signing, faults, timing) to ``p``."""
+def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_why: str) -> None:
+    """Add the runtime's options (controller, schedule, rate, outputs, signing, faults, timing) to
+    ``p``; ``--schedule`` defaults to ``schedule_default`` (``schedule_why`` ends its help)."""
     p.add_argument(
         "--controller",
         default="lpv",
         help="lpv (default: the shipped LPV module), pi, smith[:LAMBDA_S] (Smith predictor,"
         " closed-loop time constant LAMBDA_S in s, default 30 s), or a generated .py",
+    )
+    p.add_argument(
+        "--schedule",
+        choices=SOURCES,
+        default=schedule_default,
+        help=f"{SCHEDULE_HELP}{schedule_why}",
     )
     p.add_argument(
         "--rate",
@@ -225,6 +251,7 @@ def run_config(args: argparse.Namespace, ticks: int = 0) -> RunConfig:
         stall_timeout_s=args.stall_timeout,
         cpu_latency_us=args.cpu_latency,
         ticks=ticks,
+        schedule=args.schedule,
     )
 
 

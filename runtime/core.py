@@ -1,10 +1,14 @@
 """The one closed-loop core: supervisor, scheduling source and controller stepped in one place.
 
 Per tick the caller hands over what arrived for the tick (:class:`link.TickInputs`: MAP sample,
-target and the scheduling parameters the device sent - the scheduling source), the pump status of
-the tick (:class:`link.PumpStatus`, if one arrived) and the link's health; :meth:`ClosedLoopCore.step`
-assesses the inputs, steps the controller if the supervisor allows it, finalizes the command and
-returns a :class:`TickRecord`. The caller sends ``record.command_ml_h`` to the pump.
+target and whatever scheduling parameters the device sent), the pump status of the tick
+(:class:`link.PumpStatus`, if one arrived) and the link's health; :meth:`ClosedLoopCore.step`
+feeds the scheduling source (:mod:`runtime.estimation.schedule`: oracle, estimated or nominal)
+the MAP sample (NaN when no new sample arrived for the tick, ``link.sample_age_s > 0``: a repeated
+sample is no measurement), its quality bits and the pump's latest delivered rate (0 ml/h before
+any status), assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source
+returned - steps the controller with those K, T, τ if the supervisor allows it, finalizes the
+command and returns a :class:`TickRecord`. The caller sends ``record.command_ml_h`` to the pump.
 
 Two callers drive the same core, so they cannot drift apart:
 
@@ -23,6 +27,7 @@ from typing import NamedTuple
 
 from contracts.controller import Controller
 from link import PumpStatus, TickInputs
+from runtime.estimation.schedule import OracleSchedule, Schedule, ScheduleSource
 from runtime.supervisor import Supervisor, SupervisorInput, SupervisorOutput
 
 
@@ -61,12 +66,15 @@ class TickRecord(NamedTuple):
         Delivered rate (ml/h) of the tick's pump status; NaN when none arrived for the tick.
     supervisor
         The supervisor's decision; ``supervisor.command_ml_h`` is the command for the pump.
+    schedule
+        The scheduling source's report of the tick: the K, T, τ the controller was given.
     """
 
     inputs: TickInputs
     controller_ml_h: float
     pump_delivered_ml_h: float
     supervisor: SupervisorOutput
+    schedule: Schedule
 
     @property
     def command_ml_h(self) -> float:
@@ -83,9 +91,17 @@ class ClosedLoopCore:
         Any :class:`~contracts.controller.Controller`.
     supervisor
         The safety supervisor (its config's period must match the controller's).
+    schedule
+        Where K, T, τ come from (:func:`runtime.estimation.schedule.make_schedule`); default the
+        oracle (the device's values, as sent).
     """
 
-    def __init__(self, controller: Controller, supervisor: Supervisor) -> None:
+    def __init__(
+        self,
+        controller: Controller,
+        supervisor: Supervisor,
+        schedule: ScheduleSource | None = None,
+    ) -> None:
         if abs(supervisor.config.sample_period_s - controller.sample_period_s) > 1e-12:
             raise ValueError(
                 f"supervisor sample_period_s={supervisor.config.sample_period_s} s differs from"
@@ -93,6 +109,9 @@ class ClosedLoopCore:
             )
         self.controller = controller
         self.supervisor = supervisor
+        self.schedule = schedule if schedule is not None else OracleSchedule()
+        self._estimated = self.schedule.source == "estimated"
+        self._latest_delivered_ml_h = 0.0  # the pump's latest delivered rate; 0 before any status
 
     def step(
         self, inp: TickInputs, now_s: float, pump: PumpStatus | None, link: LinkHealth
@@ -110,32 +129,44 @@ class ClosedLoopCore:
         link
             The link's health at this tick.
         """
-        if pump is not None and pump.tick == inp.tick:
-            delivered, alarms = pump.delivered_ml_h, pump.alarms
+        if pump is not None:
+            self._latest_delivered_ml_h = pump.delivered_ml_h
+            if pump.tick == inp.tick:
+                delivered, alarms = pump.delivered_ml_h, pump.alarms
+            else:
+                delivered, alarms = math.nan, 0
         else:
             delivered, alarms = math.nan, 0
+        sched = self.schedule.update(
+            inp.map_mmhg if link.sample_age_s == 0.0 else math.nan,
+            inp.quality,
+            self._latest_delivered_ml_h,
+            inp.K,
+            inp.T_s,
+            inp.tau_s,
+            inp.sched_valid,
+        )
+        K, T_s, tau_s = sched.K, sched.T_s, sched.tau_s
         sup = self.supervisor
         run = sup.assess(  # positional: this is the per-tick path (fields in declaration order)
             SupervisorInput(
                 now_s,
                 inp.map_mmhg,
                 inp.quality,
-                inp.K,
-                inp.T_s,
-                inp.tau_s,
-                inp.sched_valid,
+                K,
+                T_s,
+                tau_s,
+                sched.valid,
                 link.sample_age_s,
                 link.link_silence_s,
                 inp.target_mmhg,
                 link.link_errors,
                 delivered,
                 alarms,
+                self._estimated,
+                sched.healthy,
             )
         )
-        raw = (
-            self.controller.step(inp.map_mmhg, inp.target_mmhg, inp.K, inp.T_s, inp.tau_s)
-            if run
-            else None
-        )
+        raw = self.controller.step(inp.map_mmhg, inp.target_mmhg, K, T_s, tau_s) if run else None
         out = sup.finalize(raw)
-        return TickRecord(inp, math.nan if raw is None else raw, delivered, out)
+        return TickRecord(inp, math.nan if raw is None else raw, delivered, out, sched)

@@ -57,6 +57,7 @@ from link import (
 )
 from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
 from runtime.core import ClosedLoopCore, LinkHealth, TickRecord
+from runtime.estimation.schedule import ScheduleSource
 from runtime.recorder import Recorder
 from runtime.supervisor import Supervisor
 from runtime.supervisor_config import State, fault_names
@@ -91,6 +92,9 @@ class Loop:
     on_tick
         Called after every tick with ``(tick, state, fault bits, command ml/h)`` (e.g. a
         :class:`contracts.faults.FaultScorer`'s ``update``).
+    schedule
+        The scheduling source the core steps the controller on
+        (:func:`runtime.estimation.schedule.make_schedule`); default the oracle.
     """
 
     def __init__(
@@ -102,8 +106,9 @@ class Loop:
         heartbeat_every: int = 10,
         history_ticks: int | None = None,
         on_tick: Any = None,
+        schedule: ScheduleSource | None = None,
     ) -> None:
-        self.core = ClosedLoopCore(controller, supervisor)
+        self.core = ClosedLoopCore(controller, supervisor, schedule)
         self.sup = supervisor
         self.ep = endpoint
         self.recorder = recorder

@@ -68,6 +68,7 @@ def run_runtime(
     from link import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkError, RuntimeSession
     from link.tlog import TlogWriter
     from runtime.cpu_latency import CpuLatencyRequest
+    from runtime.estimation.schedule import make_schedule
     from runtime.loop import Loop
     from runtime.supervisor import Supervisor
     from runtime.supervisor_config import supervisor_config_for
@@ -76,7 +77,8 @@ def run_runtime(
     controller = load_controller(config.controller, period_s)
     tlog = TlogWriter(config.tlog) if config.tlog is not None else None
     ok = False
-    ep = RuntimeSession(port, signing=signing, tlog=tlog)
+    # only the oracle schedules on the device's SCHEDULING_PARAMS: otherwise a device may send none
+    ep = RuntimeSession(port, signing=signing, tlog=tlog, require_sched=config.schedule == "oracle")
     recorder = None
     try:
         mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
@@ -99,6 +101,8 @@ def run_runtime(
                 f"device sample_period_s {peer.sample_period_s} s differs from --rate"
                 f" {config.rate_hz} Hz (period {period_s} s)"
             )
+        if config.schedule != "oracle":  # oracle summaries keep their pre-schedule bytes
+            identity = {**identity, "schedule": config.schedule}
         identity = {
             **identity,
             "scenario": peer.name,
@@ -132,6 +136,7 @@ def run_runtime(
             recorder=recorder,
             heartbeat_every=round(config.rate_hz),
             on_tick=on_tick,
+            schedule=make_schedule(config.schedule, period_s),
         )
         with CpuLatencyRequest(config.cpu_latency_us) as wake:
             if config.realtime:

@@ -77,6 +77,10 @@ class SupervisorInput(NamedTuple):
         Frames the link layer discarded since the last tick (advisory ``LINK_ERRORS``).
     pump_delivered_ml_h, pump_alarms
         This tick's pump status (delivered ml/h, alarm bits); NaN and 0: no fresh status.
+    estimated
+        Whether K, T, τ come from the online estimator (``--schedule estimated``).
+    estimate_healthy
+        False when the estimator rejected its estimate and reports the prior instead.
     """
 
     now_s: float
@@ -92,6 +96,8 @@ class SupervisorInput(NamedTuple):
     link_errors: int
     pump_delivered_ml_h: float
     pump_alarms: int
+    estimated: bool
+    estimate_healthy: bool
 
 
 class SupervisorOutput(NamedTuple):
@@ -176,6 +182,7 @@ class Supervisor:
         self._run_controller = False
         self._entry_state = State.STARTUP
         self._mismatch_since_s: float | None = None
+        self._out_of_box_since_s: float | None = None
 
     @property
     def alarm(self) -> bool:
@@ -238,6 +245,23 @@ class Supervisor:
             self._prev_sched_s = now_s
         return faults
 
+    def _check_estimate(self, now_s: float, inp: SupervisorInput) -> int:
+        """``ESTIMATOR_FALLBACK`` and ``ESTIMATE_OUT_OF_BOX`` (the box held for estimate_box_s)."""
+        cfg = self.config
+        faults = 0 if inp.estimate_healthy else Fault.ESTIMATOR_FALLBACK
+        box = cfg.sched_box
+        if box is None:
+            return faults
+        (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
+        if k_lo <= inp.K <= k_hi and t_lo <= inp.T_s <= t_hi and d_lo <= inp.tau_s <= d_hi:
+            self._out_of_box_since_s = None
+            return faults
+        if self._out_of_box_since_s is None:
+            self._out_of_box_since_s = now_s
+        if now_s - self._out_of_box_since_s >= cfg.estimate_box_s - _EPS_S:
+            faults |= Fault.ESTIMATE_OUT_OF_BOX
+        return faults
+
     def _check_pump(self, now_s: float, delivered: float, alarms: int) -> int:
         cfg = self.config
         if delivered != delivered:  # no fresh status: neither fault nor evidence of health
@@ -280,6 +304,8 @@ class Supervisor:
         if inp.link_errors:
             faults |= Fault.LINK_ERRORS
         faults |= self._check_pump(now_s, inp.pump_delivered_ml_h, inp.pump_alarms)
+        if inp.estimated:
+            faults |= self._check_estimate(now_s, inp)
         self.faults = faults
         state = self.state
         if faults & self._holding_faults:

@@ -34,7 +34,15 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
   advance to k, one tick after the cause). After a pump watchdog trip the held command is re-based
   on the pump's delivered (safe) rate, so re-entry slews from what the pump actually does;
 - ``PUMP_MISMATCH`` the delivered rate differs from the command sent one tick earlier by more than
-  max(``pump_mismatch_abs_ml_h``, ``pump_mismatch_rel`` × command) for ``pump_mismatch_s``.
+  max(``pump_mismatch_abs_ml_h``, ``pump_mismatch_rel`` × command) for ``pump_mismatch_s``;
+- ``ESTIMATOR_FALLBACK`` (``--schedule estimated`` only) the online estimator's health check
+  rejected its estimate (diverged, non-finite, K or T implausible): the scheduling source reports
+  the prior (the nominal patient) instead, so the safe action is already taken - the controller is
+  scheduled on the prior and the loop keeps running; advisory (no state change), alarm raised,
+  logged; same tick;
+- ``ESTIMATE_OUT_OF_BOX`` (``--schedule estimated`` only) the estimate the controller is scheduled
+  on has been outside ``sched_box`` for ``estimate_box_s`` (default 60 s) without a break;
+  advisory alarm (the controller clamps ρ to its box, as it does with any scheduling value).
 
 The pump checks need a pump status of this tick (``pump_delivered_ml_h`` not NaN); a missing one is
 not a fault (the link watchdogs cover silence).
@@ -81,10 +89,14 @@ class Fault(IntFlag):
     LINK_ERRORS = 1 << 13
     PUMP_ALARM = 1 << 14
     PUMP_MISMATCH = 1 << 15
+    ESTIMATOR_FALLBACK = 1 << 16
+    ESTIMATE_OUT_OF_BOX = 1 << 17
 
 
 #: faults that never change the state (the command is clamped and the event logged)
-ADVISORY = Fault.COMMAND_CLAMPED | Fault.LINK_ERRORS
+ADVISORY = (
+    Fault.COMMAND_CLAMPED | Fault.LINK_ERRORS | Fault.ESTIMATOR_FALLBACK | Fault.ESTIMATE_OUT_OF_BOX
+)
 #: pump alarm bits that count as a pump fault
 PUMP_ALARM_MASK = PUMP_ALARM_OCCLUSION | PUMP_ALARM_RESERVOIR_EMPTY | PUMP_ALARM_WATCHDOG
 #: scheduling faults that are advisory when ``sched_action == "advise"``
@@ -135,6 +147,7 @@ class SupervisorConfig:
     pump_mismatch_s: float = 1.0
     pump_mismatch_abs_ml_h: float = 1.0
     pump_mismatch_rel: float = 0.05
+    estimate_box_s: float = 60.0
 
     def __post_init__(self) -> None:
         def need(name: str, ok: bool, allowed: str) -> None:
@@ -166,6 +179,7 @@ class SupervisorConfig:
         need("pump_mismatch_s", self.pump_mismatch_s >= 0.0, ">= 0 s")
         need("pump_mismatch_abs_ml_h", self.pump_mismatch_abs_ml_h > 0.0, "> 0 ml/h")
         need("pump_mismatch_rel", 0.0 <= self.pump_mismatch_rel <= 1.0, "[0, 1]")
+        need("estimate_box_s", self.estimate_box_s >= 0.0, ">= 0 s")
         if self.sched_box is not None:
             need(
                 "sched_box",
@@ -238,6 +252,18 @@ def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
             "PUMP_MISMATCH",
             f"|delivered - command| > max({cfg.pump_mismatch_abs_ml_h} ml/h,"
             f" {cfg.pump_mismatch_rel:g} x command) for {cfg.pump_mismatch_s} s",
+        ),
+        (
+            "ESTIMATOR_FALLBACK",
+            "--schedule estimated: the estimator's health check rejected its estimate (diverged,"
+            " non-finite, K or T implausible); scheduling falls back to the prior (nominal"
+            " patient), the loop keeps running; advisory, alarm; same tick",
+        ),
+        (
+            "ESTIMATE_OUT_OF_BOX",
+            "--schedule estimated: the estimate outside the design box for"
+            f" {cfg.estimate_box_s:g} s; advisory alarm (the controller clamps)"
+            + ("" if cfg.sched_box is not None else "; not checked (controller not scheduled)"),
         ),
         (
             "reaction",

@@ -13,7 +13,7 @@ from runtime.config import RunConfig, add_run_options, run_config
 
 def _config(*argv: str, ticks: int = 0) -> RunConfig:
     p = UsageParser(prog="pressor run")
-    add_run_options(p)
+    add_run_options(p, "estimated", "")
     return run_config(p.parse_args(list(argv)), ticks=ticks)
 
 
@@ -26,6 +26,8 @@ def test_options_become_a_frozen_config_with_defaults_and_units(tmp_path: Path):
     assert [(f.kind, f.start_s) for f in cfg.fault_specs] == [("pump-occlusion", 300.0)]
     assert cfg.cpu_latency_us is None and cfg.stall_timeout_s == 10.0 and cfg.ticks == 0
     assert cfg.rrd == tmp_path / "r.rrd" and cfg.summary is None
+    assert cfg.schedule == "estimated"  # the default the command chose
+    assert _config("--controller", "pi", "--schedule", "nominal").schedule == "nominal"
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.rate_hz = 20.0  # type: ignore[misc]
 

@@ -62,7 +62,7 @@ def test_cpu_latency_request_is_opt_in(option, latency_us):
 @pytest.mark.parametrize("option", [["--cpu-latency", "-5"], ["--cpu-latency", "fast"]])
 def test_bad_cpu_latency_option_is_a_usage_error_naming_it(option):
     p = UsageParser(prog="pressor run")
-    add_run_options(p)
+    add_run_options(p, "oracle", "")
     with pytest.raises(UsageError, match="--cpu-latency"):
         p.parse_args(option)
 

@@ -78,7 +78,8 @@ def test_oracle_passes_the_device_values_and_flags_missing_ones():
     )  # fmt: skip
     for args in ((0.4, 120.0, 25.0, False), (math.nan, 120.0, 25.0, True)):
         s = src.update(70.0, 0, 20.0, *args)
-        assert not s.valid and math.isnan(s.K) and s.reason == "no device values"
+        assert not s.valid and s.reason == "no device values"
+        assert (s.K, s.T_s, s.tau_s)[1:] == args[1:3]  # passed through as sent, as before
 
 
 def test_nominal_is_the_prior_whatever_the_device_sends():

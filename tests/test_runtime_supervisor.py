@@ -33,6 +33,8 @@ def good_inputs(now_s: float) -> dict:
         link_errors=0,
         pump_delivered_ml_h=math.nan,
         pump_alarms=0,
+        estimated=False,
+        estimate_healthy=True,
     )
 
 

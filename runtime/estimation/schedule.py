@@ -11,9 +11,10 @@ PUMP_STATUS) and whatever scheduling parameters the device sent (K mmHg/(ml/h), 
 T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
 
 :class:`OracleSchedule`
-    The device's values (a simulator's truth; research comparisons only). ``valid`` is False when
-    the device sent none or sent non-finite values, and the values are then NaN: the controller's
-    own invalid-input handling applies, exactly as before this module existed.
+    The device's values, exactly as sent (a simulator's truth; research comparisons only).
+    ``valid`` is False when the device sent none, flagged them invalid or sent non-finite values
+    (NaN when it sent none); the supervisor and the controller's own invalid-input handling then
+    apply, exactly as before this module existed.
 :class:`NominalSchedule`
     Constant prior values (default: the nominal patient, :data:`NOMINAL_PLANT`); always valid.
 :class:`EstimatedSchedule`
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 from runtime.estimation.estimator import NOMINAL_PLANT, DelayBankEstimator, Estimate
 
@@ -69,8 +71,27 @@ class Schedule:
     estimate: Estimate | None = None
 
 
+class ScheduleSource(Protocol):
+    """What the closed-loop core (:mod:`runtime.core`) calls once per tick."""
+
+    source: str
+
+    def update(
+        self,
+        map_mmhg: float,
+        quality: int,
+        delivered_ml_h: float,
+        device_K: float,
+        device_T_s: float,
+        device_tau_s: float,
+        device_valid: bool,
+    ) -> Schedule:
+        """The tick's scheduling parameters (see the module docstring)."""
+        ...
+
+
 class OracleSchedule:
-    """Schedule on the device's K, T, τ (the simulator's truth)."""
+    """Schedule on the device's K, T, τ (the simulator's truth), passed through as sent."""
 
     source = "oracle"
 
@@ -84,12 +105,10 @@ class OracleSchedule:
         device_tau_s: float,
         device_valid: bool,
     ) -> Schedule:
-        """The device's values; ``valid`` only if it sent finite ones and flagged them valid."""
+        """The device's values as sent; ``valid`` only if finite and flagged valid."""
         ok = device_valid and math.isfinite(device_K + device_T_s + device_tau_s)
-        if not ok:
-            return Schedule(math.nan, math.nan, math.nan, "oracle", False, True, False,
-                            "no device values")  # fmt: skip
-        return Schedule(device_K, device_T_s, device_tau_s, "oracle", True, True, False, "ok")
+        return Schedule(device_K, device_T_s, device_tau_s, "oracle", ok, True, False,
+                        "ok" if ok else "no device values")  # fmt: skip
 
 
 class NominalSchedule:
