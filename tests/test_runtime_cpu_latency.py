@@ -55,7 +55,7 @@ def test_latency_outside_range_is_refused(bad):
 )
 def test_cpu_latency_request_is_opt_in(option, latency_us):
     p = UsageParser(prog="pressor run")
-    add_run_options(p)
+    add_run_options(p, "oracle", "")
     assert p.parse_args(option).cpu_latency == latency_us
 
 
