@@ -142,9 +142,7 @@ def test_quality_and_pump_alarm_bits_on_both_ends_are_the_xml_enums():
 
     quality = _xml_enum("PRESSOR_MAP_QUALITY")
     alarms = _xml_enum("PRESSOR_PUMP_ALARM")
-    ours = {
-        n: v for n, v in vars(wire_bits).items() if n.startswith(("QUALITY_", "PUMP_ALARM_"))
-    }
+    ours = {n: v for n, v in vars(wire_bits).items() if n.startswith(("QUALITY_", "PUMP_ALARM_"))}
     expected = {n.removeprefix("PRESSOR_MAP_"): v for n, v in quality.items()}
     expected |= {n.removeprefix("PRESSOR_"): v for n, v in alarms.items()}
     assert ours == expected
