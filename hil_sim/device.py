@@ -45,6 +45,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from contracts.usage import UsageError, UsageParser, run_command
+from runtime.interrupt import exit_code, signal_name, stop_requested
 from runtime.placement import parse_cpu, pin_thread
 
 #: default wall-clock timeouts (s)
@@ -109,7 +110,10 @@ def _check_range(name: str, value: float, lo: float, hi: float, unit: str, lo_op
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point of ``pressor device`` (see the module docstring)."""
-    return run_command(f"pressor {command}", lambda args: _main(command, args), argv)
+    from runtime.interrupt import stop_on_signals
+
+    with stop_on_signals():
+        return run_command(f"pressor {command}", lambda args: _main(command, args), argv)
 
 
 def _main(command: str, argv: Sequence[str]) -> int:
@@ -172,6 +176,8 @@ def _main(command: str, argv: Sequence[str]) -> int:
         if tlog is not None:
             tlog.close(commit=ok)  # a failed run never clobbers an earlier .tlog
     print(f"pressor {command}: {result.ended} after {result.ticks} ticks", file=sys.stderr)
+    if (stop := stop_requested()) is not None and result.ended.startswith("interrupted"):
+        return exit_code(stop)
     return 0 if result.ended in ("completed", "runtime closed the link") else 1
 
 
@@ -260,6 +266,7 @@ def run_device(
         STATE_FINISHED,
         STATE_RUNNING,
         Hello,
+        LinkError,
     )
 
     ts = world.sample_period_s
@@ -273,13 +280,29 @@ def run_device(
         n,
         LINK_REALTIME if realtime else LINK_LOCKSTEP,
     )
-    ep.handshake(hello, timeout_s=handshake_timeout_s)
+    deadline = time.monotonic() + handshake_timeout_s
+    while True:  # short attempts (a hello each): a stop signal is noticed within 0.5 s
+        if (stop := stop_requested()) is not None:
+            return DeviceResult(0, f"interrupted by {signal_name(stop)}", ep.counters.as_dict())
+        try:
+            ep.handshake(hello, timeout_s=min(0.5, max(0.0, deadline - time.monotonic())))
+            break
+        except LinkError:
+            if ep.peer_hello is not None:
+                raise  # a peer of the wrong role or protocol
+            if time.monotonic() >= deadline:
+                raise LinkError(
+                    f"no hello from the runtime within {handshake_timeout_s} s"
+                ) from None
     hb_every = max(1, int(round(1.0 / ts)))
     observe, apply_command, advance = world.observe, world.apply_command, world.advance
     send_obs, wait_cmd, send_status = ep.send_tick, ep.wait_for_command, ep.send_pump_status
     t0 = time.monotonic()
     down = link_faults.link_down if link_faults is not None and link_faults.down else None
     for k in range(n):
+        if (stop := stop_requested()) is not None:
+            ep.send_heartbeat(k, STATE_FINISHED)  # the runtime ends its run cleanly
+            return DeviceResult(k, f"interrupted by {signal_name(stop)}", ep.counters.as_dict())
         clock.t = world.sim_time_s
         obs = observe()
         if down is not None and _link_down_tick(ep, world, link_faults, k, obs, hello):
@@ -300,7 +323,7 @@ def run_device(
             send_obs(obs)
             cmd = wait_cmd(k, retransmit_s)
             waited = retransmit_s
-            while cmd is None:
+            while cmd is None and stop_requested() is None:
                 if waited >= link_timeout_s:
                     ep.send_heartbeat(k, STATE_FAULT)
                     return DeviceResult(k, "no command from the runtime", ep.counters.as_dict())

@@ -192,6 +192,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     """
     from link import PtyPair
     from runtime.config import load_signing
+    from runtime.interrupt import Interrupted
     from runtime.placement import lockstep_cpus
     from runtime.session import run_runtime
 
@@ -214,7 +215,11 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
         )
         device_log = Path(tmp) / "device.log"
         with open(device_log, "wb") as log:
-            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+            # its own session: a terminal's Ctrl-C reaches the runtime only, which stops the run
+            # (safe rate, outputs kept) and closes the link; the device then ends by itself
+            proc = subprocess.Popen(
+                cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+            )
         port = pair.leader_port()
         try:
             summary, result = run_runtime(
@@ -227,6 +232,9 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 on_connected=pair.close_follower,
                 peer_alive=lambda: proc.poll() is None,
             )
+        except Interrupted:
+            _stop(proc)  # before the device connected: nothing to keep, one line
+            raise
         except Exception:
             _stop(proc)
             text = device_log.read_text(errors="replace").strip()
@@ -263,7 +271,7 @@ def _main(argv: Sequence[str]) -> int:
 
     config = sil_config(argv)
     summary, result = run_sil(config)
-    return finish(summary, result, config.run)
+    return finish(summary, result, config.run, "pressor sil")
 
 
 def main(command: str, argv: list[str]) -> int:

@@ -54,7 +54,7 @@ def _main_run(argv: Sequence[str]) -> int:
         "signed": signing is not None,
     }
     summary, result = run_runtime(port, config, identity, signing)
-    return finish(summary, result, config)
+    return finish(summary, result, config, "pressor run")
 
 
 def _main_faults(argv: Sequence[str]) -> int:

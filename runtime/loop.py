@@ -34,14 +34,15 @@ Real time (``--realtime``)
 
 Execution time of a tick = wall time from release (lockstep: sample decoded; real time: deadline
 reached) to the command written to the port. Recording happens after the command is sent. The same
-tick takes longer in real time than in lockstep (development VM, LPV: p50 ~180 µs against ~36 µs)
-because after 100 ms asleep the interpreter's code and data are no longer in the CPU caches: a
-fixed 20 µs piece of Python measured 40-54 µs when run once every 100 ms.
+tick takes longer in real time than in lockstep (development VM, LPV: p50 ~180 µs against ~36 µs):
+after 100 ms asleep the interpreter's code and data are out of the CPU caches. A stop signal
+(:mod:`runtime.interrupt`) ends either loop at a tick boundary after a safe-rate command.
 """
 
 from __future__ import annotations
 
 import math
+from contextlib import suppress
 from dataclasses import replace
 from typing import Any
 
@@ -57,6 +58,7 @@ from link import (
 )
 from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
 from runtime.core import ClosedLoopCore, LinkHealth, TickRecord
+from runtime.interrupt import signal_name, stop_requested
 from runtime.recorder import Recorder
 from runtime.supervisor import Supervisor
 from runtime.supervisor_config import State, fault_names
@@ -120,6 +122,8 @@ class Loop:
         self._count = 0
         self._wall0 = perf_counter_s()
         self._link_errors_seen = 0
+        self._stop_signal: int | None = None
+        self._last_command = 0.0  # ml/h
 
     # ------------------------------------------------------------------ one tick
     def tick(
@@ -153,6 +157,7 @@ class Loop:
                 ep.send_heartbeat(inp.tick, STATE_RUNNING, flush=False)
             ep.send_command(inp.tick, command, MODE_AUTO if state == State.AUTO else MODE_SAFE)
         exec_s = perf_counter_s() - release_wall_s
+        self._last_command = command
         self._count += 1
         self.timing.record(exec_s, lateness_s, skipped)
         if not 0.0 <= command <= self.sup.config.max_rate_ml_h:  # by construction never; counted
@@ -235,6 +240,8 @@ class Loop:
             inp = None
             try:
                 while inp is None:
+                    if (stop := stop_requested()) is not None:
+                        break
                     inp = ep.wait_for_sample(poll_s)
                     if inp is None:
                         if ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FINISHED:
@@ -248,8 +255,8 @@ class Loop:
             except LinkClosedError:
                 ended = "device closed the link"
                 break
-            if inp is None:
-                ended = "device finished"
+            if inp is None:  # the device finished, or a stop signal came
+                ended = "device finished" if stop is None else self._stop_safe(last, stop)
                 break
             if last is not None and inp.tick > last.tick + 1:
                 self._silent_ticks(last, inp.tick, clock)
@@ -259,7 +266,7 @@ class Loop:
             self.tick(inp, clock.now_s(), release)
             last = inp
             answered += 1
-        if last is not None and ended != "device closed the link":
+        if last is not None and ended in ("completed", "device finished"):
             self._await_final_status(last.tick + 1, stall_timeout_s)
         self._finish()
         return self.result(ended)
@@ -328,6 +335,9 @@ class Loop:
         ended = "completed"
         k = 0
         while n_ticks == 0 or k < n_ticks:
+            if (stop := stop_requested()) is not None:
+                ended = self._stop_safe(newest, stop)
+                break
             deadline = sched.deadline_s()
             now = clock.wait_until(deadline)
             release = perf_counter_s()
@@ -360,11 +370,19 @@ class Loop:
         self._finish()
         return self.result(ended)
 
+    def _stop_safe(self, last: TickInputs | None, signum: int) -> str:
+        """Stop on a signal: command the safe rate (the configured one, else the last command,
+        held) for the tick after ``last``; return the ``ended`` text."""
+        safe = self.sup.config.safe_rate_ml_h
+        rate = self._last_command if safe is None else safe
+        with suppress(LinkClosedError):
+            self.ep.send_command(0 if last is None else last.tick + 1, rate, MODE_SAFE)
+        self._stop_signal = signum
+        return f"interrupted by {signal_name(signum)}"
+
     def _finish(self) -> None:
-        try:
+        with suppress(LinkClosedError):
             self.ep.send_heartbeat(self.trajectory.last_tick() or 0, STATE_FINISHED)
-        except LinkClosedError:
-            pass
 
     def result(self, ended: str) -> LoopResult:
         """Collect the run's account."""
@@ -378,4 +396,5 @@ class Loop:
             commands_out_of_range=self.out_of_range,
             ended=ended,
             wall_s=perf_counter_s() - self._wall0,
+            stop_signal=self._stop_signal,
         )

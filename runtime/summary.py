@@ -116,6 +116,8 @@ def build_summary(
     extra: dict[str, Any] = {}
     if faults is not None:
         extra["faults"] = faults
+    if result.stop_signal is not None:
+        extra["interrupted"] = True
     return {
         **extra,
         "commands_out_of_range": result.commands_out_of_range,
@@ -215,13 +217,14 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     write_atomic(path, json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
 
 
-def finish(summary: dict[str, Any], result: Any, config: RunConfig) -> int:
+def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = "pressor") -> int:
     """Print the summary, write the ``--summary`` / ``--timing`` files; return the exit code.
 
     Returns
     -------
     int
-        1 if a command left [0, max] (a check failed), else 0.
+        128 + the signal number when a signal stopped the run (one line on stderr,
+        :mod:`runtime.interrupt`); else 1 if a command left [0, max] (a check failed), else 0.
     """
     print_summary(summary, result.timing)
     if result.host:
@@ -241,4 +244,13 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig) -> int:
         print(f"timing: {config.timing}")
     if config.rrd is not None:
         print(f"recording: {config.rrd}\nreplay:    rerun {config.rrd}")
+    if result.stop_signal is not None:
+        from runtime.interrupt import exit_code
+
+        print(
+            f"{prog}: {result.ended} after {summary['ticks']} ticks; safe rate commanded,"
+            " outputs kept",
+            file=sys.stderr,
+        )
+        return exit_code(result.stop_signal)
     return 1 if summary["metrics"].get("commands_out_of_range") else 0
