@@ -42,6 +42,7 @@ import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from contracts.usage import UsageError, UsageParser, run_command
@@ -74,7 +75,12 @@ def _parser(command: str) -> UsageParser:
     p.add_argument("--duration", type=float, default=None, help="s (default: the scenario's)")
     p.add_argument("--rate", type=float, default=10.0, help="sample rate, Hz (default 10)")
     p.add_argument("--realtime", action="store_true", help="run on the wall clock")
-    p.add_argument("--signing-key", default=None, help="MAVLink 2 signing key file (32 B / hex)")
+    p.add_argument(
+        "--signing-key",
+        default=None,
+        help="MAVLink 2 signing key file (32 B / hex); default: the one 'pressor keygen' wrote",
+    )
+    p.add_argument("--no-signing", action="store_true", help="run the link unsigned (warned)")
     p.add_argument("--tlog", default=None, help="write every link frame to this .tlog")
     p.add_argument(
         "--retransmit", type=float, default=RETRANSMIT_S, help="s without a command before resend"
@@ -127,7 +133,6 @@ def _main(command: str, argv: Sequence[str]) -> int:
     faults = _parse_faults(args.fault)
     pin_thread(args.cpu)  # the lockstep ends on their CPUs (runtime.placement)
     world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate, faults)
-    signing = _load_signing(args.signing_key)
 
     from link import (
         DeviceSession,
@@ -143,6 +148,7 @@ def _main(command: str, argv: Sequence[str]) -> int:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises SerialException / ValueError for bad URLs
         raise UsageError(f"--port: cannot open {args.port!r}: {exc}") from None
+    signing = _load_signing(args.signing_key, args.no_signing, f"pressor {command}")
     from hil_sim.faults import LinkFaultPort, LinkFaults
 
     link_faults = LinkFaults(world.fault_specs, world.sample_period_s)
@@ -202,11 +208,21 @@ def _make_world(scenario: str, seed: int, period_s: float, faults: tuple = ()) -
         raise UsageError(f"--rate: {exc}") from exc
 
 
-def _load_signing(path: str | None) -> Any:
-    if path is None:
-        return None
-    from link import Signing
+def _load_signing(path: str | None, no_signing: bool, prog: str) -> Any:
+    from link.signing import Signing, default_key_path
 
+    if no_signing:
+        if path is not None:
+            raise UsageError("--no-signing and --signing-key: choose one")
+        print(f"{prog}: warning: the link is unsigned (--no-signing)", file=sys.stderr)
+        return None
+    if path is None:
+        path = str(default_key_path())
+        if not Path(path).exists():
+            raise UsageError(
+                f"--signing-key: no key at the default {path}: make one with 'pressor keygen'"
+                " (the runtime needs the same file), or pass --no-signing"
+            )
     try:
         return Signing.from_file(path)
     except OSError as exc:
@@ -267,6 +283,7 @@ def run_device(
         STATE_RUNNING,
         Hello,
         LinkError,
+        SigningMismatch,
     )
 
     ts = world.sample_period_s
@@ -287,9 +304,9 @@ def run_device(
         try:
             ep.handshake(hello, timeout_s=min(0.5, max(0.0, deadline - time.monotonic())))
             break
-        except LinkError:
-            if ep.peer_hello is not None:
-                raise  # a peer of the wrong role or protocol
+        except LinkError as exc:
+            if ep.peer_hello is not None or isinstance(exc, SigningMismatch):
+                raise  # a peer of the wrong role, protocol or signing
             if time.monotonic() >= deadline:
                 raise LinkError(
                     f"no hello from the runtime within {handshake_timeout_s} s"

@@ -18,7 +18,7 @@ from typing import Any
 import serial
 
 from link.codec import FrameCodec, message_object
-from link.counters import LinkClosedError, LinkCounters, LinkError
+from link.counters import LinkClosedError, LinkCounters, LinkError, SigningMismatch
 from link.dialect import pressor as mavlink
 from link.messages import PROTOCOL_VERSION, Heartbeat, Hello
 from link.signing import Signing
@@ -256,8 +256,40 @@ class Session:
 
     # ---------------------------------------------------------------- handshake
     def wait_for_hello(self, timeout_s: float) -> Hello | None:
-        """Wait for the peer's hello (``None`` on timeout)."""
-        return self._wait(lambda: self.peer_hello, timeout_s)
+        """Wait for the peer's hello (``None`` on timeout).
+
+        Raises
+        ------
+        SigningMismatch
+            At the first frame showing the peer signs differently (:meth:`check_signing`).
+        """
+
+        def ready() -> Hello | None:
+            self.check_signing()
+            return self.peer_hello
+
+        return self._wait(ready, timeout_s)
+
+    def check_signing(self) -> None:
+        """Raise :class:`SigningMismatch` naming the cause if a received frame showed that the
+        peer signs differently from this end (unsigned, another key, stale timestamps, or signed
+        while this end has no key)."""
+        peer, codec = self.PEER_NAME, self.codec
+        why = {
+            "unsigned": f"the {peer}'s frames are unsigned but this end signs: give the {peer}"
+            " the same key (--signing-key FILE) or run both ends with --no-signing",
+            "key": f"the {peer} signs with another key: give both ends the same key file"
+            " (pressor keygen; --signing-key FILE)",
+            "stale": f"the {peer}'s signing timestamps are replayed or more than a minute old"
+            f" (frames of an earlier run, or a wrong clock on the {peer})",
+        }.get(codec.refusal or "")
+        if why is None and codec.peer_signed:
+            why = (
+                f"the {peer} signs its frames but this end has no key: give it the same key"
+                f" (--signing-key FILE) or start the {peer} with --no-signing"
+            )
+        if why is not None:
+            raise SigningMismatch(f"signing mismatch: {why}")
 
     def handshake(self, hello: Hello, timeout_s: float = 10.0, resend_s: float = 0.5) -> Hello:
         """Establish the link after both ends opened their ports; return the peer's hello.
@@ -267,9 +299,11 @@ class Session:
         Raises
         ------
         LinkError
-            No hello within ``timeout_s`` (s, wall clock), or a peer of the wrong role or protocol.
+            No hello within ``timeout_s`` (s, wall clock), or a peer of the wrong role or protocol;
+            :class:`SigningMismatch` at once when the peer signs differently.
         """
         peer = self._exchange_hellos(hello, timeout_s, resend_s)
+        self.check_signing()
         if peer is None:
             raise LinkError(f"no hello from the {self.PEER_NAME} within {timeout_s} s")
         if peer.role != self.PEER_ROLE:

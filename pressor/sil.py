@@ -101,7 +101,6 @@ def sil_parser() -> UsageParser:
         help="simulated time in s (default 1800)",
     )
     p.add_argument("--link", default="pty", help="pty (default) or a pyserial URL / device path")
-    p.add_argument("--no-signing", action="store_true", help="run the link unsigned")
     p.add_argument(
         "--cpu",
         type=parse_lockstep_cpus,
@@ -143,7 +142,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         patient_seed=args.patient_seed,
         duration_s=args.duration,
         link=args.link,
-        signed=not args.no_signing,
+        signed=run.signed,
         cpu=args.cpu,
         events=tuple(scenario_events(scenario)),
     )
@@ -178,8 +177,7 @@ def device_command(
         cmd += ["--fault", text]
     if any(f.info.group == "link" for f in run.fault_specs):
         cmd += ["--retransmit", "0.05"]  # wall-clock resend of lost ticks; trajectory-neutral
-    if key_file is not None:
-        cmd += ["--signing-key", str(key_file)]
+    cmd += ["--signing-key", str(key_file)] if key_file is not None else ["--no-signing"]
     return cmd
 
 

@@ -62,7 +62,14 @@ def run_runtime(
     tuple
         The summary (:func:`runtime.summary.build_summary`) and the loop's result.
     """
-    from link import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkError, RuntimeSession
+    from link import (
+        LINK_LOCKSTEP,
+        LINK_REALTIME,
+        Hello,
+        LinkError,
+        RuntimeSession,
+        SigningMismatch,
+    )
     from link.tlog import TlogWriter
     from runtime.cpu_latency import CpuLatencyRequest
     from runtime.loop import Loop
@@ -87,6 +94,8 @@ def run_runtime(
             try:
                 peer = ep.handshake(hello, timeout_s=0.25)
                 break
+            except SigningMismatch:
+                raise
             except LinkError:
                 waited += 0.25
                 if (peer_alive is not None and not peer_alive()) or waited >= handshake_timeout_s:

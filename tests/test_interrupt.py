@@ -14,7 +14,15 @@ from pathlib import Path
 
 import pytest
 
-from link import LINK_REALTIME, DeviceSession, ManualClock, PtyPair, RuntimeSession, read_tlog
+from link import (
+    LINK_REALTIME,
+    DeviceSession,
+    ManualClock,
+    PtyPair,
+    RuntimeSession,
+    Signing,
+    read_tlog,
+)
 from link.dialect import pressor as mavlink
 from tests.sil_helpers import ROOT, poll_until_exit, rrd_columns, spawn_device
 
@@ -80,14 +88,14 @@ def test_signal_stops_sil_keeping_recording_tlog_and_summary(tmp_path, sig):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries left
 
 
-def _device_thread(pair: PtyPair, stop: threading.Event) -> threading.Thread:
+def _device_thread(pair: PtyPair, stop: threading.Event, key: Path) -> threading.Thread:
     """A simulated device (the project's world) driving the runtime from this process."""
     from hil_sim.device import run_device
     from hil_sim.world import World
 
     def run() -> None:
         clock = ManualClock()
-        ep = DeviceSession(pair.leader_port(), clock=clock)
+        ep = DeviceSession(pair.leader_port(), clock=clock, signing=Signing.from_file(key))
         try:
             run_device(ep, World("paper-tracking", 3, 0.1), clock, duration_s=120, realtime=True)
         except Exception:
@@ -104,12 +112,14 @@ def _device_thread(pair: PtyPair, stop: threading.Event) -> threading.Thread:
 def test_sigint_stops_pressor_run_with_safe_command_and_summary(tmp_path):
     pair = PtyPair.open()
     rrd, summary = tmp_path / "run.rrd", tmp_path / "s.json"
+    key = Signing.generate().write(tmp_path / "key")
     proc = _start(
         "run", "--port", pair.follower_path, "--controller", "pi", "--realtime",
+        "--signing-key", str(key),
         "--rrd", str(rrd), "--summary", str(summary), cwd=tmp_path,
     )  # fmt: skip
     done = threading.Event()
-    _device_thread(pair, done)
+    _device_thread(pair, done, key)
     try:
         _wait_for(lambda: any(p.name.startswith(".run.rrd") for p in tmp_path.iterdir()), 60)
         time.sleep(1.5)
@@ -127,11 +137,12 @@ def test_sigint_stops_pressor_run_with_safe_command_and_summary(tmp_path):
 
 def test_sigterm_stops_pressor_device_with_finished_heartbeat_and_valid_tlog(tmp_path):
     pair = PtyPair.open()
-    tlog = tmp_path / "dev.tlog"
+    tlog, key = tmp_path / "dev.tlog", Signing.generate().write(tmp_path / "key")
     proc = spawn_device(
-        pair, "--realtime", "--duration", "120", "--patient-seed", "4", "--tlog", str(tlog)
-    )
-    ep = RuntimeSession(pair.leader_port(), clock=time.monotonic)
+        pair, "--realtime", "--duration", "120", "--patient-seed", "4", "--tlog", str(tlog),
+        "--signing-key", str(key),
+    )  # fmt: skip
+    ep = RuntimeSession(pair.leader_port(), clock=time.monotonic, signing=Signing.from_file(key))
     from link import Hello
 
     try:
