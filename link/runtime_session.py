@@ -53,6 +53,7 @@ class RuntimeSession(Session):
     ROLE = ROLE_RUNTIME
     PEER_ROLE = ROLE_DEVICE
     PEER_NAME = "device"
+    MAV_TYPE = mavlink.MAV_TYPE_ONBOARD_CONTROLLER
 
     def __init__(
         self, port: Any, *, clock: Any = None, complete_ticks: bool = True, **kw: Any

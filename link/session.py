@@ -26,6 +26,14 @@ from link.tlog import TlogWriter
 
 _ID_HEARTBEAT = mavlink.MAVLINK_MSG_ID_PRESSOR_HEARTBEAT
 _ID_HELLO = mavlink.MAVLINK_MSG_ID_PRESSOR_HELLO
+_ID_STD_HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
+#: standard HEARTBEAT system_status for each PRESSOR_STATE
+_MAV_STATE = {
+    mavlink.PRESSOR_STATE_BOOT: mavlink.MAV_STATE_BOOT,
+    mavlink.PRESSOR_STATE_RUNNING: mavlink.MAV_STATE_ACTIVE,
+    mavlink.PRESSOR_STATE_FINISHED: mavlink.MAV_STATE_STANDBY,
+    mavlink.PRESSOR_STATE_FAULT: mavlink.MAV_STATE_CRITICAL,
+}
 
 
 class ManualClock:
@@ -60,8 +68,10 @@ class Session:
         MAVLink ids of this end (default: the role value, component 1).
     """
 
-    #: this end's role (``ROLE_*``) and the peer's, with the peer's name for messages
+    #: this end's role (``ROLE_*``) and the peer's, with the peer's name for messages; the
+    #: MAV_TYPE its standard HEARTBEAT announces
     ROLE: int
+    MAV_TYPE: int
     PEER_ROLE: int
     PEER_NAME: str
 
@@ -165,7 +175,18 @@ class Session:
         )
 
     def send_heartbeat(self, tick: int, state: int, *, flush: bool = True) -> None:
-        """Send a heartbeat (last tick handled, ``STATE_*``)."""
+        """Send a heartbeat (last tick handled, ``STATE_*``), preceded by the standard MAVLink
+        HEARTBEAT so generic ground tools see this node (docs/PROTOCOL.md)."""
+        self.send_fields(
+            _ID_STD_HEARTBEAT,
+            self.MAV_TYPE,
+            mavlink.MAV_AUTOPILOT_INVALID,
+            0,
+            state,  # custom_mode: the PRESSOR_STATE
+            _MAV_STATE[state],
+            3,  # mavlink_version, as the standard asks
+            flush=False,
+        )
         self.send_fields(_ID_HEARTBEAT, tick, self.ROLE, state, flush=flush)
 
     # ---------------------------------------------------------------- receiving

@@ -11,7 +11,15 @@ from pathlib import Path
 
 import pytest
 
-from link import DeviceSession, Hello, ManualClock, RuntimeSession, Signing, TlogWriter
+from link import (
+    STATE_RUNNING,
+    DeviceSession,
+    Hello,
+    ManualClock,
+    RuntimeSession,
+    Signing,
+    TlogWriter,
+)
 from tests.link_doubles import drain, loop_pair, tick_inputs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,6 +50,7 @@ def test_a_signed_tlog_decodes_with_stock_mavlogdump_by_the_readme_command(tmp_p
         drain(rt)
         x = rt.next_sample()
         rt.send_command(x.tick, 10.0 + k)
+    rt.send_heartbeat(2, STATE_RUNNING)
     tlog.close()
     words = _readme_command()
     env = dict(os.environ)
@@ -56,4 +65,5 @@ def test_a_signed_tlog_decodes_with_stock_mavlogdump_by_the_readme_command(tmp_p
     assert re.search(r"PRESSOR_HELLO \{.*patient_seed : 7.*name : paper-tracking\}", out.stdout)
     ticks = [int(t) for t in re.findall(r"MAP_SAMPLE \{sim_time_s : \S+ tick : (\d+),", out.stdout)]
     assert ticks == [0, 1, 2]
+    assert re.search(r": HEARTBEAT \{type : 18, autopilot : 8, .*system_status : 4", out.stdout)
     assert len(re.findall(r"INFUSION_COMMAND \{tick : \d, rate_ml_h : 1[0-2]\.0", out.stdout)) == 3
