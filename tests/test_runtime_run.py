@@ -104,3 +104,13 @@ def test_run_with_an_unopenable_port_exits_2_with_one_line(tmp_path: Path):
     assert proc.returncode == 2
     [line] = proc.stderr.strip().splitlines()
     assert line.startswith(f"pressor run: --port {tmp_path / 'no-tty'}: cannot open")
+
+
+def test_run_signs_by_default_and_without_a_key_says_how_to_make_one(
+    bridged_ports, tmp_path: Path, monkeypatch
+):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "empty"))
+    proc = pressor("run", "--controller", "pi", "--port", bridged_ports[1], cwd=tmp_path)
+    assert proc.returncode == 2
+    [line] = proc.stderr.strip().splitlines()
+    assert "no key at the default" in line and "pressor keygen" in line and "--no-signing" in line
