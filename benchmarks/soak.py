@@ -79,7 +79,7 @@ def main() -> int:
     texts = schedule(args.hours)
     specs = parse_faults(texts)
     controller = load_controller(args.controller, sample_period_s=ts)
-    signing = Signing.generate(seed=1)
+    signing = Signing.generate()  # per-run key, wall-clock timestamps like the device's
     pair = PtyPair.open()
     with tempfile.TemporaryDirectory(prefix="pressor-soak-") as tmp:
         key = signing.write(Path(tmp) / "key")

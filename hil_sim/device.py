@@ -37,20 +37,23 @@ Exit codes: 0 run completed (or the runtime closed the link), 1 link lost / hand
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
-from contracts.usage import UsageError, UsageParser, run_command
-from runtime.placement import parse_cpu, pin_thread
-
-#: default wall-clock timeouts (s)
-RETRANSMIT_S = 0.5
-LINK_TIMEOUT_S = 10.0
-HANDSHAKE_TIMEOUT_S = 30.0
+from contracts.usage import UsageError, run_command
+from hil_sim.device_options import (
+    HANDSHAKE_TIMEOUT_S,
+    LINK_TIMEOUT_S,
+    RETRANSMIT_S,
+    check_range,
+    device_parser,
+)
+from runtime.interrupt import exit_code, signal_name, stop_requested
+from runtime.placement import pin_thread
 
 
 @dataclass(frozen=True)
@@ -62,90 +65,25 @@ class DeviceResult:
     counters: dict[str, int]
 
 
-def _parser(command: str) -> UsageParser:
-    p = UsageParser(
-        prog=f"pressor {command}",
-        description="Run the simulated patient/pump/monitor device on a serial port.",
-    )
-    p.add_argument("--port", required=True, help="device path or pyserial URL (e.g. /dev/pts/7)")
-    p.add_argument("--scenario", default="paper-tracking", help="scenario name or .toml path")
-    p.add_argument("--patient-seed", type=int, default=0, help="patient seed, [0, 2**32)")
-    p.add_argument(
-        "--duration",
-        type=float,
-        default=None,
-        help="simulated time (s; default: the scenario's duration_s)",
-    )
-    p.add_argument("--rate", type=float, default=10.0, help="sample rate (Hz)")
-    p.add_argument(
-        "--realtime", action="store_true", help="run on the wall clock (default: lockstep)"
-    )
-    p.add_argument(
-        "--signing-key",
-        default=None,
-        help="MAVLink 2 signing key file (32 B / hex; default: unsigned)",
-    )
-    p.add_argument(
-        "--tlog", default=None, help="write every link frame to this .tlog (default: none)"
-    )
-    p.add_argument(
-        "--retransmit",
-        type=float,
-        default=RETRANSMIT_S,
-        help="wall-clock s without a command before resending a tick (s)",
-    )
-    p.add_argument(
-        "--link-timeout",
-        type=float,
-        default=LINK_TIMEOUT_S,
-        help="wall-clock s without a command before giving up (s)",
-    )
-    p.add_argument(
-        "--handshake-timeout",
-        type=float,
-        default=HANDSHAKE_TIMEOUT_S,
-        help="wall-clock s to wait for the runtime's hello (s)",
-    )
-    p.add_argument(
-        "--cpu",
-        type=parse_cpu,
-        default=None,
-        help="run on this CPU only (default: any; pressor sil puts the lockstep ends on two CPUs)",
-    )
-    p.add_argument(
-        "--fault",
-        action="append",
-        default=[],
-        metavar="KIND[:ARGS]",
-        help="inject a fault (repeatable); 'pressor faults' lists kinds, arguments and defaults",
-    )
-    return p
-
-
-def _check_range(name: str, value: float, lo: float, hi: float, unit: str, lo_open: bool) -> None:
-    ok = (value > lo if lo_open else value >= lo) and value <= hi and math.isfinite(value)
-    if not ok:
-        bracket = "(" if lo_open else "["
-        raise UsageError(f"{name}: value {value} outside {bracket}{lo}, {hi}] {unit}".rstrip())
-
-
 def main(command: str, argv: list[str]) -> int:
     """Entry point of ``pressor device`` (see the module docstring)."""
-    return run_command(f"pressor {command}", lambda args: _main(command, args), argv)
+    from runtime.interrupt import stop_on_signals
+
+    with stop_on_signals():
+        return run_command(f"pressor {command}", lambda args: _main(command, args), argv)
 
 
 def _main(command: str, argv: Sequence[str]) -> int:
-    args = _parser(command).parse_args(argv)
-    _check_range("--rate", args.rate, 0.0, 1000.0, "Hz", lo_open=True)
+    args = device_parser(command).parse_args(argv)
+    check_range("--rate", args.rate, 0.0, 1000.0, "Hz", lo_open=True)
     if args.duration is not None:
-        _check_range("--duration", args.duration, 0.0, 30 * 24 * 3600.0, "s", lo_open=True)
-    _check_range("--patient-seed", args.patient_seed, 0, 2**32 - 1, "", lo_open=False)
+        check_range("--duration", args.duration, 0.0, 30 * 24 * 3600.0, "s", lo_open=True)
+    check_range("--patient-seed", args.patient_seed, 0, 2**32 - 1, "", lo_open=False)
     for opt in ("retransmit", "link_timeout", "handshake_timeout"):
-        _check_range(f"--{opt.replace('_', '-')}", getattr(args, opt), 0.0, 3600.0, "s", True)
+        check_range(f"--{opt.replace('_', '-')}", getattr(args, opt), 0.0, 3600.0, "s", True)
     faults = _parse_faults(args.fault)
     pin_thread(args.cpu)  # the lockstep ends on their CPUs (runtime.placement)
     world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate, faults)
-    signing = _load_signing(args.signing_key)
 
     from link import (
         DeviceSession,
@@ -161,6 +99,7 @@ def _main(command: str, argv: Sequence[str]) -> int:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises SerialException / ValueError for bad URLs
         raise UsageError(f"--port: cannot open {args.port!r}: {exc}") from None
+    signing = _load_signing(args.signing_key, args.no_signing, f"pressor {command}")
     from hil_sim.faults import LinkFaultPort, LinkFaults
 
     link_faults = LinkFaults(world.fault_specs, world.sample_period_s)
@@ -194,6 +133,8 @@ def _main(command: str, argv: Sequence[str]) -> int:
         if tlog is not None:
             tlog.close(commit=ok)  # a failed run never clobbers an earlier .tlog
     print(f"pressor {command}: {result.ended} after {result.ticks} ticks", file=sys.stderr)
+    if (stop := stop_requested()) is not None and result.ended.startswith("interrupted"):
+        return exit_code(stop)
     return 0 if result.ended in ("completed", "runtime closed the link") else 1
 
 
@@ -218,11 +159,21 @@ def _make_world(scenario: str, seed: int, period_s: float, faults: tuple = ()) -
         raise UsageError(f"--rate: {exc}") from exc
 
 
-def _load_signing(path: str | None) -> Any:
-    if path is None:
-        return None
-    from link import Signing
+def _load_signing(path: str | None, no_signing: bool, prog: str) -> Any:
+    from link.signing import Signing, default_key_path
 
+    if no_signing:
+        if path is not None:
+            raise UsageError("--no-signing and --signing-key: choose one")
+        print(f"{prog}: warning: the link is unsigned (--no-signing)", file=sys.stderr)
+        return None
+    if path is None:
+        path = str(default_key_path())
+        if not Path(path).exists():
+            raise UsageError(
+                f"--signing-key: no key at the default {path}: make one with 'pressor keygen'"
+                " (the runtime needs the same file), or pass --no-signing"
+            )
     try:
         return Signing.from_file(path)
     except OSError as exc:
@@ -282,6 +233,8 @@ def run_device(
         STATE_FINISHED,
         STATE_RUNNING,
         Hello,
+        LinkError,
+        SigningMismatch,
     )
 
     ts = world.sample_period_s
@@ -295,13 +248,29 @@ def run_device(
         n,
         LINK_REALTIME if realtime else LINK_LOCKSTEP,
     )
-    ep.handshake(hello, timeout_s=handshake_timeout_s)
+    deadline = time.monotonic() + handshake_timeout_s
+    while True:  # short attempts (a hello each): a stop signal is noticed within 0.5 s
+        if (stop := stop_requested()) is not None:
+            return DeviceResult(0, f"interrupted by {signal_name(stop)}", ep.counters.as_dict())
+        try:
+            ep.handshake(hello, timeout_s=min(0.5, max(0.0, deadline - time.monotonic())))
+            break
+        except LinkError as exc:
+            if ep.peer_hello is not None or isinstance(exc, SigningMismatch):
+                raise  # a peer of the wrong role, protocol or signing
+            if time.monotonic() >= deadline:
+                raise LinkError(
+                    f"no hello from the runtime within {handshake_timeout_s} s"
+                ) from None
     hb_every = max(1, int(round(1.0 / ts)))
     observe, apply_command, advance = world.observe, world.apply_command, world.advance
     send_obs, wait_cmd, send_status = ep.send_tick, ep.wait_for_command, ep.send_pump_status
     t0 = time.monotonic()
     down = link_faults.link_down if link_faults is not None and link_faults.down else None
     for k in range(n):
+        if (stop := stop_requested()) is not None:
+            ep.send_heartbeat(k, STATE_FINISHED)  # the runtime ends its run cleanly
+            return DeviceResult(k, f"interrupted by {signal_name(stop)}", ep.counters.as_dict())
         clock.t = world.sim_time_s
         obs = observe()
         if down is not None and _link_down_tick(ep, world, link_faults, k, obs, hello):
@@ -322,7 +291,7 @@ def run_device(
             send_obs(obs)
             cmd = wait_cmd(k, retransmit_s)
             waited = retransmit_s
-            while cmd is None:
+            while cmd is None and stop_requested() is None:
                 if waited >= link_timeout_s:
                     ep.send_heartbeat(k, STATE_FAULT)
                     return DeviceResult(k, "no command from the runtime", ep.counters.as_dict())

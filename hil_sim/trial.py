@@ -9,7 +9,8 @@ Metrics judge the *true* MAP (what the patient experiences; a flushed or disconn
 count as hypertension), with the settling band chosen by whether the scenario's monitor is noisy
 (docs/METRICS.md). ``reachable`` compares the largest ΔMAP the scenario asks for (target step minus
 disturbances) with the largest steady-state ΔMAP the pump's maximum rate gives at this patient's
-sensitivity (max over i ≤ max of k0·i·e^(−k1·i)).
+sensitivity (max over i ≤ max of k0·i·e^(−k1·i)): a patient whose shortfall exceeds the metrics'
+band (:func:`contracts.metrics.reachable_band_mmhg`) is unreachable.
 
 The scenario's hemorrhages and boluses are the disturbance events the metrics split the run at
 (``docs/METRICS.md``): the step metrics stop at the first one and each gets a record in the

@@ -210,6 +210,12 @@ class World:
         return float(max(need)) if need else 0.0
 
     def reachable(self) -> bool:
-        """Whether the pump's maximum rate can hold the target at this patient's sensitivity."""
-        achievable = self.params.max_delta_map_mmhg(self.scenario.pump.max_rate_ml_h)
-        return self.required_delta_mmhg() <= achievable
+        """Whether the pump's maximum rate can bring MAP within the metrics' band of the target at
+        this patient's sensitivity (:func:`contracts.metrics.reachable_band_mmhg`: the scenario's
+        settling band, or the clinical band without a target step)."""
+        from contracts.metrics import reachable_band_mmhg
+
+        sc = self.scenario
+        band = reachable_band_mmhg(sc.step_mmhg if sc.step_mmhg != 0.0 else None, sc.noisy)
+        achievable = self.params.max_delta_map_mmhg(sc.pump.max_rate_ml_h)
+        return self.required_delta_mmhg() - band <= achievable

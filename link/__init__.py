@@ -17,7 +17,8 @@ Modules
     :class:`~link.codec.FrameCodec` - framing with resynchronisation, CRC, sequence and signature
     checks, the fast pack/decode path.
 ``counters``, ``signing``
-    :class:`LinkCounters`, :class:`LinkError`, :class:`LinkClosedError`; :class:`Signing`.
+    :class:`LinkCounters`, :class:`LinkError`, :class:`LinkClosedError`,
+    :class:`SigningMismatch`; :class:`Signing`, :func:`~link.signing.default_key_path`.
 ``session``, ``runtime_session``, ``device_session``
     :class:`Session` (what both ends share: hellos, handshake, heartbeats, reading, dispatch),
     :class:`RuntimeSession` (assembles ticks, sends commands), :class:`DeviceSession` (sends ticks
@@ -71,7 +72,7 @@ Ts, noise, n_ticks), ...)``, ``ep.send_tick(world.observe())`` (a :class:`TickIn
 Values are float32 on the wire (sim time is double), matching ``hil_sim.world``'s rounding.
 """
 
-from link.counters import LinkClosedError, LinkCounters, LinkError
+from link.counters import LinkClosedError, LinkCounters, LinkError, SigningMismatch
 from link.device_session import DeviceSession
 from link.messages import (
     LINK_LOCKSTEP,
@@ -129,6 +130,7 @@ __all__ = [
     "RuntimeSession",
     "Session",
     "Signing",
+    "SigningMismatch",
     "TickInputs",
     "TlogWriter",
     "fast_port",

@@ -24,9 +24,10 @@ Sequence numbers are tracked per (system, component); a jump counts one ``seq_ga
 Signing (MAVLink 2). With a :class:`~link.signing.Signing`, every outgoing frame is signed, and
 incoming frames are checked against the same key; unsigned frames (``require=True``) and frames
 with a wrong signature or a replayed timestamp are refused and counted (``refused_unsigned``,
-``refused_bad_signature``). The signing timestamp comes from the session's run clock (10 µs units
-of run time, then +1 per frame as the protocol requires) instead of the wall clock, so signed runs
-are byte-identical.
+``refused_bad_signature``; :attr:`FrameCodec.refusal` says why the last one was). The signing
+timestamp (10 µs units, then +1 per frame as the protocol requires) comes from the wall clock for
+keys with ``wall_clock`` (key files, random per-run keys: frames of an earlier run are refused),
+else from the session's run clock (seeded keys: signed runs are byte-identical).
 
 Hot path. Messages without arrays or strings (all but the hello) are packed by
 :meth:`FrameCodec.pack_fields` and decoded into plain field tuples: byte-identical to pymavlink's
@@ -124,6 +125,13 @@ class FrameCodec:
         counters: LinkCounters,
     ) -> None:
         mav = mavlink.MAVLink(None, system_id, component_id)
+        if signing is not None and signing.wall_clock:
+            from link.signing import wall_clock_s
+
+            clock = wall_clock_s
+            # a receiver starts at its own wall-clock stamp: a new stream more than a minute
+            # behind it (frames recorded in an earlier run) is refused
+            mav.signing.timestamp = int(clock() * 100_000.0)
         if signing is not None:
             mav.signing.secret_key = signing.key
             mav.signing.link_id = signing.link_id
@@ -137,6 +145,11 @@ class FrameCodec:
         self.counters = counters
         self.rx = bytearray()
         self._last_seq: dict[tuple[int, int], int] = {}
+        #: why the last signed-link frame was refused: ``unsigned``, ``key`` (another key) or
+        #: ``stale`` (timestamp replayed or more than a minute old); None if none was
+        self.refusal: str | None = None
+        #: an unsigned end accepted a signed frame (the peer has a key this end lacks)
+        self.peer_signed = False
 
     # ------------------------------------------------------------------ packing
     def _stamp(self) -> None:
@@ -254,8 +267,12 @@ class FrameCodec:
                     # CRC was good, so the framing is right: skip the whole frame
                     if incompat & 1:
                         c.refused_bad_signature += 1
+                        key = self.mav.signing.secret_key
+                        genuine = _sha256(key + frame[:-6]).digest()[:6] == frame[-6:]
+                        self.refusal = "stale" if genuine else "key"
                     else:
                         c.refused_unsigned += 1
+                        self.refusal = "unsigned"
                     i += flen
                 else:
                     c.bad_crc += 1
@@ -264,6 +281,8 @@ class FrameCodec:
                 continue
             i += flen
             c.frames_received += 1
+            if incompat & 1 and not self.signed:
+                self.peer_signed = True
             key = (frame[5], frame[6])
             seq = frame[4]
             last = self._last_seq.get(key)

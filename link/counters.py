@@ -9,6 +9,11 @@ class LinkError(RuntimeError):
     """The link cannot go on (handshake failed, peer mismatch)."""
 
 
+class SigningMismatch(LinkError):
+    """The peer signs differently: unsigned, another key, stale timestamps, or signed while this
+    end is not (raised by the handshake at the first such frame)."""
+
+
 class LinkClosedError(LinkError):
     """The peer closed the link (or the port vanished)."""
 

@@ -35,6 +35,7 @@ class DeviceSession(Session):
     ROLE = ROLE_DEVICE
     PEER_ROLE = ROLE_RUNTIME
     PEER_NAME = "runtime"
+    MAV_TYPE = mavlink.MAV_TYPE_GENERIC
 
     def __init__(self, port: Any, **kw: Any) -> None:
         super().__init__(port, **kw)

@@ -60,6 +60,7 @@ class RuntimeSession(Session):
     ROLE = ROLE_RUNTIME
     PEER_ROLE = ROLE_DEVICE
     PEER_NAME = "device"
+    MAV_TYPE = mavlink.MAV_TYPE_ONBOARD_CONTROLLER
 
     def __init__(
         self,

@@ -18,7 +18,7 @@ from typing import Any
 import serial
 
 from link.codec import FrameCodec, message_object
-from link.counters import LinkClosedError, LinkCounters, LinkError
+from link.counters import LinkClosedError, LinkCounters, LinkError, SigningMismatch
 from link.dialect import pressor as mavlink
 from link.messages import PROTOCOL_VERSION, Heartbeat, Hello
 from link.signing import Signing
@@ -26,6 +26,14 @@ from link.tlog import TlogWriter
 
 _ID_HEARTBEAT = mavlink.MAVLINK_MSG_ID_PRESSOR_HEARTBEAT
 _ID_HELLO = mavlink.MAVLINK_MSG_ID_PRESSOR_HELLO
+_ID_STD_HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
+#: standard HEARTBEAT system_status for each PRESSOR_STATE
+_MAV_STATE = {
+    mavlink.PRESSOR_STATE_BOOT: mavlink.MAV_STATE_BOOT,
+    mavlink.PRESSOR_STATE_RUNNING: mavlink.MAV_STATE_ACTIVE,
+    mavlink.PRESSOR_STATE_FINISHED: mavlink.MAV_STATE_STANDBY,
+    mavlink.PRESSOR_STATE_FAULT: mavlink.MAV_STATE_CRITICAL,
+}
 
 
 class ManualClock:
@@ -60,8 +68,10 @@ class Session:
         MAVLink ids of this end (default: the role value, component 1).
     """
 
-    #: this end's role (``ROLE_*``) and the peer's, with the peer's name for messages
+    #: this end's role (``ROLE_*``) and the peer's, with the peer's name for messages; the
+    #: MAV_TYPE its standard HEARTBEAT announces
     ROLE: int
+    MAV_TYPE: int
     PEER_ROLE: int
     PEER_NAME: str
 
@@ -165,7 +175,18 @@ class Session:
         )
 
     def send_heartbeat(self, tick: int, state: int, *, flush: bool = True) -> None:
-        """Send a heartbeat (last tick handled, ``STATE_*``)."""
+        """Send a heartbeat (last tick handled, ``STATE_*``), preceded by the standard MAVLink
+        HEARTBEAT so generic ground tools see this node (docs/PROTOCOL.md)."""
+        self.send_fields(
+            _ID_STD_HEARTBEAT,
+            self.MAV_TYPE,
+            mavlink.MAV_AUTOPILOT_INVALID,
+            0,
+            state,  # custom_mode: the PRESSOR_STATE
+            _MAV_STATE[state],
+            3,  # mavlink_version, as the standard asks
+            flush=False,
+        )
         self.send_fields(_ID_HEARTBEAT, tick, self.ROLE, state, flush=flush)
 
     # ---------------------------------------------------------------- receiving
@@ -256,8 +277,40 @@ class Session:
 
     # ---------------------------------------------------------------- handshake
     def wait_for_hello(self, timeout_s: float) -> Hello | None:
-        """Wait for the peer's hello (``None`` on timeout)."""
-        return self._wait(lambda: self.peer_hello, timeout_s)
+        """Wait for the peer's hello (``None`` on timeout).
+
+        Raises
+        ------
+        SigningMismatch
+            At the first frame showing the peer signs differently (:meth:`check_signing`).
+        """
+
+        def ready() -> Hello | None:
+            self.check_signing()
+            return self.peer_hello
+
+        return self._wait(ready, timeout_s)
+
+    def check_signing(self) -> None:
+        """Raise :class:`SigningMismatch` naming the cause if a received frame showed that the
+        peer signs differently from this end (unsigned, another key, stale timestamps, or signed
+        while this end has no key)."""
+        peer, codec = self.PEER_NAME, self.codec
+        why = {
+            "unsigned": f"the {peer}'s frames are unsigned but this end signs: give the {peer}"
+            " the same key (--signing-key FILE) or run both ends with --no-signing",
+            "key": f"the {peer} signs with another key: give both ends the same key file"
+            " (pressor keygen; --signing-key FILE)",
+            "stale": f"the {peer}'s signing timestamps are replayed or more than a minute old"
+            f" (frames of an earlier run, or a wrong clock on the {peer})",
+        }.get(codec.refusal or "")
+        if why is None and codec.peer_signed:
+            why = (
+                f"the {peer} signs its frames but this end has no key: give it the same key"
+                f" (--signing-key FILE) or start the {peer} with --no-signing"
+            )
+        if why is not None:
+            raise SigningMismatch(f"signing mismatch: {why}")
 
     def handshake(self, hello: Hello, timeout_s: float = 10.0, resend_s: float = 0.5) -> Hello:
         """Establish the link after both ends opened their ports; return the peer's hello.
@@ -267,9 +320,11 @@ class Session:
         Raises
         ------
         LinkError
-            No hello within ``timeout_s`` (s, wall clock), or a peer of the wrong role or protocol.
+            No hello within ``timeout_s`` (s, wall clock), or a peer of the wrong role or protocol;
+            :class:`SigningMismatch` at once when the peer signs differently.
         """
         peer = self._exchange_hellos(hello, timeout_s, resend_s)
+        self.check_signing()
         if peer is None:
             raise LinkError(f"no hello from the {self.PEER_NAME} within {timeout_s} s")
         if peer.role != self.PEER_ROLE:

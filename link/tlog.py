@@ -10,7 +10,12 @@ Only frames that decoded (sent by this end, or received and accepted) are logged
 frame in a .tlog would desynchronise readers that trust the timestamp/frame layout. The session's
 counters record what was rejected.
 
-To read a log with pymavlink's own tools, make the dialect known to them first::
+Stock ``mavlogdump.py`` reads a log with the dialect XML under ``link/message_definitions/v1.0``
+(links to ``link/pressor.xml`` and ``link/minimal.xml``), from the project root::
+
+    MAVLINK20=1 MDEF=link/message_definitions mavlogdump.py --dialect pressor run.tlog
+
+In Python, make the committed dialect module known to pymavlink's tools first::
 
     from link.tlog import register_dialect_with_mavutil
     mavutil = register_dialect_with_mavutil()

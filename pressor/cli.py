@@ -36,6 +36,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "sil": ("pressor.sil", "software-in-the-loop run: device process + runtime over a serial link"),
     "run": ("runtime.cli", "run the controller runtime alone on a serial port"),
     "faults": ("runtime.cli", "list the injectable fault kinds"),
+    "keygen": ("runtime.cli", "write a link signing key for pressor run and pressor device"),
 }
 
 

@@ -114,9 +114,6 @@ def sil_parser() -> UsageParser:
     )
     p.add_argument("--link", default="pty", help="pty (default) or a pyserial URL / device path")
     p.add_argument(
-        "--no-signing", action="store_true", help="run the link unsigned (default: signed)"
-    )
-    p.add_argument(
         "--cpu",
         type=parse_lockstep_cpus,
         default="auto",
@@ -159,7 +156,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         patient_seed=args.patient_seed,
         duration_s=scenario.duration_s if args.duration is None else args.duration,
         link=args.link,
-        signed=not args.no_signing,
+        signed=run.signed,
         cpu=args.cpu,
         events=tuple(scenario_events(scenario)),
     )
@@ -194,8 +191,7 @@ def device_command(
         cmd += ["--fault", text]
     if any(f.info.group == "link" for f in run.fault_specs):
         cmd += ["--retransmit", "0.05"]  # wall-clock resend of lost ticks; trajectory-neutral
-    if key_file is not None:
-        cmd += ["--signing-key", str(key_file)]
+    cmd += ["--signing-key", str(key_file)] if key_file is not None else ["--no-signing"]
     return cmd
 
 
@@ -208,6 +204,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     """
     from link import PtyPair
     from runtime.config import load_signing
+    from runtime.interrupt import Interrupted
     from runtime.placement import lockstep_cpus
     from runtime.progress import TerminalProgress
     from runtime.session import run_runtime
@@ -231,7 +228,11 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
         )
         device_log = Path(tmp) / "device.log"
         with open(device_log, "wb") as log:
-            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+            # its own session: a terminal's Ctrl-C reaches the runtime only, which stops the run
+            # (safe rate, outputs kept) and closes the link; the device then ends by itself
+            proc = subprocess.Popen(
+                cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+            )
         port = pair.leader_port()
         progress = TerminalProgress(run.period_s, round(config.duration_s / run.period_s))
         try:
@@ -246,6 +247,9 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 peer_alive=lambda: proc.poll() is None,
                 on_tick=progress if progress.enabled else None,
             )
+        except Interrupted:
+            _stop(proc)  # before the device connected: nothing to keep, one line
+            raise
         except Exception:
             _stop(proc)
             text = device_log.read_text(errors="replace").strip()
@@ -283,7 +287,7 @@ def _main(argv: Sequence[str]) -> int:
 
     config = sil_config(argv)
     summary, result = run_sil(config)
-    return finish(summary, result, config.run)
+    return finish(summary, result, config.run, "pressor sil")
 
 
 def main(command: str, argv: list[str]) -> int:

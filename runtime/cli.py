@@ -2,13 +2,16 @@
 
 ``pressor run --port DEV`` is the runtime end alone, on a device started by hand (a real cable or
 a ``socat`` pty). It parses its options into a :class:`runtime.config.RunConfig`, opens the port,
-signs the link if ``--signing-key`` is given, runs the loop (:func:`runtime.session.run_runtime`)
-and prints the summary (:mod:`runtime.summary`). It schedules on its own online estimate by
-default (``--schedule estimated``): a real monitor and pump send no K, T, τ, and a device that
-never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs a device that sends them.
-``pressor run --fault ...`` scores a schedule injected by that device; the device's scenario is not
-known here, so the step-window metrics and ``disturbances`` are null. ``pressor sil``, which also
-starts the device, is served by the front door (:mod:`pressor.sil`).
+signs the link (``--signing-key``, default the ``pressor keygen`` key), runs the loop
+(:func:`runtime.session.run_runtime`) and prints the summary (:mod:`runtime.summary`). It
+schedules on its own online estimate by default (``--schedule estimated``): a real monitor and pump
+send no K, T, τ, and a device that never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs
+a device that sends them. ``pressor run --fault ...`` scores a schedule injected by that device;
+the device's scenario is not known here, so the step-window metrics and ``disturbances`` are null.
+``pressor sil``, which also starts the device, is served by the front door (:mod:`pressor.sil`).
+
+``pressor keygen`` writes a fresh signing key (default :func:`link.signing.default_key_path`):
+``pressor run`` and ``pressor device`` sign the link with it unless ``--no-signing`` (warned).
 
 ``pressor faults`` lists the injectable fault kinds (``--fault KIND[:ARGS]``) with their arguments,
 defaults, detection bounds and safe states, then what the supervisor detects.
@@ -19,7 +22,9 @@ failed), 2 bad usage or input (one line on stderr naming the option or file, val
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from contracts.usage import UsageError, UsageParser, usage_exit
 from runtime.config import (
@@ -54,11 +59,17 @@ def _main_run(argv: Sequence[str]) -> int:
 
     args = _run_parser().parse_args(argv)
     config = run_config(args, ticks=args.ticks)
-    signing = load_signing(config, generate=False)
     try:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises several types for a bad path/URL
         raise UsageError(f"--port {args.port}: cannot open: {exc}") from None
+    signing = load_signing(config, generate=False)
+    if signing is None:
+        print(
+            "pressor run: warning: the link is unsigned (--no-signing): anything on the line"
+            " can command the pump",
+            file=sys.stderr,
+        )
     identity = {
         "controller": config.controller,
         "link": args.port,
@@ -67,7 +78,31 @@ def _main_run(argv: Sequence[str]) -> int:
         "signed": signing is not None,
     }
     summary, result = run_runtime(port, config, identity, signing)
-    return finish(summary, result, config)
+    return finish(summary, result, config, "pressor run")
+
+
+def _main_keygen(argv: Sequence[str]) -> int:
+    from link.signing import Signing, default_key_path
+
+    p = UsageParser(
+        prog="pressor keygen",
+        description="write a fresh 32-byte link signing key (hex, mode 0600) for pressor run and"
+        " pressor device; copy the same file to the other end",
+    )
+    p.add_argument(
+        "--out", type=Path, default=None, help=f"key file (default: {default_key_path()})"
+    )
+    p.add_argument("--force", action="store_true", help="replace an existing key file")
+    args = p.parse_args(argv)
+    path = args.out or default_key_path()
+    if path.exists() and not args.force:
+        raise UsageError(f"--out {path}: a key exists already (--force replaces it)")
+    path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+    if args.force:
+        path.unlink(missing_ok=True)
+    Signing.generate().write(path, exclusive=True)
+    print(f"signing key: {path}")
+    return 0
 
 
 def _main_faults(argv: Sequence[str]) -> int:
@@ -108,7 +143,7 @@ def main(command: str, argv: list[str]) -> int:
     """Entry point for ``pressor run | faults`` (see the module docstring for exit codes)."""
     from runtime.session import run_guarded
 
-    handlers = {"run": _main_run, "faults": _main_faults}
+    handlers = {"run": _main_run, "faults": _main_faults, "keygen": _main_keygen}
     if command not in handlers:
         return usage_exit("runtime.cli", f"unknown command {command!r}")
     return run_guarded(f"pressor {command}", handlers[command], argv)

@@ -56,6 +56,8 @@ class RunConfig:
         Output files (``None``: not written); their directories exist.
     signing_key
         Key file of the signed link (``None``: none given).
+    signed
+        ``False`` with ``--no-signing``.
     sched_faults
         ``advise`` or ``hold``: the supervisor's answer to scheduling outside the design box.
     faults
@@ -89,6 +91,7 @@ class RunConfig:
     cpu_latency_us: int | None
     ticks: int = 0
     schedule: str = "oracle"
+    signed: bool = True
 
     @property
     def period_s(self) -> float:
@@ -175,8 +178,11 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
     p.add_argument(
         "--signing-key",
         type=Path,
-        help="32-byte key file (raw or 64 hex chars); default: pressor sil generates a fresh key"
-        " per run, pressor run leaves the link unsigned",
+        help="32-byte key file (raw or 64 hex chars); pressor run defaults to the one"
+        " 'pressor keygen' wrote, pressor sil to a fresh key per run",
+    )
+    p.add_argument(
+        "--no-signing", action="store_true", help="run the link unsigned (warned; default: signed)"
     )
     p.add_argument(
         "--sched-faults",
@@ -231,6 +237,8 @@ def run_config(args: argparse.Namespace, ticks: int = 0) -> RunConfig:
     _check_out_path("--tlog", args.tlog)
     _check_out_path("--summary", args.summary)
     _check_out_path("--timing", args.timing)
+    if args.no_signing and args.signing_key is not None:
+        raise UsageError("--no-signing and --signing-key: choose one")
     load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device starts
     try:
         specs = tuple(parse_faults(args.fault))
@@ -252,6 +260,7 @@ def run_config(args: argparse.Namespace, ticks: int = 0) -> RunConfig:
         cpu_latency_us=args.cpu_latency,
         ticks=ticks,
         schedule=args.schedule,
+        signed=not args.no_signing,
     )
 
 
@@ -282,13 +291,27 @@ def load_controller(spec: str, period_s: float) -> Any:
 
 
 def load_signing(config: RunConfig, generate: bool) -> Any:
-    """The link's :class:`Signing`: from ``--signing-key``, else a fresh key if ``generate``,
-    else ``None`` (unsigned). A key file that cannot be read is a :class:`UsageError`."""
-    from link import Signing
+    """The link's :class:`Signing`, or ``None`` with ``--no-signing``.
 
-    if config.signing_key is not None:
-        try:
-            return Signing.from_file(config.signing_key)
-        except (OSError, ValueError) as exc:
-            raise UsageError(f"--signing-key {config.signing_key}: {exc}") from None
-    return Signing.generate() if generate else None
+    From ``--signing-key``; else a fresh key if ``generate`` (``pressor sil``); else the key file
+    at :func:`link.signing.default_key_path` (``pressor run``). A key file that is missing or
+    cannot be read is a :class:`UsageError` saying how to make one.
+    """
+    from link.signing import Signing, default_key_path
+
+    if not config.signed:
+        return None
+    path = config.signing_key
+    if path is None:
+        if generate:
+            return Signing.generate()
+        path = default_key_path()
+        if not path.exists():
+            raise UsageError(
+                f"--signing-key: no key at the default {path}: make one with 'pressor keygen'"
+                " (the device needs the same file), or pass --no-signing"
+            )
+    try:
+        return Signing.from_file(path)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"--signing-key {path}: {exc}") from None

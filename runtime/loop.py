@@ -17,14 +17,11 @@ Lockstep (default in ``pressor sil``)
     device is silent, and declaring link loss from wall time would make the trajectory depend on
     host load.
 
-    Link stalls in virtual time. The device is the clock: a stalled or disconnected link is
-    simulated by a device that keeps simulating without exchanging frames (``link-stall``,
-    ``link-disconnect``), so the next sample that arrives is tick k > last + 1. The loop then runs
-    the silent ticks last+1 … k−1 through the supervisor on the virtual clock (sample age and
-    link silence growing by one period per tick, the newest sample being the last one received),
-    recording each of them - with MAP NaN, nothing was measured - but sending nothing: nobody
-    would receive it. So STALE_SAMPLE (HOLD) and LINK_LOSS (FAILSAFE) are logged at exactly the
-    ticks a wall-clock runtime would have logged them, and tick k resumes from the safe state.
+    Link stalls in virtual time: a stalled link is a device that keeps simulating without
+    exchanging frames, so the next sample is tick k > last + 1. The loop runs the silent ticks
+    last+1 … k−1 through the supervisor on the virtual clock (sample age and link silence growing
+    one period per tick), recording them with MAP NaN and sending nothing, so STALE_SAMPLE (HOLD)
+    and LINK_LOSS (FAILSAFE) fall on exactly the ticks a wall-clock runtime would log them.
 
 Real time (``--realtime``)
     The :class:`~runtime.clock.MonotonicClock` releases a tick at each absolute deadline
@@ -32,16 +29,16 @@ Real time (``--realtime``)
     link silence are measured on the wall clock, so the stale-sample and link-loss watchdogs are
     real. Lateness and skipped periods are counted.
 
-Execution time of a tick = wall time from release (lockstep: sample decoded; real time: deadline
-reached) to the command written to the port. Recording happens after the command is sent. The same
-tick takes longer in real time than in lockstep (development VM, LPV: p50 ~180 µs against ~36 µs)
-because after 100 ms asleep the interpreter's code and data are no longer in the CPU caches: a
-fixed 20 µs piece of Python measured 40-54 µs when run once every 100 ms.
+Execution time = wall time from release (sample decoded, or deadline reached) to the command
+written; recording comes after. Real-time ticks run slower than lockstep ones (LPV p50 ~180 µs
+against ~36 µs: after 100 ms asleep the caches are cold). A stop signal (:mod:`runtime.interrupt`)
+ends either loop at a tick boundary after a safe-rate command.
 """
 
 from __future__ import annotations
 
 import math
+from contextlib import suppress
 from dataclasses import replace
 from typing import Any
 
@@ -58,6 +55,7 @@ from link import (
 from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
 from runtime.core import ClosedLoopCore, LinkHealth, TickRecord
 from runtime.estimation.schedule import ScheduleSource
+from runtime.interrupt import signal_name, stop_requested
 from runtime.recorder import Recorder
 from runtime.supervisor import Supervisor
 from runtime.supervisor_config import State, fault_names
@@ -127,6 +125,8 @@ class Loop:
         self._count = 0
         self._wall0 = perf_counter_s()
         self._link_errors_seen = 0
+        self._stop_signal: int | None = None
+        self._last_command = 0.0  # ml/h
 
     # ------------------------------------------------------------------ one tick
     def tick(
@@ -160,6 +160,7 @@ class Loop:
                 ep.send_heartbeat(inp.tick, STATE_RUNNING, flush=False)
             ep.send_command(inp.tick, command, MODE_AUTO if state == State.AUTO else MODE_SAFE)
         exec_s = perf_counter_s() - release_wall_s
+        self._last_command = command
         self._count += 1
         self.timing.record(exec_s, lateness_s, skipped)
         if not 0.0 <= command <= self.sup.config.max_rate_ml_h:  # by construction never; counted
@@ -243,6 +244,8 @@ class Loop:
             inp = None
             try:
                 while inp is None:
+                    if (stop := stop_requested()) is not None:
+                        break
                     inp = ep.wait_for_sample(poll_s)
                     if inp is None:
                         if ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FINISHED:
@@ -256,8 +259,8 @@ class Loop:
             except LinkClosedError:
                 ended = "device closed the link"
                 break
-            if inp is None:
-                ended = "device finished"
+            if inp is None:  # the device finished, or a stop signal came
+                ended = "device finished" if stop is None else self._stop_safe(last, stop)
                 break
             if last is not None and inp.tick > last.tick + 1:
                 self._silent_ticks(last, inp.tick, clock)
@@ -267,7 +270,7 @@ class Loop:
             self.tick(inp, clock.now_s(), release)
             last = inp
             answered += 1
-        if last is not None and ended != "device closed the link":
+        if last is not None and ended in ("completed", "device finished"):
             self._await_final_status(last.tick + 1, stall_timeout_s)
         self._finish()
         return self.result(ended)
@@ -336,6 +339,9 @@ class Loop:
         ended = "completed"
         k = 0
         while n_ticks == 0 or k < n_ticks:
+            if (stop := stop_requested()) is not None:
+                ended = self._stop_safe(newest, stop)
+                break
             deadline = sched.deadline_s()
             now = clock.wait_until(deadline)
             release = perf_counter_s()
@@ -368,11 +374,19 @@ class Loop:
         self._finish()
         return self.result(ended)
 
+    def _stop_safe(self, last: TickInputs | None, signum: int) -> str:
+        """Stop on a signal: command the safe rate (the configured one, else the last command,
+        held) for the tick after ``last``; return the ``ended`` text."""
+        safe = self.sup.config.safe_rate_ml_h
+        rate = self._last_command if safe is None else safe
+        with suppress(LinkClosedError):
+            self.ep.send_command(0 if last is None else last.tick + 1, rate, MODE_SAFE)
+        self._stop_signal = signum
+        return f"interrupted by {signal_name(signum)}"
+
     def _finish(self) -> None:
-        try:
+        with suppress(LinkClosedError):
             self.ep.send_heartbeat(self.trajectory.last_tick() or 0, STATE_FINISHED)
-        except LinkClosedError:
-            pass
 
     def result(self, ended: str) -> LoopResult:
         """Collect the run's account."""
@@ -386,4 +400,5 @@ class Loop:
             commands_out_of_range=self.out_of_range,
             ended=ended,
             wall_s=perf_counter_s() - self._wall0,
+            stop_signal=self._stop_signal,
         )

@@ -16,6 +16,7 @@ from typing import Any
 
 from contracts.usage import UsageError, run_command
 from runtime.config import RunConfig, load_controller
+from runtime.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
 from runtime.placement import Pinned
 from runtime.summary import build_summary
 
@@ -65,7 +66,14 @@ def run_runtime(
     tuple
         The summary (:func:`runtime.summary.build_summary`) and the loop's result.
     """
-    from link import LINK_LOCKSTEP, LINK_REALTIME, Hello, LinkError, RuntimeSession
+    from link import (
+        LINK_LOCKSTEP,
+        LINK_REALTIME,
+        Hello,
+        LinkError,
+        RuntimeSession,
+        SigningMismatch,
+    )
     from link.tlog import TlogWriter
     from runtime.cpu_latency import CpuLatencyRequest
     from runtime.estimation.schedule import make_schedule
@@ -87,9 +95,13 @@ def run_runtime(
         hello = Hello(name[:32], sample_period_s=period_s, link_mode=mode)
         waited = 0.0
         while True:  # short attempts, so a device process that died is noticed at once
+            if (stop := stop_requested()) is not None:
+                raise Interrupted(stop, "before the device connected")
             try:
                 peer = ep.handshake(hello, timeout_s=0.25)
                 break
+            except SigningMismatch:
+                raise
             except LinkError:
                 waited += 0.25
                 if (peer_alive is not None and not peer_alive()) or waited >= handshake_timeout_s:
@@ -183,16 +195,22 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
     """Run a runtime command with its exit codes.
 
     0 success; 1 the run completed but a check failed, or the device stalled or the link failed
-    (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`).
+    (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`); 130 / 143
+    stopped by SIGINT / SIGTERM (:mod:`runtime.interrupt`: the run stops at a tick boundary,
+    commands the safe rate, and keeps its outputs).
     """
     from link import LinkError
     from runtime.loop import DeviceStalled
 
     def guarded(args: Sequence[str]) -> int:
-        try:
-            return handler(args)
-        except (DeviceStalled, LinkError) as exc:
-            print(f"{prog}: {exc}", file=sys.stderr)
-            return 1
+        with stop_on_signals():
+            try:
+                return handler(args)
+            except (DeviceStalled, LinkError) as exc:
+                print(f"{prog}: {exc}", file=sys.stderr)
+                return 1
+            except Interrupted as exc:
+                print(f"{prog}: {exc}", file=sys.stderr)
+                return exit_code(exc.signum)
 
     return run_command(prog, guarded, argv)

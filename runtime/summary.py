@@ -12,8 +12,9 @@ timing), so two runs give identical files; loop timing (p50/p99/max) is printed,
 ``--timing`` and recorded under ``/loop``.
 
 ``reachable`` is inferred from the run, since the runtime does not know the patient: false when
-the pump sat at its limit for the whole final 10 % of the run with MAP still more than 5 mmHg
-below the target.
+the pump sat at its limit for the whole final 10 % of the run with MAP still below the target by
+more than the metrics' band (:func:`contracts.metrics.reachable_band_mmhg`: the settling band of
+the run's step, 2 % of it noise-free or 5 mmHg noisy; 5 mmHg without a step).
 
 :func:`finish` prints the summary and writes the ``--summary`` and ``--timing`` files atomically
 (:mod:`contracts.files`): a failed run leaves earlier files untouched.
@@ -30,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from contracts.files import write_atomic
-from contracts.metrics import run_metrics
+from contracts.metrics import reachable_band_mmhg, run_metrics
 from runtime.config import RunConfig
 from runtime.trajectory import held_delivered_ml_h
 
@@ -59,10 +60,12 @@ def _step_of(
     return None, None
 
 
-def _reachable(map_mmhg: np.ndarray, target: np.ndarray, cmd: np.ndarray, umax: float) -> bool:
+def _reachable(
+    map_mmhg: np.ndarray, target: np.ndarray, cmd: np.ndarray, umax: float, band_mmhg: float
+) -> bool:
     n_tail = max(1, int(round(0.1 * cmd.size)))
     at_limit = bool(np.all(cmd[-n_tail:] >= umax * (1.0 - 1e-6)))
-    below = np.nanmedian(target[-n_tail:] - map_mmhg[-n_tail:]) > 5.0
+    below = np.nanmedian(target[-n_tail:] - map_mmhg[-n_tail:]) > band_mmhg
     return not (at_limit and below)
 
 
@@ -108,7 +111,7 @@ def build_summary(
             step_time_s=step_t,
             step_mmhg=step_d,
             noisy=noisy,
-            reachable=_reachable(y, r, u, max_rate_ml_h),
+            reachable=_reachable(y, r, u, max_rate_ml_h, reachable_band_mmhg(step_d, noisy)),
             events=events,
         )
     metrics["commands_out_of_range"] = result.commands_out_of_range
@@ -116,6 +119,8 @@ def build_summary(
     extra: dict[str, Any] = {}
     if faults is not None:
         extra["faults"] = faults
+    if result.stop_signal is not None:
+        extra["interrupted"] = True
     return {
         **extra,
         "commands_out_of_range": result.commands_out_of_range,
@@ -232,13 +237,14 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     write_atomic(path, json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
 
 
-def finish(summary: dict[str, Any], result: Any, config: RunConfig) -> int:
+def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = "pressor") -> int:
     """Print the summary, write the ``--summary`` / ``--timing`` files; return the exit code.
 
     Returns
     -------
     int
-        1 if a command left [0, max] (a check failed), else 0.
+        128 + the signal number when a signal stopped the run (one line on stderr,
+        :mod:`runtime.interrupt`); else 1 if a command left [0, max] (a check failed), else 0.
     """
     print_summary(summary, result.timing)
     if result.host:
@@ -258,4 +264,13 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig) -> int:
         print(f"timing: {config.timing}")
     if config.rrd is not None:
         print(f"recording: {config.rrd}\nreplay:    rerun {config.rrd}")
+    if result.stop_signal is not None:
+        from runtime.interrupt import exit_code
+
+        print(
+            f"{prog}: {result.ended} after {summary['ticks']} ticks; safe rate commanded,"
+            " outputs kept",
+            file=sys.stderr,
+        )
+        return exit_code(result.stop_signal)
     return 1 if summary["metrics"].get("commands_out_of_range") else 0

@@ -120,3 +120,5 @@ class LoopResult:
     wall_s: float = 0.0
     #: where the run executed (filled by the CLI: CPU wake-up latency request, CPU pinning)
     host: dict[str, Any] = field(default_factory=dict)
+    #: the signal that stopped the run early (:mod:`runtime.interrupt`), else None
+    stop_signal: int | None = None

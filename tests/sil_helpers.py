@@ -60,9 +60,14 @@ def assert_recording_equals_simulation(rrd: Path, ref) -> np.ndarray:
 
 
 def spawn_device(pair: PtyPair, *args: str) -> subprocess.Popen:
-    """Start ``pressor device`` on the pty's follower end; its stderr is piped as text."""
+    """Start ``pressor device`` on the pty's follower end; its stderr is piped as text.
+
+    Unsigned (``--no-signing``) unless ``args`` give a ``--signing-key``.
+    """
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     cmd = [sys.executable, "-m", "pressor", "device", "--port", pair.follower_path, *args]
+    if "--signing-key" not in args:
+        cmd.append("--no-signing")
     return subprocess.Popen(cmd, cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True)
 
 

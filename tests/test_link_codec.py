@@ -17,6 +17,11 @@ from link.dialect import pressor as mavlink
 from tests.link_doubles import FaultyPort, SinkPort, collect, drain, loop_pair, tick_inputs
 
 
+def _pressor_heartbeat(tx: DeviceSession, tick: int, state: int) -> None:
+    """One PRESSOR_HEARTBEAT frame in one write (``send_heartbeat`` adds the standard one)."""
+    tx.send_fields(mavlink.MAVLINK_MSG_ID_PRESSOR_HEARTBEAT, tick, tx.ROLE, state)
+
+
 @pytest.mark.parametrize("every", [2, 3, 7])
 def test_a_corrupted_byte_every_n_frames_loses_only_that_frame_and_is_counted(every):
     a, b = loop_pair()
@@ -26,11 +31,11 @@ def test_a_corrupted_byte_every_n_frames_loses_only_that_frame_and_is_counted(ev
     got = collect(rx)
     n = 300
     for k in range(n):
-        tx.send_heartbeat(k, STATE_RUNNING)  # one frame per write
+        _pressor_heartbeat(tx, k, STATE_RUNNING)  # one frame per write
         if k % 20 == 19:
             rx.poll(0.0)
     tx.port = a  # a clean last frame, so a gap before it is visible
-    tx.send_heartbeat(n, STATE_FINISHED)
+    _pressor_heartbeat(tx, n, STATE_FINISHED)
     drain(rx)
     rx.wait_for_sample(0.02)  # a timeout abandons any stalled partial frame
     drain(rx)
@@ -49,7 +54,7 @@ def test_dropped_frames_are_counted_as_sequence_gaps_including_wraparound():
     rx = RuntimeSession(b)
     got = collect(rx)
     for k in range(601):  # > 2 wraps of the 8-bit sequence number; frame 600 is not dropped
-        tx.send_heartbeat(k, STATE_RUNNING)
+        _pressor_heartbeat(tx, k, STATE_RUNNING)
         if k % 50 == 0:
             rx.poll(0.0)
     drain(rx)

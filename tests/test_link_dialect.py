@@ -128,3 +128,36 @@ def test_nan_map_sample_survives_the_wire():
     assert math.isnan(sample.map_mmhg) and sample.quality == 3 and sample.tick == 5
     assert [m.id for m in got] == [45003, 45004, 45002], "sample must be the last frame of a tick"
     port.close()
+
+
+def _xml_enum(name: str) -> dict[str, int]:
+    root = ET.parse(generate.XML_PATH).getroot()
+    (enum,) = [e for e in root.iter("enum") if e.get("name") == name]
+    return {e.get("name"): int(e.get("value")) for e in enum.iter("entry")}
+
+
+def test_quality_and_pump_alarm_bits_on_both_ends_are_the_xml_enums():
+    # contracts may not import link: the bits both ends use are held equal to the XML here
+    from contracts.faults import wire_bits
+
+    quality = _xml_enum("PRESSOR_MAP_QUALITY")
+    alarms = _xml_enum("PRESSOR_PUMP_ALARM")
+    ours = {n: v for n, v in vars(wire_bits).items() if n.startswith(("QUALITY_", "PUMP_ALARM_"))}
+    expected = {n.removeprefix("PRESSOR_MAP_"): v for n, v in quality.items()}
+    expected |= {n.removeprefix("PRESSOR_"): v for n, v in alarms.items()}
+    assert ours == expected
+    assert all(v & (v - 1) == 0 for v in expected.values())  # one bit each
+    assert mavlink.PRESSOR_PUMP_ALARM_WATCHDOG == wire_bits.PUMP_ALARM_WATCHDOG
+
+
+def test_quality_and_alarm_fields_name_their_bitmask_enums():
+    root = ET.parse(generate.XML_PATH).getroot()
+    fields = {
+        (m.get("name"), f.get("name")): f for m in root.iter("message") for f in m.iter("field")
+    }
+    for key, enum in (
+        (("MAP_SAMPLE", "quality"), "PRESSOR_MAP_QUALITY"),
+        (("PUMP_STATUS", "alarms"), "PRESSOR_PUMP_ALARM"),
+    ):
+        assert fields[key].get("enum") == enum and fields[key].get("display") == "bitmask"
+        assert "defined by the device model" not in (fields[key].text or "")

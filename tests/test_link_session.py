@@ -24,7 +24,7 @@ from link import (
     register_dialect_with_mavutil,
 )
 from link.dialect import pressor as mavlink
-from tests.link_doubles import FaultyPort, drain, loop_pair, tick_inputs
+from tests.link_doubles import FaultyPort, collect, drain, loop_pair, tick_inputs
 
 
 def test_a_stalled_peer_times_out_and_is_counted():
@@ -202,3 +202,21 @@ def test_a_handshake_with_a_peer_of_the_same_role_fails():
     DeviceSession(b).send_hello(Hello("twin"))  # a second device where the runtime should be
     with pytest.raises(LinkError, match="peer announced role"):
         DeviceSession(a).handshake(Hello("paper-tracking"), timeout_s=1.0)
+
+
+def test_each_heartbeat_is_preceded_by_a_standard_mavlink_heartbeat_for_ground_tools():
+    a, b = loop_pair()
+    dev = DeviceSession(a)
+    rt = RuntimeSession(b)
+    got = collect(rt)
+    dev.send_heartbeat(7, STATE_FINISHED)
+    drain(rt)
+    std, ours = got
+    assert std.get_type() == "HEARTBEAT" and ours.get_type() == "PRESSOR_HEARTBEAT"
+    assert (std.type, std.autopilot, std.mavlink_version) == (
+        mavlink.MAV_TYPE_GENERIC,
+        mavlink.MAV_AUTOPILOT_INVALID,
+        3,
+    )
+    assert std.system_status == mavlink.MAV_STATE_STANDBY and std.custom_mode == STATE_FINISHED
+    assert rt.peer_heartbeat == (7, STATE_FINISHED)

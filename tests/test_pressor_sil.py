@@ -85,6 +85,7 @@ def test_device_command_carries_scenario_seed_duration_rate_faults_cpu_and_key(t
     assert args[-2:] == ["--signing-key", str(key)]
     plain = device_command(sil_config(["--controller", "pi"]), "/dev/pts/9", None, None)
     assert not {"--cpu", "--retransmit", "--signing-key", "--fault"} & set(plain)
+    assert plain[-1] == "--no-signing"  # an unsigned sil run: the device must not sign either
 
 
 def test_relative_scenario_path_reaches_the_device_as_an_absolute_path(tmp_path, monkeypatch):

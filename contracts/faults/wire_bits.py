@@ -1,6 +1,9 @@
 """Bit flags both ends of the link agree on: pump alarms and monitor sample quality.
 
-Defined here, once: the simulator's pump and monitor set them, the runtime's supervisor reads them.
+The wire definition is the dialect's bitmask enums ``PRESSOR_PUMP_ALARM`` and
+``PRESSOR_MAP_QUALITY`` in ``link/pressor.xml`` (docs/PROTOCOL.md); these are the same values
+for the packages that may not import ``link`` (``tests/test_link_dialect.py`` holds them equal).
+The simulator's pump and monitor set them, the runtime's supervisor reads them.
 """
 
 #: pump alarm bit flags carried by PUMP_STATUS (hil_sim.pump uses these values)

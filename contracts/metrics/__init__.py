@@ -87,7 +87,12 @@ from contracts.metrics.names import (
     Event,
 )
 from contracts.metrics.run import run_metrics, stable_flag
-from contracts.metrics.step import step_band_mmhg, step_metrics, step_window_metrics
+from contracts.metrics.step import (
+    reachable_band_mmhg,
+    step_band_mmhg,
+    step_metrics,
+    step_window_metrics,
+)
 
 __all__ = [
     "CLINICAL_BAND_MMHG",
@@ -108,6 +113,7 @@ __all__ = [
     "percentile_summary",
     "run_metrics",
     "stable_flag",
+    "reachable_band_mmhg",
     "step_band_mmhg",
     "step_metrics",
     "step_window_metrics",

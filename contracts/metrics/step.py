@@ -10,6 +10,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from contracts.metrics.names import (
+    CLINICAL_BAND_MMHG,
     NOISE_FREE_BAND_FRACTION,
     NOISY_BAND_MMHG,
     STEP_METRICS,
@@ -21,6 +22,13 @@ from contracts.metrics.signals import TIME_EPS_S, as_arrays, first_crossing, per
 def step_band_mmhg(step_mmhg: float, noisy: bool) -> float:
     """Settling band (mmHg): 2 % of |Δ| for noise-free runs, 5 mmHg for noisy runs."""
     return NOISY_BAND_MMHG if noisy else NOISE_FREE_BAND_FRACTION * abs(step_mmhg)
+
+
+def reachable_band_mmhg(step_mmhg: float | None, noisy: bool) -> float:
+    """The band ``reachable`` is judged against (mmHg): the run's settling band
+    (:func:`step_band_mmhg`), or the clinical band when it has no target step. A patient the pump
+    cannot bring within it of the target is unreachable (docs/METRICS.md)."""
+    return CLINICAL_BAND_MMHG if step_mmhg is None else step_band_mmhg(step_mmhg, noisy)
 
 
 def step_metrics(

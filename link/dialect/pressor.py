@@ -406,6 +406,32 @@ enums["PRESSOR_COMMAND_MODE"][3] = EnumEntry("PRESSOR_COMMAND_MODE_MANUAL", """R
 PRESSOR_COMMAND_MODE_ENUM_END = 4
 enums["PRESSOR_COMMAND_MODE"][4] = EnumEntry("PRESSOR_COMMAND_MODE_ENUM_END", """""")
 
+# PRESSOR_MAP_QUALITY
+enums["PRESSOR_MAP_QUALITY"] = Enum()
+enums["PRESSOR_MAP_QUALITY"].bitmask = True
+PRESSOR_MAP_QUALITY_INVALID = 1
+enums["PRESSOR_MAP_QUALITY"][1] = EnumEntry("PRESSOR_MAP_QUALITY_INVALID", """The monitor has no valid value; map_mmhg is NaN.""")
+PRESSOR_MAP_QUALITY_WAVEFORM = 2
+enums["PRESSOR_MAP_QUALITY"][2] = EnumEntry("PRESSOR_MAP_QUALITY_WAVEFORM", """The monitor's waveform check failed: no pulsatility or an over-damped line (the value may be finite but is not trusted).""")
+PRESSOR_MAP_QUALITY_ENUM_END = 3
+enums["PRESSOR_MAP_QUALITY"][3] = EnumEntry("PRESSOR_MAP_QUALITY_ENUM_END", """""")
+
+# PRESSOR_PUMP_ALARM
+enums["PRESSOR_PUMP_ALARM"] = Enum()
+enums["PRESSOR_PUMP_ALARM"].bitmask = True
+PRESSOR_PUMP_ALARM_OCCLUSION = 1
+enums["PRESSOR_PUMP_ALARM"][1] = EnumEntry("PRESSOR_PUMP_ALARM_OCCLUSION", """Line occluded: the pump's pressure sensor tripped, nothing flows.""")
+PRESSOR_PUMP_ALARM_RESERVOIR_EMPTY = 2
+enums["PRESSOR_PUMP_ALARM"][2] = EnumEntry("PRESSOR_PUMP_ALARM_RESERVOIR_EMPTY", """Syringe empty: nothing flows until it is replaced.""")
+PRESSOR_PUMP_ALARM_WATCHDOG = 4
+enums["PRESSOR_PUMP_ALARM"][4] = EnumEntry("PRESSOR_PUMP_ALARM_WATCHDOG", """No valid command within the pump's watchdog period: the pump runs its own safe rate.""")
+PRESSOR_PUMP_ALARM_INVALID_COMMAND = 8
+enums["PRESSOR_PUMP_ALARM"][8] = EnumEntry("PRESSOR_PUMP_ALARM_INVALID_COMMAND", """The last command was not finite; it was ignored and does not feed the watchdog.""")
+PRESSOR_PUMP_ALARM_OUT_OF_RANGE = 16
+enums["PRESSOR_PUMP_ALARM"][16] = EnumEntry("PRESSOR_PUMP_ALARM_OUT_OF_RANGE", """The last command was outside [0, pump maximum] ml/h and was clamped.""")
+PRESSOR_PUMP_ALARM_ENUM_END = 17
+enums["PRESSOR_PUMP_ALARM"][17] = EnumEntry("PRESSOR_PUMP_ALARM_ENUM_END", """""")
+
 # MAV_AUTOPILOT
 enums["MAV_AUTOPILOT"] = Enum()
 enums["MAV_AUTOPILOT"].bitmask = False
@@ -1018,8 +1044,8 @@ class MAVLink_map_sample_message(MAVLink_message):
     fieldnames = ["sim_time_s", "tick", "map_mmhg", "quality"]
     ordered_fieldnames = ["sim_time_s", "tick", "map_mmhg", "quality"]
     fieldtypes = ["double", "uint32_t", "float", "uint16_t"]
-    fielddisplays_by_name: Dict[str, str] = {}
-    fieldenums_by_name: Dict[str, str] = {}
+    fielddisplays_by_name: Dict[str, str] = {"quality": "bitmask"}
+    fieldenums_by_name: Dict[str, str] = {"quality": "PRESSOR_MAP_QUALITY"}
     fieldunits_by_name: Dict[str, str] = {"sim_time_s": "s", "map_mmhg": "mmHg"}
     native_format = bytearray(b"<dIfH")
     orders = [0, 1, 2, 3]
@@ -1175,7 +1201,12 @@ setattr(MAVLink_infusion_command_message, "name", mavlink_msg_deprecated_name_pr
 
 class MAVLink_pump_status_message(MAVLink_message):
     """
-    Pump state after integrating a sample period.
+    Pump state after applying the command answering tick k for one
+    sample period. It is numbered k+1 (the tick the device has
+    advanced to) and leaves just before tick k+1's frames; the runtime
+    uses it as the pump input of tick k+1 and as the rate delivered
+    over tick k. A status with any other number is ignored
+    (docs/PROTOCOL.md).
     """
 
     id = MAVLINK_MSG_ID_PUMP_STATUS
@@ -1183,8 +1214,8 @@ class MAVLink_pump_status_message(MAVLink_message):
     fieldnames = ["tick", "delivered_ml_h", "volume_ml", "alarms"]
     ordered_fieldnames = ["tick", "delivered_ml_h", "volume_ml", "alarms"]
     fieldtypes = ["uint32_t", "float", "float", "uint16_t"]
-    fielddisplays_by_name: Dict[str, str] = {}
-    fieldenums_by_name: Dict[str, str] = {}
+    fielddisplays_by_name: Dict[str, str] = {"alarms": "bitmask"}
+    fieldenums_by_name: Dict[str, str] = {"alarms": "PRESSOR_PUMP_ALARM"}
     fieldunits_by_name: Dict[str, str] = {"delivered_ml_h": "ml/h", "volume_ml": "ml"}
     native_format = bytearray(b"<IffH")
     orders = [0, 1, 2, 3]
@@ -1734,7 +1765,7 @@ class MAVLink(object):
         sim_time_s                : Device (simulation) time of the sample. [s] (type:double)
         tick                      : Tick number k. (type:uint32_t)
         map_mmhg                  : Measured MAP (may be NaN when the sensor has no value). [mmHg] (type:float)
-        quality                   : Sensor quality bit flags (defined by the device model; 0 = good). (type:uint16_t)
+        quality                   : Monitor quality bits (0 = good). (type:uint16_t, values:PRESSOR_MAP_QUALITY)
 
         """
         return MAVLink_map_sample_message(sim_time_s, tick, map_mmhg, quality)
@@ -1748,7 +1779,7 @@ class MAVLink(object):
         sim_time_s                : Device (simulation) time of the sample. [s] (type:double)
         tick                      : Tick number k. (type:uint32_t)
         map_mmhg                  : Measured MAP (may be NaN when the sensor has no value). [mmHg] (type:float)
-        quality                   : Sensor quality bit flags (defined by the device model; 0 = good). (type:uint16_t)
+        quality                   : Monitor quality bits (0 = good). (type:uint16_t, values:PRESSOR_MAP_QUALITY)
 
         """
         self.send(self.map_sample_encode(sim_time_s, tick, map_mmhg, quality), force_mavlink1=force_mavlink1)
@@ -1829,24 +1860,34 @@ class MAVLink(object):
 
     def pump_status_encode(self, tick: int, delivered_ml_h: float, volume_ml: float, alarms: int) -> MAVLink_pump_status_message:
         """
-        Pump state after integrating a sample period.
+        Pump state after applying the command answering tick k for one sample
+        period. It is numbered k+1 (the tick the device has advanced
+        to) and leaves just before tick k+1's frames; the runtime uses
+        it as the pump input of tick k+1 and as the rate delivered
+        over tick k. A status with any other number is ignored
+        (docs/PROTOCOL.md).
 
-        tick                      : Tick the status belongs to. (type:uint32_t)
+        tick                      : k+1, where k is the tick whose command was applied. (type:uint32_t)
         delivered_ml_h            : Rate the pump is delivering. [ml/h] (type:float)
         volume_ml                 : Total volume delivered since start. [ml] (type:float)
-        alarms                    : Pump alarm bit flags (defined by the device model; 0 = none). (type:uint16_t)
+        alarms                    : Pump alarm bits (0 = none). (type:uint16_t, values:PRESSOR_PUMP_ALARM)
 
         """
         return MAVLink_pump_status_message(tick, delivered_ml_h, volume_ml, alarms)
 
     def pump_status_send(self, tick: int, delivered_ml_h: float, volume_ml: float, alarms: int, force_mavlink1: bool = False) -> None:
         """
-        Pump state after integrating a sample period.
+        Pump state after applying the command answering tick k for one sample
+        period. It is numbered k+1 (the tick the device has advanced
+        to) and leaves just before tick k+1's frames; the runtime uses
+        it as the pump input of tick k+1 and as the rate delivered
+        over tick k. A status with any other number is ignored
+        (docs/PROTOCOL.md).
 
-        tick                      : Tick the status belongs to. (type:uint32_t)
+        tick                      : k+1, where k is the tick whose command was applied. (type:uint32_t)
         delivered_ml_h            : Rate the pump is delivering. [ml/h] (type:float)
         volume_ml                 : Total volume delivered since start. [ml] (type:float)
-        alarms                    : Pump alarm bit flags (defined by the device model; 0 = none). (type:uint16_t)
+        alarms                    : Pump alarm bits (0 = none). (type:uint16_t, values:PRESSOR_PUMP_ALARM)
 
         """
         self.send(self.pump_status_encode(tick, delivered_ml_h, volume_ml, alarms), force_mavlink1=force_mavlink1)

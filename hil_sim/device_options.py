@@ -1,0 +1,85 @@
+"""The options of ``pressor device``: the parser, its defaults and the range checks."""
+
+from __future__ import annotations
+
+import math
+
+from contracts.usage import UsageError, UsageParser
+from runtime.placement import parse_cpu
+
+#: default wall-clock timeouts (s)
+RETRANSMIT_S = 0.5
+LINK_TIMEOUT_S = 10.0
+HANDSHAKE_TIMEOUT_S = 30.0
+
+
+def device_parser(command: str) -> UsageParser:
+    """The option parser of ``pressor device`` (defaults and units in every help)."""
+    p = UsageParser(
+        prog=f"pressor {command}",
+        description="Run the simulated patient/pump/monitor device on a serial port.",
+    )
+    p.add_argument("--port", required=True, help="device path or pyserial URL (e.g. /dev/pts/7)")
+    p.add_argument("--scenario", default="paper-tracking", help="scenario name or .toml path")
+    p.add_argument("--patient-seed", type=int, default=0, help="patient seed, [0, 2**32)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help="simulated time (s; default: the scenario's duration_s)",
+    )
+    p.add_argument("--rate", type=float, default=10.0, help="sample rate (Hz)")
+    p.add_argument(
+        "--realtime", action="store_true", help="run on the wall clock (default: lockstep)"
+    )
+    p.add_argument(
+        "--signing-key",
+        default=None,
+        help="MAVLink 2 signing key file (32 B / hex); default: the one 'pressor keygen' wrote",
+    )
+    p.add_argument(
+        "--no-signing", action="store_true", help="run the link unsigned (warned; default: signed)"
+    )
+    p.add_argument(
+        "--tlog", default=None, help="write every link frame to this .tlog (default: none)"
+    )
+    p.add_argument(
+        "--retransmit",
+        type=float,
+        default=RETRANSMIT_S,
+        help="wall-clock s without a command before resending a tick (s)",
+    )
+    p.add_argument(
+        "--link-timeout",
+        type=float,
+        default=LINK_TIMEOUT_S,
+        help="wall-clock s without a command before giving up (s)",
+    )
+    p.add_argument(
+        "--handshake-timeout",
+        type=float,
+        default=HANDSHAKE_TIMEOUT_S,
+        help="wall-clock s to wait for the runtime's hello (s)",
+    )
+    p.add_argument(
+        "--cpu",
+        type=parse_cpu,
+        default=None,
+        help="run on this CPU only (default: any; pressor sil puts the lockstep ends on two CPUs)",
+    )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KIND[:ARGS]",
+        help="inject a fault (repeatable); 'pressor faults' lists kinds, arguments and defaults",
+    )
+    return p
+
+
+def check_range(name: str, value: float, lo: float, hi: float, unit: str, lo_open: bool) -> None:
+    """Raise :class:`UsageError` naming the option, value and range unless lo (<) <= value <= hi."""
+    ok = (value > lo if lo_open else value >= lo) and value <= hi and math.isfinite(value)
+    if not ok:
+        bracket = "(" if lo_open else "["
+        raise UsageError(f"{name}: value {value} outside {bracket}{lo}, {hi}] {unit}".rstrip())
