@@ -1,21 +1,18 @@
 """The fixed-rate loop: the shell around the controller step (PX4 module style).
 
-Each tick: read the newest MAP sample, target and scheduling parameters from the link, hand them
-with the pump status and the link's health to the closed-loop core (:mod:`runtime.core`: the
-supervisor and the controller, the same core the in-process trial runs), send the command, record.
-The loop itself holds only link I/O, timing and recording; it counts its own timing
-(:class:`~runtime.timing.TimingStats`).
+Each tick: read the newest sample, target and scheduling parameters from the link, hand them with
+the pump status and the link's health to the closed-loop core (:mod:`runtime.core`, the same core
+the in-process trial runs), send the command, record. The loop holds only link I/O, recording and
+its own timing (:class:`~runtime.timing.TimingStats`).
 
 Two ways to keep time (injected clocks, :mod:`runtime.clock`):
 
 Lockstep (default in ``pressor sil``)
-    The device sends tick k's sample and waits for tick k's command (PX4 SITL style); the runtime's
-    :class:`~runtime.clock.VirtualClock` follows the sample's sim time. The order per tick is the
-    in-process simulator's (observe → step → apply → advance), so with a clean link the serial run
-    reproduces it sample for sample. A device that sends nothing for ``stall_timeout_s`` of *wall*
-    time ends the run with :class:`DeviceStalled`: in lockstep sim time stands still while the
-    device is silent, and declaring link loss from wall time would make the trajectory depend on
-    host load.
+    The device sends tick k's sample and waits for tick k's command (PX4 SITL style); the
+    :class:`~runtime.clock.VirtualClock` follows the sample's sim time, in the in-process
+    simulator's order, so a clean serial run reproduces it sample for sample. A device silent for
+    ``stall_timeout_s`` of *wall* time ends the run (:class:`DeviceStalled`) rather than a link
+    loss, which would make the trajectory depend on host load.
 
     Link stalls in virtual time: a stalled link is a device that keeps simulating without
     exchanging frames, so the next sample is tick k > last + 1. The loop runs the silent ticks
@@ -24,10 +21,9 @@ Lockstep (default in ``pressor sil``)
     and LINK_LOSS (FAILSAFE) fall on exactly the ticks a wall-clock runtime would log them.
 
 Real time (``--realtime``)
-    The :class:`~runtime.clock.MonotonicClock` releases a tick at each absolute deadline
-    ``t0 + k·Ts``; the loop drains the link, takes the newest sample and answers it. Sample age and
-    link silence are measured on the wall clock, so the stale-sample and link-loss watchdogs are
-    real. Lateness and skipped periods are counted.
+    Ticks are released at absolute deadlines ``t0 + k·Ts`` (:class:`~runtime.clock.MonotonicClock`);
+    the newest sample is answered, sample age and link silence are wall-clock (real watchdogs), and
+    lateness and skipped periods are counted.
 
 Execution time = wall time from release (sample decoded, or deadline reached) to the command
 written; recording comes after. Real-time ticks run slower than lockstep ones (LPV p50 ~180 µs
