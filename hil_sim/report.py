@@ -8,8 +8,9 @@
   were drawn from: ``t_s`` (n,), ``map_true_mmhg``, ``target_mmhg``, ``rate_ml_h`` (patients × n),
   and ``patient_seed`` (patients,).
 
-Figures: MAP and infusion envelopes over time (median with the p10–p90 band over the reachable
-patients, one colour per controller), the distribution of each headline metric per controller, and a paired
+Figures: envelopes over time of the true MAP's distance from the target (with the ±5 mmHg band) and
+of the delivered infusion (median with the p10–p90 band over the reachable patients, one colour per
+controller), the distribution of each headline metric per controller, and a paired
 scatter of the first controller's IAE against each other controller's (points below the diagonal are
 patients the first controller served better). Matplotlib draws them with its non-interactive Agg
 backend, so no display is needed. Same inputs, same bytes: the PNGs carry no timestamp.
@@ -62,17 +63,17 @@ def _envelope_figure(
         reachable = np.array([r["reachable"] for r in records[name]], dtype=bool)
         if not reachable.any():
             continue
-        for ax, key in ((ax_map, "map_true_mmhg"), (ax_rate, "rate_ml_h")):
-            rows = np.asarray(tr[key])[reachable]
-            p10, p50, p90 = np.nanpercentile(rows, [10, 50, 90], axis=0)
+        # MAP as its distance from the target: patients' baselines differ by tens of mmHg, so
+        # absolute MAP bands show the cohort's spread, not the control
+        error = np.asarray(tr["map_true_mmhg"]) - np.asarray(tr["target_mmhg"])
+        for ax, rows in ((ax_map, error), (ax_rate, np.asarray(tr["rate_ml_h"]))):
+            p10, p50, p90 = np.nanpercentile(rows[reachable], [10, 50, 90], axis=0)
             ax.fill_between(t_min, p10, p90, color=colour, alpha=0.2, linewidth=0)
             ax.plot(t_min, p50, color=colour, label=f"{name} (median, p10–p90)")
-    first = next(iter(trajectories.values()))
-    target = np.nanmedian(np.asarray(first["target_mmhg"]), axis=0)
-    ax_map.plot(
-        np.asarray(first["t_s"]) / 60.0, target, "k--", linewidth=1, label="target (median)"
-    )
-    ax_map.set_ylabel("true MAP (mmHg)")
+    ax_map.axhline(0.0, color="k", linestyle="--", linewidth=1)
+    for band in (-5.0, 5.0):
+        ax_map.axhline(band, color="k", linestyle=":", linewidth=0.8)
+    ax_map.set_ylabel("true MAP − target (mmHg)")
     ax_rate.set_ylabel("infusion delivered (ml/h)")
     ax_rate.set_xlabel("time (min)")
     ax_map.legend(loc="lower right", fontsize=8)
