@@ -148,7 +148,7 @@ def _trial(argv: Sequence[str]) -> int:
         p.error(f"field '--rate' = {args.rate} outside [0.1, 1000] Hz")
 
     from contracts.files import write_atomic
-    from hil_sim.backend import BackendError
+    from contracts.parallel import BackendError
     from hil_sim.paired import compare_controllers, format_comparison
     from hil_sim.report import write_report
     from hil_sim.scenario import ScenarioError, load_scenario

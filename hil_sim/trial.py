@@ -42,7 +42,7 @@ from contracts.metrics import (
     event_labels,
     run_metrics,
 )
-from hil_sim.backend import run_ordered
+from contracts.parallel import run_ordered
 from hil_sim.closed_loop import Trajectory, simulate
 from hil_sim.cohort import cohort_seeds
 from hil_sim.patient import COEFFICIENT_UNITS
@@ -191,7 +191,7 @@ def run_trial(
         Called with (done, total) after each patient.
     scheduler
         Address of a Dask scheduler (``tcp://HOST:PORT``) to run the patients on instead of local
-        processes (:mod:`hil_sim.backend`); does not change the results.
+        processes (:mod:`contracts.parallel`); does not change the results.
     schedule
         The scheduling source (``oracle``, ``estimated``, ``nominal``; :func:`run_patient`).
     """

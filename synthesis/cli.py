@@ -40,6 +40,19 @@ def _parser() -> UsageParser:
         "--lambda-search", action="store_true", help="line search over (lambda2, lambda3)"
     )
     p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="local worker processes for --lambda-search, 1..64 (each solve ~0.4 GB)",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the --lambda-search solves on a Dask cluster, e.g. tcp://127.0.0.1:8786 "
+        "(default: local, see --jobs); same result",
+    )
+    p.add_argument(
         "--lambda2", type=float, help="fixed lambda2, dimensionless (default: the config's)"
     )
     p.add_argument(
@@ -91,6 +104,8 @@ def _synth(argv: Sequence[str]) -> int:
 
     single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
     args = _parser().parse_args(argv)
+    if not 1 <= args.jobs <= 64:
+        raise UsageError(f"field '--jobs' = {args.jobs} outside [1, 64]")
 
     from dataclasses import replace
 
@@ -132,9 +147,13 @@ def _synth(argv: Sequence[str]) -> int:
     say(f"config {cfg.source}; grid {cfg.grid_points}; box {cfg.model.box.tolist()}")
     extra: dict = {}
     if args.lambda_search:
+        from contracts.parallel import BackendError
         from synthesis.line_search import search
 
-        best, pts = search(cfg, progress=say)
+        try:
+            best, pts = search(cfg, progress=say, jobs=args.jobs, scheduler=args.scheduler)
+        except BackendError as exc:
+            raise UsageError(str(exc)) from None
         extra["line_search"] = [
             {"lambda2": p.lambda2, "lambda3": p.lambda3, "status": p.status, "gamma": p.gamma}
             for p in pts

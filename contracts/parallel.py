@@ -1,13 +1,14 @@
-"""Where a cohort's patients run: this process, a local process pool, or a Dask cluster.
+"""Where independent work runs: this process, a local process pool, or a Dask cluster.
 
-Patients are independent and each record is a pure function of (scenario, controller, patient
-seed), so the backend changes only the wall time: every backend returns the records in task order
-and the trial's files are byte-identical whatever the backend and the worker count.
+A cohort's patients and a design sweep's solves are independent, each result a pure function of
+its task, so the backend changes only the wall time: every backend returns the results in task
+order, and a trial's files (or a sweep's choice) are the same whatever the backend and the worker
+count. ``distributed`` is imported only when a scheduler address is given.
 
 A Dask cluster is any running ``dask scheduler`` with ``dask worker`` processes that can import this
-package (the same pressor version, installed on every worker). A worker lost mid-trial costs only
-the patients it held: the scheduler hands them to another worker (Dask's own retry of lost tasks),
-and a patient whose run raised is retried ``DASK_RETRIES`` times before the trial fails.
+package (the same pressor version, installed on every worker). A worker lost mid-run costs only the
+tasks it held: the scheduler hands them to another worker (Dask's own retry of lost tasks), and a
+task that raised is retried ``DASK_RETRIES`` times before the run fails.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ Progress = Callable[[int, int], None]
 
 #: seconds to wait for a Dask scheduler to answer before giving up
 DASK_CONNECT_TIMEOUT_S = 10.0
-#: times a patient whose run raised on a worker is resubmitted
+#: times a task that raised on a worker is resubmitted
 DASK_RETRIES = 2
 
 
