@@ -38,7 +38,6 @@ from contracts.faults.spec import (
     parse_fault,
     parse_fault_table,
     parse_faults,
-    scenario_file_faults,
 )
 from contracts.faults.wire_bits import (
     PUMP_ALARM_INVALID_COMMAND,
@@ -72,5 +71,4 @@ __all__ = [
     "parse_fault",
     "parse_fault_table",
     "parse_faults",
-    "scenario_file_faults",
 ]

@@ -7,9 +7,7 @@ Syntax: the package docstring (:mod:`contracts.faults`). Every bad value raises
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from contracts.faults.catalogue import CATALOGUE, COMMON_PARAMS, FAULT_KINDS, FaultKind, Param
@@ -140,15 +138,3 @@ def parse_fault_table(table: Any, file: str, i: int, index: int = 0) -> FaultSpe
     if not isinstance(kind, str):
         raise FaultSpecError(f"{src}: field 'kind' = {kind!r} must be one of {list(FAULT_KINDS)}")
     return make_spec(kind, values, src, index)
-
-
-def scenario_file_faults(path: str | Path, first_index: int = 0) -> list[FaultSpec]:
-    """The ``[[faults]]`` of a scenario TOML file (empty if none or unreadable)."""
-    try:
-        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError):
-        return []
-    raw = data.get("faults", [])
-    if not isinstance(raw, list):
-        return []
-    return [parse_fault_table(t, str(path), i, first_index + i) for i, t in enumerate(raw)]
