@@ -145,6 +145,22 @@ def compare_controllers(
     }
 
 
+#: the statistics of one metric, in the order every table shows them
+STAT_KEYS = ("n", "win_rate_pct", "median_ratio", "median_difference", "wilcoxon_p")
+
+
+def stat_cells(stats: Mapping[str, Any]) -> list[str]:
+    """One metric's statistics as table cells, in :data:`STAT_KEYS` order (3 digits, "—" for null)."""
+    return [
+        "—"
+        if stats[k] is None
+        else f"{stats[k]:.3g}"
+        if isinstance(stats[k], float)
+        else str(stats[k])
+        for k in STAT_KEYS
+    ]
+
+
 def format_comparison(comparison: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
     """A terminal table of :func:`compare_controllers`: one block per pair, one row per metric."""
     lines = []
@@ -152,11 +168,6 @@ def format_comparison(comparison: Mapping[str, Mapping[str, Mapping[str, Any]]])
         lines.append(f"paired: {pair} (reachable patients; win = first better)")
         lines.append(f"  {'metric':<34} {'n':>4} {'win %':>6} {'ratio':>7} {'diff':>9} {'p':>8}")
         for metric, st in metrics.items():
-            cells = [
-                "—" if st[k] is None else f"{st[k]:.3g}"
-                for k in ("win_rate_pct", "median_ratio", "median_difference", "wilcoxon_p")
-            ]
-            lines.append(
-                f"  {metric:<34} {st['n']:>4} {cells[0]:>6} {cells[1]:>7} {cells[2]:>9} {cells[3]:>8}"
-            )
+            n, win, ratio, diff, p = stat_cells(st)
+            lines.append(f"  {metric:<34} {n:>4} {win:>6} {ratio:>7} {diff:>9} {p:>8}")
     return "\n".join(lines)

@@ -29,6 +29,7 @@ import matplotlib
 import numpy as np
 
 from contracts.files import write_atomic
+from hil_sim.paired import stat_cells
 from hil_sim.trial import controller_dir_name
 
 matplotlib.use("Agg")
@@ -119,22 +120,11 @@ def _paired_figure(records: Mapping[str, Sequence[Mapping[str, Any]]]) -> str:
     return _png(fig)
 
 
-def _fmt(v: Any) -> str:
-    if v is None:
-        return "—"
-    if isinstance(v, float):
-        return f"{v:.3g}"
-    return str(v)
-
-
 def _comparison_table(comparison: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
     rows = []
     for pair, metrics in comparison.items():
         for metric, s in metrics.items():
-            cells = [pair, metric] + [
-                _fmt(s[k])
-                for k in ("n", "win_rate_pct", "median_ratio", "median_difference", "wilcoxon_p")
-            ]
+            cells = [pair, metric, *stat_cells(s)]
             rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
     head = "".join(
         f"<th>{h}</th>"
