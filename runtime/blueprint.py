@@ -14,6 +14,7 @@ without that series; referencing them is harmless.
 from __future__ import annotations
 
 import rerun.blueprint as rrb
+import rerun.encodings as rre
 
 #: the timeline the viewer opens on (s of simulated time, logged as a duration)
 TIMELINE = "sim_time"
@@ -67,6 +68,14 @@ _WHOLE_RUN = rrb.VisibleTimeRange(
     TIMELINE, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
 )
 
+# the data range alone is not enough: without a view range of its own the viewer's x axis follows
+# the time cursor (about 100 s around the newest tick when a recording streams in)
+_WHOLE_RUN_AXIS = rrb.archetypes.TimeAxis(
+    view_range=rre.TimeRange(
+        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    )
+)
+
 
 def _plot(name: str, contents: list[str]) -> rrb.TimeSeriesView:
     """A time-series view of ``contents`` over the whole run, legend top right."""
@@ -75,6 +84,7 @@ def _plot(name: str, contents: list[str]) -> rrb.TimeSeriesView:
         origin="/",
         contents=contents,
         time_ranges=_WHOLE_RUN,
+        axis_x=_WHOLE_RUN_AXIS,
         plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=True),
     )
 

@@ -58,7 +58,7 @@ def blueprint_rows(path: Path) -> dict[str, dict[str, Any]]:
 
 
 def views(rows: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """View name -> {"kind", "contents", "ranges", "legend_corner"}."""
+    """View name -> {"kind", "contents", "ranges", "axis_range", "legend_corner"}."""
     out = {}
     for path, row in rows.items():
         if "ViewBlueprint:display_name" not in row:
@@ -66,10 +66,12 @@ def views(rows: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
         parts = {p.rsplit("/", 1)[1]: r for p, r in rows.items() if p.startswith(path + "/")}
         ranges = parts.get("VisibleTimeRanges", {}).get("VisibleTimeRanges:ranges")
         legend = parts.get("PlotLegend", {}).get("PlotLegend:corner")
+        axis_range = parts.get("TimeAxis", {}).get("TimeAxis:view_range")
         out[row["ViewBlueprint:display_name"].as_py()[0]] = {
             "kind": row["ViewBlueprint:class_identifier"].as_py()[0],
             "contents": parts["ViewContents"]["ViewContents:query"].as_py(),
             "ranges": ranges,
+            "axis_range": axis_range,
             "legend_corner": None if legend is None else legend.as_py()[0],
         }
     return out
@@ -94,6 +96,10 @@ def test_every_plot_shows_the_whole_run_with_its_legend_in_a_corner(run):
         assert ranges.field("timeline").to_pylist() == [TIMELINE], name
         assert boundary_kinds(ranges.field("range").field("start")) == ["Infinite"], name
         assert boundary_kinds(ranges.field("range").field("end")) == ["Infinite"], name
+        # the x axis too: with only the data range set, the viewer's axis follows the time cursor
+        axis = view["axis_range"].values
+        assert boundary_kinds(axis.field("start")) == ["Infinite"], name
+        assert boundary_kinds(axis.field("end")) == ["Infinite"], name
         assert view["legend_corner"] == 2, name  # Corner2D.RightTop: not over the traces' start
 
 
