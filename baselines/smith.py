@@ -157,6 +157,13 @@ class SmithController:
         """Flags of the last step and counts since reset."""
         return self._status
 
+    def scheduled_rho(self) -> tuple[float, float, float]:
+        """K (mmHg/(ml/h)), T (s) and τ (s) the last step used, after the clamp and the rate
+        limit; NaN before the first step."""
+        if self._schedule is None:
+            return (math.nan, math.nan, math.nan)
+        return self._schedule
+
     def _sanitise(self, K: float, T: float, tau: float) -> tuple[float, float, float, bool, bool]:
         """Hold non-finite values, clamp to the range, rate-limit against the previous tick."""
         # written out per parameter: this runs every tick

@@ -4,6 +4,11 @@ Both the generated LPV modules (``codegen``) and the PI baseline (:mod:`baseline
 satisfy :class:`Controller`; the loop, the in-process simulator (``hil_sim``) and user code call
 nothing else. A step is a pure function of the controller's own state and its arguments: no clock,
 no I/O, no allocation that grows.
+
+Optional, read by the recorder only: ``scheduled_rho() -> (K, T, tau)``, the scheduling values the
+last step used after the controller's own clamp and rate limit (mmHg/(ml/h), s, s; NaN before the
+first step). The Smith predictor has it; a generated LPV module exposes the same values as the last
+three entries of its ``state()``.
 """
 
 from __future__ import annotations

@@ -142,13 +142,18 @@ class Recorder:
         self._closed = False
 
     def use_controller(self, controller: Controller) -> None:
-        """Record what ``controller`` declares: its design box (``/schedule/box/*``) and, for a
-        generated LPV module, the K, T, τ it scheduled on after its own clamp and rate limit
-        (``/controller/rho/*``, the last three values of its ``state()``). Call before the first
-        tick; other controllers leave those channels NaN."""
+        """Record what ``controller`` declares: its design box (``/schedule/box/*``) and the K, T, τ
+        it scheduled on after its own clamp and rate limit (``/controller/rho/*``: its
+        ``scheduled_rho()``, or for a generated LPV module the last three values of its
+        ``state()``). Call before the first tick; other controllers leave those channels NaN."""
         self._box = sched_limits_of(controller)[0]
-        state = getattr(controller, "state", None)
-        self._rho_of = state if self._box is not None and callable(state) else None
+        scheduled_rho, state = (getattr(controller, n, None) for n in ("scheduled_rho", "state"))
+        if callable(scheduled_rho):
+            self._rho_of = scheduled_rho
+        elif self._box is not None and callable(state):
+            self._rho_of = lambda: state()[-3:]
+        else:
+            self._rho_of = None
         if self._box is not None:
             for lo_entity, hi_entity in BOX_ENTITIES:
                 for entity, side in ((lo_entity, "low"), (hi_entity, "high")):
@@ -220,7 +225,7 @@ class Recorder:
         row[ix["/schedule/T_s"]] = inp.T_s
         row[ix["/schedule/tau_s"]] = inp.tau_s
         stepped = self._rho_of is not None and rec.controller_ml_h == rec.controller_ml_h
-        used = self._rho_of()[-3:] if stepped else _NO_RHO  # NaN: controller not stepped
+        used = self._rho_of() if stepped else _NO_RHO  # NaN: controller not stepped
         row[ix["/controller/rho/K"]] = used[0]
         row[ix["/controller/rho/T_s"]] = used[1]
         row[ix["/controller/rho/tau_s"]] = used[2]

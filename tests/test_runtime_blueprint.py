@@ -174,3 +174,23 @@ def test_disturbance_and_fault_starts_are_marked_on_the_map_plot(run):
             if "TextLog:text" in batch.schema.names:
                 texts += [v[0] for v in batch.column("TextLog:text").to_pylist()]
     assert texts == ["fault: pump-occlusion at 30 s", "disturbance: hemorrhage at 60 s"]
+
+
+def test_smith_predictor_records_the_schedule_it_used_without_a_design_box(tmp_path):
+    proc = pressor(
+        "sil", "--controller", "smith", "--duration", "60", "--rrd", "s.rrd", cwd=tmp_path
+    )
+    assert proc.returncode == 0, proc.stderr
+    cols = rrd_columns(tmp_path / "s.rrd")
+    for used_entity, device_entity in (
+        ("/controller/rho/K", "/schedule/K"),
+        ("/controller/rho/T_s", "/schedule/T_s"),
+        ("/controller/rho/tau_s", "/schedule/tau_s"),
+    ):
+        used, device = cols[used_entity], cols[device_entity]
+        stepped = [t for t, v in used.items() if not math.isnan(v)]
+        assert len(stepped) > 0.9 * len(used)
+        # the device's values lie inside the Smith clamp ranges and move slower than its rate
+        # limits, so what it used is what the device sent
+        assert all(used[t] == pytest.approx(device[t], rel=1e-6) for t in stepped)
+    assert BOX_ENTITIES[0][0] not in cols  # no design box for a predictor without one
