@@ -143,6 +143,7 @@ class DeviceConfig:
     monitor_period_s: float | None = None  # None: a new value every tick
     seed: int = 7
     key: bytes | None = None
+    wall_clock_signing: bool = True  # False: stamps from 0, pymavlink's default (to be refused)
     name: str = "protodev"
     retransmit_s: float = 0.5
     link_timeout_s: float = 10.0
@@ -214,7 +215,7 @@ class ProtocolDevice:
         if cfg.key is not None:
             self.mav.signing.secret_key = cfg.key
             self.mav.signing.link_id = 0
-            self.mav.signing.timestamp = wall_signing_stamp()
+            self.mav.signing.timestamp = wall_signing_stamp() if cfg.wall_clock_signing else 0
             self.mav.signing.sign_outgoing = True
         self.patient = Patient(*cfg.patient[:3], cfg.patient[3], cfg.sample_period_s)
         self.pump = Pump(dialect, cfg.pump_max_ml_h)

@@ -179,16 +179,21 @@ def test_realtime_signed_loop_keeps_up_in_auto_with_commands_in_range(
 
 
 @pytest.mark.parametrize(
-    ("device_key", "cause"),
-    [("other", "signs with another key"), (None, "unsigned")],
-    ids=["wrong-key", "unsigned"],
+    ("device_key", "wall_clock", "cause"),
+    [
+        ("other", True, "signs with another key"),
+        (None, True, "unsigned"),
+        ("same", False, "more than a minute old"),
+    ],
+    ids=["wrong-key", "unsigned", "stamps-from-zero"],
 )
 def test_signing_mismatch_is_refused_with_one_line_within_2_s(
-    dialect: ModuleType, tmp_path: Path, device_key: str | None, cause: str
+    dialect: ModuleType, tmp_path: Path, device_key: str | None, wall_clock: bool, cause: str
 ) -> None:
     key = write_key(tmp_path / "signing.key")
-    other = read_key(write_key(tmp_path / "other.key")) if device_key else None
-    run = drive(dialect, tmp_path, DeviceConfig(n_ticks=100, key=other), key)
+    device_keys = {"other": read_key(write_key(tmp_path / "other.key")), "same": read_key(key)}
+    cfg = DeviceConfig(n_ticks=100, key=device_keys.get(device_key), wall_clock_signing=wall_clock)
+    run = drive(dialect, tmp_path, cfg, key)
     assert run.rc == 1
     assert run.after_port_open_s < 2.0
     assert run.log.runtime_hello is None and not run.log.commands
