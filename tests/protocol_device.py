@@ -217,7 +217,7 @@ class ProtocolDevice:
             self.mav.signing.link_id = 0
             self.mav.signing.timestamp = wall_signing_stamp() if cfg.wall_clock_signing else 0
             self.mav.signing.sign_outgoing = True
-        self.patient = Patient(*cfg.patient[:3], cfg.patient[3], cfg.sample_period_s)
+        self.patient = Patient(*cfg.patient, cfg.sample_period_s)
         self.pump = Pump(dialect, cfg.pump_max_ml_h)
         every = round((cfg.monitor_period_s or cfg.sample_period_s) / cfg.sample_period_s)
         self.monitor = Monitor(cfg.noise_mmhg, cfg.quantum_mmhg, every, cfg.seed)
@@ -266,6 +266,11 @@ class ProtocolDevice:
             if m.state == self.d.PRESSOR_STATE_FAULT:
                 raise LinkDown("runtime heartbeat FAULT")
 
+    def _pump_status(self, tick: int) -> None:
+        """PUMP_STATUS numbered ``tick`` = k+1 after applying tick k's command for one period."""
+        p = self.pump
+        self.mav.send(self.mav.pump_status_encode(tick, p.rate_ml_h, p.volume_ml, p.alarms))
+
     def _heartbeat(self, tick: int, state: int) -> None:
         status = {
             self.d.PRESSOR_STATE_RUNNING: self.d.MAV_STATE_ACTIVE,
@@ -300,8 +305,7 @@ class ProtocolDevice:
         """Queue tick ``tick``: [pump status], [heartbeats], scheduling, target, sample last."""
         cfg = self.cfg
         if tick > 0:
-            p = self.pump
-            self.mav.send(self.mav.pump_status_encode(tick, p.rate_ml_h, p.volume_ml, p.alarms))
+            self._pump_status(tick)
         if tick % self.heartbeat_every == 0:
             self._heartbeat(tick, self.d.PRESSOR_STATE_RUNNING)
         if not with_sample:
@@ -332,30 +336,21 @@ class ProtocolDevice:
 
     def _advance(self, command: tuple[int, float, int] | None) -> None:
         """Apply a command (tick, ml/h, mode; None: none came) and integrate one sample period."""
-        if command is None:
-            self.pump.apply(None)
-        else:
-            _, rate_ml_h, mode = command
-            self.pump.apply(0.0 if mode == self.d.PRESSOR_COMMAND_MODE_STOP else rate_ml_h)
+        stop = command is not None and command[2] == self.d.PRESSOR_COMMAND_MODE_STOP
+        self.pump.apply(0.0 if stop else None if command is None else command[1])
         self.pump.run(self.cfg.sample_period_s)
         self.patient.step(self.pump.rate_ml_h)
 
     def _finish(self, n: int) -> None:
         """After the last tick: the final pump status and FINISHED, then linger for the runtime's."""
-        p = self.pump
-        self.mav.send(self.mav.pump_status_encode(n, p.rate_ml_h, p.volume_ml, p.alarms))
+        self._pump_status(n)
         self._heartbeat(n, self.d.PRESSOR_STATE_FINISHED)
         self._flush()
         until = time.monotonic() + 2.0
-        while (
-            time.monotonic() < until
-            and self.d.PRESSOR_STATE_FINISHED not in self.log.runtime_states
-        ):
-            try:
-                for m in self._receive(0.1):
-                    self._handle(m)
-            except LinkDown:
-                break
+        finished = self.d.PRESSOR_STATE_FINISHED
+        while time.monotonic() < until and finished not in self.log.runtime_states:
+            for m in self._receive(0.1):
+                self._handle(m)
 
     def _lockstep(self) -> None:
         cfg = self.cfg

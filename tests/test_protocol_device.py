@@ -158,7 +158,7 @@ def test_lockstep_signed_lpv_estimated_without_scheduling_params_brings_map_to_t
 ) -> None:
     key = write_key(tmp_path / "signing.key")
     cfg = DeviceConfig(
-        n_ticks=4000, target_mmhg=TARGET_MMHG, send_scheduling=False, key=read_key(key)
+        n_ticks=3000, target_mmhg=TARGET_MMHG, send_scheduling=False, key=read_key(key)
     )
     run = drive(dialect, tmp_path, cfg, key, "--schedule", "estimated")
     assert_lockstep_reaches_target(run, cfg.n_ticks)
@@ -168,7 +168,7 @@ def test_realtime_signed_loop_keeps_up_in_auto_with_commands_in_range(
     dialect: ModuleType, tmp_path: Path
 ) -> None:
     key = write_key(tmp_path / "signing.key")
-    cfg = DeviceConfig(realtime=True, n_ticks=120, send_scheduling=False, key=read_key(key))
+    cfg = DeviceConfig(realtime=True, n_ticks=100, send_scheduling=False, key=read_key(key))
     run = drive(dialect, tmp_path, cfg, key, "--realtime")
     assert run.rc == 0, run.stderr
     assert run.log.outcome == "finished"
