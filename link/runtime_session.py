@@ -2,8 +2,9 @@
 
 A lockstep tick is assembled whatever order its frames arrive in: the MAP sample waits until the
 rest of its tick is there - SCHEDULING_PARAMS if ``require_sched``, MAP_TARGET if
-``require_target``, and PUMP_STATUS once the device has sent one - and the tick goes to the loop
-as soon as it is complete (docs/PROTOCOL.md, "Required and optional").
+``require_target``, and PUMP_STATUS once the device has sent one numbered as docs/PROTOCOL.md
+says - and the tick goes to the loop as soon as it is complete (docs/PROTOCOL.md, "Required and
+optional").
 :meth:`RuntimeSession.wait_for_sample` returns it as a :class:`~link.messages.TickInputs`;
 :meth:`RuntimeSession.send_command` answers it. A tick whose frames were lost stays unanswered
 until the device resends it (its pump status is not resent: the tick then goes without it).
@@ -100,7 +101,9 @@ class RuntimeSession(Session):
         #: when a read ended with it pending (counted if the device resends it)
         self._pending: tuple[float, int, float, int] | None = None
         self._waited: tuple[int, tuple[str, ...]] | None = None
-        self._status_seen = False  # the device sends PUMP_STATUS: lockstep waits for it
+        #: the device sends PUMP_STATUS numbered k+1 after the command for k: lockstep ticks wait
+        #: for theirs (a device numbering it otherwise is not waited for)
+        self._status_seen = False
         self._last_sample_tick = -1
         self._last_command: tuple[int, float, int] | None = None
         self._handlers.update(
@@ -185,15 +188,18 @@ class RuntimeSession(Session):
             self._try_complete(resent=False)
 
     def _on_pump_status(self, fields: tuple) -> None:
-        self.pump_status = PumpStatus(*fields)
-        self._status_seen = True
-        if self._pending is not None:
+        status = self.pump_status = PumpStatus(*fields)
+        pending = self._pending
+        if status.tick == (self._last_sample_tick + 1 if pending is None else pending[1]):
+            self._status_seen = True  # numbered as the protocol says: lockstep waits for it
+        if pending is not None:
             self._try_complete(resent=False)
 
     # ----------------------------------------------------------- tick assembly
     def _missing(self, tick: int) -> tuple[str, ...]:
         """What lockstep tick ``tick`` still lacks: ``sched`` (only if ``require_sched``),
-        ``target`` (only if ``require_target``), ``status`` (once the device sent any)."""
+        ``target`` (only if ``require_target``), ``status`` (once the device sent one numbered as
+        the protocol says)."""
         sched, target, status = self._sched, self._target, self.pump_status
         missing = []
         if self.require_sched and (sched is None or sched[0] != tick):

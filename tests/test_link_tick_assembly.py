@@ -57,12 +57,14 @@ def _send(dev: DeviceSession, x: TickInputs, status: PumpStatus | None, order: t
 
 
 def _lockstep_device(
-    pair: PtyPair, n: int, order: tuple, lose: set, out: dict, retransmit_s: float = 0.2
+    pair: PtyPair, n: int, order: tuple, lose: set, out: dict, status_ahead: int = 1
 ) -> None:
-    """A device that sends each tick's frames in ``order`` and the pump status of the tick it
-    advanced to; ``lose`` = {(tick, frame name)} left out of the tick's first transmission.
+    """A device that sends each tick's frames in ``order`` and the pump status after each
+    command, numbered ``status_ahead`` ticks after the one answered (the protocol says 1);
+    ``lose`` = {(tick, frame name)} left out of the tick's first transmission.
     It resends a tick once (without the pump status, like ``pressor device``) if no command came
-    within ``retransmit_s`` (s), else gives up."""
+    within 0.2 s, else gives up."""
+    retransmit_s = 0.2
     dev = DeviceSession(pair.follower_port())
     out["retransmits"] = 0
     try:
@@ -80,19 +82,23 @@ def _lockstep_device(
                 if cmd is None:
                     out["gave_up_at"] = k
                     return
-            status = PumpStatus(k + 1, cmd.rate_ml_h, 0.1 * k, 0)
+            status = PumpStatus(k + status_ahead, cmd.rate_ml_h, 0.1 * k, 0)
         dev.send_heartbeat(n, STATE_FINISHED)
     finally:
         dev.close()
 
 
-def _run(order: tuple, lose: frozenset = frozenset(), n: int = 50, **session: Any):
+def _run(
+    order: tuple, lose: frozenset = frozenset(), n: int = 50, status_ahead: int = 1, **session: Any
+):
     """Drive the device above from a runtime session; returns the ticks, the pump status at hand
     at each tick, the wall time of the ticks (s), the runtime session and the device's account."""
     pair = PtyPair.open()
     rt = RuntimeSession(pair.leader_port(), **session)
     out: dict = {}
-    t = threading.Thread(target=_lockstep_device, args=(pair, n, order, set(lose), out))
+    t = threading.Thread(
+        target=_lockstep_device, args=(pair, n, order, set(lose), out, status_ahead)
+    )
     t.start()
     try:
         rt.handshake(Hello("pi"), timeout_s=5.0)
@@ -125,10 +131,11 @@ def test_a_device_sending_sample_then_target_then_sched_runs_50_ticks_without_a_
     ticks, statuses, wall_s, rt, out = _run(order)
     assert "gave_up_at" not in out and out["retransmits"] == 0
     _assert_ticks_as_sent(ticks, 50)
-    # the pump status sent after the sample still belongs to its tick: the pump checks run
+    # the pump status sent after the sample still belongs to its tick: the pump checks run (from
+    # tick 2: the runtime waits for a status once the device has sent the first one)
     assert statuses[0] is None
-    assert [s.tick for s in statuses[1:]] == list(range(1, 50))
-    assert [s.delivered_ml_h for s in statuses[1:]] == [1.0 + k for k in range(49)]
+    assert [s.tick for s in statuses[2:]] == list(range(2, 50))
+    assert [s.delivered_ml_h for s in statuses[2:]] == [1.0 + k for k in range(1, 49)]
     assert wall_s < 2.0  # each resend would cost 0.2 s
     c = rt.counters
     assert c.duplicates == c.old_ticks == c.incomplete() == c.timeouts == 0
@@ -159,6 +166,14 @@ def test_a_tick_missing_a_lost_frame_completes_after_the_device_resends_it_count
         assert held == [j if j != k else k - 1 for j in range(1, n)]
     else:
         assert held == list(range(1, n))
+
+
+def test_a_pump_status_numbered_k_instead_of_k_plus_1_is_not_waited_for():
+    ticks, statuses, wall_s, rt, out = _run(("sample", "target", "sched", "status"), status_ahead=0)
+    assert out["retransmits"] == 0 and wall_s < 2.0
+    _assert_ticks_as_sent(ticks, 50)
+    assert all(s is None or s.tick < x.tick for s, x in zip(statuses, ticks, strict=True))
+    assert rt.counters.incomplete() == 0
 
 
 def test_without_required_sched_and_target_the_sample_alone_completes_a_tick():
