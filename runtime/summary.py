@@ -10,7 +10,8 @@ cause of :data:`link.counters.DROP_CAUSES`, documented in docs/PROTOCOL.md) and,
 faults were scheduled, the scored fault list (:func:`contracts.faults.fault_report`: ``kind``,
 ``start_tick``, ``detected_tick``, ``latency_ticks`` and its documented bound, ``safe_state_s``,
 ``max_reentry_step_ml_h``). It holds only values that are functions of the seed (no wall-clock
-timing), so two runs give identical files; loop timing (p50/p99/max) is printed, written with
+timing), so two runs give identical files - except the link counts of a run that lost frames
+(the device resends on the wall clock); loop timing (p50/p99/max) is printed, written with
 ``--timing`` and recorded under ``/loop``.
 
 ``reachable`` is inferred from the run, since the runtime does not know the patient: false when
