@@ -17,8 +17,9 @@ Modules
     :class:`~link.codec.FrameCodec` - framing with resynchronisation, CRC, sequence and signature
     checks, the fast pack/decode path.
 ``counters``, ``signing``
-    :class:`LinkCounters`, :class:`LinkError`, :class:`LinkClosedError`,
-    :class:`SigningMismatch`; :class:`Signing`, :func:`~link.signing.default_key_path`.
+    :class:`LinkCounters` (``DROP_CAUSES``: the ones counting what is dropped, by cause),
+    :class:`LinkError`, :class:`LinkClosedError`, :class:`SigningMismatch`; :class:`Signing`,
+    :func:`~link.signing.default_key_path`.
 ``session``, ``runtime_session``, ``device_session``
     :class:`Session` (what both ends share: hellos, handshake, heartbeats, reading, dispatch),
     :class:`RuntimeSession` (assembles ticks, sends commands), :class:`DeviceSession` (sends ticks
@@ -56,8 +57,10 @@ values are stale). ``ep.peer_heartbeat`` is a :class:`Heartbeat` ``(tick, state)
 ``STATE_FINISHED`` when the device reached the end of its run (it then closes the link: waits raise
 :class:`LinkClosedError`). After the last tick keep reading (``poll``) until that FINISHED
 heartbeat: a lost final command is retransmitted-for by the device and answered by the session
-itself. In lockstep a sample whose scheduling/target frames were lost is withheld
-(``counters.incomplete_ticks``) until the device resends the tick. Real-time loops use
+itself. In lockstep a tick is handed over once complete, its frames in any order (the sample waits
+for the tick's required scheduling/target frames and its pump status); one whose frames were lost
+is withheld until the device resends it (``counters.incomplete_sched`` / ``_target`` /
+``_status``; everything dropped is counted by cause, ``DROP_CAUSES``). Real-time loops use
 ``ep.poll(0)`` then ``ep.newest_sample()`` (non-blocking; ``next_sample()`` takes the oldest). Call
 ``PtyPair.close_follower()`` once the device process has opened the follower, or the leader never
 sees the device exit. ``ep.clock`` is the run clock (by default it follows the samples' sim time;
@@ -72,7 +75,13 @@ Ts, noise, n_ticks), ...)``, ``ep.send_tick(world.observe())`` (a :class:`TickIn
 Values are float32 on the wire (sim time is double), matching ``hil_sim.world``'s rounding.
 """
 
-from link.counters import LinkClosedError, LinkCounters, LinkError, SigningMismatch
+from link.counters import (
+    DROP_CAUSES,
+    LinkClosedError,
+    LinkCounters,
+    LinkError,
+    SigningMismatch,
+)
 from link.device_session import DeviceSession
 from link.messages import (
     LINK_LOCKSTEP,
@@ -102,6 +111,7 @@ from link.tlog import TlogWriter, read_tlog, register_dialect_with_mavutil
 from link.ttyport import FdPort, PtyPair, fast_port
 
 __all__ = [
+    "DROP_CAUSES",
     "LINK_LOCKSTEP",
     "LINK_REALTIME",
     "MODE_AUTO",

@@ -41,15 +41,22 @@ class LinkCounters:
     refused_unsigned, refused_bad_signature
         Frames refused by signing: unsigned, or signed with a wrong key / replayed timestamp.
     duplicates
-        Retransmitted ticks or commands received again (ignored, or answered once more).
+        MAP samples of a tick already held or answered (a resent tick, a duplicated frame; the
+        runtime answers a resent tick it already answered once more), or commands for a tick
+        already applied (device); ignored.
+    old_ticks
+        MAP samples of an earlier tick than one already held or answered (ignored).
     retransmits
         Frames this end re-sent on its own (a command for a retransmitted tick; a tick the device
         sent again after a timeout).
     stale
-        Messages for a tick other than the one expected (ignored).
-    incomplete_ticks
-        Lockstep only: MAP samples dropped because the tick's scheduling or target frame was lost
-        (left unanswered, so the device sends the whole tick again).
+        MAP samples superseded by a newer one before the loop took them (real time), or commands
+        for a later tick than the one expected (device); ignored.
+    incomplete_sched, incomplete_target, incomplete_status
+        Lockstep only: ticks the device had to resend because their first transmission lacked
+        the SCHEDULING_PARAMS (when required), the MAP_TARGET (when required) or the PUMP_STATUS
+        (once the device sent one) of the tick; a tick lacking several counts in each. A lost
+        pump status is not resent: the tick then goes to the loop without it.
     """
 
     frames_sent: int = 0
@@ -67,8 +74,31 @@ class LinkCounters:
     duplicates: int = 0
     retransmits: int = 0
     stale: int = 0
-    incomplete_ticks: int = 0
+    old_ticks: int = 0
+    incomplete_sched: int = 0
+    incomplete_target: int = 0
+    incomplete_status: int = 0
 
     def as_dict(self) -> dict[str, int]:
         """The counters as a plain dict (JSON-ready)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def incomplete(self) -> int:
+        """Lockstep ticks resent because they were incomplete (each cause counted)."""
+        return self.incomplete_sched + self.incomplete_target + self.incomplete_status
+
+
+#: What the runtime's session drops, by cause: the counters above that count discarded frames
+#: or samples (the run summary's ``link_dropped``, docs/PROTOCOL.md).
+DROP_CAUSES: tuple[str, ...] = (
+    "bad_crc",
+    "resyncs",
+    "refused_unsigned",
+    "refused_bad_signature",
+    "duplicates",
+    "old_ticks",
+    "stale",
+    "incomplete_sched",
+    "incomplete_target",
+    "incomplete_status",
+)

@@ -1,8 +1,8 @@
 """The device's end of the link: send each tick's inputs and the pump status, wait for commands.
 
 Per tick k the device sends :meth:`DeviceSession.send_tick` (scheduling parameters, target, then
-the MAP sample - the sample last, so its arrival means the tick is complete), waits for the
-command answering k (:meth:`DeviceSession.wait_for_command`), and after advancing sends
+the MAP sample; the runtime assembles a tick from its frames in any order), waits for the command
+answering k (:meth:`DeviceSession.wait_for_command`), and after advancing sends
 :meth:`DeviceSession.send_pump_status`.
 """
 

@@ -86,7 +86,7 @@ class Heartbeat(NamedTuple):
 @dataclass(frozen=True, slots=True)
 class TickInputs:
     """Everything the device reports for tick k (frames SCHEDULING_PARAMS, MAP_TARGET and
-    MAP_SAMPLE, sent in that order): what the world observes and what the runtime's loop consumes.
+    MAP_SAMPLE, in any order): what the world observes and what the runtime's loop consumes.
 
     Attributes
     ----------
@@ -99,16 +99,18 @@ class TickInputs:
     quality
         Monitor quality flags (0 = good; :data:`contracts.faults` sensor-quality bits).
     target_mmhg
-        The clinician's MAP target (mmHg); NaN on the runtime side if none received yet.
+        The clinician's MAP target (mmHg); NaN on the runtime side if none received yet, or in
+        lockstep when the runtime does not require it and the tick's own had not arrived.
     K, T_s, tau_s
         Scheduling parameters: sensitivity (mmHg/(ml/h)), lag (s), delay (s); NaN on the runtime
-        side if none received yet.
+        side as for ``target_mmhg``.
     sched_valid
         The device marked the scheduling parameters valid.
     sched_tick, target_tick
         Tick the scheduling parameters / target belong to (-1 if none): equal to ``tick`` as the
-        world builds it; on the runtime side they differ when those frames were lost and the
-        values are stale ones from an earlier tick.
+        world builds it; on the runtime side in real time they differ when those frames were lost
+        and the values are stale ones from an earlier tick (lockstep never hands over stale ones:
+        see :class:`~link.runtime_session.RuntimeSession`).
     """
 
     tick: int

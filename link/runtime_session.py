@@ -1,11 +1,16 @@
 """The runtime's end of the link: assemble each tick's inputs, send commands and heartbeats.
 
-The device sends tick k as scheduling parameters, target, then MAP sample - the sample last, so
-its arrival means the tick is complete (scheduling parameters are required only when the runtime
-schedules on them, ``require_sched``: a device may send none). :meth:`RuntimeSession.wait_for_sample` returns the tick as
-a :class:`~link.messages.TickInputs`; :meth:`RuntimeSession.send_command` answers it. When the
-device retransmits a tick the runtime has already answered (the command was lost), the session
-re-sends the same command by itself and counts it.
+A lockstep tick is assembled whatever order its frames arrive in: the MAP sample waits until the
+rest of its tick is there - SCHEDULING_PARAMS if ``require_sched``, MAP_TARGET if
+``require_target``, and PUMP_STATUS once the device has sent one numbered as docs/PROTOCOL.md
+says - and the tick goes to the loop as soon as it is complete (docs/PROTOCOL.md, "Required and
+optional").
+:meth:`RuntimeSession.wait_for_sample` returns it as a :class:`~link.messages.TickInputs`;
+:meth:`RuntimeSession.send_command` answers it. A tick whose frames were lost stays unanswered
+until the device resends it (its pump status is not resent: the tick then goes without it).
+When the device retransmits a tick the runtime has already answered (the command was lost), the
+session re-sends the same command by itself. Whatever is dropped is counted by cause
+(:class:`~link.counters.LinkCounters`, ``DROP_CAUSES``).
 """
 
 from __future__ import annotations
@@ -44,17 +49,23 @@ class RuntimeSession(Session):
         time of the received MAP samples (lockstep virtual time); pass another (e.g. the monotonic
         clock in real-time mode) to use it instead.
     complete_ticks
-        Lockstep peers only: deliver a MAP sample only together with its own tick's scheduling
-        parameters and target; a sample whose companions were lost is dropped and left unanswered
-        so the device retransmits the tick (the trajectory then stays identical to the in-process
-        simulation). With a real-time peer samples are always delivered and
-        ``TickInputs.sched_tick`` / ``target_tick`` tell the loop which values are stale.
+        Lockstep peers only: deliver a MAP sample only once its tick is complete (see the module
+        docstring), so the trajectory stays identical to the in-process simulation. The tick then
+        carries the scheduling parameters and target of its own tick; one that is not required
+        and had not arrived when the tick was complete is NaN with ``sched_tick`` /
+        ``target_tick`` -1 (``sched_valid`` False). With a real-time peer (or ``False``) samples
+        are delivered at once with the latest scheduling parameters and target received, and
+        ``sched_tick`` / ``target_tick`` tell the loop which values are stale.
     require_sched
-        Whether a lockstep tick is complete only with its own SCHEDULING_PARAMS (default True:
-        the runtime schedules on the device's values, ``--schedule oracle``). False when the
-        runtime schedules on its own estimate or constants (``--schedule estimated|nominal``):
-        a tick is then complete with its target and MAP sample, and a device that never sends
-        scheduling parameters works (``TickInputs`` then carries NaN and ``sched_valid=False``).
+        Whether a lockstep tick needs its own SCHEDULING_PARAMS (default True: the runtime
+        schedules on the device's values, ``--schedule oracle``). False when the runtime
+        schedules on its own estimate or constants (``--schedule estimated|nominal``): a device
+        that never sends scheduling parameters then works.
+    require_target
+        Whether a lockstep tick needs its own MAP_TARGET (default True: the device plays the
+        clinician's console). False when the runtime has its own target: the tick's
+        ``target_mmhg`` is then the device's value for that tick if it came before the tick was
+        complete, else NaN (``target_tick`` -1).
     """
 
     ROLE = ROLE_RUNTIME
@@ -69,19 +80,30 @@ class RuntimeSession(Session):
         clock: Any = None,
         complete_ticks: bool = True,
         require_sched: bool = True,
+        require_target: bool = True,
         **kw: Any,
     ) -> None:
         super().__init__(port, clock=clock, **kw)
         self.complete_ticks = complete_ticks
         self.require_sched = require_sched
+        self.require_target = require_target
         self._follow_samples = clock is None
         #: the device's latest pump status (or None)
         self.pump_status: PumpStatus | None = None
         self._hello_reply_due = False
-        # received tick data, as field tuples in XML order (see the handlers)
-        self._samples: list[tuple[float, int, float, int]] = []
+        # received tick data, as field tuples in XML order (see the handlers): samples ready for
+        # the loop, each with the scheduling and target frames of its own tick taken when the
+        # lockstep tick was complete (None: real time, the latest ones at hand-over)
+        self._samples: list[tuple[tuple, tuple | None]] = []
         self._sched: tuple[int, float, float, float, int] | None = None
         self._target: tuple[int, float] | None = None
+        #: lockstep: the sample waiting for the rest of its tick; the tick and what it lacked
+        #: when a read ended with it pending (counted if the device resends it)
+        self._pending: tuple[float, int, float, int] | None = None
+        self._waited: tuple[int, tuple[str, ...]] | None = None
+        #: the device sends PUMP_STATUS numbered k+1 after the command for k: lockstep ticks wait
+        #: for theirs (a device numbering it otherwise is not waited for)
+        self._status_seen = False
         self._last_sample_tick = -1
         self._last_command: tuple[int, float, int] | None = None
         self._handlers.update(
@@ -103,6 +125,9 @@ class RuntimeSession(Session):
     def feed(self, data: bytes) -> None:
         """Process received bytes, then answer a device hello that asked for it."""
         super().feed(data)
+        pending = self._pending
+        if pending is not None:  # a read ended with the tick incomplete: remember what it lacks
+            self._waited = (pending[1], self._missing(pending[1]))
         if self._hello_reply_due:
             self._hello_reply_due = False
             assert self._hello is not None
@@ -118,47 +143,110 @@ class RuntimeSession(Session):
             and msg.role == ROLE_DEVICE
             and self._last_sample_tick < 0
             and not self._samples
+            and self._pending is None
         ):
             self._hello_reply_due = True
 
     def _on_sample(self, fields: tuple) -> None:
         tick = fields[1]
-        if self._samples and self._samples[-1][1] >= tick:
-            self.counters.duplicates += 1  # retransmitted before the loop took the first copy
+        c = self.counters
+        pending = self._pending
+        newest = max(
+            self._last_sample_tick,
+            self._samples[-1][0][1] if self._samples else -1,
+            -1 if pending is None else pending[1],
+        )
+        if tick < newest:
+            c.old_ticks += 1  # an earlier tick than one already held or answered
             return
-        if tick <= self._last_sample_tick:
-            # the device retransmitted a tick: answer again if we already did
-            self.counters.duplicates += 1
+        if tick == newest:
+            c.duplicates += 1  # the device resent the tick, or the link duplicated the frame
+            self._on_resend(tick)
             last = self._last_command
-            if last is not None and last[0] == tick:
-                self.counters.retransmits += 1
+            if tick == self._last_sample_tick and last is not None and last[0] == tick:
+                c.retransmits += 1  # the answer was lost: answer again
                 self.send_fields(_ID_COMMAND, *last)
             return
-        if self.complete_ticks:
-            peer = self.peer_hello
-            sched, target = self._sched, self._target
-            if (
-                peer is not None
-                and peer.link_mode == LINK_LOCKSTEP
-                and (
-                    (self.require_sched and (sched is None or sched[0] != tick))
-                    or target is None
-                    or target[0] != tick
-                )
-            ):
-                # in lockstep a stale value would change the trajectory: wait for the resend
-                self.counters.incomplete_ticks += 1
-                return
-        self._samples.append(fields)
+        if pending is not None:  # the device moved on without completing the pending tick
+            self._count_incomplete(self._missing(pending[1]))
+            self._pending = None
+        peer = self.peer_hello
+        if self.complete_ticks and peer is not None and peer.link_mode == LINK_LOCKSTEP:
+            self._pending = fields
+            self._try_complete(resent=False)
+        else:
+            self._samples.append((fields, None))
 
     def _on_sched(self, fields: tuple) -> None:
         self._sched = fields
+        if self._pending is not None:
+            self._try_complete(resent=False)
 
     def _on_target(self, fields: tuple) -> None:
         self._target = fields
+        if self._pending is not None:
+            self._try_complete(resent=False)
 
     def _on_pump_status(self, fields: tuple) -> None:
-        self.pump_status = PumpStatus(*fields)
+        status = self.pump_status = PumpStatus(*fields)
+        pending = self._pending
+        if status.tick == (self._last_sample_tick + 1 if pending is None else pending[1]):
+            self._status_seen = True  # numbered as the protocol says: lockstep waits for it
+        if pending is not None:
+            self._try_complete(resent=False)
+
+    # ----------------------------------------------------------- tick assembly
+    def _missing(self, tick: int) -> tuple[str, ...]:
+        """What lockstep tick ``tick`` still lacks: ``sched`` (only if ``require_sched``),
+        ``target`` (only if ``require_target``), ``status`` (once the device sent one numbered as
+        the protocol says)."""
+        sched, target, status = self._sched, self._target, self.pump_status
+        missing = []
+        if self.require_sched and (sched is None or sched[0] != tick):
+            missing.append("sched")
+        if self.require_target and (target is None or target[0] != tick):
+            missing.append("target")
+        if self._status_seen and (status is None or status.tick != tick):
+            missing.append("status")
+        return tuple(missing)
+
+    def _try_complete(self, *, resent: bool) -> None:
+        """Hand the pending sample to the loop if its tick is complete (or, on the device's
+        resend, lacks only its pump status, which the device does not resend)."""
+        pending = self._pending
+        assert pending is not None
+        tick = pending[1]
+        missing = self._missing(tick)
+        if missing and not (resent and missing == ("status",)):
+            return
+        self._pending = None
+        sched, target = self._sched, self._target
+        own = (
+            sched if sched is not None and sched[0] == tick else None,
+            target if target is not None and target[0] == tick else None,
+        )
+        self._samples.append((pending, own))
+
+    def _on_resend(self, tick: int) -> None:
+        """A sample of ``tick`` came again: if a read ended with that tick incomplete, the
+        device resent it because its first copy lacked something: count what, and deliver a
+        tick that now lacks only its pump status."""
+        waited = self._waited
+        if waited is None or waited[0] != tick:
+            return
+        self._waited = None
+        self._count_incomplete(waited[1])
+        if self._pending is not None and self._pending[1] == tick:
+            self._try_complete(resent=True)
+
+    def _count_incomplete(self, missing: tuple[str, ...]) -> None:
+        c = self.counters
+        if "sched" in missing:
+            c.incomplete_sched += 1
+        if "target" in missing:
+            c.incomplete_target += 1
+        if "status" in missing:
+            c.incomplete_status += 1
 
     def next_sample(self) -> TickInputs | None:
         """Non-blocking: the oldest sample already received and not yet returned.
@@ -167,11 +255,12 @@ class RuntimeSession(Session):
         """
         if not self._samples:
             return None
-        sim_time_s, tick, map_mmhg, quality = self._samples.pop(0)
+        fields, own = self._samples.pop(0)
+        sim_time_s, tick, map_mmhg, quality = fields
         self._last_sample_tick = tick
         if self._follow_samples:
             self.clock.t = sim_time_s
-        s, t = self._sched, self._target
+        s, t = own if own is not None else (self._sched, self._target)
         nan = math.nan
         if s is None:
             s = (-1, nan, nan, nan, 0)
@@ -202,11 +291,12 @@ class RuntimeSession(Session):
         return self.next_sample()
 
     def wait_for_sample(self, timeout_s: float) -> TickInputs | None:
-        """The next new MAP sample with the tick's scheduling parameters and target.
+        """The next tick: a new MAP sample with its tick's scheduling parameters and target
+        (lockstep: once the tick is complete, see the module docstring).
 
         Waits at most ``timeout_s`` (wall clock). Returns ``None`` on timeout (counted in
-        ``timeouts``). Samples are returned in arrival order, each once; retransmitted ones are
-        answered automatically (see the module docstring).
+        ``timeouts``). Ticks are returned in order, each once; retransmitted ones are answered
+        automatically.
 
         Raises
         ------

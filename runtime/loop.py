@@ -210,7 +210,7 @@ class Loop:
             + c.junk_bytes
             + c.resyncs
             + c.seq_gaps
-            + c.incomplete_ticks
+            + c.incomplete()
             + c.refused_unsigned
             + c.refused_bad_signature
         )

@@ -4,11 +4,14 @@
 (:func:`contracts.metrics.run_metrics`, defined in docs/METRICS.md; with ``pressor sil`` the step
 metrics stop at the first disturbance and each hemorrhage or bolus of the scenario gets a
 ``disturbances`` record; with ``pressor run`` the device's scenario is not known, so those are
-null) plus ``commands_out_of_range``, the supervisor's account, the link's error counts and, when
+null) plus ``commands_out_of_range``, the supervisor's account, the link's error counts
+(``link_errors``), what the runtime's end of the link dropped by cause (``link_dropped``, every
+cause of :data:`link.counters.DROP_CAUSES`, documented in docs/PROTOCOL.md) and, when
 faults were scheduled, the scored fault list (:func:`contracts.faults.fault_report`: ``kind``,
 ``start_tick``, ``detected_tick``, ``latency_ticks`` and its documented bound, ``safe_state_s``,
 ``max_reentry_step_ml_h``). It holds only values that are functions of the seed (no wall-clock
-timing), so two runs give identical files; loop timing (p50/p99/max) is printed, written with
+timing), so two runs give identical files - except the link counts of a run that lost frames
+(the device resends on the wall clock); loop timing (p50/p99/max) is printed, written with
 ``--timing`` and recorded under ``/loop``.
 
 ``reachable`` is inferred from the run, since the runtime does not know the patient: false when
@@ -32,6 +35,7 @@ import numpy as np
 
 from contracts.files import write_atomic
 from contracts.metrics import reachable_band_mmhg, run_metrics
+from link.counters import DROP_CAUSES
 from runtime.config import RunConfig
 from runtime.trajectory import held_delivered_ml_h
 
@@ -143,6 +147,7 @@ def build_summary(
                 "refused_bad_signature",
             )
         },
+        "link_dropped": {k: link[k] for k in DROP_CAUSES},
     }
 
 
@@ -205,6 +210,9 @@ def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = No
     )
     errs = {k: v for k, v in summary["link_errors"].items() if v}
     print(f"link: {'clean' if not errs else errs}", file=out)
+    dropped = [f"{k} {v}" for k, v in summary["link_dropped"].items() if v]
+    if dropped:
+        print(f"link dropped: {', '.join(dropped)}", file=out)
     if summary.get("faults"):
         print_fault_table(summary["faults"], summary["commands_out_of_range"], out)
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from link import DROP_CAUSES
 from runtime.supervisor_config import Fault, State, SupervisorConfig
 from tests.sil_helpers import rrd_columns
 
@@ -114,6 +115,22 @@ def test_link_and_sensor_faults_detected_within_one_watchdog_period(link_sensor_
     for kind in ("sensor-nan", "sensor-flush", "sensor-range", "sensor-disconnect"):
         assert by[kind]["latency_ticks"] == 0
     assert s["supervisor"]["detections"]["LINK_LOSS"] >= 2
+
+
+def test_the_summary_counts_what_the_runtime_dropped_by_cause(link_sensor_run):
+    proc, _, s = link_sensor_run
+    dropped = s["link_dropped"]
+    assert list(dropped) == sorted(DROP_CAUSES)  # every cause, zero or not
+    assert dropped["bad_crc"] > 0  # link-flip
+    assert dropped["refused_bad_signature"] > 0  # link-duplicate: a signed frame twice is a replay
+    assert dropped["duplicates"] > 0  # ticks the device resent
+    # link-drop / link-duplicate: ticks resent because a frame of their first copy was lost
+    assert dropped["incomplete_sched"] + dropped["incomplete_target"] > 0
+    assert dropped["incomplete_status"] > 0
+    # a signed peer, lockstep: nothing unsigned, nothing superseded, no tick older than the last
+    assert dropped["refused_unsigned"] == dropped["stale"] == dropped["old_ticks"] == 0
+    line = next(x for x in proc.stdout.splitlines() if x.startswith("link dropped: "))
+    assert f"duplicates {dropped['duplicates']}" in line and "stale" not in line
 
 
 def test_silent_ticks_of_a_stall_are_recorded_on_the_virtual_clock(link_sensor_run):

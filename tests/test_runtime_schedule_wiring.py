@@ -141,7 +141,7 @@ def test_a_device_that_never_sends_scheduling_params_completes_a_run_with_the_es
     assert result.ended in ("device finished", "completed")
     assert summary["ticks"] == round(duration_s / TS)
     assert summary["schedule"] == "estimated"
-    assert result.link["incomplete_ticks"] == 0
+    assert result.link["incomplete_sched"] == result.link["incomplete_target"] == 0
     assert result.ticks_in_state["AUTO"] == summary["ticks"]  # no SCHED_INVALID hold
     assert result.trajectory["command_ml_h"].max() > 1.0  # the loop infused
     ref = simulate(World(SCENARIO, SEED, TS), load_controller(controller, TS), duration_s,

@@ -49,6 +49,7 @@ def summary() -> dict:
         },
         "supervisor": {"detections": {}, "ticks_in_state": {"AUTO": 9000}},
         "link_errors": {},
+        "link_dropped": {"duplicates": 0, "incomplete_sched": 0},
     }
 
 
@@ -72,3 +73,13 @@ def test_json_summary_keeps_full_precision(tmp_path):
     write_json(tmp_path / "s.json", summary())
     data = json.loads((tmp_path / "s.json").read_text())
     assert data["metrics"]["settling_time_s"] == 465.15000000000003
+
+
+def test_terminal_summary_names_each_cause_of_dropped_link_frames_only_when_any():
+    clean = io.StringIO()
+    print_summary(summary(), TIMING, clean)
+    assert "link: clean" in clean.getvalue() and "dropped" not in clean.getvalue()
+    lossy = summary() | {"link_dropped": {"duplicates": 3, "old_ticks": 0, "incomplete_sched": 1}}
+    out = io.StringIO()
+    print_summary(lossy, TIMING, out)
+    assert "link dropped: duplicates 3, incomplete_sched 1\n" in out.getvalue()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from link import LinkCounters
 from runtime.summary import build_summary
 from runtime.trajectory import LoopResult
 
@@ -26,10 +27,7 @@ def _pinned_run(short_mmhg: float) -> LoopResult:
         "command_ml_h": cmd,
         "delivered_ml_h": cmd,
     }
-    return LoopResult(traj, {}, {k: 0 for k in _LINK}, {}, {}, [], 0, "completed")
-
-
-_LINK = ("bad_crc", "seq_gaps", "frames_lost", "refused_unsigned", "refused_bad_signature")
+    return LoopResult(traj, {}, LinkCounters().as_dict(), {}, {}, [], 0, "completed")
 
 
 @pytest.mark.parametrize(
