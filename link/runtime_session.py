@@ -55,6 +55,10 @@ class RuntimeSession(Session):
         runtime schedules on its own estimate or constants (``--schedule estimated|nominal``):
         a tick is then complete with its target and MAP sample, and a device that never sends
         scheduling parameters works (``TickInputs`` then carries NaN and ``sched_valid=False``).
+    require_target
+        Whether a lockstep tick is complete only with its own MAP_TARGET (default True). False
+        when the runtime sets the target itself (``pressor run --target-mmhg``): ``TickInputs``
+        then carries the device's latest target, if any, which the runtime's loop replaces.
     """
 
     ROLE = ROLE_RUNTIME
@@ -69,11 +73,13 @@ class RuntimeSession(Session):
         clock: Any = None,
         complete_ticks: bool = True,
         require_sched: bool = True,
+        require_target: bool = True,
         **kw: Any,
     ) -> None:
         super().__init__(port, clock=clock, **kw)
         self.complete_ticks = complete_ticks
         self.require_sched = require_sched
+        self.require_target = require_target
         self._follow_samples = clock is None
         #: the device's latest pump status (or None)
         self.pump_status: PumpStatus | None = None
@@ -142,8 +148,7 @@ class RuntimeSession(Session):
                 and peer.link_mode == LINK_LOCKSTEP
                 and (
                     (self.require_sched and (sched is None or sched[0] != tick))
-                    or target is None
-                    or target[0] != tick
+                    or (self.require_target and (target is None or target[0] != tick))
                 )
             ):
                 # in lockstep a stale value would change the trajectory: wait for the resend
