@@ -44,6 +44,7 @@ def _start_run(port: str, key: Path, tmp_path: Path, *args: str) -> subprocess.P
         cmd,
         cwd=tmp_path,
         env=dict(os.environ, CI="1", PYTHONPATH=str(ROOT)),
+        stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -102,16 +103,26 @@ def _events(rrd: Path) -> list[tuple[int, str]]:
     return sorted(out)
 
 
-def _run_against_device(tmp_path: Path, run_args: list[str], n: int, **device_kw) -> tuple:
-    """``pressor run RUN_ARGS`` against the scripted device; (exit code, stderr, summary, rrd)."""
+def _run_against_device(
+    tmp_path: Path,
+    run_args: list[str],
+    n: int,
+    before_tick: Callable[[int, subprocess.Popen], object] | None = None,
+    **device_kw,
+) -> tuple:
+    """``pressor run RUN_ARGS`` against the scripted device; (exit code, stderr, summary, rrd).
+
+    ``before_tick(k, run)`` runs before the device sends tick k (``run``: the runtime process).
+    """
     key = _key(tmp_path)
     summary, rrd = tmp_path / "s.json", tmp_path / "run.rrd"
     with bridged_ttys() as (device_port, runtime_port):
         run = _start_run(
             runtime_port, key, tmp_path, "--summary", str(summary), "--rrd", str(rrd), *run_args
         )
+        before = None if before_tick is None else lambda k: before_tick(k, run)
         try:
-            _device(device_port, key, n, **device_kw).close()
+            _device(device_port, key, n, before_tick=before, **device_kw).close()
             _, err = run.communicate(timeout=120)
         finally:
             run.kill()
@@ -167,7 +178,7 @@ def test_a_target_file_change_is_applied_at_the_next_tick_recorded_and_listed(tm
     target.write_text("70\n")
     script = {5: "abc\n", 10: "90\n"}  # written after tick k-1 was answered, before tick k
 
-    def before_tick(k: int) -> None:
+    def before_tick(k: int, _run: subprocess.Popen) -> None:
         if k in script:
             _replace_file(target, script[k])
 
@@ -197,6 +208,23 @@ def test_a_target_file_change_is_applied_at_the_next_tick_recorded_and_listed(tm
     events = _events(rrd)
     assert (10, f"target 70 -> 90 mmHg (file {target})") in events
     assert any(k == 5 and "refused" in text for k, text in events)
+
+
+def test_a_stdin_line_changes_the_target_at_the_next_tick(tmp_path):
+    def before_tick(k: int, run: subprocess.Popen) -> None:
+        if k == 7:
+            run.stdin.write("65\n")
+            run.stdin.flush()
+
+    rc, err, summary, rrd = _run_against_device(
+        tmp_path, ["--target-mmhg", "70", "--target-stdin"], 15, before_tick=before_tick
+    )
+    assert rc == 0, err
+    [change] = summary["target"]["changes"]
+    assert (change["tick"], change["old_mmhg"], change["new_mmhg"]) == (7, 70.0, 65.0)
+    assert change["from"] == "stdin"
+    recorded = rrd_columns(rrd)["/controller/target_mmhg"]
+    assert [recorded[k] for k in range(15)] == [70.0] * 7 + [65.0] * 8
 
 
 @pytest.mark.parametrize(
