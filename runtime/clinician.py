@@ -227,3 +227,15 @@ def check_device_hello(peer: Any, max_rate_ml_h: float, clinician: ClinicianInpu
             f"device pump maximum {pump_max:g} ml/h differs from the controller's"
             f" {max_rate_ml_h:g} ml/h: the pump cannot deliver every rate the controller commands"
         )
+
+
+def describe_target(record: dict[str, Any]) -> str:
+    """One terminal line for the summary's ``target`` record (its source, changes, refusals)."""
+    if record["source"] == "device":
+        return "target: the device's MAP_TARGET"
+    text = f"target: the runtime's, {record['initial_mmhg']:g} mmHg"
+    for c in record["changes"]:
+        text += f"; at {c['sim_time_s']:g} s {c['old_mmhg']:g} -> {c['new_mmhg']:g} mmHg"
+    if record["refused"]:
+        text += f"; {record['refused']} refused"
+    return text

@@ -110,7 +110,8 @@ def _run_against_device(
     before_tick: Callable[[int, subprocess.Popen], object] | None = None,
     **device_kw,
 ) -> tuple:
-    """``pressor run RUN_ARGS`` against the scripted device; (exit code, stderr, summary, rrd).
+    """``pressor run RUN_ARGS`` against the scripted device; (exit code, stdout + stderr, summary,
+    rrd).
 
     ``before_tick(k, run)`` runs before the device sends tick k (``run``: the runtime process).
     """
@@ -123,19 +124,19 @@ def _run_against_device(
         before = None if before_tick is None else lambda k: before_tick(k, run)
         try:
             _device(device_port, key, n, before_tick=before, **device_kw).close()
-            _, err = run.communicate(timeout=120)
+            out, err = run.communicate(timeout=120)
         finally:
             run.kill()
-    return run.returncode, err, json.loads(summary.read_text()), rrd
+    return run.returncode, out + err, json.loads(summary.read_text()), rrd
 
 
 def test_run_target_mmhg_wins_over_the_device_target_in_summary_and_recording(tmp_path):
     # a pump that can deliver more than the controller's 120 ml/h is fine
     syringe = {**SYRINGE, "pump_max_ml_h": 200.0}
-    rc, err, summary, rrd = _run_against_device(
+    rc, output, summary, rrd = _run_against_device(
         tmp_path, ["--target-mmhg", "70"], 30, syringe=syringe
     )
-    assert rc == 0, err
+    assert rc == 0, output
     assert summary["target"] == {
         "source": "runtime",
         "initial_mmhg": 70.0,
@@ -152,17 +153,18 @@ def test_run_target_mmhg_wins_over_the_device_target_in_summary_and_recording(tm
 
 
 def test_run_without_target_option_uses_the_device_target_and_says_so(tmp_path):
-    rc, err, summary, rrd = _run_against_device(tmp_path, [], 20)
-    assert rc == 0, err
+    rc, output, summary, rrd = _run_against_device(tmp_path, [], 20)
+    assert rc == 0, output
     assert summary["target"] == {"source": "device"}
+    assert "target: the device's MAP_TARGET" in output.splitlines()
     assert set(rrd_columns(rrd)["/controller/target_mmhg"].values()) == {DEVICE_TARGET}
 
 
 def test_run_target_mmhg_needs_no_map_target_from_the_device(tmp_path):
-    rc, err, summary, rrd = _run_against_device(
+    rc, output, summary, rrd = _run_against_device(
         tmp_path, ["--target-mmhg", "75"], 20, send_target=False
     )
-    assert rc == 0, err  # without its own target the runtime would wait for MAP_TARGET forever
+    assert rc == 0, output  # without its own target the runtime would wait for MAP_TARGET forever
     assert summary["ticks"] == 20 and summary["ended"] == "completed"
     assert set(rrd_columns(rrd)["/controller/target_mmhg"].values()) == {75.0}
 
@@ -182,10 +184,10 @@ def test_a_target_file_change_is_applied_at_the_next_tick_recorded_and_listed(tm
         if k in script:
             _replace_file(target, script[k])
 
-    rc, err, summary, rrd = _run_against_device(
+    rc, output, summary, rrd = _run_against_device(
         tmp_path, ["--target-file", str(target)], 20, before_tick=before_tick
     )
-    assert rc == 0, err
+    assert rc == 0, output
     assert summary["target"] == {
         "source": "runtime",
         "initial_mmhg": 70.0,
@@ -200,9 +202,10 @@ def test_a_target_file_change_is_applied_at_the_next_tick_recorded_and_listed(tm
         ],
         "refused": 1,
     }
-    [refusal] = [line for line in err.splitlines() if "refused" in line]
-    assert refusal.startswith("pressor run: target from file") and "'abc'" in refusal
+    [refusal] = [line for line in output.splitlines() if line.startswith("pressor run: target")]
+    assert refusal.startswith(f"pressor run: target from file {target} refused: 'abc'")
     assert "keeping 70 mmHg" in refusal
+    assert "target: the runtime's, 70 mmHg; at 1 s 70 -> 90 mmHg; 1 refused" in output.splitlines()
     recorded = rrd_columns(rrd)["/controller/target_mmhg"]
     assert [recorded[k] for k in range(20)] == [70.0] * 10 + [90.0] * 10
     events = _events(rrd)
@@ -216,10 +219,10 @@ def test_a_stdin_line_changes_the_target_at_the_next_tick(tmp_path):
             run.stdin.write("65\n")
             run.stdin.flush()
 
-    rc, err, summary, rrd = _run_against_device(
+    rc, output, summary, rrd = _run_against_device(
         tmp_path, ["--target-mmhg", "70", "--target-stdin"], 15, before_tick=before_tick
     )
-    assert rc == 0, err
+    assert rc == 0, output
     [change] = summary["target"]["changes"]
     assert (change["tick"], change["old_mmhg"], change["new_mmhg"]) == (7, 70.0, 65.0)
     assert change["from"] == "stdin"
