@@ -63,7 +63,9 @@ class TargetSource:
         #: values refused (bad text, out of range, unreadable file)
         self.refused = 0
         self._path = clinician.target_file
-        self._file_state = _file_state(self._path) if self._path is not None else None
+        # never a real state: the first poll reads the file again (it may have changed since
+        # the command line read the starting target)
+        self._file_state: tuple[int, int, int] | None | str = "unread"
         self._fd: int | None = stdin_fd if clinician.target_stdin else None
         self._buf = b""
         self._err = err
@@ -146,6 +148,8 @@ class TargetSource:
         self._pending_refusals.clear()
         for value, source in self._pending:
             old = self.target_mmhg
+            if value == old:
+                continue  # rewritten with the same target: no change
             self.target_mmhg = value
             self.changes.append(
                 {"tick": tick, "sim_time_s": t, "old_mmhg": old, "new_mmhg": value, "from": source}

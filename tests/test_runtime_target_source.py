@@ -98,18 +98,28 @@ def test_a_target_file_is_reread_only_when_it_changes(tmp_path):
     err = io.StringIO()
     src = TargetSource(ClinicianInput(target_mmhg=70.0, target_file=path), err=err)
     assert _tick(src, 0) == 70.0 and src.changes == []  # the starting content is no change
+    _replace(path, "70\n")
+    assert _tick(src, 1) == 70.0 and src.changes == []  # nor is the same target rewritten
     _replace(path, "75.5\n")
-    assert _tick(src, 1) == 75.5
-    assert _tick(src, 2) == 75.5 and len(src.changes) == 1
+    assert _tick(src, 2) == 75.5
+    assert _tick(src, 3) == 75.5 and len(src.changes) == 1
     path.write_text("")  # a writer that truncates first: ignored, nothing refused
-    assert _tick(src, 3) == 75.5
+    assert _tick(src, 4) == 75.5
     path.write_text("88")
-    assert _tick(src, 4) == 88.0
-    path.unlink()
     assert _tick(src, 5) == 88.0
+    path.unlink()
+    assert _tick(src, 6) == 88.0
     assert src.refused == 1
     assert "cannot read" in err.getvalue() and "keeping 88 mmHg" in err.getvalue()
     _replace(path, "91\n")
-    assert _tick(src, 6) == 91.0
-    assert [c["tick"] for c in src.changes] == [1, 4, 6]
+    assert _tick(src, 7) == 91.0
+    assert [c["tick"] for c in src.changes] == [2, 5, 7]
     assert {c["from"] for c in src.changes} == {f"file {path}"}
+
+
+def test_a_target_file_changed_before_the_loop_started_is_applied_at_the_first_tick(tmp_path):
+    path = tmp_path / "target"
+    path.write_text("72\n")  # the command line read 70; the file changed during the handshake
+    src = TargetSource(ClinicianInput(target_mmhg=70.0, target_file=path), err=io.StringIO())
+    assert _tick(src, 0) == 72.0
+    assert [(c["tick"], c["old_mmhg"], c["new_mmhg"]) for c in src.changes] == [(0, 70.0, 72.0)]
