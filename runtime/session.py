@@ -202,8 +202,13 @@ def run_runtime(
             faults=report,
             events=events,
         )
-        if config.clinician is not None:  # pressor run: where the target came from
+        if config.clinician is not None:  # pressor run: where the target came from, the syringe
             summary["target"] = {"source": "device"} if target is None else target.summary()
+            summary["syringe"] = {
+                "drug": clinician.drug,
+                "concentration_ug_ml": clinician.concentration_ug_ml,
+                "pump_max_ml_h": float(peer.pump_max_ml_h),
+            }
         ok = True
         return summary, result
     finally:

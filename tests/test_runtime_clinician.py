@@ -144,6 +144,7 @@ def test_run_target_mmhg_wins_over_the_device_target_in_summary_and_recording(tm
         "refused": 0,
     }
     assert summary["ticks"] == 30
+    assert summary["syringe"] == {**syringe, "pump_max_ml_h": 200.0}  # as the device announced
     recorded = rrd_columns(rrd)["/controller/target_mmhg"]
     assert sorted(recorded) == list(range(30)) and set(recorded.values()) == {70.0}
     assert any(
