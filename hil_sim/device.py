@@ -4,8 +4,9 @@ Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:
 
 1. open the port (a pyserial URL or device path, e.g. the follower of the pty ``pressor sil``
    created, or one end of a ``socat`` pair), handshake: announce itself with a hello (scenario,
-   patient seed, sample period, sensor noise, number of ticks, link mode) every 0.5 s until the
-   runtime answers;
+   patient seed, sample period, sensor noise, number of ticks, link mode, and the syringe:
+   ``--drug``, ``--concentration-ug-ml``, the pump's maximum rate) every 0.5 s until the runtime
+   answers;
 2. per tick k (lockstep, PX4 SITL style): send tick k's scheduling parameters, target and MAP sample
    (plus a heartbeat once per simulated second), wait for the infusion command answering tick k,
    apply it, advance the world one sample period, queue the pump status (it leaves with the next
@@ -40,10 +41,11 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
 from contracts.usage import UsageError, run_command
 from hil_sim.device_options import (
     HANDSHAKE_TIMEOUT_S,
@@ -81,9 +83,13 @@ def _main(command: str, argv: Sequence[str]) -> int:
     check_range("--patient-seed", args.patient_seed, 0, 2**32 - 1, "", lo_open=False)
     for opt in ("retransmit", "link_timeout", "handshake_timeout"):
         check_range(f"--{opt.replace('_', '-')}", getattr(args, opt), 0.0, 3600.0, "s", True)
+    if args.pump_max_ml_h is not None:
+        check_range("--pump-max-ml-h", args.pump_max_ml_h, 0.0, 10000.0, "ml/h", lo_open=True)
     faults = _parse_faults(args.fault)
     pin_thread(args.cpu)  # the lockstep ends on their CPUs (runtime.placement)
-    world = _make_world(args.scenario, args.patient_seed, 1.0 / args.rate, faults)
+    world = _make_world(
+        args.scenario, args.patient_seed, 1.0 / args.rate, faults, args.pump_max_ml_h
+    )
 
     from link import (
         DeviceSession,
@@ -120,6 +126,8 @@ def _main(command: str, argv: Sequence[str]) -> int:
             link_timeout_s=args.link_timeout,
             handshake_timeout_s=args.handshake_timeout,
             link_faults=link_faults,
+            drug=args.drug,
+            concentration_ug_ml=args.concentration_ug_ml,
         )
         ok = True
     except LinkClosedError:
@@ -147,14 +155,28 @@ def _parse_faults(texts: list[str]) -> tuple:
         raise UsageError(str(exc)) from exc
 
 
-def _make_world(scenario: str, seed: int, period_s: float, faults: tuple = ()) -> Any:
-    from hil_sim.scenario import ScenarioError
+def _make_world(
+    scenario: str,
+    seed: int,
+    period_s: float,
+    faults: tuple = (),
+    pump_max_ml_h: float | None = None,
+) -> Any:
+    """The world of ``scenario``, its pump's maximum replaced by ``pump_max_ml_h`` (ml/h) if given."""
+    from hil_sim.scenario import ScenarioError, load_scenario
     from hil_sim.world import World
 
     try:
-        return World(scenario, seed, period_s, faults=faults)
+        sc = load_scenario(scenario)
     except ScenarioError as exc:
         raise UsageError(str(exc)) from exc
+    if pump_max_ml_h is not None:
+        try:
+            sc = replace(sc, pump=replace(sc.pump, max_rate_ml_h=pump_max_ml_h))
+        except ValueError as exc:  # e.g. the scenario's safe rate above the new maximum
+            raise UsageError(f"--pump-max-ml-h {pump_max_ml_h:g}: {exc}") from exc
+    try:
+        return World(sc, seed, period_s, faults=faults)
     except ValueError as exc:
         raise UsageError(f"--rate: {exc}") from exc
 
@@ -193,6 +215,8 @@ def run_device(
     link_timeout_s: float = LINK_TIMEOUT_S,
     handshake_timeout_s: float = HANDSHAKE_TIMEOUT_S,
     link_faults: Any = None,
+    drug: str = DESIGN_DRUG,
+    concentration_ug_ml: float = DESIGN_CONCENTRATION_UG_ML,
 ) -> DeviceResult:
     """Run ``world`` as the device end of the link ``ep`` (handshake included).
 
@@ -213,6 +237,8 @@ def run_device(
     link_faults
         :class:`hil_sim.faults.LinkFaults` whose stalls/disconnects this loop plays (the
         byte-level ones live in the port wrapper).
+    drug, concentration_ug_ml
+        The syringe the hello announces (µg/ml), with the world's pump maximum (ml/h).
 
     Returns
     -------
@@ -247,6 +273,9 @@ def run_device(
         float(world.scenario.sensor.noise_std_mmhg),
         n,
         LINK_REALTIME if realtime else LINK_LOCKSTEP,
+        drug=drug,
+        concentration_ug_ml=concentration_ug_ml,
+        pump_max_ml_h=world.pump.config.max_rate_ml_h,
     )
     deadline = time.monotonic() + handshake_timeout_s
     while True:  # short attempts (a hello each): a stop signal is noticed within 0.5 s

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import math
 
+from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
 from contracts.usage import UsageError, UsageParser
+from runtime.clinician import argtype, parse_concentration, parse_drug
 from runtime.placement import parse_cpu
 
 #: default wall-clock timeouts (s)
@@ -73,6 +75,28 @@ def device_parser(command: str) -> UsageParser:
         default=[],
         metavar="KIND[:ARGS]",
         help="inject a fault (repeatable); 'pressor faults' lists kinds, arguments and defaults",
+    )
+    p.add_argument(
+        "--drug",
+        type=argtype("--drug", parse_drug),
+        default=DESIGN_DRUG,
+        help=f"drug in the syringe, announced in the hello (default: {DESIGN_DRUG})",
+    )
+    p.add_argument(
+        "--concentration-ug-ml",
+        type=argtype("--concentration-ug-ml", parse_concentration),
+        default=DESIGN_CONCENTRATION_UG_ML,
+        metavar="UG_ML",
+        help="syringe concentration announced in the hello (ug/ml, default"
+        f" {DESIGN_CONCENTRATION_UG_ML:g}: the one the simulated patient's K assumes)",
+    )
+    p.add_argument(
+        "--pump-max-ml-h",
+        type=float,
+        default=None,
+        metavar="ML_H",
+        help="the pump's largest rate (ml/h, (0, 10000]), announced in the hello (default: the"
+        " scenario's [pump] max_rate_ml_h, 120 ml/h in every shipped scenario)",
     )
     return p
 

@@ -35,8 +35,9 @@ STATE_FAULT = mavlink.PRESSOR_STATE_FAULT
 LINK_LOCKSTEP = mavlink.PRESSOR_LINK_MODE_LOCKSTEP
 LINK_REALTIME = mavlink.PRESSOR_LINK_MODE_REALTIME
 
-#: Dialect semantics version both ends must announce.
-PROTOCOL_VERSION = 1
+#: Dialect semantics version both ends must announce (2: the hello carries drug, concentration and
+#: pump maximum).
+PROTOCOL_VERSION = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,6 +62,15 @@ class Hello:
         Sender's role (``ROLE_RUNTIME`` / ``ROLE_DEVICE``); filled in on receipt.
     protocol_version
         Dialect semantics version of the sender.
+    drug
+        Drug in the syringe (device) or the one the controller was designed for (runtime), at
+        most 16 ASCII characters; empty when not announced.
+    concentration_ug_ml
+        Drug concentration (µg/ml): the syringe's (device) or the one the controller's gain
+        units assume (runtime); 0 when not announced.
+    pump_max_ml_h
+        Largest rate (ml/h) the pump delivers (device) or the controller commands (runtime); 0
+        when not announced.
     """
 
     name: str
@@ -71,6 +81,9 @@ class Hello:
     link_mode: int = LINK_LOCKSTEP
     role: int = 0
     protocol_version: int = PROTOCOL_VERSION
+    drug: str = ""
+    concentration_ug_ml: float = 0.0
+    pump_max_ml_h: float = 0.0
 
 
 class Heartbeat(NamedTuple):

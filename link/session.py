@@ -36,6 +36,12 @@ _MAV_STATE = {
 }
 
 
+def _text(value: bytes | str) -> str:
+    """A ``char[N]`` field as text (pymavlink hands out bytes or str, NUL padding removed)."""
+    text = value.decode("ascii", "replace") if isinstance(value, bytes) else value
+    return text.rstrip("\0")
+
+
 class ManualClock:
     """Run clock set by its owner (virtual time, s). Calling it returns the current time."""
 
@@ -157,9 +163,9 @@ class Session:
         self.codec.restart()
 
     def send_hello(self, hello: Hello, *, flush: bool = True) -> None:
-        """Announce this end (scenario / controller, seed, period, noise, length, mode)."""
+        """Announce this end (scenario / controller, seed, period, noise, length, mode, drug,
+        concentration, pump maximum)."""
         self._hello = hello
-        name = hello.name.encode("ascii", "replace")[:32]
         self.send(
             self.codec.mav.pressor_hello_encode(
                 hello.sample_period_s,
@@ -169,7 +175,10 @@ class Session:
                 self.ROLE,
                 hello.link_mode,
                 hello.protocol_version,
-                name,
+                hello.name.encode("ascii", "replace")[:32],
+                hello.drug.encode("ascii", "replace")[:16],
+                hello.concentration_ug_ml,
+                hello.pump_max_ml_h,
             ),
             flush=flush,
         )
@@ -263,9 +272,8 @@ class Session:
         self.peer_heartbeat = Heartbeat(tick, state)
 
     def _on_hello(self, msg: Any) -> None:
-        name = msg.name.decode("ascii", "replace") if isinstance(msg.name, bytes) else msg.name
         self.peer_hello = Hello(
-            name,
+            _text(msg.name),
             msg.patient_seed,
             msg.sample_period_s,
             msg.sensor_noise_mmhg,
@@ -273,6 +281,9 @@ class Session:
             msg.link_mode,
             msg.role,
             msg.protocol_version,
+            _text(msg.drug),
+            msg.concentration_ug_ml,
+            msg.pump_max_ml_h,
         )
 
     # ---------------------------------------------------------------- handshake

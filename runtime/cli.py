@@ -8,6 +8,11 @@ schedules on its own online estimate by default (``--schedule estimated``): a re
 send no K, T, τ, and a device that never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs
 a device that sends them. ``pressor run --fault ...`` scores a schedule injected by that device;
 the device's scenario is not known here, so the step-window metrics and ``disturbances`` are null.
+``pressor run --target-mmhg`` (or ``--target-file``, changed live with it or ``--target-stdin``)
+sets the MAP target on the runtime side instead of the device's MAP_TARGET; the device's hello must
+announce the drug and concentration the controller assumes (``--drug``,
+``--concentration-ug-ml``) and a pump that reaches the controller's maximum rate, else the run
+refuses to start (:mod:`runtime.clinician`).
 ``pressor sil``, which also starts the device, is served by the front door (:mod:`pressor.sil`).
 
 ``pressor keygen`` writes a fresh signing key (default :func:`link.signing.default_key_path`):
@@ -27,6 +32,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from contracts.usage import UsageError, UsageParser, usage_exit
+from runtime.clinician import add_clinician_options, clinician_input
 from runtime.config import (
     DEFAULT_RATE_HZ,
     MAX_RATE_HZ,
@@ -48,6 +54,7 @@ def _run_parser() -> UsageParser:
         default=0,
         help="stop after N ticks, one per sample period (default 0: when the device ends)",
     )
+    add_clinician_options(p)
     return p
 
 
@@ -58,7 +65,7 @@ def _main_run(argv: Sequence[str]) -> int:
     from runtime.summary import finish
 
     args = _run_parser().parse_args(argv)
-    config = run_config(args, ticks=args.ticks)
+    config = run_config(args, ticks=args.ticks, clinician=clinician_input(args))
     try:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises several types for a bad path/URL

@@ -18,6 +18,7 @@ from typing import Any
 
 from contracts.faults import FaultSpec, FaultSpecError, parse_faults
 from contracts.usage import UsageError
+from runtime.clinician import ClinicianInput
 from runtime.cpu_latency import MAX_LATENCY_US
 from runtime.estimation.schedule import SOURCES
 
@@ -74,6 +75,9 @@ class RunConfig:
     schedule
         The scheduling source (``oracle``, ``estimated``, ``nominal``;
         :mod:`runtime.estimation.schedule`).
+    clinician
+        ``pressor run``'s target and syringe options (:mod:`runtime.clinician`); ``None``
+        (``pressor sil``): the device's target, the shipped designs' drug and concentration.
     """
 
     controller: str
@@ -92,6 +96,7 @@ class RunConfig:
     ticks: int = 0
     schedule: str = "oracle"
     signed: bool = True
+    clinician: ClinicianInput | None = None
 
     @property
     def period_s(self) -> float:
@@ -215,7 +220,9 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
     )
 
 
-def run_config(args: argparse.Namespace, ticks: int = 0) -> RunConfig:
+def run_config(
+    args: argparse.Namespace, ticks: int = 0, clinician: ClinicianInput | None = None
+) -> RunConfig:
     """Check the options :func:`add_run_options` parsed and freeze them into a :class:`RunConfig`.
 
     Parameters
@@ -224,6 +231,8 @@ def run_config(args: argparse.Namespace, ticks: int = 0) -> RunConfig:
         The parsed namespace.
     ticks
         ``pressor run --ticks`` (0: until the device ends).
+    clinician
+        ``pressor run``'s checked target and syringe options (:func:`runtime.clinician.clinician_input`).
 
     Raises
     ------
@@ -261,6 +270,7 @@ def run_config(args: argparse.Namespace, ticks: int = 0) -> RunConfig:
         ticks=ticks,
         schedule=args.schedule,
         signed=not args.no_signing,
+        clinician=clinician,
     )
 
 

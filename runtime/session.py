@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.usage import UsageError, run_command
+from runtime.clinician import ClinicianInput, check_device_hello
 from runtime.config import RunConfig, load_controller
 from runtime.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
 from runtime.placement import Pinned
@@ -80,19 +81,35 @@ def run_runtime(
     from runtime.loop import Loop
     from runtime.supervisor import Supervisor
     from runtime.supervisor_config import supervisor_config_for
+    from runtime.target_source import TargetedLoop, TargetSource
 
     period_s = config.period_s
     controller = load_controller(config.controller, period_s)
+    clinician = config.clinician or ClinicianInput()
     tlog = TlogWriter(config.tlog) if config.tlog is not None else None
     ok = False
-    # only the oracle schedules on the device's SCHEDULING_PARAMS: otherwise a device may send none
-    ep = RuntimeSession(port, signing=signing, tlog=tlog, require_sched=config.schedule == "oracle")
+    # only the oracle schedules on the device's SCHEDULING_PARAMS: otherwise a device may send
+    # none; with the runtime's own target the device's MAP_TARGET is not needed either
+    ep = RuntimeSession(
+        port,
+        signing=signing,
+        tlog=tlog,
+        require_sched=config.schedule == "oracle",
+        require_target=clinician.target_mmhg is None,
+    )
     recorder = None
     try:
         mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
         spec = config.controller
         name = Path(spec).stem if spec not in ("pi", "lpv") else spec
-        hello = Hello(name[:32], sample_period_s=period_s, link_mode=mode)
+        hello = Hello(
+            name[:32],
+            sample_period_s=period_s,
+            link_mode=mode,
+            drug=clinician.drug,
+            concentration_ug_ml=clinician.concentration_ug_ml,
+            pump_max_ml_h=controller.max_rate_ml_h,
+        )
         waited = 0.0
         while True:  # short attempts, so a device process that died is noticed at once
             if (stop := stop_requested()) is not None:
@@ -113,6 +130,7 @@ def run_runtime(
                 f"device sample_period_s {peer.sample_period_s} s differs from --rate"
                 f" {config.rate_hz} Hz (period {period_s} s)"
             )
+        check_device_hello(peer, controller.max_rate_ml_h, clinician)
         if config.schedule != "oracle":  # oracle summaries keep their pre-schedule bytes
             identity = {**identity, "schedule": config.schedule}
         identity = {
@@ -141,15 +159,18 @@ def run_runtime(
                     for f in config.fault_specs
                 ]
             )
-        loop = Loop(
-            controller,
-            sup,
-            ep,
-            recorder=recorder,
-            heartbeat_every=round(config.rate_hz),
-            on_tick=on_tick,
-            schedule=make_schedule(config.schedule, period_s),
-        )
+        loop_kw: dict[str, Any] = {
+            "recorder": recorder,
+            "heartbeat_every": round(config.rate_hz),
+            "on_tick": on_tick,
+            "schedule": make_schedule(config.schedule, period_s),
+        }
+        target = None
+        if clinician.target_mmhg is None:
+            loop = Loop(controller, sup, ep, **loop_kw)
+        else:  # the runtime's own target, in place of the device's (runtime.target_source)
+            target = TargetSource(clinician)
+            loop = TargetedLoop(controller, sup, ep, target=target, **loop_kw)
         with CpuLatencyRequest(config.cpu_latency_us) as wake:
             if config.realtime:
                 result = loop.run_realtime(peer.n_ticks if peer.n_ticks else config.ticks)
@@ -181,6 +202,13 @@ def run_runtime(
             faults=report,
             events=events,
         )
+        if config.clinician is not None:  # pressor run: where the target came from, the syringe
+            summary["target"] = {"source": "device"} if target is None else target.summary()
+            summary["syringe"] = {
+                "drug": clinician.drug,
+                "concentration_ug_ml": clinician.concentration_ug_ml,
+                "pump_max_ml_h": float(peer.pump_max_ml_h),
+            }
         ok = True
         return summary, result
     finally:

@@ -36,6 +36,7 @@ import numpy as np
 from contracts.files import write_atomic
 from contracts.metrics import reachable_band_mmhg, run_metrics
 from link.counters import DROP_CAUSES
+from runtime.clinician import describe_target
 from runtime.config import RunConfig
 from runtime.trajectory import held_delivered_ml_h
 
@@ -184,6 +185,8 @@ def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = No
         f"  ({summary['ended']})",
         file=out,
     )
+    if "target" in summary:  # pressor run
+        print(describe_target(summary["target"]), file=out)
     print("metrics (defined in docs/METRICS.md):", file=out)
     metrics = summary["metrics"]
     for k, v in metrics.items():

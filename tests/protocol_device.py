@@ -138,6 +138,8 @@ class DeviceConfig:
     send_scheduling: bool = True
     patient: tuple[float, float, float, float] = (0.4, 120.0, 30.0, 55.0)  # K, T s, tau s, mmHg
     pump_max_ml_h: float = 120.0
+    drug: str = "phenylephrine"
+    concentration_ug_ml: float = 100.0
     noise_mmhg: float = 0.5
     quantum_mmhg: float | None = None
     monitor_period_s: float | None = None  # None: a new value every tick
@@ -176,8 +178,11 @@ def hello_fields(d: ModuleType, cfg: DeviceConfig) -> dict[str, Any]:
         "sensor_noise_mmhg": cfg.noise_mmhg,
         "role": d.PRESSOR_ROLE_DEVICE,
         "link_mode": d.PRESSOR_LINK_MODE_REALTIME if cfg.realtime else d.PRESSOR_LINK_MODE_LOCKSTEP,
-        "protocol_version": 1,
+        "protocol_version": 2,
         "name": cfg.name.encode("ascii"),
+        "drug": cfg.drug.encode("ascii"),
+        "concentration_ug_ml": cfg.concentration_ug_ml,
+        "pump_max_ml_h": cfg.pump_max_ml_h,
     }
 
 

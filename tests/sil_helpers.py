@@ -1,12 +1,17 @@
 """Shared helpers for end-to-end tests: run the ``pressor`` CLI in a subprocess, read a .rrd,
-spawn ``pressor device`` on a pty and drain its link until it exits."""
+spawn ``pressor device`` on a pty and drain its link until it exits, bridge two ttys."""
 
 from __future__ import annotations
 
 import os
+import select
 import subprocess
 import sys
+import threading
 import time
+import tty
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 os.environ["CI"] = "1"  # the rerun CLI writes analytics files otherwise
@@ -79,3 +84,37 @@ def poll_until_exit(proc: subprocess.Popen, ep: RuntimeSession, timeout_s: float
             ep.poll(0.05)
         except LinkClosedError:
             break
+
+
+def _pty() -> tuple[int, int, str]:
+    leader, follower = os.openpty()
+    tty.setraw(follower)
+    return leader, follower, os.ttyname(follower)
+
+
+@contextmanager
+def bridged_ttys() -> Iterator[tuple[str, str]]:
+    """Two tty paths whose bytes cross over, like a null-modem cable: each end opens the follower
+    of its own pty and a thread copies bytes between the two leaders (what ``socat`` does)."""
+    (la, fa, pa), (lb, fb, pb) = _pty(), _pty()
+    stop = threading.Event()
+
+    def bridge() -> None:
+        while not stop.is_set():
+            ready, _, _ = select.select([la, lb], [], [], 0.05)
+            for fd in ready:
+                try:
+                    data = os.read(fd, 65536)
+                except OSError:
+                    continue
+                os.write(lb if fd == la else la, data)
+
+    thread = threading.Thread(target=bridge, daemon=True)
+    thread.start()
+    try:
+        yield pa, pb
+    finally:
+        stop.set()
+        thread.join()
+        for fd in (la, fa, lb, fb):
+            os.close(fd)

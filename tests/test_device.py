@@ -252,3 +252,43 @@ def test_lockstep_over_a_corrupting_link_recovers_and_keeps_the_simulated_trajec
     c = rt.counters
     assert c.bad_crc + c.junk_bytes > 0 and c.seq_gaps > 0 and c.incomplete() > 0
     assert out["result"].counters["retransmits"] > 0 and c.retransmits > 0
+
+
+def test_device_hello_announces_the_syringe_and_the_pump_maximum_its_pump_keeps_to():
+    pair = PtyPair.open()
+    ep = RuntimeSession(pair.leader_port())
+    proc = spawn_device(
+        pair,
+        *("--duration", "0.5", "--pump-max-ml-h", "100"),
+        *("--drug", "Norepinephrine", "--concentration-ug-ml", "16"),
+    )
+    peer = ep.handshake(Hello("pi"), timeout_s=30.0)
+    assert (peer.drug, peer.concentration_ug_ml, peer.pump_max_ml_h) == ("norepinephrine", 16, 100)
+    delivered = []
+    for _ in range(peer.n_ticks):
+        x = ep.wait_for_sample(10.0)
+        assert x is not None
+        if ep.pump_status is not None and ep.pump_status.tick == x.tick:
+            delivered.append(ep.pump_status.delivered_ml_h)
+        ep.send_command(x.tick, 120.0)  # above this pump's maximum: it clamps
+    assert _finish(proc, pair, ep) == 0
+    assert delivered and set(delivered) == {100.0}
+
+
+def test_device_defaults_announce_the_shipped_designs_syringe_and_the_scenarios_pump():
+    pair = PtyPair.open()
+    ep = RuntimeSession(pair.leader_port())
+    proc = spawn_device(pair, "--duration", "0.1")
+    peer = ep.handshake(Hello("pi"), timeout_s=30.0)
+    assert (peer.drug, peer.concentration_ug_ml, peer.pump_max_ml_h) == ("phenylephrine", 100, 120)
+    x = ep.wait_for_sample(10.0)
+    ep.send_command(x.tick, 0.0)
+    assert _finish(proc, pair, ep) == 0
+
+
+def test_device_pump_maximum_outside_the_pumps_range_exits_2_with_one_line(capsys):
+    rc = device_main("device", ["--port", "x", "--no-signing", "--pump-max-ml-h", "0"])
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert (
+        rc == 2 and line == "pressor device: --pump-max-ml-h: value 0.0 outside (0.0, 10000.0] ml/h"
+    )

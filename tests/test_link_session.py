@@ -220,3 +220,26 @@ def test_each_heartbeat_is_preceded_by_a_standard_mavlink_heartbeat_for_ground_t
     )
     assert std.system_status == mavlink.MAV_STATE_STANDBY and std.custom_mode == STATE_FINISHED
     assert rt.peer_heartbeat == (7, STATE_FINISHED)
+
+
+def test_the_hello_carries_drug_concentration_and_pump_maximum_both_ways():
+    a, b = loop_pair()
+    dev, rt = DeviceSession(a), RuntimeSession(b)
+    syringe = {"drug": "phenylephrine", "concentration_ug_ml": 100.0}
+    dev.send_hello(Hello("paper-tracking", 3, pump_max_ml_h=110.5, **syringe))
+    got = rt.wait_for_hello(1.0)
+    assert (got.name, got.patient_seed, got.protocol_version) == ("paper-tracking", 3, 2)
+    assert (got.drug, got.concentration_ug_ml, got.pump_max_ml_h) == ("phenylephrine", 100.0, 110.5)
+    rt.send_hello(Hello("pi", pump_max_ml_h=120.0, **syringe))
+    back = dev.wait_for_hello(1.0)
+    assert (back.name, back.drug, back.pump_max_ml_h) == ("pi", "phenylephrine", 120.0)
+
+
+def test_a_protocol_1_peer_still_decodes_and_is_refused_naming_the_version():
+    # the new hello fields are MAVLink 2 extensions: they do not enter CRC_EXTRA, so version 1's
+    # hello (the same frame without them) still decodes and the handshake can say what is wrong
+    assert mavlink.MAVLink_pressor_hello_message.crc_extra == 238  # version 1's
+    a, b = loop_pair()
+    DeviceSession(b).send_hello(Hello("old-device", protocol_version=1))
+    with pytest.raises(LinkError, match="peer protocol_version 1, expected 2"):
+        RuntimeSession(a).handshake(Hello("pi"), timeout_s=1.0)

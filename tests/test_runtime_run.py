@@ -1,57 +1,30 @@
 """``pressor run``: the runtime alone on a serial port, against a device started by hand.
 
-The device and the runtime each open the follower of their own pty; a thread copies bytes
-between the two leaders (what ``socat`` does between two ports), so both ends are real ttys.
+The device and the runtime each open the follower of their own pty, bridged like a null-modem
+cable (:func:`tests.sil_helpers.bridged_ttys`), so both ends are real ttys.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import select
 import subprocess
 import sys
-import threading
-import tty
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from tests.sil_helpers import ROOT, pressor
+from tests.sil_helpers import ROOT, bridged_ttys, pressor
 
 SEED = 4
-
-
-def _pty() -> tuple[int, int, str]:
-    leader, follower = os.openpty()
-    tty.setraw(follower)
-    return leader, follower, os.ttyname(follower)
 
 
 @pytest.fixture
 def bridged_ports() -> Iterator[tuple[str, str]]:
     """Two tty paths whose bytes cross over, like a null-modem cable."""
-    (la, fa, pa), (lb, fb, pb) = _pty(), _pty()
-    stop = threading.Event()
-
-    def bridge() -> None:
-        while not stop.is_set():
-            ready, _, _ = select.select([la, lb], [], [], 0.05)
-            for fd in ready:
-                try:
-                    data = os.read(fd, 65536)
-                except OSError:
-                    continue
-                os.write(lb if fd == la else la, data)
-
-    thread = threading.Thread(target=bridge, daemon=True)
-    thread.start()
-    yield pa, pb
-    stop.set()
-    thread.join()
-    for fd in (la, fa, lb, fb):
-        os.close(fd)
+    with bridged_ttys() as ports:
+        yield ports
 
 
 def test_run_against_a_hand_started_device_scores_its_faults_without_scenario_events(

@@ -44,7 +44,9 @@ def test_a_signed_tlog_decodes_with_stock_mavlogdump_by_the_readme_command(tmp_p
     tlog = TlogWriter(tmp_path / "run.tlog")
     dev = DeviceSession(a, signing=key, clock=ManualClock())
     rt = RuntimeSession(b, signing=key, tlog=tlog)
-    dev.send_hello(Hello("paper-tracking", 7, 0.1, 0.0, 3))
+    dev.send_hello(
+        Hello("paper-tracking", 7, 0.1, 0.0, 3, drug="phenylephrine", pump_max_ml_h=120.0)
+    )
     for k in range(3):
         dev.send_tick(tick_inputs(k, 0.1 * k, 70.0 + k))
         drain(rt)
@@ -62,7 +64,8 @@ def test_a_signed_tlog_decodes_with_stock_mavlogdump_by_the_readme_command(tmp_p
     out = subprocess.run(words, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "UNKNOWN" not in out.stdout
-    assert re.search(r"PRESSOR_HELLO \{.*patient_seed : 7.*name : paper-tracking\}", out.stdout)
+    hello = r"PRESSOR_HELLO \{.*patient_seed : 7.*name : paper-tracking, drug : phenylephrine"
+    assert re.search(hello + r".*pump_max_ml_h : 120\.0\}", out.stdout)  # extension fields too
     ticks = [int(t) for t in re.findall(r"MAP_SAMPLE \{sim_time_s : \S+ tick : (\d+),", out.stdout)]
     assert ticks == [0, 1, 2]
     assert re.search(r": HEARTBEAT \{type : 18, autopilot : 8, .*system_status : 4", out.stdout)

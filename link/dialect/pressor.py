@@ -993,22 +993,22 @@ class MAVLink_pressor_hello_message(MAVLink_message):
 
     id = MAVLINK_MSG_ID_PRESSOR_HELLO
     msgname = "PRESSOR_HELLO"
-    fieldnames = ["sample_period_s", "patient_seed", "n_ticks", "sensor_noise_mmhg", "role", "link_mode", "protocol_version", "name"]
-    ordered_fieldnames = ["sample_period_s", "patient_seed", "n_ticks", "sensor_noise_mmhg", "role", "link_mode", "protocol_version", "name"]
-    fieldtypes = ["double", "uint32_t", "uint32_t", "float", "uint8_t", "uint8_t", "uint8_t", "char"]
+    fieldnames = ["sample_period_s", "patient_seed", "n_ticks", "sensor_noise_mmhg", "role", "link_mode", "protocol_version", "name", "drug", "concentration_ug_ml", "pump_max_ml_h"]
+    ordered_fieldnames = ["sample_period_s", "patient_seed", "n_ticks", "sensor_noise_mmhg", "role", "link_mode", "protocol_version", "name", "drug", "concentration_ug_ml", "pump_max_ml_h"]
+    fieldtypes = ["double", "uint32_t", "uint32_t", "float", "uint8_t", "uint8_t", "uint8_t", "char", "char", "float", "float"]
     fielddisplays_by_name: Dict[str, str] = {}
     fieldenums_by_name: Dict[str, str] = {"role": "PRESSOR_ROLE", "link_mode": "PRESSOR_LINK_MODE"}
-    fieldunits_by_name: Dict[str, str] = {"sample_period_s": "s", "sensor_noise_mmhg": "mmHg"}
-    native_format = bytearray(b"<dIIfBBBc")
-    orders = [0, 1, 2, 3, 4, 5, 6, 7]
-    lengths = [1, 1, 1, 1, 1, 1, 1, 1]
-    array_lengths = [0, 0, 0, 0, 0, 0, 0, 32]
+    fieldunits_by_name: Dict[str, str] = {"sample_period_s": "s", "sensor_noise_mmhg": "mmHg", "concentration_ug_ml": "ug/ml", "pump_max_ml_h": "ml/h"}
+    native_format = bytearray(b"<dIIfBBBccff")
+    orders = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10]
+    lengths = [1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1]
+    array_lengths = [0, 0, 0, 0, 0, 0, 0, 32, 16, 0, 0]
     crc_extra = 238
-    unpacker = struct.Struct("<dIIfBBB32s")
+    unpacker = struct.Struct("<dIIfBBB32s16sff")
     instance_field = None
     instance_offset = -1
 
-    def __init__(self, sample_period_s: float, patient_seed: int, n_ticks: int, sensor_noise_mmhg: float, role: int, link_mode: int, protocol_version: int, name: bytes):
+    def __init__(self, sample_period_s: float, patient_seed: int, n_ticks: int, sensor_noise_mmhg: float, role: int, link_mode: int, protocol_version: int, name: bytes, drug: bytes = b"", concentration_ug_ml: float = 0, pump_max_ml_h: float = 0):
         MAVLink_message.__init__(self, MAVLink_pressor_hello_message.id, MAVLink_pressor_hello_message.msgname)
         self._fieldnames = MAVLink_pressor_hello_message.fieldnames
         self._instance_field = MAVLink_pressor_hello_message.instance_field
@@ -1022,9 +1022,13 @@ class MAVLink_pressor_hello_message(MAVLink_message):
         self.protocol_version = protocol_version
         self._name_raw = name
         self.name = name.split(b"\x00", 1)[0].decode("ascii", errors="replace")
+        self._drug_raw = drug
+        self.drug = drug.split(b"\x00", 1)[0].decode("ascii", errors="replace")
+        self.concentration_ug_ml = concentration_ug_ml
+        self.pump_max_ml_h = pump_max_ml_h
 
     def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
-        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.sample_period_s, self.patient_seed, self.n_ticks, self.sensor_noise_mmhg, self.role, self.link_mode, self.protocol_version, self._name_raw), force_mavlink1=force_mavlink1)
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.sample_period_s, self.patient_seed, self.n_ticks, self.sensor_noise_mmhg, self.role, self.link_mode, self.protocol_version, self._name_raw, self._drug_raw, self.concentration_ug_ml, self.pump_max_ml_h), force_mavlink1=force_mavlink1)
 
 
 # Define name on the class for backwards compatibility (it is now msgname).
@@ -1720,7 +1724,7 @@ class MAVLink(object):
         """
         self.send(self.pressor_heartbeat_encode(tick, role, state), force_mavlink1=force_mavlink1)
 
-    def pressor_hello_encode(self, sample_period_s: float, patient_seed: int, n_ticks: int, sensor_noise_mmhg: float, role: int, link_mode: int, protocol_version: int, name: bytes) -> MAVLink_pressor_hello_message:
+    def pressor_hello_encode(self, sample_period_s: float, patient_seed: int, n_ticks: int, sensor_noise_mmhg: float, role: int, link_mode: int, protocol_version: int, name: bytes, drug: bytes = b"", concentration_ug_ml: float = 0, pump_max_ml_h: float = 0) -> MAVLink_pressor_hello_message:
         """
         Announcement sent on connect (repeated until answered). The device
         describes the run so the runtime can label its summary; the
@@ -1732,13 +1736,16 @@ class MAVLink(object):
         sensor_noise_mmhg         : Standard deviation of the MAP sensor noise. [mmHg] (type:float)
         role                      : Sender's role. (type:uint8_t, values:PRESSOR_ROLE)
         link_mode                 : Time keeping of the run. (type:uint8_t, values:PRESSOR_LINK_MODE)
-        protocol_version          : Version of this dialect's message semantics (currently 1). (type:uint8_t)
+        protocol_version          : Version of this dialect's message semantics (currently 2: the hello carries the drug, its concentration and the pump maximum). (type:uint8_t)
         name                      : Scenario name (device) or controller name (runtime). (type:char)
+        drug                      : Drug in the syringe (device) or the one the controller was designed for (runtime), lower-case ASCII, e.g. phenylephrine. (type:char)
+        concentration_ug_ml        : Drug concentration in the syringe (device) or the one the controller's gain units assume (runtime). [ug/ml] (type:float)
+        pump_max_ml_h             : Largest rate the pump delivers (device) or the controller commands (runtime). [ml/h] (type:float)
 
         """
-        return MAVLink_pressor_hello_message(sample_period_s, patient_seed, n_ticks, sensor_noise_mmhg, role, link_mode, protocol_version, name)
+        return MAVLink_pressor_hello_message(sample_period_s, patient_seed, n_ticks, sensor_noise_mmhg, role, link_mode, protocol_version, name, drug, concentration_ug_ml, pump_max_ml_h)
 
-    def pressor_hello_send(self, sample_period_s: float, patient_seed: int, n_ticks: int, sensor_noise_mmhg: float, role: int, link_mode: int, protocol_version: int, name: bytes, force_mavlink1: bool = False) -> None:
+    def pressor_hello_send(self, sample_period_s: float, patient_seed: int, n_ticks: int, sensor_noise_mmhg: float, role: int, link_mode: int, protocol_version: int, name: bytes, drug: bytes = b"", concentration_ug_ml: float = 0, pump_max_ml_h: float = 0, force_mavlink1: bool = False) -> None:
         """
         Announcement sent on connect (repeated until answered). The device
         describes the run so the runtime can label its summary; the
@@ -1750,11 +1757,14 @@ class MAVLink(object):
         sensor_noise_mmhg         : Standard deviation of the MAP sensor noise. [mmHg] (type:float)
         role                      : Sender's role. (type:uint8_t, values:PRESSOR_ROLE)
         link_mode                 : Time keeping of the run. (type:uint8_t, values:PRESSOR_LINK_MODE)
-        protocol_version          : Version of this dialect's message semantics (currently 1). (type:uint8_t)
+        protocol_version          : Version of this dialect's message semantics (currently 2: the hello carries the drug, its concentration and the pump maximum). (type:uint8_t)
         name                      : Scenario name (device) or controller name (runtime). (type:char)
+        drug                      : Drug in the syringe (device) or the one the controller was designed for (runtime), lower-case ASCII, e.g. phenylephrine. (type:char)
+        concentration_ug_ml        : Drug concentration in the syringe (device) or the one the controller's gain units assume (runtime). [ug/ml] (type:float)
+        pump_max_ml_h             : Largest rate the pump delivers (device) or the controller commands (runtime). [ml/h] (type:float)
 
         """
-        self.send(self.pressor_hello_encode(sample_period_s, patient_seed, n_ticks, sensor_noise_mmhg, role, link_mode, protocol_version, name), force_mavlink1=force_mavlink1)
+        self.send(self.pressor_hello_encode(sample_period_s, patient_seed, n_ticks, sensor_noise_mmhg, role, link_mode, protocol_version, name, drug, concentration_ug_ml, pump_max_ml_h), force_mavlink1=force_mavlink1)
 
     def map_sample_encode(self, sim_time_s: float, tick: int, map_mmhg: float, quality: int) -> MAVLink_map_sample_message:
         """

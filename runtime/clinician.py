@@ -1,0 +1,241 @@
+"""The clinician's input on the runtime side: the MAP target and the syringe the controller assumes.
+
+``pressor run`` takes the target from the device's MAP_TARGET by default. ``--target-mmhg`` (or
+``--target-file``) makes it the runtime's own: the device's value is then ignored and MAP_TARGET is
+no longer required for a tick. ``--target-file`` and ``--target-stdin`` change it while the loop
+runs (:mod:`runtime.target_source`). ``--drug`` and ``--concentration-ug-ml`` state the drug and
+concentration the loaded controller's gain units assume (the shipped controllers carry neither:
+:data:`contracts.controller.DESIGN_DRUG`, :data:`~contracts.controller.DESIGN_CONCENTRATION_UG_ML`);
+:func:`check_device_hello` refuses a device whose hello announces another drug, another
+concentration or a pump that cannot reach the controller's maximum rate (docs/PROTOCOL.md,
+"Clinician's input").
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
+from contracts.usage import UsageError
+
+#: MAP targets the runtime accepts (mmHg), from any source
+TARGET_MIN_MMHG = 50.0
+TARGET_MAX_MMHG = 120.0
+#: largest concentration accepted (µg/ml)
+MAX_CONCENTRATION_UG_ML = 100000.0
+#: longest drug name (the hello's ``drug`` is char[16])
+MAX_DRUG_CHARS = 16
+
+
+@dataclass(frozen=True)
+class ClinicianInput:
+    """What ``pressor run`` was told about the target and the syringe (checked).
+
+    Attributes
+    ----------
+    target_mmhg
+        The runtime's starting target (mmHg); ``None``: the device's MAP_TARGET is used.
+    target_file
+        File re-read whenever it changes (one number, mmHg); ``None``: none.
+    target_stdin
+        Read a new target from each stdin line while running.
+    drug
+        Drug the controller was designed for (lower case).
+    concentration_ug_ml
+        Concentration (µg/ml) the controller's gain units assume.
+    """
+
+    target_mmhg: float | None = None
+    target_file: Path | None = None
+    target_stdin: bool = False
+    drug: str = DESIGN_DRUG
+    concentration_ug_ml: float = DESIGN_CONCENTRATION_UG_ML
+
+    @property
+    def target_source(self) -> str:
+        """``runtime`` when the runtime sets the target, else ``device``."""
+        return "device" if self.target_mmhg is None else "runtime"
+
+
+def parse_target(text: str) -> float:
+    """A MAP target (mmHg) from ``text``; ``ValueError`` naming the allowed range otherwise."""
+    allowed = f"allowed [{TARGET_MIN_MMHG:g}, {TARGET_MAX_MMHG:g}] mmHg"
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{text.strip()!r}: not a number ({allowed})") from None
+    if not TARGET_MIN_MMHG <= value <= TARGET_MAX_MMHG:  # False for NaN too
+        raise ValueError(f"{text.strip()!r}: {allowed}")
+    return value
+
+
+def read_target_file(path: Path) -> float:
+    """The target (mmHg) ``path`` holds; ``ValueError`` if it cannot be read or is out of range."""
+    try:
+        text = path.read_text(encoding="ascii", errors="replace")
+    except OSError as exc:
+        raise ValueError(f"cannot read: {exc.strerror}") from None
+    return parse_target(text)
+
+
+def argtype(name: str, parse: Any) -> Any:
+    """An argparse type for option ``name`` from a parser raising ``ValueError``."""
+
+    def convert(text: str) -> Any:
+        try:
+            return parse(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(f"{name} {exc}") from None
+
+    return convert
+
+
+def parse_concentration(text: str) -> float:
+    """A concentration (µg/ml) from ``text``; ``ValueError`` naming the allowed range otherwise."""
+    allowed = f"allowed (0, {MAX_CONCENTRATION_UG_ML:g}] ug/ml"
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{text!r}: not a number ({allowed})") from None
+    if not 0.0 < value <= MAX_CONCENTRATION_UG_ML:  # False for NaN too
+        raise ValueError(f"{text!r}: {allowed}")
+    return value
+
+
+def parse_drug(text: str) -> str:
+    """A drug name (lower case, 1-16 ASCII characters); ``ValueError`` otherwise."""
+    name = text.strip().lower()
+    if not (name and name.isascii() and len(name) <= MAX_DRUG_CHARS):
+        raise ValueError(f"{text!r}: allowed 1 to {MAX_DRUG_CHARS} ASCII characters")
+    return name
+
+
+def add_clinician_options(p: argparse.ArgumentParser) -> None:
+    """Add ``--target-mmhg``, ``--target-file``, ``--target-stdin``, ``--drug`` and
+    ``--concentration-ug-ml`` to ``p`` (``pressor run``)."""
+    rng = f"allowed [{TARGET_MIN_MMHG:g}, {TARGET_MAX_MMHG:g}]"
+    p.add_argument(
+        "--target-mmhg",
+        type=argtype("--target-mmhg", parse_target),
+        default=None,
+        metavar="MMHG",
+        help=f"the runtime's own MAP target (mmHg, {rng}); the device's MAP_TARGET is"
+        " then ignored and not required (default: the device's MAP_TARGET)",
+    )
+    p.add_argument(
+        "--target-file",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help=f"a file holding one number, the MAP target (mmHg, {rng}): read at start (the"
+        " starting target, instead of --target-mmhg) and again whenever it changes; a bad value"
+        " is refused with one line on stderr and the target kept (default: none)",
+    )
+    p.add_argument(
+        "--target-stdin",
+        action="store_true",
+        help=f"read a new MAP target (mmHg, {rng}) from each line on stdin while running; needs"
+        " --target-mmhg or --target-file for the starting target (default: off)",
+    )
+    p.add_argument(
+        "--drug",
+        type=argtype("--drug", parse_drug),
+        default=DESIGN_DRUG,
+        help="drug the controller was designed for; the device's hello must announce the same"
+        f" (default: {DESIGN_DRUG})",
+    )
+    p.add_argument(
+        "--concentration-ug-ml",
+        type=argtype("--concentration-ug-ml", parse_concentration),
+        default=DESIGN_CONCENTRATION_UG_ML,
+        metavar="UG_ML",
+        help="syringe concentration the controller's gain K (mmHg per ml/h) assumes (ug/ml,"
+        f" default {DESIGN_CONCENTRATION_UG_ML:g}: the shipped designs'); the device's hello must"
+        " announce the same",
+    )
+
+
+def clinician_input(args: argparse.Namespace) -> ClinicianInput:
+    """Check the options :func:`add_clinician_options` parsed into a :class:`ClinicianInput`.
+
+    Raises
+    ------
+    contracts.usage.UsageError
+        Both ``--target-mmhg`` and ``--target-file``; ``--target-stdin`` without a starting
+        target; a target file that cannot be read or holds no valid target.
+    """
+    target = args.target_mmhg
+    if args.target_file is not None:
+        if target is not None:
+            raise UsageError(
+                "--target-mmhg and --target-file: choose one (the file holds the starting target)"
+            )
+        try:
+            target = read_target_file(args.target_file)
+        except ValueError as exc:
+            raise UsageError(f"--target-file {args.target_file}: {exc}") from None
+    if args.target_stdin and target is None:
+        raise UsageError("--target-stdin: needs a starting target (--target-mmhg or --target-file)")
+    return ClinicianInput(
+        target_mmhg=target,
+        target_file=args.target_file,
+        target_stdin=args.target_stdin,
+        drug=args.drug,
+        concentration_ug_ml=args.concentration_ug_ml,
+    )
+
+
+def check_device_hello(peer: Any, max_rate_ml_h: float, clinician: ClinicianInput) -> None:
+    """Refuse a device whose syringe or pump does not fit the loaded controller.
+
+    Parameters
+    ----------
+    peer
+        The device's :class:`link.Hello`.
+    max_rate_ml_h
+        The controller's largest command (ml/h).
+    clinician
+        The drug and concentration the controller assumes.
+
+    Raises
+    ------
+    contracts.usage.UsageError
+        One line naming both values: another drug, another concentration (beyond float32
+        rounding), or a pump maximum below the controller's (a pump that cannot deliver every
+        rate the controller commands; a larger pump maximum is fine: the runtime never commands
+        more than the controller's).
+    """
+    drug = peer.drug.strip().lower()
+    if drug != clinician.drug:
+        raise UsageError(
+            f"device drug {drug or '(none announced)'} differs from the controller's"
+            f" {clinician.drug} (--drug)"
+        )
+    conc, want = float(peer.concentration_ug_ml), clinician.concentration_ug_ml
+    if not math.isclose(conc, want, rel_tol=1e-6):
+        raise UsageError(
+            f"device concentration {conc:g} ug/ml differs from the controller's {want:g} ug/ml"
+            " (--concentration-ug-ml)"
+        )
+    pump_max = float(peer.pump_max_ml_h)
+    if not pump_max >= max_rate_ml_h * (1.0 - 1e-6):  # NaN refused too
+        raise UsageError(
+            f"device pump maximum {pump_max:g} ml/h differs from the controller's"
+            f" {max_rate_ml_h:g} ml/h: the pump cannot deliver every rate the controller commands"
+        )
+
+
+def describe_target(record: dict[str, Any]) -> str:
+    """One terminal line for the summary's ``target`` record (its source, changes, refusals)."""
+    if record["source"] == "device":
+        return "target: the device's MAP_TARGET"
+    text = f"target: the runtime's, {record['initial_mmhg']:g} mmHg"
+    for c in record["changes"]:
+        text += f"; at {c['sim_time_s']:g} s {c['old_mmhg']:g} -> {c['new_mmhg']:g} mmHg"
+    if record["refused"]:
+        text += f"; {record['refused']} refused"
+    return text
