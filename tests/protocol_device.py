@@ -169,6 +169,10 @@ class DeviceLog:
     outcome: str = ""
 
 
+#: the PRESSOR_HELLO protocol_version both ends must announce
+PROTOCOL_VERSION = 2
+
+
 def hello_fields(d: ModuleType, cfg: DeviceConfig) -> dict[str, Any]:
     """The device's PRESSOR_HELLO (the one place to change when the hello grows)."""
     return {
@@ -178,7 +182,7 @@ def hello_fields(d: ModuleType, cfg: DeviceConfig) -> dict[str, Any]:
         "sensor_noise_mmhg": cfg.noise_mmhg,
         "role": d.PRESSOR_ROLE_DEVICE,
         "link_mode": d.PRESSOR_LINK_MODE_REALTIME if cfg.realtime else d.PRESSOR_LINK_MODE_LOCKSTEP,
-        "protocol_version": 2,
+        "protocol_version": PROTOCOL_VERSION,
         "name": cfg.name.encode("ascii"),
         "drug": cfg.drug.encode("ascii"),
         "concentration_ug_ml": cfg.concentration_ug_ml,
@@ -301,7 +305,10 @@ class ProtocolDevice:
             while self.log.runtime_hello is None and time.monotonic() < resend_at:
                 for m in self._receive(resend_at - time.monotonic()):
                     if m.get_type() == "PRESSOR_HELLO":
-                        if m.role != self.d.PRESSOR_ROLE_RUNTIME or m.protocol_version != 1:
+                        if (
+                            m.role != self.d.PRESSOR_ROLE_RUNTIME
+                            or m.protocol_version != PROTOCOL_VERSION
+                        ):
                             raise LinkDown(f"bad runtime hello {m}")
                         self.log.runtime_hello = m
         self.t_start = time.monotonic()
