@@ -130,6 +130,14 @@ def run_runtime(
                 f"device sample_period_s {peer.sample_period_s} s differs from --rate"
                 f" {config.rate_hz} Hz (period {period_s} s)"
             )
+        if peer.link_mode != mode:  # the device's clock and ours would both think they lead
+            theirs, ours = (
+                "real time" if m == LINK_REALTIME else "lockstep" for m in (peer.link_mode, mode)
+            )
+            raise UsageError(
+                f"device runs {theirs} (hello link_mode {peer.link_mode}) but this runtime"
+                f" runs {ours}: {'add' if peer.link_mode == LINK_REALTIME else 'drop'} --realtime"
+            )
         check_device_hello(peer, controller.max_rate_ml_h, clinician)
         if config.schedule != "oracle":  # oracle summaries keep their pre-schedule bytes
             identity = {**identity, "schedule": config.schedule}

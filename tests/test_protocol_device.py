@@ -178,6 +178,18 @@ def test_realtime_signed_loop_keeps_up_in_auto_with_commands_in_range(
     assert len(run.log.commands) >= cfg.n_ticks // 2
 
 
+def test_realtime_device_and_lockstep_runtime_refuse_to_start_with_one_line(
+    dialect: ModuleType, tmp_path: Path
+) -> None:
+    key = write_key(tmp_path / "signing.key")
+    cfg = DeviceConfig(realtime=True, n_ticks=100, key=read_key(key), link_timeout_s=3.0)
+    run = drive(dialect, tmp_path, cfg, key)  # no --realtime
+    assert run.rc == 2
+    lines = (run.stdout + run.stderr).strip().splitlines()
+    assert len(lines) == 1 and "device runs real time" in lines[0], lines
+    assert "add --realtime" in lines[0] and not run.log.commands
+
+
 @pytest.mark.parametrize(
     ("device_key", "wall_clock", "cause"),
     [
