@@ -54,6 +54,7 @@ from hil_sim.device_options import (
     check_range,
     device_parser,
 )
+from hil_sim.truth import TruthLog
 from runtime.interrupt import exit_code, signal_name, stop_requested
 from runtime.placement import pin_thread
 
@@ -114,6 +115,8 @@ def _main(command: str, argv: Sequence[str]) -> int:
     tlog = TlogWriter(args.tlog) if args.tlog else None
     clock = ManualClock()
     ep = DeviceSession(port, signing=signing, clock=clock, tlog=tlog)
+    duration = world.scenario.duration_s if args.duration is None else args.duration
+    truth = TruthLog(round(duration * args.rate)) if args.truth_out else None
     ok = False
     try:
         result = run_device(
@@ -128,6 +131,7 @@ def _main(command: str, argv: Sequence[str]) -> int:
             link_faults=link_faults,
             drug=args.drug,
             concentration_ug_ml=args.concentration_ug_ml,
+            truth=truth,
         )
         ok = True
     except LinkClosedError:
@@ -140,6 +144,8 @@ def _main(command: str, argv: Sequence[str]) -> int:
         ep.close()
         if tlog is not None:
             tlog.close(commit=ok)  # a failed run never clobbers an earlier .tlog
+        if truth is not None:
+            truth.save(args.truth_out)  # whatever happened: the ticks played so far
     print(f"pressor {command}: {result.ended} after {result.ticks} ticks", file=sys.stderr)
     if (stop := stop_requested()) is not None and result.ended.startswith("interrupted"):
         return exit_code(stop)
@@ -217,6 +223,7 @@ def run_device(
     link_faults: Any = None,
     drug: str = DESIGN_DRUG,
     concentration_ug_ml: float = DESIGN_CONCENTRATION_UG_ML,
+    truth: TruthLog | None = None,
 ) -> DeviceResult:
     """Run ``world`` as the device end of the link ``ep`` (handshake included).
 
@@ -239,6 +246,8 @@ def run_device(
         byte-level ones live in the port wrapper).
     drug, concentration_ug_ml
         The syringe the hello announces (µg/ml), with the world's pump maximum (ml/h).
+    truth
+        Where to keep each tick's true MAP (:mod:`hil_sim.truth`), or ``None``.
 
     Returns
     -------
@@ -302,6 +311,8 @@ def run_device(
             return DeviceResult(k, f"interrupted by {signal_name(stop)}", ep.counters.as_dict())
         clock.t = world.sim_time_s
         obs = observe()
+        if truth is not None:
+            truth.record(k, obs.sim_time_s, world.true_map_mmhg())
         if down is not None and _link_down_tick(ep, world, link_faults, k, obs, hello):
             if realtime:
                 _sleep_until(ep, t0 + (k + 1) * ts)

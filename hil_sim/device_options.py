@@ -98,6 +98,13 @@ def device_parser(command: str) -> UsageParser:
         help="the pump's largest rate (ml/h, (0, 10000]), announced in the hello (default: the"
         " scenario's [pump] max_rate_ml_h, 120 ml/h in every shipped scenario)",
     )
+    p.add_argument(
+        "--truth-out",
+        default=None,
+        metavar="FILE.npz",
+        help="write the simulated patient's true MAP per tick (mmHg) to FILE.npz when the device"
+        " ends (default: none; pressor sil adds it to its recording)",
+    )
     return p
 
 

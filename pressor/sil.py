@@ -163,7 +163,11 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
 
 
 def device_command(
-    config: SilConfig, port_path: str, cpu: int | None, key_file: Path | None
+    config: SilConfig,
+    port_path: str,
+    cpu: int | None,
+    key_file: Path | None,
+    truth_out: Path | None = None,
 ) -> list[str]:
     """The ``python -m pressor device`` command line of the device process for ``config``."""
     run = config.run
@@ -192,6 +196,8 @@ def device_command(
     if any(f.info.group == "link" for f in run.fault_specs):
         cmd += ["--retransmit", "0.05"]  # wall-clock resend of lost ticks; trajectory-neutral
     cmd += ["--signing-key", str(key_file)] if key_file is not None else ["--no-signing"]
+    if truth_out is not None:
+        cmd += ["--truth-out", str(truth_out)]
     return cmd
 
 
@@ -223,8 +229,9 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     pair = PtyPair.open()
     with tempfile.TemporaryDirectory(prefix="pressor-sil-") as tmp:
         key_file = signing.write(Path(tmp) / "signing.key") if signing is not None else None
+        truth_file = Path(tmp) / "truth.npz" if run.rrd is not None else None
         cmd = device_command(
-            config, pair.follower_path, None if cpus is None else cpus[1], key_file
+            config, pair.follower_path, None if cpus is None else cpus[1], key_file, truth_file
         )
         device_log = Path(tmp) / "device.log"
         with open(device_log, "wb") as log:
@@ -246,6 +253,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 on_connected=pair.close_follower,
                 peer_alive=lambda: proc.poll() is None,
                 on_tick=progress if progress.enabled else None,
+                before_close=lambda rec: _add_truth(rec, proc, truth_file),
             )
         except Interrupted:
             _stop(proc)  # before the device connected: nothing to keep, one line
@@ -267,6 +275,22 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
             text = device_log.read_text(errors="replace").strip()
             print(f"device exited with {code}:\n{text}", file=sys.stderr)
     return summary, result
+
+
+def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path | None) -> None:
+    """Add the device's true MAP to the recording once the device has ended and written it
+    (``pressor device --truth-out``); a device that did not write it leaves the series out."""
+    from hil_sim.truth import load_truth
+
+    if truth_file is None:
+        return
+    try:
+        proc.wait(timeout=10.0)
+    except subprocess.TimeoutExpired:
+        return  # _stop ends it; the recording goes without the true MAP
+    if truth_file.is_file():
+        ticks, times_s, map_true = load_truth(truth_file)
+        recorder.log_series("/patient/map_true_mmhg", "MAP true (mmHg)", ticks, times_s, map_true)
 
 
 def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:

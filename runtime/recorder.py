@@ -314,6 +314,27 @@ class Recorder:
         self.rows_written += n
         self._n = 0
 
+    def log_series(
+        self,
+        entity: str,
+        label: str,
+        ticks: np.ndarray,
+        times_s: np.ndarray,
+        values: np.ndarray,
+    ) -> None:
+        """Add a whole series named ``label`` that did not come through the loop (the simulated
+        device's true MAP) on the same two timelines; call before :meth:`close`."""
+        style = rr.SeriesLines(names=label, colors=SERIES_COLORS.get(entity))
+        self._rec.log(entity, style, static=True)
+        self._rec.send_columns(
+            entity,
+            indexes=[
+                rr.TimeColumn("tick", sequence=np.asarray(ticks, dtype=np.int64)),
+                rr.TimeColumn("sim_time", duration=np.asarray(times_s, dtype=np.float64)),
+            ],
+            columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64)),
+        )
+
     def close(self) -> Path:
         """Flush, finish the file and move it to ``path``; return ``path``."""
         if self._closed:

@@ -34,6 +34,7 @@ def run_runtime(
     peer_alive: Callable[[], bool] | None = None,
     handshake_timeout_s: float = 30.0,
     on_tick: Callable[[int, int, int, float], object] | None = None,
+    before_close: Callable[[Any], object] | None = None,
 ) -> tuple[dict[str, Any], Any]:
     """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result).
 
@@ -61,6 +62,9 @@ def run_runtime(
     on_tick
         The loop's per-tick callback ``(tick, state, fault bits, command ml/h)``, e.g. a
         :class:`runtime.progress.TerminalProgress`.
+    before_close
+        Called with the :class:`runtime.recorder.Recorder` after the loop ended and before the
+        recording is closed (``pressor sil`` adds the simulated device's true MAP there).
 
     Returns
     -------
@@ -188,6 +192,8 @@ def run_runtime(
                     result = loop.run_lockstep(n, stall_timeout_s=config.stall_timeout_s)
         result.host = {"cpu_latency": wake.status, "cpus": cpus}
         if recorder is not None:
+            if before_close is not None:
+                before_close(recorder)
             recorder.close()
             recorder = None
         report = None

@@ -194,3 +194,21 @@ def test_smith_predictor_records_the_schedule_it_used_without_a_design_box(tmp_p
         # limits, so what it used is what the device sent
         assert all(used[t] == pytest.approx(device[t], rel=1e-6) for t in stepped)
     assert BOX_ENTITIES[0][0] not in cols  # no design box for a predictor without one
+
+
+def test_sil_recording_holds_the_true_map_beside_the_noisy_measured_one(tmp_path):
+    (tmp_path / "noisy.toml").write_text(
+        'name = "noisy"\nduration_s = 60.0\n[patient]\nmode = "nonlinear"\n'
+        "[target]\nstep_mmhg = 20.0\n[sensor]\nnoise_std_mmhg = 2.0\n"
+    )
+    proc = pressor(
+        "sil", "--controller", "pi", "--scenario", "noisy.toml", "--rrd", "n.rrd", cwd=tmp_path
+    )
+    assert proc.returncode in (0, 1), proc.stderr
+    cols = rrd_columns(tmp_path / "n.rrd")
+    true, measured = cols["/patient/map_true_mmhg"], cols["/patient/map_mmhg"]
+    assert sorted(true) == sorted(measured) == list(range(600))
+    noise = [measured[k] - true[k] for k in range(600)]
+    spread = (sum(e * e for e in noise) / len(noise)) ** 0.5
+    assert 1.5 < spread < 2.5  # the monitor's 2 mmHg noise, absent from the true MAP
+    assert max(abs(true[k + 1] - true[k]) for k in range(599)) < 0.5  # smooth: no noise in it
