@@ -304,7 +304,7 @@ class Supervisor:
         faults = 0
         if inp.link_silence_s >= cfg.link_loss_after_s - _EPS_S:
             faults |= Fault.LINK_LOSS
-        if inp.sample_age_s > cfg.stale_after_s:
+        if inp.sample_age_s > cfg.stale_after_s + _EPS_S:  # the limit itself is not stale
             faults |= Fault.STALE_SAMPLE
         else:
             faults |= self._check_map(now_s, inp.map_mmhg, inp.quality, inp.sample_age_s == 0.0)
