@@ -252,3 +252,30 @@ def test_lockstep_over_a_corrupting_link_recovers_and_keeps_the_simulated_trajec
     c = rt.counters
     assert c.bad_crc + c.junk_bytes > 0 and c.seq_gaps > 0 and c.incomplete_ticks > 0
     assert out["result"].counters["retransmits"] > 0 and c.retransmits > 0
+
+
+def test_realtime_device_with_a_1hz_monitor_sends_only_new_samples_and_applies_every_answer():
+    from runtime.loop import Loop
+    from runtime.supervisor import Supervisor
+    from runtime.supervisor_config import supervisor_config_for
+
+    pair = PtyPair.open()
+    ep = RuntimeSession(pair.leader_port())
+    samples: list[int] = []
+    statuses: list = []
+    ep.on_message = lambda m: (
+        samples.append(m.tick) if m.get_type() == "MAP_SAMPLE" else
+        statuses.append(m) if m.get_type() == "PUMP_STATUS" else None
+    )  # fmt: skip
+    proc = spawn_device(pair, "--scenario", "bedside-monitor", "--duration", "3.0", "--realtime")
+    peer = ep.handshake(Hello("pi"), timeout_s=30.0)
+    pi = PIController(sample_period_s=peer.sample_period_s)
+    loop = Loop(pi, Supervisor(supervisor_config_for(pi, peer.sensor_noise_mmhg)), ep)
+    result = loop.run_realtime(peer.n_ticks)
+    assert _finish(proc, pair, ep) == 0
+    assert samples == [0, 10, 20]  # the monitor's updates only: no HELD repeats in real time
+    assert result.ticks_in_state["AUTO"] == result.timing["ticks"]  # held, never stale
+    # each period's command answers the latest sample, and the pump applies it: the delivered
+    # rate follows the PI's integrator tick by tick, not only at the three updates
+    delivered = [s.delivered_ml_h for s in statuses]
+    assert len(set(delivered)) >= 20 and max(delivered) > 0.0

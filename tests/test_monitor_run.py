@@ -21,9 +21,9 @@ DURATION_S = 600.0
 @pytest.mark.parametrize("controller", ["lpv", "pi"])
 def test_a_1hz_quantized_monitor_keeps_the_loop_out_of_failsafe(
     controller,
-    bridged_ports,
+    bridged_ports,  # noqa: F811 (the imported fixture)
     tmp_path: Path,
-    monkeypatch,  # noqa: F811
+    monkeypatch,
 ):
     device_port, runtime_port = bridged_ports
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
