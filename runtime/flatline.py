@@ -20,10 +20,11 @@ must not exceed the true one), and scale with the announced noise σ and the mon
     trend adds little). Only when σ ≥ q: below that, quantization alone can make readings constant.
     At σ = 1 mmHg, q = 1 mmHg, 30 samples: a false alarm needs 27 of 29 steps to be zero, < 1e-11.
 
-The quantum is learned: the smallest non-zero step between consecutive new samples, starting from
-``quantum_max_mmhg`` (1 mmHg, the coarsest resolution of a MAP monitor), so before any step the
-rules assume the coarse monitor (fewer alarms). A disconnected line (transducer open to air, ~0
-mmHg) is the supervisor's range check, same tick; the monitor's own waveform check
+The quantum is read off the values: the coarsest of :data:`GRAINS_MMHG` (1 mmHg down to 0.01 mmHg)
+that every new sample so far is a multiple of, 0 for a monitor that reads finer (a float32 reading
+of a continuous value is no multiple of any). So the first sample of an integer-mmHg monitor sets
+q = 1 mmHg and a line frozen from the very start is caught too. A disconnected line (transducer
+open to air, ~0 mmHg) is the supervisor's range check, same tick; the monitor's own waveform check
 (``QUALITY_WAVEFORM``) is its quality check, same tick.
 """
 
@@ -34,6 +35,18 @@ from collections import deque
 
 #: false-alarm probability per new sample the stuck rule is sized for
 FALSE_ALARM = 1e-9
+#: the resolutions (mmHg) a monitor's readings are checked against, coarsest first
+GRAINS_MMHG = (1.0, 0.5, 0.25, 0.2, 0.1, 0.05, 0.02, 0.01)
+
+
+def grain_mmhg(map_mmhg: float) -> float:
+    """The coarsest of :data:`GRAINS_MMHG` that ``map_mmhg`` is a multiple of (to 1e-4 of it, a
+    float32 reading), else 0."""
+    for g in GRAINS_MMHG:
+        x = map_mmhg / g
+        if abs(x - round(x)) <= 1e-4:
+            return g
+    return 0.0
 
 
 def stuck_samples(noise_mmhg: float, quantum_mmhg: float, eps_mmhg: float) -> float:
@@ -77,26 +90,23 @@ class FlatlineRules:
         New samples (at least) the damped rule averages over.
     ratio
         The damped rule's threshold, as a fraction of σ.
-    quantum_max_mmhg
-        The quantum assumed until a smaller step is seen (mmHg).
+
+    Attributes
+    ----------
+    quantum_mmhg
+        The monitor's quantum as read off its values so far (mmHg; 0: finer than 0.01 mmHg).
     """
 
     def __init__(
-        self,
-        noise_mmhg: float,
-        min_s: float,
-        eps_mmhg: float,
-        window: int,
-        ratio: float,
-        quantum_max_mmhg: float,
+        self, noise_mmhg: float, min_s: float, eps_mmhg: float, window: int, ratio: float
     ) -> None:
         self.noise_mmhg = noise_mmhg
         self.min_s = min_s
         self.eps_mmhg = eps_mmhg
         self.window = window
-        self.quantum_mmhg = quantum_max_mmhg
+        self.quantum_mmhg = GRAINS_MMHG[0]
         self._collapse = 2.0 * (ratio * noise_mmhg) ** 2  # mmHg², on the mean squared step
-        self._need = stuck_samples(noise_mmhg, quantum_max_mmhg, eps_mmhg)
+        self._need = stuck_samples(noise_mmhg, self.quantum_mmhg, eps_mmhg)
         self._prev = math.nan
         self._anchor = math.nan
         self._anchor_s = 0.0
@@ -108,6 +118,11 @@ class FlatlineRules:
         """Take a new, plausible sample (mmHg) at ``now_s`` (s); return whether a rule fires."""
         prev = self._prev
         self._prev = map_mmhg
+        if self.quantum_mmhg > 0.0:  # a quantum only ever gets finer
+            grain = grain_mmhg(map_mmhg)
+            if grain < self.quantum_mmhg:
+                self.quantum_mmhg = grain
+                self._need = stuck_samples(self.noise_mmhg, grain, self.eps_mmhg)
         if abs(map_mmhg - self._anchor) > self.eps_mmhg or self._anchor != self._anchor:
             self._anchor = map_mmhg
             self._anchor_s = now_s
@@ -118,9 +133,6 @@ class FlatlineRules:
         if prev != prev:
             return stuck
         step = abs(map_mmhg - prev)
-        if 0.0 < step < self.quantum_mmhg:
-            self.quantum_mmhg = step
-            self._need = stuck_samples(self.noise_mmhg, step, self.eps_mmhg)
         steps = self._steps
         steps.append((now_s, step * step))
         self._sum += step * step

@@ -183,7 +183,6 @@ class Supervisor:
                 cfg.flatline_eps_mmhg,
                 cfg.flatline_window,
                 cfg.flatline_ratio,
-                cfg.quantum_max_mmhg,
             )
             if cfg.sensor_noise_mmhg > 0.0
             else None

@@ -147,7 +147,6 @@ class SupervisorConfig:
     flatline_eps_mmhg: float = 0.05
     flatline_window: int = 30
     flatline_ratio: float = 0.25
-    quantum_max_mmhg: float = 1.0
     quality_mask: int = QUALITY_MASK
     stale_after_s: float = DEFAULT_SAMPLE_AGE_LIMIT_S
     link_loss_after_s: float = 1.0
@@ -184,7 +183,6 @@ class SupervisorConfig:
         need("flatline_eps_mmhg", self.flatline_eps_mmhg > 0.0, "> 0 mmHg")
         need("flatline_window", 2 <= self.flatline_window <= 10000, "[2, 10000] samples")
         need("flatline_ratio", 0.0 < self.flatline_ratio < 1.0, "(0, 1)")
-        need("quantum_max_mmhg", 0.0 < self.quantum_max_mmhg <= 10.0, "(0, 10] mmHg")
         need(
             "stale_after_s",
             self.sample_period_s <= self.stale_after_s <= 60.0,

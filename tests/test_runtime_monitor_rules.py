@@ -20,7 +20,7 @@ from hil_sim.scenario import parse_scenario
 from hil_sim.world import World
 from link.messages import TickInputs
 from runtime.core import CLEAN_LINK, ClosedLoopCore
-from runtime.flatline import stuck_samples
+from runtime.flatline import FlatlineRules, grain_mmhg, stuck_samples
 from runtime.supervisor import Supervisor, SupervisorInput
 from runtime.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
 
@@ -210,3 +210,16 @@ def test_the_sample_age_limit_is_a_supervisor_setting_validated_against_the_loop
     with pytest.raises(ValueError, match="stale_after_s"):
         SupervisorConfig(sample_period_s=TS, stale_after_s=61.0)
     assert SupervisorConfig().stale_after_s == 3.0
+
+
+def test_the_quantum_is_read_off_the_values_so_a_line_frozen_from_the_start_is_caught():
+    assert [grain_mmhg(x) for x in (80.0, 80.5, 80.3, 80.25)] == [1.0, 0.5, 0.1, 0.25]
+    assert grain_mmhg(float(np.float32(80.0317))) == 0.0  # a continuous reading (float32)
+    # a 10 Hz monitor reading 0.01 mmHg or finer with 0.1 mmHg noise, frozen from its first value
+    rules = FlatlineRules(0.1, 10.0, 0.05, 30, 0.25)
+    fired = [rules.update(k * TS, 80.0317) for k in range(101)]
+    assert rules.quantum_mmhg == 0.0 and fired.index(True) == 100  # after 10 s, as before
+    # the same value from an integer-mmHg monitor with 0.1 mmHg noise is a steady patient
+    coarse = FlatlineRules(0.1, 10.0, 0.05, 30, 0.25)
+    assert not any(coarse.update(k * TS, 80.0) for k in range(3000))
+    assert coarse.quantum_mmhg == 1.0

@@ -107,7 +107,7 @@ def test_sensor_fault_is_detected_same_tick_and_holds_last_command_with_alarm(ba
 def test_flatline_detected_after_window_only_when_sensor_is_noisy():
     cfg = SupervisorConfig(sample_period_s=TS, sensor_noise_mmhg=0.1, flatline_s=2.0)
     rig = Rig(cfg)
-    for m in (80.3, 79.8, 80.2, 80.25):  # the monitor's noise: it reads to 0.05 mmHg or finer
+    for m in (80.3, 79.8, 80.2, 80.25):  # the monitor reads to 0.1 mmHg (or finer)
         rig.tick(map_mmhg=m)
     # stuck for 2 s and 23 samples (the count a 1e-9 false alarm needs at 0.1 mmHg noise)
     rig.ticks(22, map_mmhg=80.0)
