@@ -44,15 +44,14 @@ def _run(ports: tuple[str, str], tmp_path: Path, duration_s: float, *run_args: s
 
 @pytest.mark.parametrize("controller", ["lpv", "pi"])
 def test_a_1hz_quantized_monitor_keeps_the_loop_out_of_failsafe(
-    controller,
+    controller: str,
     bridged_ports,  # noqa: F811 (the imported fixture)
     tmp_path: Path,
     monkeypatch,
 ):
     monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
-    s = _run(
-        bridged_ports, tmp_path, DURATION_S, "--controller", controller, "--schedule", "oracle"
-    )
+    # pressor run's default schedule: the online estimator, fed the held values between updates
+    s = _run(bridged_ports, tmp_path, DURATION_S, "--controller", controller)
     assert s["ticks"] == round(DURATION_S / 0.1) and s["sensor_noise_mmhg"] == 0.5
     states = s["supervisor"]["ticks_in_state"]
     assert states["FAILSAFE"] == 0 and states["HOLD"] == 0, s["supervisor"]
