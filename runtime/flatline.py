@@ -18,7 +18,7 @@ must not exceed the true one), and scale with the announced noise σ and the mon
     variance collapse: the mean squared successive difference of the last ``window`` new samples
     (and at least ``min_s`` of them) below 2 (``ratio`` σ)² (honest white noise gives 2σ², a slow
     trend adds little). Only when σ ≥ q: below that, quantization alone can make readings constant.
-    At σ = 1 mmHg, q = 1 mmHg, 30 samples: a false alarm needs 27 of 29 steps to be zero, < 1e-11.
+    At σ = 1 mmHg, q = 1 mmHg, 30 steps: a false alarm needs 27 of them to be zero, p < 1e-11.
 
 The quantum is read off the values: the coarsest of :data:`GRAINS_MMHG` (1 mmHg down to 0.01 mmHg)
 that every new sample so far is a multiple of, 0 for a monitor that reads finer (a float32 reading

@@ -120,6 +120,10 @@ def run_runtime(
                 f"device sample_period_s {peer.sample_period_s} s differs from --rate"
                 f" {config.rate_hz} Hz (period {period_s} s)"
             )
+        if not 0.0 <= peer.sensor_noise_mmhg <= 50.0:  # False for NaN too
+            raise UsageError(
+                f"device announces sensor_noise_mmhg {peer.sensor_noise_mmhg}: allowed [0, 50] mmHg"
+            )
         if config.schedule != "oracle":  # oracle summaries keep their pre-schedule bytes
             identity = {**identity, "schedule": config.schedule}
         identity = {

@@ -3,6 +3,7 @@ controller see, a device that sends no scheduling parameters, trial and SIL on t
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import threading
@@ -282,3 +283,27 @@ def test_the_summarys_settling_band_is_the_callers_not_the_devices_noise_announc
     # integer readings never stay within 2 % of the step (0.4 mmHg); they settle within 5 mmHg
     assert summary["metrics"]["settling_time_s"] == two_pct and two_pct != five
     assert five is not None
+
+
+def test_a_device_announcing_an_impossible_noise_is_refused_with_one_line():
+    from contracts.usage import UsageError
+    from link import LINK_LOCKSTEP, Hello, LinkError
+
+    pair = PtyPair.open()
+    device = DeviceSession(open_port(pair.follower_path), clock=ManualClock())
+    hello = Hello("noisy", 1, TS, math.nan, 10, LINK_LOCKSTEP)
+
+    def announce() -> None:
+        with contextlib.suppress(LinkError):  # the runtime refuses and closes the link
+            device.handshake(hello, timeout_s=10.0)
+
+    thread = threading.Thread(target=announce, daemon=True)
+    thread.start()
+    try:
+        with pytest.raises(UsageError, match="sensor_noise_mmhg nan: allowed") as info:
+            run_runtime(pair.leader_port(), _config("pi", "oracle"), {"controller": "pi"}, None)
+        assert "\n" not in str(info.value)
+    finally:
+        thread.join(15)
+        device.close()
+        pair.close()
