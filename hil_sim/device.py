@@ -18,7 +18,11 @@ Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:
 
 ``--realtime`` runs on the wall clock instead: tick k is released at t0 + k·Ts (absolute deadlines),
 the command answering it is applied if it arrived before the next release, otherwise the pump keeps
-the previous rate (counted as a timeout).
+the previous rate (counted as a timeout). A monitor slower than the tick (scenario
+``sensor.period_s``) sends MAP_SAMPLE only when it has a new value: in lockstep every tick carries
+one, the value repeated with ``QUALITY_HELD`` between updates; in real time the ticks between
+updates carry none, and the runtime's command for each of them answers the latest sample sent
+(docs/PROTOCOL.md, sample-and-hold).
 
 Faults (``--fault KIND[:ARGS]``, repeatable; see ``pressor faults`` and :mod:`contracts.faults`):
 sensor, pump and scheduling faults are injected in the world (:mod:`hil_sim.faults`); byte-level
@@ -260,6 +264,7 @@ def run_device(
     link.LinkError
         The handshake failed.
     """
+    from contracts.faults import QUALITY_HELD
     from link import (
         LINK_LOCKSTEP,
         LINK_REALTIME,
@@ -305,6 +310,7 @@ def run_device(
     send_obs, wait_cmd, send_status = ep.send_tick, ep.wait_for_command, ep.send_pump_status
     t0 = time.monotonic()
     down = link_faults.link_down if link_faults is not None and link_faults.down else None
+    answers = 0  # real time: the tick of the latest sample sent, which the runtime answers
     for k in range(n):
         if (stop := stop_requested()) is not None:
             ep.send_heartbeat(k, STATE_FINISHED)  # the runtime ends its run cleanly
@@ -325,8 +331,10 @@ def run_device(
             ep.send_heartbeat(k, STATE_RUNNING, flush=False)
         if realtime:
             _sleep_until(ep, t0 + k * ts)
-            send_obs(obs)
-            cmd = wait_cmd(k, max(0.0, t0 + (k + 1) * ts - time.monotonic()))
+            new_sample = k == 0 or not obs.quality & QUALITY_HELD
+            answers = k if new_sample else answers
+            send_obs(obs, sample=new_sample)
+            cmd = wait_cmd(answers, max(0.0, t0 + (k + 1) * ts - time.monotonic()))
         else:
             send_obs(obs)
             cmd = wait_cmd(k, retransmit_s)

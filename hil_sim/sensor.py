@@ -1,6 +1,8 @@
 """Arterial-line MAP monitor: sampling, quantisation, seeded noise and line artifacts.
 
-The monitor samples the true MAP every ``period_s`` (sample-and-hold between samples), adds
+The monitor samples the true MAP every ``period_s`` (sample-and-hold between samples: a reading
+between two monitor updates repeats the last value with ``QUALITY_HELD`` added, as a monitor slower
+than the loop reports it on the link, docs/PROTOCOL.md), adds
 Gaussian noise (σ = ``noise_std_mmhg``, from the patient's own seeded PCG64 stream, drawn in blocks
 so the sequence does not depend on how the loop is driven) and rounds to ``quantum_mmhg``.
 Artifacts, each switched on by the scenario for a time window:
@@ -39,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from contracts.faults import QUALITY_INVALID, QUALITY_WAVEFORM
+from contracts.faults import QUALITY_HELD, QUALITY_INVALID, QUALITY_WAVEFORM
 
 ARTIFACT_KINDS = ("flush", "damping", "disconnect", "monitor_fault", "nan", "flatline", "range")
 _NOISE_BLOCK = 4096
@@ -127,7 +129,8 @@ class Sensor:
         return v
 
     def read(self, t_s: float, true_map_mmhg: float) -> tuple[float, int]:
-        """The monitor's reading at ``t_s``: ``(map_mmhg, quality flags)``."""
+        """The monitor's reading at ``t_s``: ``(map_mmhg, quality flags)``; between two monitor
+        updates the last reading with ``QUALITY_HELD`` added."""
         cfg = self.config
         # The damped line filters continuously, sampled or not.
         if self._damped is None or self._last_t is None:
@@ -145,7 +148,8 @@ class Sensor:
                 )
         self._last_t = t_s
         if t_s + 1e-9 < self._next_sample_s:
-            return self._held
+            value, quality = self._held
+            return value, quality | QUALITY_HELD
         self._next_sample_s += cfg.period_s
         value = self._damped
         quality = 0

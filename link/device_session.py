@@ -43,13 +43,15 @@ class DeviceSession(Session):
         self._handlers[_ID_COMMAND] = self._on_command
 
     # ------------------------------------------------------------------ sending
-    def send_tick(self, inputs: TickInputs, *, flush: bool = True) -> None:
-        """Send tick k's scheduling parameters, target and MAP sample (in that order)."""
+    def send_tick(self, inputs: TickInputs, *, flush: bool = True, sample: bool = True) -> None:
+        """Send tick k's scheduling parameters, target and MAP sample (in that order); with
+        ``sample=False`` (real time, the monitor has no new value) the first two only."""
         send = self.send_fields
         k = inputs.tick
         send(_ID_SCHED, k, inputs.K, inputs.T_s, inputs.tau_s, int(inputs.sched_valid), flush=False)
-        send(_ID_TARGET, k, inputs.target_mmhg, flush=False)
-        send(_ID_SAMPLE, inputs.sim_time_s, k, inputs.map_mmhg, inputs.quality, flush=flush)
+        send(_ID_TARGET, k, inputs.target_mmhg, flush=not sample and flush)
+        if sample:
+            send(_ID_SAMPLE, inputs.sim_time_s, k, inputs.map_mmhg, inputs.quality, flush=flush)
 
     def send_pump_status(self, status: PumpStatus, *, flush: bool = True) -> None:
         """Send the pump status (ml/h, ml, alarm flags) after an advance."""

@@ -69,6 +69,8 @@ class SilConfig:
         Lockstep CPU placement choice (:mod:`runtime.placement`).
     events
         The scenario's disturbance events ``(kind, start_s)`` for the metrics.
+    noisy
+        Whether the scenario's monitor adds noise (the metrics' settling band, docs/METRICS.md).
     """
 
     run: RunConfig
@@ -79,6 +81,7 @@ class SilConfig:
     signed: bool
     cpu: CpuChoice
     events: tuple[tuple[str, float], ...]
+    noisy: bool
 
 
 def _seed(text: str) -> int:
@@ -159,6 +162,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         signed=run.signed,
         cpu=args.cpu,
         events=tuple(scenario_events(scenario)),
+        noisy=scenario.noisy,
     )
 
 
@@ -254,6 +258,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 peer_alive=lambda: proc.poll() is None,
                 on_tick=progress if progress.enabled else None,
                 before_close=lambda rec: _add_truth(rec, proc, truth_file),
+                noisy_band=config.noisy,
             )
         except Interrupted:
             _stop(proc)  # before the device connected: nothing to keep, one line

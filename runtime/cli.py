@@ -114,7 +114,11 @@ def _main_keygen(argv: Sequence[str]) -> int:
 
 def _main_faults(argv: Sequence[str]) -> int:
     from contracts.faults import catalogue_rows
-    from runtime.supervisor_config import SupervisorConfig, detection_bounds
+    from runtime.supervisor_config import (
+        DEFAULT_SAMPLE_AGE_LIMIT_S,
+        SupervisorConfig,
+        detection_bounds,
+    )
 
     p = UsageParser(prog="pressor faults", description="fault kinds the supervisor detects")
     p.add_argument(
@@ -124,7 +128,10 @@ def _main_faults(argv: Sequence[str]) -> int:
         help="loop rate the detection bounds are given at (Hz)",
     )
     args = p.parse_args(argv)
-    cfg = SupervisorConfig(sample_period_s=1.0 / args.rate, stale_after_s=3.5 / args.rate)
+    period_s = 1.0 / args.rate
+    cfg = SupervisorConfig(
+        sample_period_s=period_s, stale_after_s=max(DEFAULT_SAMPLE_AGE_LIMIT_S, period_s)
+    )
     print(
         "Injectable faults: --fault KIND[:key=value,...] on pressor sil / device (bare numbers"
         " = start_s, duration_s; s of sim time). Bounds are ticks at 10 Hz after the first"

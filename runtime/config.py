@@ -21,6 +21,7 @@ from contracts.usage import UsageError
 from runtime.clinician import ClinicianInput
 from runtime.cpu_latency import MAX_LATENCY_US
 from runtime.estimation.schedule import SOURCES
+from runtime.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S
 
 #: what ``--schedule`` means, for the help of every command that takes it
 SCHEDULE_HELP = (
@@ -78,6 +79,8 @@ class RunConfig:
     clinician
         ``pressor run``'s target and syringe options (:mod:`runtime.clinician`); ``None``
         (``pressor sil``): the device's target, the shipped designs' drug and concentration.
+    sample_age_limit_s
+        Age (s) past which the held MAP sample is stale (the supervisor's ``STALE_SAMPLE``).
     """
 
     controller: str
@@ -97,6 +100,7 @@ class RunConfig:
     schedule: str = "oracle"
     signed: bool = True
     clinician: ClinicianInput | None = None
+    sample_age_limit_s: float = DEFAULT_SAMPLE_AGE_LIMIT_S
 
     @property
     def period_s(self) -> float:
@@ -209,6 +213,14 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
         help="lockstep: give up after this many wall-clock seconds without a sample (s)",
     )
     p.add_argument(
+        "--sample-age-limit-s",
+        type=positive("--sample-age-limit-s", 60.0),
+        default=DEFAULT_SAMPLE_AGE_LIMIT_S,
+        help="the runtime holds the newest MAP sample and uses it until it is this old (s; a"
+        " sample repeated with the HELD quality bit ages from the last new one), then"
+        " STALE_SAMPLE; at least one loop period, default 3 s: three updates of a 1 Hz monitor",
+    )
+    p.add_argument(
         "--cpu-latency",
         type=_cpu_latency,
         default=None,
@@ -248,6 +260,11 @@ def run_config(
     _check_out_path("--timing", args.timing)
     if args.no_signing and args.signing_key is not None:
         raise UsageError("--no-signing and --signing-key: choose one")
+    if args.sample_age_limit_s < 1.0 / args.rate:
+        raise UsageError(
+            f"--sample-age-limit-s {args.sample_age_limit_s:g}: allowed [1/--rate ="
+            f" {1.0 / args.rate:g}, 60] s"
+        )
     load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device starts
     try:
         specs = tuple(parse_faults(args.fault))
@@ -271,6 +288,7 @@ def run_config(
         schedule=args.schedule,
         signed=not args.no_signing,
         clinician=clinician,
+        sample_age_limit_s=args.sample_age_limit_s,
     )
 
 

@@ -4,11 +4,23 @@ Per tick the caller hands over what arrived for the tick (:class:`link.TickInput
 target and whatever scheduling parameters the device sent), the pump status of the tick
 (:class:`link.PumpStatus`, if one arrived) and the link's health; :meth:`ClosedLoopCore.step`
 feeds the scheduling source (:mod:`runtime.estimation.schedule`: oracle, estimated or nominal)
-the MAP sample (NaN when no new sample arrived for the tick, ``link.sample_age_s > 0``: a repeated
-sample is no measurement), its quality bits and the pump's latest delivered rate (0 ml/h before
-any status), assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source
-returned - steps the controller with those K, T, τ if the supervisor allows it, finalizes the
-command and returns a :class:`TickRecord`. The caller sends ``record.command_ml_h`` to the pump.
+the MAP sample, its quality bits and the pump's latest delivered rate (0 ml/h before any status),
+assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source returned -
+steps the controller with those K, T, τ if the supervisor allows it, finalizes the command and
+returns a :class:`TickRecord`. The caller sends ``record.command_ml_h`` to the pump.
+
+Sample-and-hold (docs/PROTOCOL.md). A monitor slower than the loop leaves ticks without a new
+value: in lockstep the device repeats the last one with ``QUALITY_HELD``, in real time no sample
+arrives and the loop hands over the newest one with its link age. The sample's age is the time
+since the last sample *without* ``QUALITY_HELD`` was received; the supervisor sees that age
+(``STALE_SAMPLE`` past its limit, and its flatline rules judge only new samples, age 0). Until the
+limit the controller and the scheduling source both get the held value (``QUALITY_HELD`` removed
+from the bits the source's gate sees): a digital loop with a slower sensor is a zero-order hold of
+the measurement, and a NaN would freeze the controllers instead (the generated LPV and the PI hold
+their command and stop their integrators and reference model on a non-finite MAP, the Smith
+predictor stops integrating), while the estimator's window means need the held values (a 1 Hz
+monitor fills a tenth of a 10 Hz window). Past the limit the source gets NaN and the supervisor
+does not step the controller.
 
 Two callers drive the same core, so they cannot drift apart:
 
@@ -26,6 +38,7 @@ import math
 from typing import NamedTuple
 
 from contracts.controller import Controller
+from contracts.faults import QUALITY_HELD
 from link import PumpStatus, TickInputs
 from runtime.estimation.schedule import OracleSchedule, Schedule, ScheduleSource
 from runtime.supervisor import Supervisor, SupervisorInput, SupervisorOutput
@@ -37,7 +50,8 @@ class LinkHealth(NamedTuple):
     Attributes
     ----------
     sample_age_s
-        Time (s) since the newest MAP sample was received.
+        Time (s) since the newest MAP sample was received (a held one too; the core ages a
+        ``QUALITY_HELD`` sample from the last sample without the bit).
     link_silence_s
         Time (s) since any frame was received from the device.
     link_errors
@@ -112,6 +126,16 @@ class ClosedLoopCore:
         self.schedule = schedule if schedule is not None else OracleSchedule()
         self._estimated = self.schedule.source == "estimated"
         self._latest_delivered_ml_h = 0.0  # the pump's latest delivered rate; 0 before any status
+        self._fresh_s = -math.inf  # when the last sample without QUALITY_HELD was received (s)
+        self._age_limit_s = supervisor.config.stale_after_s
+
+    def sample_age_s(self, quality: int, now_s: float, link_age_s: float) -> float:
+        """The age (s) of this tick's sample: since its receipt, or for a ``QUALITY_HELD`` one since
+        the last sample without the bit (infinite before any)."""
+        if quality & QUALITY_HELD:
+            return now_s - self._fresh_s
+        self._fresh_s = now_s - link_age_s
+        return link_age_s
 
     def step(
         self, inp: TickInputs, now_s: float, pump: PumpStatus | None, link: LinkHealth
@@ -137,9 +161,10 @@ class ClosedLoopCore:
                 delivered, alarms = math.nan, 0
         else:
             delivered, alarms = math.nan, 0
+        age_s = self.sample_age_s(inp.quality, now_s, link.sample_age_s)
         sched = self.schedule.update(
-            inp.map_mmhg if link.sample_age_s == 0.0 else math.nan,
-            inp.quality,
+            inp.map_mmhg if age_s <= self._age_limit_s else math.nan,
+            inp.quality & ~QUALITY_HELD,
             self._latest_delivered_ml_h,
             inp.K,
             inp.T_s,
@@ -157,7 +182,7 @@ class ClosedLoopCore:
                 T_s,
                 tau_s,
                 sched.valid,
-                link.sample_age_s,
+                age_s,
                 link.link_silence_s,
                 inp.target_mmhg,
                 link.link_errors,

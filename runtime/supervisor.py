@@ -39,6 +39,7 @@ import math
 from typing import NamedTuple
 
 from contracts.faults import PUMP_ALARM_WATCHDOG
+from runtime.flatline import FlatlineRules
 from runtime.supervisor_config import (
     ADVISORY,
     ALARM_FAULTS,
@@ -68,7 +69,9 @@ class SupervisorInput(NamedTuple):
     K, T_s, tau_s, sched_valid
         Newest scheduling parameters (mmHg/(ml/h), s, s) and their validity flag.
     sample_age_s
-        Time (s) since the newest sample was received; the MAP checks are skipped once stale.
+        Age (s) of the sample: since it was received, or for a ``QUALITY_HELD`` repeat since the
+        last sample without the bit (:mod:`runtime.core`); 0 marks a new sample, the only kind
+        the flatline rules judge. The MAP checks are skipped once stale.
     link_silence_s
         Time (s) since any frame was received from the device.
     target_mmhg
@@ -172,8 +175,19 @@ class Supervisor:
         self.detections: dict[str, int] = {}
         self._prev_faults = 0
         self._prev_map: float | None = None
-        self._flat_anchor: float | None = None
-        self._flat_since_s = 0.0
+        cfg = self.config
+        self._flat = (
+            FlatlineRules(
+                cfg.sensor_noise_mmhg,
+                cfg.flatline_s,
+                cfg.flatline_eps_mmhg,
+                cfg.flatline_window,
+                cfg.flatline_ratio,
+            )
+            if cfg.sensor_noise_mmhg > 0.0
+            else None
+        )
+        self._flat_fault = 0  # the flatline verdict of the last new sample, held between them
         self._prev_sched: tuple[float, float, float] | None = None
         self._prev_sched_s = 0.0
         self._fault_since_s: float | None = None
@@ -190,7 +204,7 @@ class Supervisor:
         return self.state in (State.HOLD, State.FAILSAFE) or bool(self.faults & ALARM_FAULTS)
 
     # -- input checks ---------------------------------------------------------------------------
-    def _check_map(self, now_s: float, map_mmhg: float, quality: int) -> int:
+    def _check_map(self, now_s: float, map_mmhg: float, quality: int, new: bool) -> int:
         cfg = self.config
         faults = 0
         if quality & cfg.quality_mask:
@@ -202,15 +216,10 @@ class Supervisor:
         if self._prev_map is not None and abs(map_mmhg - self._prev_map) > cfg.spike_mmhg:
             faults |= Fault.MAP_SPIKE
         self._prev_map = map_mmhg
-        if cfg.flatline_enabled:
-            if (
-                self._flat_anchor is None
-                or abs(map_mmhg - self._flat_anchor) > cfg.flatline_eps_mmhg
-            ):
-                self._flat_anchor = map_mmhg
-                self._flat_since_s = now_s
-            elif now_s - self._flat_since_s >= cfg.flatline_s - _EPS_S:
-                faults |= Fault.MAP_FLATLINE
+        if self._flat is not None:
+            if new:
+                self._flat_fault = Fault.MAP_FLATLINE if self._flat.update(now_s, map_mmhg) else 0
+            faults |= self._flat_fault
         return faults
 
     def _check_sched(self, now_s: float, K: float, T_s: float, tau_s: float, valid: bool) -> int:
@@ -294,10 +303,10 @@ class Supervisor:
         faults = 0
         if inp.link_silence_s >= cfg.link_loss_after_s - _EPS_S:
             faults |= Fault.LINK_LOSS
-        if inp.sample_age_s > cfg.stale_after_s:
+        if inp.sample_age_s > cfg.stale_after_s + _EPS_S:  # the limit itself is not stale
             faults |= Fault.STALE_SAMPLE
         else:
-            faults |= self._check_map(now_s, inp.map_mmhg, inp.quality)
+            faults |= self._check_map(now_s, inp.map_mmhg, inp.quality, inp.sample_age_s == 0.0)
             faults |= self._check_sched(now_s, inp.K, inp.T_s, inp.tau_s, inp.sched_valid)
             if not cfg.map_min_mmhg <= inp.target_mmhg <= cfg.map_max_mmhg:  # False for NaN too
                 faults |= Fault.TARGET_INVALID

@@ -10,11 +10,15 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
   flush ~300) — same tick;
 - ``MAP_SPIKE`` |MAP_k − MAP_{k−1}| > ``spike_mmhg`` between consecutive plausible samples — same
   tick; a real level change is a single spike and is accepted after ``recover_after_s``;
-- ``MAP_FLATLINE`` MAP within ±``flatline_eps_mmhg`` of an anchor for ``flatline_s`` — only when
-  the sensor is known to be noisy (``flatline_enabled``): a noise-free simulator legitimately
-  produces constant samples;
-- ``SENSOR_QUALITY`` the monitor flags the sample (any bit of ``quality`` in ``quality_mask``);
-- ``STALE_SAMPLE`` newest sample older than ``stale_after_s``;
+- ``MAP_FLATLINE`` a frozen line (new samples stuck within ±max(``flatline_eps_mmhg``, quantum/2)
+  for a count of samples scaled to the announced noise and the quantum, and ``flatline_s`` at
+  least) or a damped one (variance collapse of the new samples) - :mod:`runtime.flatline`; only
+  when the monitor announces noise (``sensor_noise_mmhg`` > 0): a noise-free simulator
+  legitimately produces constant samples;
+- ``SENSOR_QUALITY`` the monitor flags the sample (any bit of ``quality`` in ``quality_mask``; by
+  default every bit but ``QUALITY_HELD``, which marks a repeated value, not a fault);
+- ``STALE_SAMPLE`` the sample older than ``stale_after_s`` (the runtime's
+  ``--sample-age-limit-s``, default 3 s; a held sample ages from the last new one);
 - ``LINK_LOSS`` no frame at all for ``link_loss_after_s``;
 - ``SCHED_INVALID`` scheduling marked invalid or non-finite (when ``sched_required``);
 - ``SCHED_OUT_OF_BOX`` K, T or τ outside ``sched_box``;
@@ -56,7 +60,13 @@ from enum import IntEnum, IntFlag
 from typing import Any
 
 from contracts.controller import Controller
-from contracts.faults import PUMP_ALARM_OCCLUSION, PUMP_ALARM_RESERVOIR_EMPTY, PUMP_ALARM_WATCHDOG
+from contracts.faults import (
+    PUMP_ALARM_OCCLUSION,
+    PUMP_ALARM_RESERVOIR_EMPTY,
+    PUMP_ALARM_WATCHDOG,
+    QUALITY_HELD,
+)
+from runtime.flatline import stuck_samples
 
 
 class State(IntEnum):
@@ -103,6 +113,11 @@ PUMP_ALARM_MASK = PUMP_ALARM_OCCLUSION | PUMP_ALARM_RESERVOIR_EMPTY | PUMP_ALARM
 SCHED_ENVELOPE = Fault.SCHED_OUT_OF_BOX | Fault.SCHED_RATE
 #: fault name -> bit, as plain ints (IntFlag arithmetic runs Python-level enum code)
 FAULT_BITS: dict[str, int] = {f.name: int(f) for f in Fault}
+#: the default sample age limit (s): three updates of a 1 Hz monitor (one missed update plus
+#: jitter), 3 % of the fastest patient lag (T >= 100 s) - holding MAP that long costs nothing
+DEFAULT_SAMPLE_AGE_LIMIT_S = 3.0
+#: quality bits that count as bad by default: all but QUALITY_HELD (unknown bits too)
+QUALITY_MASK = 0xFFFFFFFF & ~QUALITY_HELD
 #: the faults that raise the alarm (plain int, for the per-tick path)
 ALARM_FAULTS = ~int(Fault.COMMAND_CLAMPED)
 
@@ -127,11 +142,13 @@ class SupervisorConfig:
     map_min_mmhg: float = 20.0
     map_max_mmhg: float = 250.0
     spike_mmhg: float = 20.0
-    flatline_enabled: bool = False
+    sensor_noise_mmhg: float = 0.0
     flatline_s: float = 10.0
     flatline_eps_mmhg: float = 0.05
-    quality_mask: int = 0xFFFFFFFF
-    stale_after_s: float = 0.35
+    flatline_window: int = 30
+    flatline_ratio: float = 0.25
+    quality_mask: int = QUALITY_MASK
+    stale_after_s: float = DEFAULT_SAMPLE_AGE_LIMIT_S
     link_loss_after_s: float = 1.0
     sched_required: bool = False
     sched_box: tuple[tuple[float, float], ...] | None = None
@@ -162,8 +179,15 @@ class SupervisorConfig:
         need("map_max_mmhg", self.map_max_mmhg <= 400.0, "(map_min_mmhg, 400] mmHg")
         need("spike_mmhg", self.spike_mmhg > 0.0, "> 0 mmHg")
         need("flatline_s", self.flatline_s > 0.0, "> 0 s")
-        need("flatline_eps_mmhg", self.flatline_eps_mmhg >= 0.0, ">= 0 mmHg")
-        need("stale_after_s", self.stale_after_s > 0.0, "> 0 s")
+        need("sensor_noise_mmhg", 0.0 <= self.sensor_noise_mmhg <= 50.0, "[0, 50] mmHg")
+        need("flatline_eps_mmhg", self.flatline_eps_mmhg > 0.0, "> 0 mmHg")
+        need("flatline_window", 2 <= self.flatline_window <= 10000, "[2, 10000] samples")
+        need("flatline_ratio", 0.0 < self.flatline_ratio < 1.0, "(0, 1)")
+        need(
+            "stale_after_s",
+            self.sample_period_s <= self.stale_after_s <= 60.0,
+            "[sample_period_s, 60] s",
+        )
         need("link_loss_after_s", self.link_loss_after_s > 0.0, "> 0 s")
         need("sched_rate_tolerance", self.sched_rate_tolerance >= 1.0, ">= 1")
         need("sched_action", self.sched_action in ("hold", "advise"), "'hold' or 'advise'")
@@ -217,11 +241,19 @@ def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
         ("MAP_SPIKE", f"|MAP step| > {cfg.spike_mmhg} mmHg between samples; same tick"),
         (
             "MAP_FLATLINE",
-            f"MAP within +/-{cfg.flatline_eps_mmhg} mmHg for {cfg.flatline_s} s"
-            " (only when the device reports sensor noise > 0)",
+            "new samples stuck within +/-max("
+            f"{cfg.flatline_eps_mmhg} mmHg, quantum/2) for n samples and {cfg.flatline_s} s at"
+            " least (n sized for a 1e-9 false alarm: "
+            f"{stuck_samples(1.0, 1.0, cfg.flatline_eps_mmhg):.0f} at noise 1 mmHg, quantum 1"
+            " mmHg), or their mean squared step below"
+            f" 2 x ({cfg.flatline_ratio} x noise)^2 over {cfg.flatline_window} samples and"
+            f" {cfg.flatline_s} s (noise >= quantum); only when the device announces noise > 0",
         ),
-        ("SENSOR_QUALITY", "monitor flags the sample (quality bits); same tick"),
-        ("STALE_SAMPLE", f"newest sample older than {cfg.stale_after_s} s"),
+        ("SENSOR_QUALITY", "monitor flags the sample (quality bits but HELD); same tick"),
+        (
+            "STALE_SAMPLE",
+            f"sample older than {cfg.stale_after_s} s (a HELD repeat ages from the last new one)",
+        ),
         ("LINK_LOSS", f"no frame for {cfg.link_loss_after_s} s -> FAILSAFE at once"),
         ("SCHED_INVALID", "scheduling marked invalid or non-finite; same tick"),
         ("SCHED_OUT_OF_BOX", box),
@@ -309,8 +341,8 @@ def supervisor_config_for(
     """A supervisor configuration matched to ``controller`` and the device's sensor.
 
     Sample period and pump limit come from the controller; the scheduling box and rates from
-    :func:`sched_limits_of`; the flatline check is on only when the sensor is noisy (a noise-free
-    simulated sensor legitimately repeats values). Leaving the design box or rate bounds is
+    :func:`sched_limits_of`; the flatline rules scale with the announced noise and are off
+    without it (a noise-free simulated sensor legitimately repeats values). Leaving the design box or rate bounds is
     advisory by default (``sched_action="advise"``): the generated controller clamps and
     rate-limits ρ itself (docs/INTERFACES.md), and the simulated patients routinely leave the envelope
     (paper-tracking seed 3: K down to 0.18 < 0.25; τ moving ~1 s/s against a 0.1 s/s bound), so
@@ -320,12 +352,12 @@ def supervisor_config_for(
     cfg: dict[str, Any] = {
         "sample_period_s": float(controller.sample_period_s),
         "max_rate_ml_h": float(controller.max_rate_ml_h),
-        "flatline_enabled": sensor_noise_mmhg > 0.0,
+        "sensor_noise_mmhg": float(sensor_noise_mmhg),
         "sched_required": box is not None,
         "sched_box": box,
         "sched_rate_bounds": rates,
         "sched_action": "advise",
-        "stale_after_s": 3.5 * float(controller.sample_period_s),
+        "stale_after_s": max(DEFAULT_SAMPLE_AGE_LIMIT_S, float(controller.sample_period_s)),
     }
     cfg.update(overrides)
     return SupervisorConfig(**cfg)

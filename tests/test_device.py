@@ -292,3 +292,28 @@ def test_device_pump_maximum_outside_the_pumps_range_exits_2_with_one_line(capsy
     assert (
         rc == 2 and line == "pressor device: --pump-max-ml-h: value 0.0 outside (0.0, 10000.0] ml/h"
     )
+def test_realtime_device_with_a_1hz_monitor_sends_only_new_samples_and_applies_every_answer():
+    from runtime.loop import Loop
+    from runtime.supervisor import Supervisor
+    from runtime.supervisor_config import supervisor_config_for
+
+    pair = PtyPair.open()
+    ep = RuntimeSession(pair.leader_port())
+    samples: list[int] = []
+    statuses: list = []
+    ep.on_message = lambda m: (
+        samples.append(m.tick) if m.get_type() == "MAP_SAMPLE" else
+        statuses.append(m) if m.get_type() == "PUMP_STATUS" else None
+    )  # fmt: skip
+    proc = spawn_device(pair, "--scenario", "bedside-monitor", "--duration", "3.0", "--realtime")
+    peer = ep.handshake(Hello("pi"), timeout_s=30.0)
+    pi = PIController(sample_period_s=peer.sample_period_s)
+    loop = Loop(pi, Supervisor(supervisor_config_for(pi, peer.sensor_noise_mmhg)), ep)
+    result = loop.run_realtime(peer.n_ticks)
+    assert _finish(proc, pair, ep) == 0
+    assert samples == [0, 10, 20]  # the monitor's updates only: no HELD repeats in real time
+    assert result.ticks_in_state["AUTO"] == result.timing["ticks"]  # held, never stale
+    # each period's command answers the latest sample, and the pump applies it: the delivered
+    # rate follows the PI's integrator tick by tick, not only at the three updates
+    delivered = [s.delivered_ml_h for s in statuses]
+    assert len(set(delivered)) >= 20 and max(delivered) > 0.0

@@ -9,7 +9,7 @@ import pytest
 
 from hil_sim.cohort import patient_rng
 from hil_sim.disturbance import Bolus, DisturbanceSum, Hemorrhage, Sinusoid
-from hil_sim.sensor import QUALITY_INVALID, Artifact, Sensor, SensorConfig
+from hil_sim.sensor import QUALITY_HELD, QUALITY_INVALID, Artifact, Sensor, SensorConfig
 
 
 def _read(sensor: Sensor, truth, n: int, ts: float = 0.1) -> list[tuple[float, int]]:
@@ -21,6 +21,13 @@ def test_sample_and_hold_at_monitor_period_and_quantisation():
     out = _read(s, lambda t: 60.0 + t, 25)
     values = [v for v, _ in out]
     assert values[:10] == [60.0] * 10 and values[10] == 61.0 and values[24] == 62.0
+    # a repeat between two monitor updates carries QUALITY_HELD; an update does not
+    assert [q for _, q in out] == [0 if k % 10 == 0 else QUALITY_HELD for k in range(25)]
+
+
+def test_a_monitor_as_fast_as_the_loop_never_holds():
+    out = _read(Sensor(SensorConfig(period_s=0.1)), lambda t: 60.0 + t, 50)
+    assert all(q == 0 for _, q in out)
 
 
 def test_noise_is_seeded_and_has_configured_std():

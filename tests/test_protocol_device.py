@@ -34,11 +34,6 @@ PROJECT_PACKAGES = {
     "hil_sim",
     "pressor",
 }
-HELD_XFAIL = pytest.mark.xfail(
-    strict=True, reason="needs the HELD quality bit and the sample-age limit (monitor branch)"
-)
-
-
 @dataclass
 class Run:
     """One ``pressor run`` driven by the protocol device."""
@@ -225,7 +220,6 @@ def quantized_1hz(**kwargs: object) -> DeviceConfig:
     )
 
 
-@HELD_XFAIL
 def test_lockstep_1hz_quantized_monitor_holds_samples_and_reaches_target(
     dialect: ModuleType, tmp_path: Path
 ) -> None:
@@ -240,7 +234,6 @@ def test_lockstep_1hz_quantized_monitor_holds_samples_and_reaches_target(
 
 
 @pytest.mark.slow
-@HELD_XFAIL
 def test_realtime_1hz_quantized_monitor_sends_samples_on_updates_and_stays_in_auto(
     dialect: ModuleType, tmp_path: Path
 ) -> None:

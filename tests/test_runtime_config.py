@@ -27,6 +27,8 @@ def test_options_become_a_frozen_config_with_defaults_and_units(tmp_path: Path):
     assert cfg.cpu_latency_us is None and cfg.stall_timeout_s == 10.0 and cfg.ticks == 0
     assert cfg.rrd == tmp_path / "r.rrd" and cfg.summary is None
     assert cfg.schedule == "estimated"  # the default the command chose
+    assert cfg.sample_age_limit_s == 3.0  # a held MAP sample is used for 3 s, then stale
+    assert _config("--controller", "pi", "--sample-age-limit-s", "1.5").sample_age_limit_s == 1.5
     assert _config("--controller", "pi", "--schedule", "nominal").schedule == "nominal"
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.rate_hz = 20.0  # type: ignore[misc]
@@ -47,6 +49,12 @@ def test_options_become_a_frozen_config_with_defaults_and_units(tmp_path: Path):
         ),
         (["--controller", "smith:1"], 0, ["--controller smith:1", "[5, 600] s"]),
         (["--controller", "pi", "--fault", "no-such-fault"], 0, ["no-such-fault"]),
+        (
+            ["--controller", "pi", "--sample-age-limit-s", "0.05"],
+            0,
+            ["--sample-age-limit-s 0.05", "[1/--rate = 0.1, 60] s"],
+        ),
+        (["--sample-age-limit-s", "61"], 0, ["--sample-age-limit-s", "'61'", "(0, 60]"]),
     ],
 )
 def test_a_bad_value_is_one_usage_error_naming_option_value_and_range(argv, ticks, needles):

@@ -187,7 +187,8 @@ def test_realtime_watchdogs_flag_stale_sample_then_link_loss_and_failsafe():
     ep = RuntimeSession(a)
     ep.handshake(Hello("pi"), timeout_s=10.0)
     pi = PIController(sample_period_s=TS)
-    sup = Supervisor(supervisor_config_for(pi, 0.0, safe_rate_ml_h=0.0))
+    # a sample age limit of 0.35 s (--sample-age-limit-s 0.35): stale before the link is lost
+    sup = Supervisor(supervisor_config_for(pi, 0.0, safe_rate_ml_h=0.0, stale_after_s=0.35))
     try:
         res = Loop(pi, sup, ep).run_realtime(n_ticks=25)
     finally:
@@ -228,6 +229,7 @@ def test_supervisor_config_reads_design_envelope_from_generated_module_constants
     cfg = supervisor_config_for(ctrl, sensor_noise_mmhg=2.0)
     assert cfg.sched_box == ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
     assert cfg.sched_rate_bounds == (2e-4, 0.06, 0.1)
-    assert cfg.sched_required and cfg.flatline_enabled and cfg.sched_action == "advise"
+    assert cfg.sched_required and cfg.sensor_noise_mmhg == 2.0 and cfg.sched_action == "advise"
     pi_cfg = supervisor_config_for(PIController(), sensor_noise_mmhg=0.0)
-    assert pi_cfg.sched_box is None and not pi_cfg.sched_required and not pi_cfg.flatline_enabled
+    assert pi_cfg.sched_box is None and not pi_cfg.sched_required
+    assert pi_cfg.sensor_noise_mmhg == 0.0  # a noise-free monitor: the flatline rules are off

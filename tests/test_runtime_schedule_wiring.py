@@ -3,6 +3,7 @@ controller see, a device that sends no scheduling parameters, trial and SIL on t
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import threading
@@ -11,6 +12,7 @@ import numpy as np
 import pytest
 
 from baselines.pi import PIController
+from contracts.metrics import step_metrics
 from hil_sim.closed_loop import simulate
 from hil_sim.device import run_device
 from hil_sim.scenario import load_scenario
@@ -241,11 +243,67 @@ def test_an_estimate_outside_the_box_raises_the_advisory_after_the_documented_ti
     assert not math.isnan(rec.controller_ml_h)
 
 
-def test_a_repeated_sample_of_a_silent_link_is_not_fed_to_the_source_as_a_measurement():
+def test_a_repeated_sample_of_a_silent_link_is_held_for_the_source_until_the_age_limit():
     ctl = PIController(TS)
     spy = SpySchedule((0.5, 150.0, 30.0), healthy=True)
     core = ClosedLoopCore(ctl, Supervisor(supervisor_config_for(ctl, 0.0)), spy)
     obs = World(SCENARIO, SEED, TS).observe()
     core.step(obs, 0.0, None, CLEAN_LINK)
     core.step(obs, 0.1, None, LinkHealth(sample_age_s=0.1, link_silence_s=0.1, link_errors=0))
-    assert spy.fed[0][0] == obs.map_mmhg and math.isnan(spy.fed[1][0])
+    core.step(obs, 3.2, None, LinkHealth(sample_age_s=3.2, link_silence_s=0.1, link_errors=0))
+    # sample-and-hold (docs/PROTOCOL.md): the held value within the 3 s limit, NaN past it
+    assert spy.fed[0][0] == obs.map_mmhg and spy.fed[1][0] == obs.map_mmhg
+    assert math.isnan(spy.fed[2][0])
+
+
+def test_the_summarys_settling_band_is_the_callers_not_the_devices_noise_announcement():
+    duration_s = 300.0
+    pair = PtyPair.open()
+    clock = ManualClock()
+    device = DeviceSession(open_port(pair.follower_path), clock=clock)
+    world = World("bedside-monitor", SEED, TS)  # announces 0.5 mmHg of noise in its hello
+    thread = threading.Thread(
+        target=lambda: (run_device(device, world, clock, duration_s=duration_s), device.close()),
+        daemon=True,
+    )
+    thread.start()
+    try:
+        summary, result = run_runtime(
+            pair.leader_port(), _config("lpv", "oracle"), {"controller": "lpv"}, None,
+            noisy_band=False,
+        )  # fmt: skip
+    finally:
+        thread.join(30)
+        pair.close()
+    assert summary["sensor_noise_mmhg"] == 0.5
+    tr = result.trajectory
+    t, y, r = tr["sim_time_s"], tr["map_mmhg"], tr["target_mmhg"]
+    two_pct = step_metrics(t, y, r, 0.0, float(r[0] - y[0]), noisy=False)["settling_time_s"]
+    five = step_metrics(t, y, r, 0.0, float(r[0] - y[0]), noisy=True)["settling_time_s"]
+    # integer readings never stay within 2 % of the step (0.4 mmHg); they settle within 5 mmHg
+    assert summary["metrics"]["settling_time_s"] == two_pct and two_pct != five
+    assert five is not None
+
+
+def test_a_device_announcing_an_impossible_noise_is_refused_with_one_line():
+    from contracts.usage import UsageError
+    from link import LINK_LOCKSTEP, Hello, LinkError
+
+    pair = PtyPair.open()
+    device = DeviceSession(open_port(pair.follower_path), clock=ManualClock())
+    hello = Hello("noisy", 1, TS, math.nan, 10, LINK_LOCKSTEP)
+
+    def announce() -> None:
+        with contextlib.suppress(LinkError):  # the runtime refuses and closes the link
+            device.handshake(hello, timeout_s=10.0)
+
+    thread = threading.Thread(target=announce, daemon=True)
+    thread.start()
+    try:
+        with pytest.raises(UsageError, match="sensor_noise_mmhg nan: allowed") as info:
+            run_runtime(pair.leader_port(), _config("pi", "oracle"), {"controller": "pi"}, None)
+        assert "\n" not in str(info.value)
+    finally:
+        thread.join(15)
+        device.close()
+        pair.close()

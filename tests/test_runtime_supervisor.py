@@ -88,7 +88,7 @@ def test_startup_with_bad_sample_commands_zero_and_does_not_run_controller():
         ({"map_mmhg": 300.0}, Fault.MAP_RANGE),  # flush
         ({"map_mmhg": GOOD_MAP + 35.0}, Fault.MAP_SPIKE),
         ({"quality": 1}, Fault.SENSOR_QUALITY),
-        ({"sample_age_s": 0.5}, Fault.STALE_SAMPLE),
+        ({"sample_age_s": 3.1}, Fault.STALE_SAMPLE),  # past the 3 s default age limit
         ({"target_mmhg": math.nan}, Fault.TARGET_INVALID),
     ],
 )
@@ -105,9 +105,12 @@ def test_sensor_fault_is_detected_same_tick_and_holds_last_command_with_alarm(ba
 
 
 def test_flatline_detected_after_window_only_when_sensor_is_noisy():
-    cfg = SupervisorConfig(sample_period_s=TS, flatline_enabled=True, flatline_s=2.0)
+    cfg = SupervisorConfig(sample_period_s=TS, sensor_noise_mmhg=0.1, flatline_s=2.0)
     rig = Rig(cfg)
-    rig.ticks(20, map_mmhg=80.0)
+    for m in (80.3, 79.8, 80.2, 80.25):  # the monitor reads to 0.1 mmHg (or finer)
+        rig.tick(map_mmhg=m)
+    # stuck for 2 s and 23 samples (the count a 1e-9 false alarm needs at 0.1 mmHg noise)
+    rig.ticks(22, map_mmhg=80.0)
     assert rig.sup.state == State.AUTO
     rig.tick(map_mmhg=80.0)
     assert rig.sup.faults & Fault.MAP_FLATLINE
@@ -266,7 +269,7 @@ def test_command_is_always_finite_and_within_pump_limits(rows, safe_rate):
         sched_required=True,
         sched_box=BOX,
         sched_rate_bounds=RATES,
-        flatline_enabled=True,
+        sensor_noise_mmhg=1.0,
         flatline_s=0.5,
     )
     sup = Supervisor(cfg)

@@ -45,6 +45,7 @@ from contracts.faults.wire_bits import (
     PUMP_ALARM_OUT_OF_RANGE,
     PUMP_ALARM_RESERVOIR_EMPTY,
     PUMP_ALARM_WATCHDOG,
+    QUALITY_HELD,
     QUALITY_INVALID,
     QUALITY_WAVEFORM,
 )
@@ -58,6 +59,7 @@ __all__ = [
     "PUMP_ALARM_OUT_OF_RANGE",
     "PUMP_ALARM_RESERVOIR_EMPTY",
     "PUMP_ALARM_WATCHDOG",
+    "QUALITY_HELD",
     "QUALITY_INVALID",
     "QUALITY_WAVEFORM",
     "catalogue_rows",

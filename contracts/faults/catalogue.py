@@ -86,7 +86,7 @@ _LINK_SAFE = (
     " LINK_ERRORS logged"
 )
 _HOLD = "HOLD (last command held, controller frozen, alarm); FAILSAFE after hold_max_s"
-_LOSS = "HOLD at STALE_SAMPLE, FAILSAFE at LINK_LOSS (ramp to safe rate); pump watchdog after 5 s"
+_LOSS = "FAILSAFE at LINK_LOSS (ramp to safe rate); pump watchdog after 5 s"
 
 CATALOGUE: dict[str, FaultKind] = {
     k.name: k
@@ -122,7 +122,7 @@ CATALOGUE: dict[str, FaultKind] = {
             3.0,
             ("STALE_SAMPLE", "LINK_LOSS"),
             10,
-            "STALE_SAMPLE after stale_after_s (4 ticks), LINK_LOSS after 1 s (10 ticks)",
+            "LINK_LOSS after 1 s (10 ticks); STALE_SAMPLE (sample age limit, 3 s) comes later",
             _LOSS,
         ),
         FaultKind(
@@ -134,7 +134,7 @@ CATALOGUE: dict[str, FaultKind] = {
             8.0,
             ("STALE_SAMPLE", "LINK_LOSS"),
             10,
-            "STALE_SAMPLE after stale_after_s (4 ticks), LINK_LOSS after 1 s (10 ticks)",
+            "LINK_LOSS after 1 s (10 ticks); STALE_SAMPLE (sample age limit, 3 s) comes later",
             _LOSS,
         ),
         FaultKind(

@@ -16,3 +16,4 @@ PUMP_ALARM_OUT_OF_RANGE = 16
 #: monitor quality bits carried by MAP_SAMPLE.quality (hil_sim.sensor uses these values)
 QUALITY_INVALID = 1
 QUALITY_WAVEFORM = 2  # the monitor's waveform check: no pulsatility / over-damped line
+QUALITY_HELD = 4  # value repeated, the monitor has no newer one: not a fault (sample-and-hold)

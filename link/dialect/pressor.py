@@ -413,8 +413,10 @@ PRESSOR_MAP_QUALITY_INVALID = 1
 enums["PRESSOR_MAP_QUALITY"][1] = EnumEntry("PRESSOR_MAP_QUALITY_INVALID", """The monitor has no valid value; map_mmhg is NaN.""")
 PRESSOR_MAP_QUALITY_WAVEFORM = 2
 enums["PRESSOR_MAP_QUALITY"][2] = EnumEntry("PRESSOR_MAP_QUALITY_WAVEFORM", """The monitor's waveform check failed: no pulsatility or an over-damped line (the value may be finite but is not trusted).""")
-PRESSOR_MAP_QUALITY_ENUM_END = 3
-enums["PRESSOR_MAP_QUALITY"][3] = EnumEntry("PRESSOR_MAP_QUALITY_ENUM_END", """""")
+PRESSOR_MAP_QUALITY_HELD = 4
+enums["PRESSOR_MAP_QUALITY"][4] = EnumEntry("PRESSOR_MAP_QUALITY_HELD", """Value repeated: the monitor has no newer one (a monitor slower than the tick, lockstep). Not a fault: the runtime uses the held value and ages it from the last sample without this bit (docs/PROTOCOL.md, sample-and-hold).""")
+PRESSOR_MAP_QUALITY_ENUM_END = 5
+enums["PRESSOR_MAP_QUALITY"][5] = EnumEntry("PRESSOR_MAP_QUALITY_ENUM_END", """""")
 
 # PRESSOR_PUMP_ALARM
 enums["PRESSOR_PUMP_ALARM"] = Enum()
