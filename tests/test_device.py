@@ -292,6 +292,8 @@ def test_device_pump_maximum_outside_the_pumps_range_exits_2_with_one_line(capsy
     assert (
         rc == 2 and line == "pressor device: --pump-max-ml-h: value 0.0 outside (0.0, 10000.0] ml/h"
     )
+
+
 def test_realtime_device_with_a_1hz_monitor_sends_only_new_samples_and_applies_every_answer():
     from runtime.loop import Loop
     from runtime.supervisor import Supervisor

@@ -34,6 +34,8 @@ PROJECT_PACKAGES = {
     "hil_sim",
     "pressor",
 }
+
+
 @dataclass
 class Run:
     """One ``pressor run`` driven by the protocol device."""
