@@ -192,6 +192,7 @@ def test_per_tick_work_allocates_nothing_that_grows():
         ({"q_b": -1.0}, "q_b"),
         ({"r_mmhg": math.nan}, "r_mmhg"),
         ({"memory_s": 1.0}, "memory_s"),
+        ({"tau_prior_s": (15.0, 0.0)}, "tau_prior_std_s"),
         ({"tau_range_s": (40.0, 10.0)}, "tau_range_s"),
         ({"prior": (0.5, 150.0)}, "prior"),
         ({"prior": (0.5, -1.0, 40.0)}, "prior_T_s"),
@@ -211,3 +212,20 @@ def test_estimate_says_whether_it_lies_in_the_design_box(K, inside):
     last = estimates[-1]
     assert not last.from_prior and abs(last.K - K) / K < 0.15
     assert last.in_box is inside
+
+
+def test_tau_prior_weighs_the_delays_only_where_the_data_carry_no_delay_information():
+    n_excited, n = round(1200.0 / TS), round(4800.0 / TS)
+    u = np.concatenate([staircase(11, 1200.0), np.full(n - n_excited, 30.0)])  # then held
+    y = fopdt_map(u, np.full(n, 0.5), 150.0, 25.0, 11)
+    low = DelayBankEstimator(TS, tau_prior_s=(12.0, 10.0))
+    high = DelayBankEstimator(TS, tau_prior_s=(40.0, 10.0))
+    a, b = run(low, y, u), run(high, y, u)
+    excited = slice(n_excited - 600, n_excited)  # the last minute of the staircase
+    for estimates in (a, b):  # the data decide: both priors give the true 25 s
+        assert all(abs(e.tau_s - 25.0) < 2.0 for e in estimates[excited])
+        assert all(e.tau_lo_s <= 25.0 <= e.tau_hi_s for e in estimates[excited])
+    # an hour after the rate was last changed the data have been forgotten: each credible
+    # interval has spread towards its own prior's mode
+    assert a[-1].tau_lo_s <= 15.0 and b[-1].tau_lo_s >= 25.0
+    assert b[-1].tau_hi_s - a[-1].tau_hi_s >= 8.0

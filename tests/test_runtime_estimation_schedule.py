@@ -122,8 +122,9 @@ def _estimate(K: float, K_std: float, T_s: float, T_std_s: float) -> Estimate:
 @pytest.mark.parametrize(
     ("est", "K", "T_s"),
     [
-        (_estimate(0.5, 0.2, 150.0, 60.0), 0.5 + 0.75 * 0.2, 150.0 - 0.75 * 60.0),  # full shift
-        (_estimate(0.5, 0.015, 150.0, 4.5), 0.5 + 0.075 * 0.015, 150.0 - 0.075 * 4.5),  # 3 %
+        (_estimate(0.5, 0.35, 200.0, 130.0), 0.5 + 0.75 * 0.35, 200.0 - 0.75 * 130.0),  # full
+        (_estimate(0.5, 0.15, 150.0, 45.0), 0.5 + 0.375 * 0.15, 150.0 - 0.375 * 45.0),  # 30 %
+        (_estimate(0.5, 0.015, 150.0, 4.5), 0.5 + 0.0375 * 0.015, 150.0 - 0.0375 * 4.5),  # 3 %
         (_estimate(0.9, 0.3, 110.0, 40.0), 1.0, 100.0),  # stops at the box's K high, T low
         (_estimate(1.5, 0.3, 90.0, 40.0), 1.5, 90.0),  # already beyond: the estimate as is
     ],

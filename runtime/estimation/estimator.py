@@ -11,9 +11,12 @@ with the output-error gradient ψ = (∂x̂/∂a, ∂x̂/∂b, 1))::
     a = e^(−Δ/T), b = K·(1 − a), c = β − y_ref (the baseline's shift, mmHg)
 
 ``y_ref`` is the first valid window (the MAP before the drug acts). Per window the random walks
-have standard deviations ``q_a``, ``q_b`` and ``q_c`` (mmHg: a haemorrhage of 10 mmHg over 5 min is
-≈ 0.07 mmHg per window); an innovation beyond ``jump_sigma`` standard deviations is taken as a
-baseline jump (the offset's variance is raised by its square, so c absorbs it rather than a, b).
+have standard deviations ``q_a``, ``q_b`` and ``q_c`` (q_c 0.03 mmHg: small, so that in a settled
+loop, where K·ū and c cannot be told apart by the data, c stays near the pre-drug baseline and the
+MAP's level keeps K tracked as it falls with the infusion; with 0.1 mmHg c took the drift and K
+erred 11–17 % on cohort seed 11); an innovation beyond ``jump_sigma`` standard deviations is taken
+as a baseline jump (the offset's variance is raised by its square, so c absorbs it rather than
+a, b): a haemorrhage of 10 mmHg over 5 min (≈ 0.07 mmHg per window) enters c that way.
 Each model keeps an exponentially forgotten negative log-likelihood of its innovations (memory
 ``memory_s``); the best model (log-likelihood plus the τ prior's −2 log-density, below) gives
 K = b/(1 − a) and T = −Δ/ln a, and τ is refined between bank members by a parabola through those
@@ -55,8 +58,10 @@ patient, :data:`NOMINAL_PLANT`) is reported with reason ``"learning"``; the sche
 schedules cautiously around it (:class:`runtime.estimation.schedule.EstimatedSchedule`). Every
 estimate is checked (finite parameters and covariance, 0 < a < 1, K and T in the plausible ranges)
 before it is reported; when the bank's best model fails, the prior is reported with the reason
-(``"diverged"``, ``"K implausible"``, ``"T implausible"``) and ``healthy=False``, and it stays so
-until a model with ``min_age_s`` of data since a restart from the prior passes. Bad samples are
+(``"diverged"``, ``"K implausible"``, ``"T implausible"``) and ``healthy=False``; once an estimate
+has been reported it stays so until a model with ``min_age_s`` of data since a restart from the
+prior passes (before, the learning gate already holds the prior: an ill-conditioned fit in the
+step's first minute does not lock the estimate out for ``min_age_s``). Bad samples are
 kept out by :class:`runtime.estimation.gate.SampleGate`; a window with fewer than half its samples
 accepted is not fitted (the models still simulate through it).
 
@@ -146,13 +151,13 @@ class DelayBankEstimator:
         prior_rel_std: float = 0.6,
         q_a: float = 2e-5,
         q_b: float = 2e-5,
-        q_c: float = 0.1,
+        q_c: float = 0.05,
         r_mmhg: float = 0.05,
         jump_sigma: float = 4.0,
         baseline_std_mmhg: float = 2.0,
         reseed_nll: float = 100.0,
         min_age_s: float = 300.0,
-        memory_s: float = 1200.0,
+        memory_s: float = 600.0,
         learn_rel_std: float = 0.5,
         tau_prior_s: tuple[float, float] = (15.0, 10.0),
         K_plausible: tuple[float, float] = (0.02, 5.0),
@@ -333,8 +338,8 @@ class DelayBankEstimator:
             self._rejection = verdict
             return self._fallback(verdict, False)
         model = bank[best]
-        if self._rejection and model.age < self._min_age:  # restarted after a rejection
-            return self._fallback(self._rejection, False)
+        if self._rejection and self._learned and model.age < self._min_age:
+            return self._fallback(self._rejection, False)  # restarted after a rejection
         self._rejection = ""
         lmin = model.nll + pen[best]
         w, total = self._w, 0.0
