@@ -65,13 +65,14 @@ step's first minute does not lock the estimate out for ``min_age_s``). Bad sampl
 kept out by :class:`runtime.estimation.gate.SampleGate`; a window with fewer than half its samples
 accepted is not fitted (the models still simulate through it).
 
-Known limits (measured with ``benchmarks/estimator.py``, 100 patients, seed 2026, LPV on the
-oracle): K is tracked (median second-half error ≈ 10 %), but T and τ are only observable while the
-rate moves. Once the closed loop has settled the data say nothing new, while the simulated patient
-(``hil_sim.patient``) keeps moving: T grows with the infused volume and τ, raised for minutes by
-every rate change, decays to ≈ 10 + i/12 s. The estimate keeps what the excited periods showed
-(T ≈ 100 s, τ near its post-step peak): median errors ≈ 28 % and ≈ 18 s. With the rate excited
-throughout (open-loop staircase) the same estimator reaches ≈ 9 %, 12 %, 6.4 s.
+Known limits (closed loop, LPV on this schedule, README "Scheduling sources" for the figures and
+commands): K is tracked (the MAP's level against the pre-drug baseline); T and τ are observable
+only while the rate moves. Once the loop has settled the simulated patient (``hil_sim.patient``)
+keeps moving while the data say nothing new: T grows with the infused volume (the estimate keeps
+the start-up's ≈ 100 s, median error ≈ 25 %), and τ, raised for minutes by every rate change,
+decays to ≈ 10 + i/12 s, which the τ prior, not the data, then reports. With the rate excited
+throughout (open-loop staircase, ``benchmarks/estimator.py``) the estimator reaches ≈ 9 %, 12 %,
+6.4 s.
 """
 
 from __future__ import annotations
