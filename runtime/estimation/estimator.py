@@ -12,8 +12,8 @@ with the output-error gradient ψ = (∂x̂/∂a, ∂x̂/∂b, 1))::
 
 ``y_ref`` is the first valid window (the MAP before the drug acts). Per window the random walks
 have standard deviations ``q_a``, ``q_b`` and ``q_c`` (mmHg: a haemorrhage of 10 mmHg over 5 min is
-≈ 0.07 mmHg per window; with q_c 0.05 the haemorrhage entered K, median error 21 % on cohort seed
-11, and with 0.03 c could not leave a start-up misfit); an innovation beyond ``jump_sigma``
+≈ 0.07 mmHg per window; 0.03–0.05 tracked K better in paper-tracking, 2–6 %, but then the
+haemorrhage entered K: 21 % on paper-disturbance, cohort seed 11); an innovation beyond ``jump_sigma``
 standard deviations is taken as a baseline jump (the offset's variance is raised by its square, so
 c absorbs it rather than a, b).
 Each model keeps an exponentially forgotten negative log-likelihood of its innovations (memory
