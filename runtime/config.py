@@ -33,8 +33,8 @@ SCHEDULE_HELP = (
 )
 #: why ``pressor sil`` and ``pressor trial`` still default to the oracle
 ORACLE_DEFAULT_WHY = (
-    "; default oracle here, because the estimator's T and tau figures still miss their targets"
-    " once the closed loop settles (README, 'Scheduling sources')"
+    "; default oracle here, because with the target step at t = 0, before the drug has moved MAP,"
+    " the estimated LPV's median IAE is still ~2x the oracle's (README, 'Scheduling sources')"
 )
 
 DEFAULT_RATE_HZ = 10.0

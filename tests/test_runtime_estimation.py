@@ -192,6 +192,7 @@ def test_per_tick_work_allocates_nothing_that_grows():
         ({"q_b": -1.0}, "q_b"),
         ({"r_mmhg": math.nan}, "r_mmhg"),
         ({"memory_s": 1.0}, "memory_s"),
+        ({"tau_prior_s": (15.0, 0.0)}, "tau_prior_std_s"),
         ({"tau_range_s": (40.0, 10.0)}, "tau_range_s"),
         ({"prior": (0.5, 150.0)}, "prior"),
         ({"prior": (0.5, -1.0, 40.0)}, "prior_T_s"),
@@ -211,3 +212,20 @@ def test_estimate_says_whether_it_lies_in_the_design_box(K, inside):
     last = estimates[-1]
     assert not last.from_prior and abs(last.K - K) / K < 0.15
     assert last.in_box is inside
+
+
+def test_tau_prior_decides_only_where_the_data_carry_no_delay_information():
+    low = (12.0, 10.0)  # (mode s, std s) of two different priors
+    high = (40.0, 10.0)
+    u = staircase(11, 1200.0)  # steps: the delay is in the data
+    y = fopdt_map(u, np.full(u.size, 0.5), 150.0, 25.0, 11)
+    for prior in (low, high):
+        last_minute = run(DelayBankEstimator(TS, tau_prior_s=prior), y, u)[-600:]
+        assert all(abs(e.tau_s - 25.0) < 2.0 for e in last_minute)
+    n = round(3600.0 / TS)
+    ramp = 10.0 + 40.0 * np.arange(n) / n  # a ramp shows T + τ only: the prior decides
+    y = fopdt_map(ramp, np.full(n, 0.5), 150.0, 25.0, 12)
+    a = run(DelayBankEstimator(TS, tau_prior_s=low), y, ramp)[-1]
+    b = run(DelayBankEstimator(TS, tau_prior_s=high), y, ramp)[-1]
+    assert not a.from_prior and not b.from_prior
+    assert b.tau_s - a.tau_s >= 5.0 and b.tau_lo_s - a.tau_lo_s >= 5.0

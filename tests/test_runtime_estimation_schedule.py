@@ -9,6 +9,7 @@ import sys
 import pytest
 
 from contracts.faults import QUALITY_INVALID, QUALITY_WAVEFORM
+from runtime.estimation.estimate import Estimate
 from runtime.estimation.estimator import NOMINAL_PLANT, DelayBankEstimator
 from runtime.estimation.gate import SampleGate
 from runtime.estimation.schedule import (
@@ -102,12 +103,44 @@ def test_nominal_rejects_bad_constants(args, match):
         NominalSchedule(*args)
 
 
-def test_estimated_starts_from_the_prior_and_ignores_the_device():
+def test_estimated_starts_on_the_low_gain_side_of_the_prior_and_ignores_the_device():
     src = EstimatedSchedule(sample_period_s=0.1)
     s = src.update(60.0, 0, 0.0, 0.9, 180.0, 12.0, True)
-    assert (s.K, s.T_s, s.tau_s) == NOMINAL_PLANT
+    e = s.estimate
+    assert e is not None and (e.K, e.T_s, e.tau_s) == NOMINAL_PLANT and e.confidence == 0.0
+    # K 0.75 σ above the prior's 0.55, T 0.75 σ below 150 s but not below the box's 100 s
+    assert s.K == pytest.approx(0.55 + 0.75 * 0.6 * 0.55) and s.T_s == 100.0
+    assert s.tau_s == NOMINAL_PLANT[2]
     assert s.source == "estimated" and s.valid and s.healthy and s.from_prior
-    assert s.reason == "learning" and s.estimate is not None and s.estimate.confidence == 0.0
+    assert s.reason == "learning"
+
+
+def _estimate(K: float, K_std: float, T_s: float, T_std_s: float) -> Estimate:
+    return Estimate(K, T_s, 20.0, K_std, T_std_s, 15.0, 25.0, 0.5, True, False, "ok", True)
+
+
+@pytest.mark.parametrize(
+    ("est", "K", "T_s"),
+    [
+        (_estimate(0.5, 0.35, 200.0, 130.0), 0.5 + 0.75 * 0.35, 200.0 - 0.75 * 130.0),  # full
+        (_estimate(0.5, 0.15, 150.0, 45.0), 0.5 + 0.375 * 0.15, 150.0 - 0.375 * 45.0),  # 30 %
+        (_estimate(0.5, 0.015, 150.0, 4.5), 0.5 + 0.0375 * 0.015, 150.0 - 0.0375 * 4.5),  # 3 %
+        (_estimate(0.9, 0.3, 110.0, 40.0), 1.0, 100.0),  # stops at the box's K high, T low
+        (_estimate(1.5, 0.3, 90.0, 40.0), 1.5, 90.0),  # already beyond: the estimate as is
+    ],
+)
+def test_cautious_shift_is_on_the_low_gain_side_and_shrinks_with_the_uncertainty(est, K, T_s):
+    assert EstimatedSchedule().cautious(est) == pytest.approx((K, T_s))
+    assert EstimatedSchedule(caution_sigma=0.0).cautious(est) == (est.K, est.T_s)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [({"caution_sigma": -1.0}, "caution_sigma"), ({"caution_rel_std": math.nan}, "caution_rel")],
+)
+def test_estimated_rejects_bad_caution_settings(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        EstimatedSchedule(**kwargs)
 
 
 def test_estimated_schedules_on_the_estimate_once_learned():

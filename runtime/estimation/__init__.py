@@ -7,6 +7,8 @@ hot path, no solver, no simulator). Modules:
     Which MAP samples may enter the estimator (NaN, quality bits, range, spikes, flatlines).
 :mod:`runtime.estimation.estimator`
     The delay-bank Kalman estimator (method, prior, health check: see its docstring).
+:mod:`runtime.estimation.estimate`
+    Its report (:class:`~runtime.estimation.estimate.Estimate`): values, uncertainty, health.
 :mod:`runtime.estimation.schedule`
     The scheduling sources the runtime plugs in: oracle, nominal, estimated.
 """

@@ -12,16 +12,26 @@ with the output-error gradient ψ = (∂x̂/∂a, ∂x̂/∂b, 1))::
 
 ``y_ref`` is the first valid window (the MAP before the drug acts). Per window the random walks
 have standard deviations ``q_a``, ``q_b`` and ``q_c`` (mmHg: a haemorrhage of 10 mmHg over 5 min is
-≈ 0.07 mmHg per window); an innovation beyond ``jump_sigma`` standard deviations is taken as a
-baseline jump (the offset's variance is raised by its square, so c absorbs it rather than a, b).
+≈ 0.07 mmHg per window; 0.03–0.05 tracked K better in paper-tracking, 2–6 %, but then the
+haemorrhage entered K: 21 % on paper-disturbance, cohort seed 11); an innovation beyond ``jump_sigma``
+standard deviations is taken as a baseline jump (the offset's variance is raised by its square, so
+c absorbs it rather than a, b).
 Each model keeps an exponentially forgotten negative log-likelihood of its innovations (memory
-``memory_s``); the best model gives K = b/(1 − a) and T = −Δ/ln a, and τ is refined between bank
-members by a parabola through the log-likelihoods, minus half a window (the averaged MAP lags the
-window's end by Δ/2; measured bias on synthetic data). Models that fall more than ``reseed_nll``
-behind the best, or fail the health check, restart from the best healthy model's θ, covariance and
-simulation (only the delay then differs, so the comparison of delays stays fair). Uncertainty: K
-and T standard deviations from the filter covariance (first order); τ an interval holding ~90 % of
-the bank's posterior weight.
+``memory_s``); the best model (log-likelihood plus the τ prior's −2 log-density, below) gives
+K = b/(1 − a) and T = −Δ/ln a, and τ is refined between bank members by a parabola through those
+sums, minus half a window (the averaged MAP lags the window's end by Δ/2; measured bias on
+synthetic data). Models that fall more than ``reseed_nll`` behind the best, or fail the health
+check, restart from the best healthy model's θ, covariance and simulation (only the delay then
+differs, so the comparison of delays stays fair). Uncertainty: K and T standard deviations from the
+filter covariance (first order); τ an interval holding ~90 % of the bank's posterior weight.
+
+The τ prior (``tau_prior_s``, Gaussian, default mode 15 s, std 10 s: the delay of a held infusion
+in the literature patient model this project simulates, 10–15 s at steady rates within its
+[10, 35] s range; ``hil_sim/patient.py``) weighs the delays where the data do not: after a rate
+change the likelihood differences between delays are hundreds of units and the prior (at most 9)
+does not matter; once the loop has settled the forgetting shrinks those differences and the
+estimate returns to the prior's mode. So in a settled loop τ̂ is the prior's, not a measurement
+(the data carry no delay information there; see "Known limits").
 
 Why this method (evidence: ``benchmarks/estimator.py`` and ``tests/test_runtime_estimation.py``):
 
@@ -42,76 +52,41 @@ Why this method (evidence: ``benchmarks/estimator.py`` and ``tests/test_runtime_
   grows honestly.
 
 Start-up and health: until the K and T relative standard deviations have fallen below
-``learn_rel_std`` the prior (the nominal patient, :data:`NOMINAL_PLANT`) is reported with reason
-``"learning"``. Every estimate is checked (finite parameters and covariance, 0 < a < 1, K and T in
-the plausible ranges) before it is reported; when the bank's best model fails, the prior is
-reported with the reason (``"diverged"``, ``"K implausible"``, ``"T implausible"``) and
-``healthy=False``, and it stays so until a model with ``min_age_s`` of data since a restart from
-the prior passes. Bad samples are kept out by :class:`runtime.estimation.gate.SampleGate`; a window
-with fewer than half its samples accepted is not fitted (the models still simulate through it).
+``learn_rel_std`` (≈ 40–80 s after the first rate step has reached the MAP) the prior (the nominal
+patient, :data:`NOMINAL_PLANT`) is reported with reason ``"learning"``; the scheduling source
+schedules cautiously around it (:class:`runtime.estimation.schedule.EstimatedSchedule`). Every
+estimate is checked (finite parameters and covariance, 0 < a < 1, K and T in the plausible ranges)
+before it is reported; when the bank's best model fails, the prior is reported with the reason
+(``"diverged"``, ``"K implausible"``, ``"T implausible"``) and ``healthy=False``; once an estimate
+has been reported it stays so until a model with ``min_age_s`` of data since a restart from the
+prior passes (before, the learning gate already holds the prior: an ill-conditioned fit in the
+step's first minute does not lock the estimate out for ``min_age_s``). Bad samples are
+kept out by :class:`runtime.estimation.gate.SampleGate`; a window with fewer than half its samples
+accepted is not fitted (the models still simulate through it).
 
-Known limits (measured with ``benchmarks/estimator.py``, 100 patients, seed 2026, LPV on the
-oracle): K is tracked (median second-half error ≈ 10 %), but T and τ are only observable while the
-rate moves. Once the closed loop has settled the data say nothing new, while the simulated patient
-(``hil_sim.patient``) keeps moving: T grows with the infused volume and τ, raised for minutes by
-every rate change, decays to ≈ 10 + i/12 s. The estimate keeps what the excited periods showed
-(T ≈ 100 s, τ near its post-step peak): median errors ≈ 28 % and ≈ 18 s. With the rate excited
-throughout (open-loop staircase) the same estimator reaches ≈ 9 %, 12 %, 6.4 s.
+Known limits (closed loop, LPV on this schedule, README "Scheduling sources" for the figures and
+commands): K is tracked (the MAP's level against the pre-drug baseline); T and τ are observable
+only while the rate moves. Once the loop has settled the simulated patient (``hil_sim.patient``)
+keeps moving while the data say nothing new: T grows with the infused volume (the estimate keeps
+the start-up's ≈ 100 s, median error ≈ 25 %), and τ, raised for minutes by every rate change,
+decays to ≈ 10 + i/12 s, which the τ prior, not the data, then reports. With the rate excited
+throughout (open-loop staircase, ``benchmarks/estimator.py``) the estimator reaches ≈ 9 %, 12 %,
+6.4 s.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 from baselines.smith import INITIAL_SCHEDULE
 from runtime.estimation.bank import DelayModel, FilterSettings
+from runtime.estimation.estimate import Estimate
 from runtime.estimation.gate import SampleGate
 
 #: the prior: the nominal patient the design and the PI were tuned for (K mmHg/(ml/h), T s, τ s)
 NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
 #: the default design box: (low, high) of K (mmHg/(ml/h)), T (s), τ (s)
 DESIGN_BOX: tuple[tuple[float, float], ...] = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
-
-
-@dataclass(frozen=True, slots=True)
-class Estimate:
-    """One report of the estimator.
-
-    Attributes
-    ----------
-    K, T_s, tau_s
-        Sensitivity (mmHg/(ml/h)), lag (s), delay (s) to schedule on (the prior when
-        ``from_prior``).
-    K_std, T_std_s
-        Standard deviations of K (mmHg/(ml/h)) and T (s).
-    tau_lo_s, tau_hi_s
-        Interval of τ (s) holding ~90 % of the bank's posterior weight.
-    confidence
-        0 (nothing learned) … 1 (K within ~5 %, T within ~10 %, one standard deviation).
-    healthy
-        False when the latest estimate was rejected by the health check (``reason`` says why).
-    from_prior
-        True when the values are the prior's (learning, or the check rejected the estimate).
-    reason
-        ``"ok"``, ``"learning"`` or the health check's rejection (``"diverged"``, ``"K
-        implausible"``, ``"T implausible"``).
-    in_box
-        Whether (K, T, τ) lies inside the design box.
-    """
-
-    K: float
-    T_s: float
-    tau_s: float
-    K_std: float
-    T_std_s: float
-    tau_lo_s: float
-    tau_hi_s: float
-    confidence: float
-    healthy: bool
-    from_prior: bool
-    reason: str
-    in_box: bool
 
 
 def _check_positive(**values: float) -> None:
@@ -156,6 +131,9 @@ class DelayBankEstimator:
         Memory of the delay selection's log-likelihoods (s), > window_s.
     learn_rel_std
         K and T relative standard deviations below which the estimate is reported, > 0.
+    tau_prior_s
+        (mode s, standard deviation s) > 0 of the Gaussian prior on τ weighing the bank's
+        log-likelihoods (see the module docstring).
     K_plausible, T_plausible_s
         Plausible (low, high) of K (mmHg/(ml/h)) and T (s); outside, the estimate is rejected.
     box
@@ -179,8 +157,9 @@ class DelayBankEstimator:
         baseline_std_mmhg: float = 2.0,
         reseed_nll: float = 100.0,
         min_age_s: float = 300.0,
-        memory_s: float = 1200.0,
+        memory_s: float = 600.0,
         learn_rel_std: float = 0.5,
+        tau_prior_s: tuple[float, float] = (15.0, 10.0),
         K_plausible: tuple[float, float] = (0.02, 5.0),
         T_plausible_s: tuple[float, float] = (20.0, 1000.0),
         box: tuple[tuple[float, float], ...] = DESIGN_BOX,
@@ -202,6 +181,9 @@ class DelayBankEstimator:
         if not (math.isfinite(memory_s) and memory_s > window_s):
             raise ValueError(f"memory_s={memory_s!r} must be finite and > window_s={window_s!r}")
         _check_range("tau_range_s", *tau_range_s)
+        if len(tau_prior_s) != 2:
+            raise ValueError(f"tau_prior_s={tau_prior_s!r} must be (mode s, std s)")
+        _check_positive(tau_prior_mode_s=tau_prior_s[0], tau_prior_std_s=tau_prior_s[1])
         _check_range("K_plausible", *K_plausible)
         _check_range("T_plausible_s", *T_plausible_s)
         if len(prior) != 3:
@@ -239,8 +221,11 @@ class DelayBankEstimator:
         self._reseed = reseed_nll
         self._min_age = round(min_age_s / window_s)
         self._tau_offset = 0.5 * window_s  # averaged MAP lags the window's end by half a window
+        # the τ prior as −2 log-density per bank member, added to its log-likelihood when selecting
+        mode, std = tau_prior_s
+        self._pen = [((d - self._tau_offset - mode) / std) ** 2 for d in self.delays_s]
         self._learn = learn_rel_std
-        self._K_pl, self._T_pl, self._box = K_plausible, T_plausible_s, box
+        self._K_pl, self._T_pl, self.box = K_plausible, T_plausible_s, box
         self.gate = gate if gate is not None else SampleGate(sample_period_s)
         # decimation: sums of the open window; ring of closed windows' rates (preallocated)
         self._phase = 0
@@ -309,7 +294,7 @@ class DelayBankEstimator:
 
     # -- report -----------------------------------------------------------------------------------
     def _inside(self, K: float, T_s: float, tau_s: float) -> bool:
-        (k0, k1), (t0, t1), (d0, d1) = self._box
+        (k0, k1), (t0, t1), (d0, d1) = self.box
         return k0 <= K <= k1 and t0 <= T_s <= t1 and d0 <= tau_s <= d1
 
     def _fallback(self, reason: str, healthy: bool) -> Estimate:
@@ -345,22 +330,21 @@ class DelayBankEstimator:
         """
         bank = self._bank
         n = len(bank)
-        best = min(range(n), key=lambda m: bank[m].nll)
+        pen = self._pen
+        best = min(range(n), key=lambda m: bank[m].nll + pen[m])
         verdict = bank[best].verdict(self._K_pl, self._T_pl)
         self._restart_failing()
         if verdict != "ok":
             self._rejection = verdict
             return self._fallback(verdict, False)
         model = bank[best]
-        if model.age < self._min_age:  # restarted from the prior: not enough data yet
-            if self._rejection:
-                return self._fallback(self._rejection, False)
-            return self._fallback("learning", True)
+        if self._rejection and self._learned and model.age < self._min_age:
+            return self._fallback(self._rejection, False)  # restarted after a rejection
         self._rejection = ""
-        lmin = model.nll
+        lmin = model.nll + pen[best]
         w, total = self._w, 0.0
         for m in range(n):
-            w[m] = math.exp(-0.5 * min(bank[m].nll - lmin, 700.0))
+            w[m] = math.exp(-0.5 * min(bank[m].nll + pen[m] - lmin, 700.0))
             total += w[m]
         lo_i, hi_i, acc = 0, n - 1, 0.0
         for m in range(n):  # 5 % tails of the posterior weight
@@ -374,7 +358,7 @@ class DelayBankEstimator:
                 hi_i = m - 1
         tau = self.delays_s[best] - self._tau_offset
         if 0 < best < n - 1:  # parabola through the three log-likelihoods around the best
-            l0, l2 = bank[best - 1].nll, bank[best + 1].nll
+            l0, l2 = bank[best - 1].nll + pen[best - 1], bank[best + 1].nll + pen[best + 1]
             curv = l0 - 2.0 * lmin + l2
             if curv > 0.0:
                 tau += 0.5 * self.window_s * (l0 - l2) / curv

@@ -20,7 +20,13 @@ T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
 :class:`EstimatedSchedule`
     The online estimator (:class:`runtime.estimation.estimator.DelayBankEstimator`); always valid:
     it reports the prior until it has learned and whenever its health check rejects an estimate,
-    with ``healthy`` and ``reason`` saying so.
+    with ``healthy`` and ``reason`` saying so. K and T are scheduled *cautiously*: on the low-gain
+    side of the estimate's credible region (higher K, shorter T: the feedforward expects a faster,
+    stronger response and stops pushing sooner), by a shift that shrinks as the estimate's
+    relative standard deviation falls (:meth:`EstimatedSchedule.cautious`). On the prior (σ 60 %)
+    the shift is 0.75 σ: K 0.80, T 100 s (the box's low edge), τ the prior's 40 s, so the start-up
+    step does not overshoot a sensitive patient; once learned (σ_K ≈ 2–5 %, σ_T ≈ 5–10 %) it is
+    at most 0.06 σ_K and 0.13 σ_T. Tuned on cohort seed 11 (README, "Scheduling sources").
 """
 
 from __future__ import annotations
@@ -29,9 +35,14 @@ import math
 from dataclasses import dataclass
 from typing import Protocol
 
-from runtime.estimation.estimator import NOMINAL_PLANT, DelayBankEstimator, Estimate
+from runtime.estimation.estimate import Estimate
+from runtime.estimation.estimator import NOMINAL_PLANT, DelayBankEstimator
 
 SOURCES = ("oracle", "estimated", "nominal")
+#: the cautious rule's full shift (standard deviations) and the relative standard deviation from
+#: which it applies in full (below, the shift shrinks in proportion): tuned on cohort seed 11
+CAUTION_SIGMA = 0.75
+CAUTION_REL_STD = 0.6
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,7 +163,7 @@ class NominalSchedule:
 
 
 class EstimatedSchedule:
-    """Schedule on the online estimate; the device's values are ignored.
+    """Schedule on the online estimate, cautiously; the device's values are ignored.
 
     Parameters
     ----------
@@ -160,16 +171,44 @@ class EstimatedSchedule:
         The estimator to feed (default: :class:`DelayBankEstimator` at ``sample_period_s``).
     sample_period_s
         Tick period (s), > 0; used only to build the default estimator.
+    caution_sigma
+        Largest shift of K up and T down, in standard deviations, >= 0 (0: the estimate as is).
+    caution_rel_std
+        Relative standard deviation from which the full shift applies, > 0 (below, the shift
+        shrinks in proportion to it).
     """
 
     source = "estimated"
 
     def __init__(
-        self, estimator: DelayBankEstimator | None = None, sample_period_s: float = 0.1
+        self,
+        estimator: DelayBankEstimator | None = None,
+        sample_period_s: float = 0.1,
+        caution_sigma: float = CAUTION_SIGMA,
+        caution_rel_std: float = CAUTION_REL_STD,
     ) -> None:
+        for name, value in (("caution_sigma", caution_sigma), ("caution_rel_std", caution_rel_std)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name}={value!r} must be finite and >= 0")
+        if caution_rel_std == 0.0 and caution_sigma > 0.0:
+            raise ValueError("caution_rel_std must be > 0 when caution_sigma > 0")
         self.estimator = estimator if estimator is not None else DelayBankEstimator(sample_period_s)
+        self._z = float(caution_sigma)
+        self._z_per_rel = self._z / caution_rel_std if caution_sigma > 0.0 else 0.0
+        (_, self._K_hi), (self._T_lo, _), _ = self.estimator.box
         self._last: Estimate | None = None
         self._schedule: Schedule | None = None
+
+    def cautious(self, est: Estimate) -> tuple[float, float]:
+        """The (K mmHg/(ml/h), T s) to schedule on for ``est``: the low-gain side of its credible
+        region, K̂ + z_K·σ_K and T̂ − z_T·σ_T, with z_X = ``caution_sigma`` · min(1, (σ_X/X̂) /
+        ``caution_rel_std``), never moved beyond the design box's K high / T low edge."""
+        z, zr = self._z, self._z_per_rel
+        zk = min(z, zr * est.K_std / est.K)
+        zt = min(z, zr * est.T_std_s / est.T_s)
+        K = min(est.K + zk * est.K_std, max(est.K, self._K_hi))
+        T = max(est.T_s - zt * est.T_std_s, min(est.T_s, self._T_lo))
+        return K, T
 
     def update(
         self,
@@ -185,7 +224,8 @@ class EstimatedSchedule:
         est = self.estimator.update(map_mmhg, quality, delivered_ml_h)
         if est is not self._last or self._schedule is None:
             self._last = est
-            self._schedule = Schedule(est.K, est.T_s, est.tau_s, "estimated", True, est.healthy,
+            K, T = self.cautious(est)
+            self._schedule = Schedule(K, T, est.tau_s, "estimated", True, est.healthy,
                                       est.from_prior, est.reason, est)  # fmt: skip
         return self._schedule
 
