@@ -141,6 +141,10 @@ def run_runtime(
                 f"device sample_period_s {peer.sample_period_s} s differs from --rate"
                 f" {config.rate_hz} Hz (period {period_s} s)"
             )
+        if not 0.0 <= peer.sensor_noise_mmhg <= 50.0:  # False for NaN too
+            raise UsageError(
+                f"device announces sensor_noise_mmhg {peer.sensor_noise_mmhg}: allowed [0, 50] mmHg"
+            )
         if peer.link_mode != mode:  # the device's clock and ours would both think they lead
             theirs, ours = (
                 "real time" if m == LINK_REALTIME else "lockstep" for m in (peer.link_mode, mode)
@@ -150,10 +154,6 @@ def run_runtime(
                 f" runs {ours}: {'add' if peer.link_mode == LINK_REALTIME else 'drop'} --realtime"
             )
         check_device_hello(peer, controller.max_rate_ml_h, clinician)
-        if not 0.0 <= peer.sensor_noise_mmhg <= 50.0:  # False for NaN too
-            raise UsageError(
-                f"device announces sensor_noise_mmhg {peer.sensor_noise_mmhg}: allowed [0, 50] mmHg"
-            )
         if config.schedule != "oracle":  # oracle summaries keep their pre-schedule bytes
             identity = {**identity, "schedule": config.schedule}
         identity = {
