@@ -83,11 +83,11 @@ def analyse_wirtinger(
     rate_form: str = "vertex",
     coupling: str = "dense",
     p_params: Sequence[int] | None = None,
+    backoff: float = 0.02,
 ) -> AnalysisResult:
     """Solve the Wirtinger-based analysis LMI over a set of frozen closed loops.
 
-    Parameters are those of :func:`synthesis.analysis_lmi.analyse` (no back-off solve: use
-    ``gamma_cap`` for a centred certificate), plus the ones below. Every delay must be > 0 (the
+    Parameters are those of :func:`synthesis.analysis_lmi.analyse`, plus the ones below. Every delay must be > 0 (the
     functional divides by tau) and <= ``tau_max_s``. ``working_set=k`` imposes the LMI at k
     spread points, re-checks every point and vertex in floating point and adds up to k failing
     points per round (with ``gamma_cap`` it stops as soon as an imposed point fails: that cap is
@@ -103,6 +103,10 @@ def analyse_wirtinger(
         rate terms per imposed point, tied by equalities): the same feasible set, a sparser solve.
     p_params
         Indices of the parameters P depends on (default all); ignored for "constant".
+    backoff
+        If the minimum-gamma solution fails the re-check at an imposed point (it sits on the
+        boundary), solve again with gamma <= (1 + backoff) times that optimum, maximising the
+        common margin; 0 skips it. Not used with ``gamma_cap``.
 
     Returns
     -------
@@ -145,23 +149,37 @@ def analyse_wirtinger(
     notes: list[str] = []
     opts = {"chordal_decomposition_enable": False, **(solver_options or {})}
 
-    def solve(pts: NDArray[np.int64]) -> tuple[str, Array | None]:
+    def solve_once(pts: NDArray[np.int64], cap: float | None) -> tuple[str, Array | None]:
         if progress:
             progress(f"Wirtinger LMI: assembling {len(pts)} points ({rate_form}, {coupling})")
-        q, a, b, cones, ncol, n_psd = build_conic(
-            data, pts, rate_form, coupling, epsilon, gamma_cap
-        )
+        q, a, b, cones, ncol, n_psd = build_conic(data, pts, rate_form, coupling, epsilon, cap)
         label = f"Wirtinger LMI ({len(pts)}/{m} points, {rate_form})"
         if progress:
             progress(f"{label}: solving {n_psd} PSD blocks, {ncol} variables with Clarabel")
         sol = solve_conic(q, a, b, cones, opts, progress, label)
         if sol.status == "solver_error":
             notes.append(f"Clarabel ended {sol.clarabel_status}")
-        if sol.x is not None and gamma_cap is not None:
-            notes.append(
-                f"feasibility form: gamma <= {float(gamma_cap):.4g}, margin t = {sol.x[-1]:.3g}"
-            )
+        if sol.x is not None and cap is not None:
+            notes.append(f"feasibility form: gamma <= {cap:.4g}, margin t = {sol.x[-1]:.3g}")
         return sol.status, None if sol.x is None else sol.x[:nvar]
+
+    def solve(pts: NDArray[np.int64]) -> tuple[str, Array | None]:
+        if gamma_cap is not None:
+            return solve_once(pts, float(gamma_cap))
+        status, xv = solve_once(pts, None)
+        if xv is None or backoff <= 0.0 or np.all(recheck(xv)[1][pts] > 0):
+            return status, xv
+        # the optimum sits on the boundary (in the bound form the slack cones Z_i >= +/- M_i
+        # too): back off gamma by a few percent and maximise the common margin instead
+        cap = float(np.sqrt(max(float(xv[-1]), 0.0))) * (1.0 + backoff)
+        if progress:
+            progress(f"Wirtinger LMI: back-off solve at gamma = {cap:.4g}")
+        status2, xb = solve_once(pts, cap)
+        if xb is None:
+            notes.append(f"back-off solve ended {status2}; kept the first solution")
+            return status, xv
+        notes.append(f"back-off: gamma {cap / (1.0 + backoff):.6g} -> {cap:.6g}")
+        return status2, xb
 
     def recheck(xv: Array) -> tuple[bool, Array, Array]:
         # the certificate: every vertex LMI evaluated at the solution at EVERY point
