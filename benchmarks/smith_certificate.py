@@ -3,8 +3,8 @@
 Builds the scheduled Smith predictor (:class:`synthesis.smith_lpv.SmithLPV`) at every point of a
 grid over the shipped design's box, closes it with the shipped plant model and weights (so γ
 compares with the shipped design's), and solves :func:`synthesis.analysis_wirtinger.analyse_wirtinger`
-with all rate vertices. Prints the certificate verdict, γ, the smallest re-checked margin, wall time
-and peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
+with all rate vertices or one LMI per point. Prints the certificate verdict, γ, the smallest
+re-checked margin, wall and CPU time and peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
 
     python benchmarks/smith_certificate.py --loop-gain 2 --grid 3,3,3 [--p-dependence quadratic]
     python benchmarks/smith_certificate.py --loop-gain 2 --grid 5,5,5 --working-set 27 --gamma-cap 15
@@ -12,12 +12,14 @@ and peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
 ``--working-set K`` imposes the LMI at K spread points and re-checks every point and rate vertex
 (the verdict covers the whole grid either way); ``--gamma-cap G`` solves the feasibility form (γ ≤ G,
 largest common margin), whose solution is off the boundary of the points left out.
-``--rate-form bound --coupling per_point`` is the cheap form (one LMI per point, a copy of P per
-point); ``--p-params K,tau`` lets P depend on those parameters only. ``--compare`` first runs the
-current formulation (every rate vertex, dense coupling, P in every parameter, same grid and cap) in
-a child process and prints the ratios of wall time, CPU time and peak RSS::
+``--rate-form bound`` is the cheap form (one LMI per point with rate slacks; ``--epsilon 5e-5``
+keeps its minimum-γ solution inside the vertex LMIs, so no back-off solve is needed);
+``--coupling per_point`` gives each point its own copy of P, ``--p-params K,tau`` lets P depend on
+those parameters only. ``--compare`` first runs the current formulation (every rate vertex, dense
+coupling, P in every parameter, ε = 1e-6, same grid and cap) in a child process and prints the
+ratios of wall time, CPU time and peak RSS::
 
-    python benchmarks/smith_certificate.py --grid 5,5,5 --rate-form bound --coupling per_point --compare
+    python benchmarks/smith_certificate.py --grid 3,3,3 --rate-form bound --epsilon 5e-5 --compare
 """
 
 from __future__ import annotations
@@ -77,6 +79,12 @@ def main() -> None:
         metavar="G",
         help="feasibility form: gamma <= G, maximise the common margin (default: minimise gamma)",
     )
+    ap.add_argument(
+        "--epsilon",
+        type=float,
+        default=1e-6,
+        help="strictness margin of every LMI, scaled units (default 1e-6)",
+    )
     ap.add_argument("--rate-form", default="vertex", choices=("vertex", "bound"))
     ap.add_argument("--coupling", default="dense", choices=("dense", "per_point"))
     ap.add_argument(
@@ -87,7 +95,7 @@ def main() -> None:
     ap.add_argument(
         "--compare",
         action="store_true",
-        help="also run the current formulation (vertex, dense, P in K,T,tau) in a child process",
+        help="also run the current formulation (vertex, dense, P in K,T,tau, epsilon 1e-6) in a child process",
     )
     ap.add_argument("--progress", action="store_true", help="solver progress lines on stderr")
     args = ap.parse_args()
@@ -99,6 +107,7 @@ def main() -> None:
     if args.compare:
         argv = [a for a in sys.argv[1:] if a != "--compare"]
         argv += ["--rate-form", "vertex", "--coupling", "dense", "--p-params", "K,T,tau"]
+        argv += ["--epsilon", "1e-6"]  # the last occurrence of an option wins
         reference = _figures(
             subprocess.run(
                 [sys.executable, os.path.abspath(__file__), *argv],
@@ -144,12 +153,13 @@ def main() -> None:
         rate_form=args.rate_form,
         coupling=args.coupling,
         p_params=p_params,
+        epsilon=args.epsilon,
     )
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
     print(
         f"loop gain {args.loop_gain:g}, grid {args.grid}, P {args.p_dependence} in "
-        f"{args.p_params}, {args.rate_form}/{args.coupling}, working set {args.working_set}, "
+        f"{args.p_params}, {args.rate_form}/{args.coupling}, epsilon {args.epsilon:g}, working set {args.working_set}, "
         f"gamma cap {args.gamma_cap}: certified={res.certified} status={res.status} "
         f"gamma={res.gamma} min margin={np.min(res.margins):.3g} LMIs={res.n_lmis} "
         f"wall={wall:.1f} s cpu={cpu:.1f} s peak RSS={rss_gb:.2f} GB "
