@@ -3,8 +3,8 @@
 Builds the scheduled Smith predictor (:class:`synthesis.smith_lpv.SmithLPV`) at every point of a
 grid over the shipped design's box, closes it with the shipped plant model and weights (so γ
 compares with the shipped design's), and solves :func:`synthesis.analysis_wirtinger.analyse_wirtinger`
-with all rate vertices. Prints the certificate verdict, γ, the smallest re-checked margin, wall time
-and peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
+with all rate vertices or one LMI per point. Prints the certificate verdict, γ, the smallest
+re-checked margin, wall and CPU time and peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
 
     python benchmarks/smith_certificate.py --loop-gain 2 --grid 3,3,3 [--p-dependence quadratic]
     python benchmarks/smith_certificate.py --loop-gain 2 --grid 5,5,5 --working-set 27 --gamma-cap 15
@@ -12,6 +12,14 @@ and peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
 ``--working-set K`` imposes the LMI at K spread points and re-checks every point and rate vertex
 (the verdict covers the whole grid either way); ``--gamma-cap G`` solves the feasibility form (γ ≤ G,
 largest common margin), whose solution is off the boundary of the points left out.
+``--rate-form bound`` is the cheap form (one LMI per point with rate slacks; ``--epsilon 5e-5``
+keeps its minimum-γ solution inside the vertex LMIs, so no back-off solve is needed);
+``--coupling per_point`` gives each point its own copy of P, ``--p-params K,tau`` lets P depend on
+those parameters only. ``--compare`` first runs the current formulation (every rate vertex, dense
+coupling, P in every parameter, ε = 1e-6, same grid and cap) in a child process and prints the
+ratios of wall time, CPU time and peak RSS::
+
+    python benchmarks/smith_certificate.py --grid 3,3,3 --rate-form bound --epsilon 5e-5 --compare
 """
 
 from __future__ import annotations
@@ -19,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import resource
+import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -70,8 +79,43 @@ def main() -> None:
         metavar="G",
         help="feasibility form: gamma <= G, maximise the common margin (default: minimise gamma)",
     )
+    ap.add_argument(
+        "--epsilon",
+        type=float,
+        default=1e-6,
+        help="strictness margin of every LMI, scaled units (default 1e-6)",
+    )
+    ap.add_argument("--rate-form", default="vertex", choices=("vertex", "bound"))
+    ap.add_argument("--coupling", default="dense", choices=("dense", "per_point"))
+    ap.add_argument(
+        "--p-params",
+        default="K,T,tau",
+        help="parameters P depends on, comma-separated from K,T,tau (default all)",
+    )
+    ap.add_argument(
+        "--compare",
+        action="store_true",
+        help="also run the current formulation (vertex, dense, P in K,T,tau, epsilon 1e-6) in a child process",
+    )
     ap.add_argument("--progress", action="store_true", help="solver progress lines on stderr")
     args = ap.parse_args()
+    names = ("K", "T", "tau")
+    if not set(args.p_params.split(",")) <= set(names):
+        ap.error(f"--p-params={args.p_params!r}: comma-separated names from K,T,tau")
+    p_params = [names.index(v) for v in args.p_params.split(",")]
+    reference = None
+    if args.compare:
+        argv = [a for a in sys.argv[1:] if a != "--compare"]
+        argv += ["--rate-form", "vertex", "--coupling", "dense", "--p-params", "K,T,tau"]
+        argv += ["--epsilon", "1e-6"]  # the last occurrence of an option wins
+        reference = _figures(
+            subprocess.run(
+                [sys.executable, os.path.abspath(__file__), *argv],
+                check=True,
+                capture_output=True,
+                text=True,
+            ).stdout
+        )
     if args.working_set is not None and args.working_set < 1:
         ap.error(f"--working-set={args.working_set}: need an integer >= 1")
     counts = [int(v) for v in args.grid.split(",")]
@@ -84,7 +128,7 @@ def main() -> None:
     axes = [np.linspace(box[i, 0], box[i, 1], counts[i]) for i in range(3)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     ctrl = SmithLPV(args.loop_gain, cfg.omega, cfg.lambda_)
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     systems = [close_loop(plant_at(p, cfg), ctrl.at(p), float(p[2])) for p in pts]
     # conditioning: whiten by the nominal point's own frozen certificate, then balance
     nominal = np.asarray(NOMINAL_RHO, dtype=float)
@@ -106,18 +150,43 @@ def main() -> None:
         working_set=args.working_set,
         gamma_cap=args.gamma_cap,
         progress=_progress(t0) if args.progress else None,
+        rate_form=args.rate_form,
+        coupling=args.coupling,
+        p_params=p_params,
+        epsilon=args.epsilon,
     )
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
     print(
-        f"loop gain {args.loop_gain:g}, grid {args.grid}, P {args.p_dependence}, "
-        f"working set {args.working_set}, gamma cap {args.gamma_cap}: "
-        f"certified={res.certified} status={res.status} gamma={res.gamma} "
-        f"min margin={np.min(res.margins):.3g} LMIs={res.n_lmis} "
-        f"wall={wall:.0f} s peak RSS={rss_gb:.2f} GB (shipped design gamma {art.gamma:.2f})"
+        f"loop gain {args.loop_gain:g}, grid {args.grid}, P {args.p_dependence} in "
+        f"{args.p_params}, {args.rate_form}/{args.coupling}, epsilon {args.epsilon:g}, working set {args.working_set}, "
+        f"gamma cap {args.gamma_cap}: certified={res.certified} status={res.status} "
+        f"gamma={res.gamma} min margin={np.min(res.margins):.3g} LMIs={res.n_lmis} "
+        f"wall={wall:.1f} s cpu={cpu:.1f} s peak RSS={rss_gb:.2f} GB "
+        f"(shipped design gamma {art.gamma:.2f})"
     )
     for note in res.notes:
         print(f"  {note}")
+    if reference is not None:
+        print(
+            f"current formulation (vertex/dense, P in K,T,tau): gamma={reference['gamma']} "
+            f"certified={reference['certified']} wall={reference['wall']:.1f} s "
+            f"cpu={reference['cpu']:.1f} s peak RSS={reference['rss']:.2f} GB; ratio "
+            f"current/this: wall {reference['wall'] / wall:.1f}x, cpu "
+            f"{reference['cpu'] / cpu:.1f}x, peak RSS {reference['rss'] / rss_gb:.1f}x"
+        )
+
+
+def _figures(line: str) -> dict[str, float | str]:
+    """gamma, certified, wall (s), cpu (s), peak RSS (GB) from this script's summary line."""
+    fields = dict(tok.split("=", 1) for tok in line.splitlines()[0].split() if "=" in tok)
+    return {
+        "gamma": fields["gamma"],
+        "certified": fields["certified"],
+        "wall": float(fields["wall"]),
+        "cpu": float(fields["cpu"]),
+        "rss": float(fields["RSS"]),
+    }
 
 
 if __name__ == "__main__":

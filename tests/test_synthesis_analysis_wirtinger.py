@@ -132,3 +132,77 @@ def test_gamma_cap_infeasible_at_the_imposed_points_stops_without_adding_points(
     assert any("no points added" in note for note in fast.notes)
     assert "working set: LMI imposed at 1 of 5 points" in fast.notes
     assert fast.margins.shape == (5,) and np.all(fast.margins < 0)
+
+
+def _two_moving(stable: bool) -> tuple[list[DelaySystem], np.ndarray, tuple]:
+    """The delayed-feedback grid with a damping term so gamma is finite: x' = -0.2 x - k x(t - tau) + w."""
+    systems, rho, args = (
+        _delayed_feedback_grid(1.0, 0.2) if stable else _delayed_feedback_grid(1.3, 0.4)
+    )
+    damped = [DelaySystem(q.A - 0.2, q.Ad, q.B, q.C, q.Cd, q.D, q.tau) for q in systems]
+    return damped, rho, args
+
+
+def test_rate_bound_form_certifies_every_vertex_and_is_never_below_the_vertex_bound() -> None:
+    # one LMI per point instead of 4 vertex LMIs: sufficient, so its gamma is >= the vertex one,
+    # and the re-check of every vertex at its solution passes
+    systems, rho, (rate, dtau, tau_max) = _two_moving(stable=True)
+    kw = dict(p_dependence="affine")
+    vertex = analyse_wirtinger(systems, rho, rate, dtau, tau_max, **kw)
+    bound = analyse_wirtinger(systems, rho, rate, dtau, tau_max, rate_form="bound", **kw)
+    assert vertex.certified and bound.certified
+    assert bound.n_lmis == vertex.n_lmis == 9 * 4 and np.all(bound.margins > 0)
+    assert vertex.gamma * (1 - 1e-4) <= bound.gamma <= vertex.gamma * 1.01
+
+
+def test_rate_bound_form_does_not_certify_an_unstable_corner() -> None:
+    systems, rho, (rate, dtau, tau_max) = _two_moving(stable=False)
+    res = analyse_wirtinger(
+        systems, rho, rate, dtau, tau_max, p_dependence="affine", rate_form="bound", gamma_cap=1e3
+    )
+    assert not res.certified and np.min(res.margins) <= 0
+
+
+def test_per_point_coupling_is_the_same_problem_as_the_dense_one() -> None:
+    systems, rho, (rate, dtau, tau_max) = _two_moving(stable=True)
+    for form in ("vertex", "bound"):
+        kw = dict(p_dependence="quadratic", rate_form=form)
+        dense = analyse_wirtinger(systems, rho, rate, dtau, tau_max, **kw)
+        split = analyse_wirtinger(systems, rho, rate, dtau, tau_max, coupling="per_point", **kw)
+        assert dense.certified and split.certified
+        assert split.gamma == pytest.approx(dense.gamma, rel=1e-4)
+
+
+def test_p_independent_of_a_parameter_drops_its_rate_vertices_and_costs_gamma() -> None:
+    # P in rho_2 (the delay parameter) only: rho_1 no longer moves anything, 2 vertices per point
+    systems, rho, (rate, dtau, tau_max) = _two_moving(stable=True)
+    full = analyse_wirtinger(systems, rho, rate, dtau, tau_max, p_dependence="affine")
+    part = analyse_wirtinger(systems, rho, rate, dtau, tau_max, p_dependence="affine", p_params=[1])
+    assert part.certified and part.n_lmis == 9 * 2
+    assert part.gamma >= full.gamma * (1 - 1e-4)
+    with pytest.raises(ValueError, match="p_params"):
+        analyse_wirtinger(systems, rho, rate, dtau, tau_max, p_params=[2])
+
+
+def test_rate_bound_form_certifies_the_smith_loop_on_a_grid_above_every_frozen_norm() -> None:
+    # the scheduled Smith predictor (loop gain 2) on the 2 x 2 x 2 corners of the shipped box,
+    # every rate moving: the one-LMI form certifies it, and its bound can never undercut the
+    # exact H-infinity norm of any frozen point (what physics allows)
+    model = parse_config({}).model
+    box = np.array([[0.25, 1.0], [100.0, 200.0], [10.0, 45.0]])
+    half = 0.5 * (box[:, 1] - box[:, 0])
+    rho_hat = np.array([(a, b, c) for a in (-1.0, 1.0) for b in (-1.0, 1.0) for c in (-1.0, 1.0)])
+    rhos = 0.5 * (box[:, 0] + box[:, 1]) + rho_hat * half
+    loops = [close_loop(plant_at(r, model), SmithLPV(2.0).at(r), r[2]) for r in rhos]
+    res = analyse_wirtinger(
+        loops,
+        rho_hat,
+        np.array([2e-4, 0.06, 0.1]) / half,
+        np.array([0.0, 0.0, half[2]]),
+        45.0,
+        p_dependence="affine",
+        time_scale_s=45.0,
+        rate_form="bound",
+    )
+    assert res.certified and res.n_lmis == 8 * 8
+    assert res.gamma >= max(_hinf(q) for q in loops) * (1 - 1e-3)

@@ -1,0 +1,265 @@
+"""The Wirtinger-based analysis LMI split into its rate-free part and one term per moving parameter.
+
+The LMI of :mod:`synthesis.analysis_wirtinger` at a grid point rho_k and a rate vertex sigma is
+affine in sigma::
+
+    LMI(rho_k, sigma) = L0(rho_k) + sum_i sigma_i M_i(rho_k),     sigma in {-1, +1}^s
+
+    L0  = He(G1' P G0) + Ex'S Ex - Eh'S Eh + taubar^2 Ga'R Ga - (taubar/tau)(E1'R E1 + 3 E2'R E2)
+          - mu Ew'Ew + Gz'Gz                       (G0 at dtau/dt = 0)
+    M_i = G1' D_i G1 + c_i (He(G1' P Eg) + Eh'S Eh),   D_i = nu_i dP/drho_i,  c_i = nu_i dtau/drho_i
+
+(``Eg zeta = [0; x(t - tau)]``: the d/dt int x row of G0 is ``x - (1 - dtau) x(t - tau)``; nu_i is
+the rate bound of rho_hat_i in scaled time). Everything is linear in the *local* variables of the
+point, ``[P(rho_k), D_1..D_s', S, R, mu]`` (only the s' moving parameters: nonzero rate, and P or
+the delay depends on them), and the local variables are a fixed sparse linear map ``T_k`` of the
+global ones ``x = [P basis terms, S, R, mu]``. :func:`point_maps` gives the exact maps of L0 and
+every M_i on the local variables (by unit probes, in Clarabel's PSD-triangle order);
+:func:`vertex_lmis` evaluates every vertex LMI at a solution for the re-check.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+
+from synthesis.closed_loop import DelaySystem
+from synthesis.conic import svec_rows
+from synthesis.state_transform import transform_of
+
+__all__ = ["WirtingerData", "point_maps", "prepare", "sym", "vertex_lmis"]
+
+Array = NDArray[np.float64]
+
+#: points evaluated per batch (bounds the probe arrays to ~ nloc x batch x (1 + s') x big^2)
+_BATCH = 12
+
+
+def sym(vec: Array, n: int) -> Array:
+    """Symmetric (…, n, n) matrices from their upper-triangle entries (…, n(n+1)/2)."""
+    iu = np.triu_indices(n)
+    out = np.zeros((*vec.shape[:-1], n, n))
+    out[..., iu[0], iu[1]] = vec
+    out[..., iu[1], iu[0]] = vec
+    return out
+
+
+def _p_basis(rho_hat: Array, p_dependence: str, p_params: Sequence[int]) -> tuple[Array, Array]:
+    """Weights (m, n_p) of the P basis and their derivatives (m, n_p, s) in rho_hat: 1, then
+    rho_i (affine), then rho_i^2 / 2 (quadratic), for i in ``p_params``."""
+    m, s = rho_hat.shape
+    w, dw = [np.ones(m)], [np.zeros((m, s))]
+    for power in (1, 2)[: {"constant": 0, "affine": 1, "quadratic": 2}[p_dependence]]:
+        for i in p_params:
+            d = np.zeros((m, s))
+            d[:, i] = rho_hat[:, i] ** (power - 1)
+            w.append(rho_hat[:, i] ** power / power)
+            dw.append(d)
+    return np.stack(w, axis=1), np.stack(dw, axis=1)
+
+
+@dataclass(frozen=True)
+class WirtingerData:
+    """The scaled data of one problem and the layout of its global and local variables."""
+
+    g1: Array  # (m, 2n, big): G1 zeta = [x; h v]
+    g0: Array  # (m, 2n, big): G0 zeta = d/dt [x; int x] at dtau/dt = 0
+    ga: Array  # (m, n, big): [A Ad 0 B]
+    const: Array  # (m, big, big): Gz'Gz
+    h: Array  # (m,) tau / time scale
+    hbar: float
+    w_p: Array  # (m, n_p) P basis weights
+    dw_m: Array  # (m, n_p, s') nu_i d w / d rho_i of the moving parameters
+    c_tau: Array  # (s',) nu_i d tau / d rho_i (s/s)
+    moving: tuple[int, ...]
+    n: int
+    nw: int
+    tx: Array
+    txi: Array
+    time_scale_s: float
+
+    @property
+    def big(self) -> int:
+        return 3 * self.n + self.nw
+
+    @property
+    def ns2(self) -> int:
+        return self.n * (2 * self.n + 1)
+
+    @property
+    def ns(self) -> int:
+        return self.n * (self.n + 1) // 2
+
+    @property
+    def n_p(self) -> int:
+        return self.w_p.shape[1]
+
+    @property
+    def nvar(self) -> int:
+        """Global variables: P basis terms, S, R, mu."""
+        return self.n_p * self.ns2 + 2 * self.ns + 1
+
+    @property
+    def n_pd(self) -> int:
+        """Local P(rho_k) and D_i entries (the part of the local variables T_k maps from P terms)."""
+        return self.ns2 * (1 + len(self.moving))
+
+    @property
+    def nloc(self) -> int:
+        return self.n_pd + 2 * self.ns + 1
+
+
+def prepare(
+    systems: Sequence[DelaySystem],
+    rho_hat: Array,
+    rate: Array,
+    dtau: Array,
+    tau_max: float,
+    taus: Array,
+    p_dependence: str,
+    p_params: Sequence[int],
+    time_scale_s: float,
+    state_transform: Array | None,
+) -> WirtingerData:
+    """Scale time and state (:func:`synthesis.state_transform.transform_of`), build G1, G0, Ga,
+    Gz'Gz and the P basis; a parameter moves if its rate is > 0 and P or tau depends on it."""
+    ts = float(time_scale_s)
+    n, nw = systems[0].n, systems[0].B.shape[1]
+    m = len(systems)
+    tx, txi = transform_of(systems, ts, state_transform)
+    a = np.stack([ts * txi @ q.A @ tx for q in systems])
+    ad = np.stack([ts * txi @ q.Ad @ tx for q in systems])
+    b = np.stack([ts * txi @ q.B for q in systems])
+    c = np.stack([q.C @ tx for q in systems])
+    cd = np.stack([q.Cd @ tx for q in systems])
+    d = np.stack([q.D for q in systems])
+    h = taus / ts
+    ga = np.concatenate([a, ad, np.zeros((m, n, n)), b], axis=2)
+    gz = np.concatenate([c, cd, np.zeros((m, c.shape[1], n)), d], axis=2)
+    g1 = np.zeros((m, 2 * n, 3 * n + nw))
+    g1[:, :n, :n] = np.eye(n)
+    g1[:, n:, 2 * n : 3 * n] = h[:, None, None] * np.eye(n)
+    g0 = np.zeros_like(g1)
+    g0[:, :n, :] = ga
+    g0[:, n:, :n] = np.eye(n)
+    g0[:, n:, n : 2 * n] = -np.eye(n)
+    w_p, dw_p = _p_basis(rho_hat, p_dependence, p_params)
+    moving = tuple(
+        i
+        for i in range(rho_hat.shape[1])
+        if rate[i] > 0 and (np.any(dw_p[:, :, i] != 0) or dtau[i] != 0)
+    )
+    mv = list(moving)
+    return WirtingerData(
+        g1=g1,
+        g0=g0,
+        ga=ga,
+        const=np.einsum("mra,mrb->mab", gz, gz),
+        h=h,
+        hbar=tau_max / ts,
+        w_p=w_p,
+        dw_m=dw_p[:, :, mv] * (rate[mv] * ts)[None, None, :],
+        c_tau=rate[mv] * dtau[mv],
+        moving=moving,
+        n=n,
+        nw=nw,
+        tx=tx,
+        txi=txi,
+        time_scale_s=ts,
+    )
+
+
+def local_map(data: WirtingerData, k: int) -> sp.csr_matrix:
+    """``T_k``: the P(rho_k) and D_i rows of the local variables as a map of the P basis terms
+    (n_pd x n_p ns2); S, R, mu are the global ones."""
+    rows = [data.w_p[k]] + [data.dw_m[k, :, i] for i in range(len(data.moving))]
+    return sp.kron(sp.csr_matrix(np.array(rows)), sp.eye(data.ns2), format="csr")
+
+
+def _parts(data: WirtingerData, loc: Array, pts: NDArray[np.int64]) -> tuple[Array, Array]:
+    """L0 without Gz'Gz, (J, P, big, big), and M (J, P, s', big, big) for local vectors
+    ``loc`` (J, P, nloc) at the points ``pts`` (P of them)."""
+    n, n2, ns, ns2, n_pd = data.n, 2 * data.n, data.ns, data.ns2, data.n_pd
+    nm, big = len(data.moving), data.big
+    j, npt = loc.shape[:2]
+    p = sym(loc[..., :ns2], n2)
+    dmat = sym(loc[..., ns2:n_pd].reshape(j, npt, nm, ns2), n2)
+    sm = sym(loc[..., n_pd : n_pd + ns], n)
+    rm = sym(loc[..., n_pd + ns : n_pd + 2 * ns], n)
+    mu = loc[..., -1]
+    g1, g0, ga, h = data.g1[pts], data.g0[pts], data.ga[pts], data.h[pts]
+
+    def embed(mat: Array, r0: int) -> Array:  # an n x n block at rows/cols r0 of a big matrix
+        out = np.zeros((*mat.shape[:-2], big, big))
+        out[..., r0 : r0 + n, r0 : r0 + n] = mat
+        return out
+
+    def wirt(r: Array) -> Array:  # E1'R E1 + 3 E2'R E2, E1 = [I -I 0 0], E2 = [I I -2I 0]
+        out = np.zeros((*r.shape[:-2], big, big))
+        for coef, weight in (((1.0, -1.0, 0.0), 1.0), ((1.0, 1.0, -2.0), 3.0)):
+            for bi in range(3):
+                for bj in range(3):
+                    out[..., bi * n : bi * n + n, bj * n : bj * n + n] += (
+                        weight * coef[bi] * coef[bj] * r
+                    )
+        return out
+
+    he = np.einsum("pra,jprs,psb->jpab", g1, p, g0, optimize=True)
+    l0 = he + np.swapaxes(he, -1, -2)
+    l0 += embed(sm, 0) - embed(sm, n)
+    l0 += data.hbar**2 * np.einsum("pra,jprs,psb->jpab", ga, rm, ga, optimize=True)
+    l0 -= (data.hbar / h)[None, :, None, None] * wirt(rm)
+    idx = np.arange(3 * n, big)
+    l0[..., idx, idx] -= mu[..., None]
+    eg = np.zeros((n2, big))
+    eg[n:, n : 2 * n] = np.eye(n)
+    hg = np.einsum("pra,jprs,sb->jpab", g1, p, eg, optimize=True)
+    rate_tau = hg + np.swapaxes(hg, -1, -2) + embed(sm, n)
+    mt = np.einsum("pra,jpirs,psb->jpiab", g1, dmat, g1, optimize=True)
+    mt += data.c_tau[None, None, :, None, None] * rate_tau[:, :, None]
+    return l0, mt
+
+
+def point_maps(data: WirtingerData, pts: NDArray[np.int64]) -> tuple[Array, Array, Array]:
+    """Exact maps at ``pts`` on the local variables, in Clarabel's PSD-triangle order:
+    ``F0`` (P, nsv, nloc) and ``FM`` (P, s', nsv, nloc) with ``svec(L0) = F0 loc + f0`` and
+    ``svec(M_i) = FM_i loc``, and ``f0`` (P, nsv) = svec(Gz'Gz)."""
+    idx, wsv = svec_rows(data.big)
+    nloc = data.nloc
+    f0_all, fm_all = [], []
+    for lo in range(0, len(pts), _BATCH):
+        sub = pts[lo : lo + _BATCH]
+        unit = np.broadcast_to(np.eye(nloc)[:, None, :], (nloc, len(sub), nloc))
+        l0, mt = _parts(data, unit, sub)
+        f0_all.append(np.moveaxis(l0.reshape(nloc, len(sub), -1)[..., idx] * wsv, 0, -1))
+        fm_all.append(
+            np.moveaxis(mt.reshape(nloc, len(sub), mt.shape[2], data.big**2)[..., idx] * wsv, 0, -1)
+        )
+    const = data.const[pts].reshape(len(pts), -1)[:, idx] * wsv
+    return np.concatenate(f0_all), np.concatenate(fm_all), const
+
+
+def local_values(data: WirtingerData, x: Array) -> Array:
+    """The local variables (m, nloc) of every point for the global vector x (nvar,)."""
+    ns2, n_p = data.ns2, data.n_p
+    c = x[: n_p * ns2].reshape(n_p, ns2)
+    p = data.w_p @ c
+    dm = np.einsum("mjs,je->mse", data.dw_m, c).reshape(len(p), -1)
+    rest = np.broadcast_to(x[n_p * ns2 :], (len(p), data.nvar - n_p * ns2))
+    return np.concatenate([p, dm, rest], axis=1)
+
+
+def vertex_lmis(data: WirtingerData, x: Array, vertices: Array) -> Array:
+    """Every vertex LMI (m, nv, big, big) at the global vector x (the re-check's input)."""
+    loc = local_values(data, x)
+    out = []
+    for lo in range(0, len(loc), _BATCH):
+        pts = np.arange(lo, min(len(loc), lo + _BATCH))
+        l0, mt = _parts(data, loc[None, pts], pts)
+        val = l0[0][:, None] + np.einsum("vi,piab->pvab", vertices, mt[0])
+        out.append(val + data.const[pts][:, None])
+    return np.concatenate(out)
