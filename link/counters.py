@@ -57,6 +57,11 @@ class LinkCounters:
         the SCHEDULING_PARAMS (when required), the MAP_TARGET (when required) or the PUMP_STATUS
         (once the device sent one) of the tick; a tick lacking several counts in each. A lost
         pump status is not resent: the tick then goes to the loop without it.
+    misnumbered_status
+        Lockstep only: PUMP_STATUS frames numbered for a tick already answered (a device that
+        numbers the status of tick k's command k instead of k+1). The runtime cannot use them,
+        so its pump checks (alarms, delivered versus commanded) do not run; counted and raised
+        as the advisory ``LINK_ERRORS`` instead of passing silently.
     """
 
     frames_sent: int = 0
@@ -78,6 +83,7 @@ class LinkCounters:
     incomplete_sched: int = 0
     incomplete_target: int = 0
     incomplete_status: int = 0
+    misnumbered_status: int = 0
 
     def as_dict(self) -> dict[str, int]:
         """The counters as a plain dict (JSON-ready)."""
@@ -86,6 +92,21 @@ class LinkCounters:
     def incomplete(self) -> int:
         """Lockstep ticks resent because they were incomplete (each cause counted)."""
         return self.incomplete_sched + self.incomplete_target + self.incomplete_status
+
+    def discarded(self) -> int:
+        """What the link layer discarded or could not use, all causes that raise the runtime's
+        advisory ``LINK_ERRORS``: bad frames, junk, abandoned partial frames, sequence gaps,
+        incomplete ticks, misnumbered pump statuses, refused signatures."""
+        return (
+            self.bad_crc
+            + self.junk_bytes
+            + self.resyncs
+            + self.seq_gaps
+            + self.incomplete()
+            + self.misnumbered_status
+            + self.refused_unsigned
+            + self.refused_bad_signature
+        )
 
 
 #: What the runtime's session drops, by cause: the counters above that count discarded frames
@@ -101,4 +122,5 @@ DROP_CAUSES: tuple[str, ...] = (
     "incomplete_sched",
     "incomplete_target",
     "incomplete_status",
+    "misnumbered_status",
 )

@@ -190,6 +190,15 @@ class RuntimeSession(Session):
     def _on_pump_status(self, fields: tuple) -> None:
         status = self.pump_status = PumpStatus(*fields)
         pending = self._pending
+        peer = self.peer_hello
+        if (
+            status.tick <= self._last_sample_tick
+            and peer is not None
+            and peer.link_mode == LINK_LOCKSTEP
+        ):
+            # after the command for k only a status numbered k+1 can follow: this one is
+            # numbered for a tick already answered and its pump checks cannot run
+            self.counters.misnumbered_status += 1
         if status.tick == (self._last_sample_tick + 1 if pending is None else pending[1]):
             self._status_seen = True  # numbered as the protocol says: lockstep waits for it
         if pending is not None:

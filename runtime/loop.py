@@ -204,16 +204,7 @@ class Loop:
 
     def _link_errors(self) -> int:
         """Frames the link layer discarded since the previous tick."""
-        c = self.ep.counters
-        total = (
-            c.bad_crc
-            + c.junk_bytes
-            + c.resyncs
-            + c.seq_gaps
-            + c.incomplete()
-            + c.refused_unsigned
-            + c.refused_bad_signature
-        )
+        total = self.ep.counters.discarded()
         new = total - self._link_errors_seen
         self._link_errors_seen = total
         return new

@@ -31,7 +31,8 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
 - ``COMMAND_CLAMPED`` the controller returned a command outside [0, max] (clamped; an alarm, not a
   state change);
 - ``LINK_ERRORS`` the link layer discarded something since the last tick (bad CRC, junk bytes,
-  sequence gaps, abandoned partial frames, incomplete ticks, refused signatures) - advisory:
+  sequence gaps, abandoned partial frames, incomplete ticks, refused signatures, pump statuses
+  numbered for a tick already answered, which leave the pump checks off) - advisory:
   what got through passed its CRC (and signature), lockstep resends lost ticks; same tick;
 - ``PUMP_ALARM`` the pump reports occlusion, empty reservoir or its own watchdog
   (``pump_alarm_mask``) - on the tick its status arrives (the status of tick k follows the

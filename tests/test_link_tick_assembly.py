@@ -139,6 +139,7 @@ def test_a_device_sending_sample_then_target_then_sched_runs_50_ticks_without_a_
     assert wall_s < 2.0  # each resend would cost 0.2 s
     c = rt.counters
     assert c.duplicates == c.old_ticks == c.incomplete() == c.timeouts == 0
+    assert c.misnumbered_status == 0
 
 
 @pytest.mark.parametrize(
@@ -174,6 +175,9 @@ def test_a_pump_status_numbered_k_instead_of_k_plus_1_is_not_waited_for():
     _assert_ticks_as_sent(ticks, 50)
     assert all(s is None or s.tick < x.tick for s, x in zip(statuses, ticks, strict=True))
     assert rt.counters.incomplete() == 0
+    # not silent: each unusable status is counted and raises the runtime's LINK_ERRORS alarm
+    assert rt.counters.misnumbered_status == 49  # ticks 1..49 each brought the previous status
+    assert rt.counters.discarded() == 49
 
 
 def test_without_required_sched_and_target_the_sample_alone_completes_a_tick():
