@@ -19,6 +19,8 @@ cores: hence the generous default wait.
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import socket
 import subprocess
 import sys
@@ -82,6 +84,7 @@ def screenshot(
         ],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        start_new_session=True,  # `rerun` is a launcher: its viewer server is a child process
     )
     try:
         wait_for_port(http_port, 30.0)
@@ -101,7 +104,7 @@ def screenshot(
             page.screenshot(path=str(out))
             browser.close()
     finally:
-        server.terminate()
+        os.killpg(server.pid, signal.SIGTERM)  # the launcher and its server
         server.wait(timeout=10)
 
 
