@@ -61,16 +61,22 @@ class ClinicianInput:
         return "device" if self.target_mmhg is None else "runtime"
 
 
-def parse_target(text: str) -> float:
-    """A MAP target (mmHg) from ``text``; ``ValueError`` naming the allowed range otherwise."""
-    allowed = f"allowed [{TARGET_MIN_MMHG:g}, {TARGET_MAX_MMHG:g}] mmHg"
+def number_in(text: str, lo: float, hi: float, unit: str, *, lo_open: bool = False) -> float:
+    """The number ``text`` holds if it lies in [lo, hi] (``lo_open``: (lo, hi]) ``unit``;
+    ``ValueError`` naming the text and the allowed range otherwise (NaN included)."""
+    allowed = f"allowed {'(' if lo_open else '['}{lo:g}, {hi:g}] {unit}"
     try:
         value = float(text)
     except ValueError:
         raise ValueError(f"{text.strip()!r}: not a number ({allowed})") from None
-    if not TARGET_MIN_MMHG <= value <= TARGET_MAX_MMHG:  # False for NaN too
+    if not ((lo < value) if lo_open else (lo <= value)) or not value <= hi:
         raise ValueError(f"{text.strip()!r}: {allowed}")
     return value
+
+
+def parse_target(text: str) -> float:
+    """A MAP target (mmHg) from ``text``; ``ValueError`` naming the allowed range otherwise."""
+    return number_in(text, TARGET_MIN_MMHG, TARGET_MAX_MMHG, "mmHg")
 
 
 def read_target_file(path: Path) -> float:
@@ -96,14 +102,7 @@ def argtype(name: str, parse: Any) -> Any:
 
 def parse_concentration(text: str) -> float:
     """A concentration (µg/ml) from ``text``; ``ValueError`` naming the allowed range otherwise."""
-    allowed = f"allowed (0, {MAX_CONCENTRATION_UG_ML:g}] ug/ml"
-    try:
-        value = float(text)
-    except ValueError:
-        raise ValueError(f"{text!r}: not a number ({allowed})") from None
-    if not 0.0 < value <= MAX_CONCENTRATION_UG_ML:  # False for NaN too
-        raise ValueError(f"{text!r}: {allowed}")
-    return value
+    return number_in(text, 0.0, MAX_CONCENTRATION_UG_ML, "ug/ml", lo_open=True)
 
 
 def parse_drug(text: str) -> str:

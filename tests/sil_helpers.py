@@ -20,8 +20,29 @@ import numpy as np  # noqa: E402
 from rerun.chunk import RrdReader  # noqa: E402
 
 from link import LinkClosedError, PtyPair, RuntimeSession  # noqa: E402
+from runtime.config import RunConfig  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def lockstep_run_config(controller: str, schedule: str) -> RunConfig:
+    """A lockstep ``pressor run`` configuration with no output files (``run_runtime`` tests)."""
+    return RunConfig(
+        controller=controller,
+        rate_hz=10.0,
+        realtime=False,
+        rrd=None,
+        tlog=None,
+        summary=None,
+        timing=None,
+        signing_key=None,
+        sched_faults="advise",
+        faults=(),
+        fault_specs=(),
+        stall_timeout_s=20.0,
+        cpu_latency_us=None,
+        schedule=schedule,
+    )
 
 
 def pressor(*args: str, cwd: Path, timeout: float = 120) -> subprocess.CompletedProcess:

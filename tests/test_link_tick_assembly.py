@@ -26,11 +26,11 @@ from link import (
     open_port,
 )
 from link.dialect import pressor as mavlink
-from runtime.config import RunConfig
 from runtime.controller_loader import load_controller
 from runtime.estimation.schedule import make_schedule
 from runtime.session import run_runtime
 from tests.link_doubles import tick_inputs
+from tests.sil_helpers import lockstep_run_config
 
 _IDS = {
     "sample": mavlink.MAVLINK_MSG_ID_MAP_SAMPLE,
@@ -237,22 +237,7 @@ def test_a_sample_first_device_without_scheduling_params_drives_the_pi_on_the_es
         finally:
             device.close()
 
-    config = RunConfig(
-        controller="pi",
-        rate_hz=10.0,
-        realtime=False,
-        rrd=None,
-        tlog=None,
-        summary=None,
-        timing=None,
-        signing_key=None,
-        sched_faults="advise",
-        faults=(),
-        fault_specs=(),
-        stall_timeout_s=20.0,
-        cpu_latency_us=None,
-        schedule="estimated",
-    )
+    config = lockstep_run_config("pi", "estimated")
     thread = threading.Thread(target=serve, daemon=True)
     thread.start()
     t0 = time.monotonic()

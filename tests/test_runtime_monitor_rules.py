@@ -23,6 +23,7 @@ from runtime.core import CLEAN_LINK, ClosedLoopCore
 from runtime.flatline import FlatlineRules, grain_mmhg, stuck_samples
 from runtime.supervisor import Supervisor, SupervisorInput
 from runtime.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
+from tests.test_runtime_supervisor import good_inputs
 
 TS = 0.1
 HOUR_S = 3600.0
@@ -99,23 +100,12 @@ class Feed:
 
     def second(self, map_mmhg: float) -> None:
         for j in range(10):
-            args = dict(
-                now_s=self.k * TS,
-                map_mmhg=map_mmhg,
-                quality=QUALITY_HELD if j else 0,
-                K=0.5,
-                T_s=150.0,
-                tau_s=30.0,
-                sched_valid=True,
-                sample_age_s=j * TS,
-                link_silence_s=0.0,
-                target_mmhg=80.0,
-                link_errors=0,
-                pump_delivered_ml_h=math.nan,
-                pump_alarms=0,
-                estimated=False,
-                estimate_healthy=True,
-            )
+            args = {
+                **good_inputs(self.k * TS),
+                "map_mmhg": map_mmhg,
+                "quality": QUALITY_HELD if j else 0,
+                "sample_age_s": j * TS,
+            }
             self.k += 1
             self.sup.finalize(10.0 if self.sup.assess(SupervisorInput(**args)) else None)
             for name in self.sup.detections:

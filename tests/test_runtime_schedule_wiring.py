@@ -20,7 +20,6 @@ from hil_sim.trial import run_patient
 from hil_sim.world import World
 from link import DeviceSession, ManualClock, PtyPair, TickInputs, open_port
 from link.dialect import pressor as mavlink
-from runtime.config import RunConfig
 from runtime.controller_loader import load_controller
 from runtime.core import CLEAN_LINK, ClosedLoopCore, LinkHealth
 from runtime.estimation.estimator import NOMINAL_PLANT
@@ -28,7 +27,12 @@ from runtime.estimation.schedule import Schedule, make_schedule
 from runtime.session import run_runtime
 from runtime.supervisor import Supervisor
 from runtime.supervisor_config import Fault, State, supervisor_config_for
-from tests.sil_helpers import assert_recording_equals_simulation, pressor, rrd_columns
+from tests.sil_helpers import (
+    assert_recording_equals_simulation,
+    lockstep_run_config,
+    pressor,
+    rrd_columns,
+)
 
 SCENARIO, SEED, TS = "paper-tracking", 3, 0.1
 
@@ -94,25 +98,6 @@ class NoSchedDevice(DeviceSession):
              inputs.quality, flush=flush)  # fmt: skip
 
 
-def _config(controller: str, schedule: str) -> RunConfig:
-    return RunConfig(
-        controller=controller,
-        rate_hz=10.0,
-        realtime=False,
-        rrd=None,
-        tlog=None,
-        summary=None,
-        timing=None,
-        signing_key=None,
-        sched_faults="advise",
-        faults=(),
-        fault_specs=(),
-        stall_timeout_s=20.0,
-        cpu_latency_us=None,
-        schedule=schedule,
-    )
-
-
 @pytest.mark.parametrize("controller", ["lpv", "pi"])
 def test_a_device_that_never_sends_scheduling_params_completes_a_run_with_the_estimator(
     controller,
@@ -134,7 +119,10 @@ def test_a_device_that_never_sends_scheduling_params_completes_a_run_with_the_es
     thread.start()
     try:
         summary, result = run_runtime(
-            pair.leader_port(), _config(controller, "estimated"), {"controller": controller}, None
+            pair.leader_port(),
+            lockstep_run_config(controller, "estimated"),
+            {"controller": controller},
+            None,
         )
     finally:
         thread.join(30)
@@ -269,7 +257,7 @@ def test_the_summarys_settling_band_is_the_callers_not_the_devices_noise_announc
     thread.start()
     try:
         summary, result = run_runtime(
-            pair.leader_port(), _config("lpv", "oracle"), {"controller": "lpv"}, None,
+            pair.leader_port(), lockstep_run_config("lpv", "oracle"), {"controller": "lpv"}, None,
             noisy_band=False,
         )  # fmt: skip
     finally:
@@ -301,7 +289,9 @@ def test_a_device_announcing_an_impossible_noise_is_refused_with_one_line():
     thread.start()
     try:
         with pytest.raises(UsageError, match="sensor_noise_mmhg nan: allowed") as info:
-            run_runtime(pair.leader_port(), _config("pi", "oracle"), {"controller": "pi"}, None)
+            run_runtime(
+                pair.leader_port(), lockstep_run_config("pi", "oracle"), {"controller": "pi"}, None
+            )
         assert "\n" not in str(info.value)
     finally:
         thread.join(15)
