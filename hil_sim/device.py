@@ -119,8 +119,7 @@ def _main(command: str, argv: Sequence[str]) -> int:
     tlog = TlogWriter(args.tlog) if args.tlog else None
     clock = ManualClock()
     ep = DeviceSession(port, signing=signing, clock=clock, tlog=tlog)
-    duration = world.scenario.duration_s if args.duration is None else args.duration
-    truth = TruthLog(round(duration * args.rate)) if args.truth_out else None
+    truth = TruthLog() if args.truth_out else None
     ok = False
     try:
         result = run_device(
@@ -251,7 +250,8 @@ def run_device(
     drug, concentration_ug_ml
         The syringe the hello announces (µg/ml), with the world's pump maximum (ml/h).
     truth
-        Where to keep each tick's true MAP (:mod:`hil_sim.truth`), or ``None``.
+        Where to keep each tick's true MAP (:mod:`hil_sim.truth`; sized here for the run), or
+        ``None``.
 
     Returns
     -------
@@ -280,6 +280,8 @@ def run_device(
     ts = world.sample_period_s
     duration = world.scenario.duration_s if duration_s is None else duration_s
     n = int(round(duration / ts))
+    if truth is not None:
+        truth.reserve(n)
     hello = Hello(
         world.scenario.name,
         world.patient_seed,

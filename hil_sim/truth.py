@@ -18,15 +18,14 @@ from contracts.files import write_atomic
 
 
 class TruthLog:
-    """True MAP per tick, preallocated for ``n_ticks`` ticks (nothing grows while the run goes).
+    """True MAP per tick, preallocated by :meth:`reserve` (nothing grows while the run goes)."""
 
-    Parameters
-    ----------
-    n_ticks
-        Ticks the device will play, >= 0.
-    """
+    def __init__(self) -> None:
+        self.reserve(0)
 
-    def __init__(self, n_ticks: int) -> None:
+    def reserve(self, n_ticks: int) -> None:
+        """Make room for ``n_ticks`` (>= 0) ticks, dropping what was recorded; the device calls
+        it once it knows the run's length."""
         if n_ticks < 0:
             raise ValueError(f"n_ticks={n_ticks!r} must be >= 0")
         self._ticks = np.zeros(n_ticks, dtype=np.int64)
@@ -35,8 +34,8 @@ class TruthLog:
         self._n = 0
 
     def record(self, tick: int, sim_time_s: float, map_true_mmhg: float) -> None:
-        """Keep tick ``tick``'s true MAP (mmHg) at ``sim_time_s`` (s); ticks past the
-        preallocated count are ignored."""
+        """Keep tick ``tick``'s true MAP (mmHg) at ``sim_time_s`` (s); ticks past the reserved
+        count are ignored."""
         n = self._n
         if n < len(self._ticks):
             self._ticks[n], self._times[n], self._map[n] = tick, sim_time_s, map_true_mmhg

@@ -257,7 +257,9 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 on_connected=pair.close_follower,
                 peer_alive=lambda: proc.poll() is None,
                 on_tick=progress if progress.enabled else None,
-                before_close=lambda rec: _add_truth(rec, proc, truth_file),
+                before_close=None
+                if truth_file is None
+                else lambda rec: _add_truth(rec, proc, truth_file),
                 noisy_band=config.noisy,
             )
         except Interrupted:
@@ -282,13 +284,11 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     return summary, result
 
 
-def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path | None) -> None:
+def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:
     """Add the device's true MAP to the recording once the device has ended and written it
     (``pressor device --truth-out``); a device that did not write it leaves the series out."""
     from hil_sim.truth import load_truth
 
-    if truth_file is None:
-        return
     try:
         proc.wait(timeout=10.0)
     except subprocess.TimeoutExpired:
