@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, Protocol
 
 from pymavlink.generator import mavgen
 
@@ -204,10 +204,26 @@ class LinkDown(Exception):
     """The device stops: the peer ended, a timeout passed, or the link failed."""
 
 
+class PatientModel(Protocol):
+    """What the device needs of a patient: the true MAP now and one sample period's advance."""
+
+    @property
+    def map_mmhg(self) -> float:
+        """True MAP now (mmHg)."""
+        ...
+
+    def step(self, rate_ml_h: float) -> None:
+        """Advance one sample period with the pump delivering ``rate_ml_h`` (ml/h)."""
+        ...
+
+
 class ProtocolDevice:
     """The device end of the pressor link over the file descriptor ``fd`` (a pty master).
 
     ``peer_gone`` is polled while waiting (the test harness passes "the runtime exited").
+    ``patient`` replaces the device's own :class:`Patient` built from ``cfg.patient`` (stepped once
+    per ``cfg.sample_period_s``); with ``cfg.send_scheduling`` it must also have ``K``, ``T_s``
+    and ``tau_s``.
     """
 
     def __init__(
@@ -216,6 +232,7 @@ class ProtocolDevice:
         fd: int,
         cfg: DeviceConfig,
         peer_gone: Callable[[], bool] = lambda: False,
+        patient: PatientModel | None = None,
     ):
         self.d, self.fd, self.cfg, self.peer_gone = dialect, fd, cfg, peer_gone
         self.out = _Out()
@@ -226,7 +243,7 @@ class ProtocolDevice:
             self.mav.signing.link_id = 0
             self.mav.signing.timestamp = wall_signing_stamp() if cfg.wall_clock_signing else 0
             self.mav.signing.sign_outgoing = True
-        self.patient = Patient(*cfg.patient, cfg.sample_period_s)
+        self.patient = Patient(*cfg.patient, cfg.sample_period_s) if patient is None else patient
         self.pump = Pump(dialect, cfg.pump_max_ml_h)
         every = round((cfg.monitor_period_s or cfg.sample_period_s) / cfg.sample_period_s)
         self.monitor = Monitor(cfg.noise_mmhg, cfg.quantum_mmhg, every, cfg.seed)

@@ -1,0 +1,296 @@
+"""LPV vs PI vs Smith on a patient model that is not this project's, through the real ``pressor run``.
+
+Each seeded patient of :mod:`benchmarks.independent_patient_model` (two-compartment
+pharmacokinetics, an effect compartment, a sigmoid Emax on MAP, a transport delay, tachyphylaxis,
+a haemorrhage-like drop at 20 min and a fluid-bolus-like rise at 40 min) is played by the device
+of ``tests/protocol_device.py`` (written from docs/PROTOCOL.md alone) on a pty, signed, in
+lockstep, against a real ``pressor run --controller SPEC`` with its default estimated schedule (a
+real monitor sends no K, T, tau). The device announces phenylephrine at 100 µg/ml, the runtime's
+defaults. Nothing of :mod:`hil_sim` is used::
+
+    python benchmarks/independent_patients.py                  # 10 patients x lpv, pi, smith
+    python benchmarks/independent_patients.py --controller pi \\
+        --controller s30=/work/briefs/spike/s30/lpv_map_controller.py --patients 3
+
+Per patient and controller it prints the IAE over the whole run (mmHg·s, on the true MAP), the
+start step's overshoot (% of the step, before the haemorrhage), each disturbance's peak deviation
+(mmHg, signed) and recovery into ±5 mmHg (s), as docs/METRICS.md defines them; then per controller
+"IAE below PI's: k of N" and the median per-patient IAE ratio to the PI. Reachable: the patient's
+steady-state rate for the target after the haemorrhage is within the pump's maximum. The same
+seed prints the same bytes; progress and wall times go to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import tty
+from dataclasses import dataclass, replace
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.independent_patient_model import (  # noqa: E402
+    BOLUS_AT_S,
+    HEMORRHAGE_AT_S,
+    IndependentPatient,
+    PatientParams,
+    draw_patient,
+)
+from contracts.metrics import run_metrics  # noqa: E402
+from tests.protocol_device import DeviceConfig, ProtocolDevice, build_dialect, read_key  # noqa: E402
+from tests.test_protocol_device import wait_for_port_open, write_key  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE_PERIOD_S = 0.1  # 1 / pressor run's default --rate (s)
+PUMP_MAX_ML_H = 120.0  # the controllers' default maximum rate (ml/h)
+CONCENTRATION_UG_ML = 100.0  # phenylephrine syringe, the runtime's default --concentration-ug-ml
+DEFAULT_CONTROLLERS = ("lpv", "pi", "smith")
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What every run of a benchmark shares (units in the names)."""
+
+    duration_s: float = 3600.0
+    target_mmhg: float = 70.0
+    noise_mmhg: float = 0.3
+
+
+def controller_label(spec: str) -> tuple[str, str]:
+    """``NAME=SPEC`` -> (NAME, SPEC); a bare spec is its own name, a module path its folder's."""
+    if "=" in spec:
+        name, _, spec = spec.partition("=")
+        return name, spec
+    if spec.endswith(".py"):
+        return Path(spec).resolve().parent.name, spec
+    return spec, spec
+
+
+def launch(
+    dialect: ModuleType,
+    workdir: Path,
+    cfg: DeviceConfig,
+    patient: IndependentPatient,
+    controller: str,
+) -> list[float]:
+    """Run ``pressor run --controller controller`` on a fresh pty against ``patient``.
+
+    Returns the true MAP (mmHg) at every tick; raises RuntimeError when the run did not finish
+    cleanly (its stderr's tail in the message).
+    """
+    key_file = write_key(workdir / "signing.key")
+    cfg = replace(cfg, key=read_key(key_file))
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    argv = [sys.executable, "-m", "pressor", "run", "--port", os.ttyname(slave)]
+    argv += ["--signing-key", str(key_file), "--controller", controller]
+    err = workdir / "run.err"
+    with (workdir / "run.out").open("w") as fout, err.open("w") as ferr:
+        proc = subprocess.Popen(
+            argv, cwd=workdir, env=dict(os.environ, CI="1"), stdout=fout, stderr=ferr
+        )
+    try:
+        os.close(slave)
+        wait_for_port_open(master, proc)
+        device = ProtocolDevice(
+            dialect, master, cfg, peer_gone=lambda: proc.poll() is not None, patient=patient
+        )
+        log = device.run()
+        rc = proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        os.close(master)
+    if rc != 0 or log.outcome != "finished" or len(log.true_map_mmhg) != cfg.n_ticks:
+        tail = err.read_text().strip().splitlines()[-3:]
+        raise RuntimeError(f"pressor run --controller {controller}: rc {rc}, {log.outcome}: {tail}")
+    return log.true_map_mmhg
+
+
+class RecordingPatient(IndependentPatient):
+    """An :class:`IndependentPatient` that keeps every delivered rate (ml/h), one per tick."""
+
+    def __init__(self, *args: Any, **kwargs: Any):
+        super().__init__(*args, **kwargs)
+        self.rates_ml_h: list[float] = []
+
+    def step(self, rate_ml_h: float) -> None:
+        """Record ``rate_ml_h`` (ml/h) and advance one sample period."""
+        self.rates_ml_h.append(rate_ml_h)
+        super().step(rate_ml_h)
+
+
+def run_patient(
+    dialect: ModuleType, params: PatientParams, controller: str, setup: Setup, seed: int
+) -> dict[str, Any]:
+    """One patient under one controller through ``pressor run``: the metrics of the run.
+
+    Returns ``iae_mmhg_s``, ``step_overshoot_pct``, ``disturbances`` (run_metrics of
+    docs/METRICS.md, judged on the true MAP, events at :data:`HEMORRHAGE_AT_S` and
+    :data:`BOLUS_AT_S` when inside the run), ``stable``, ``reachable`` and ``final_map_mmhg``.
+    """
+    patient = RecordingPatient(params, SAMPLE_PERIOD_S, CONCENTRATION_UG_ML)
+    n_ticks = round(setup.duration_s / SAMPLE_PERIOD_S)
+    cfg = DeviceConfig(
+        n_ticks=n_ticks,
+        target_mmhg=setup.target_mmhg,
+        send_scheduling=False,
+        pump_max_ml_h=PUMP_MAX_ML_H,
+        concentration_ug_ml=CONCENTRATION_UG_ML,
+        noise_mmhg=setup.noise_mmhg,
+        seed=seed,
+        name="independent",
+    )
+    with tempfile.TemporaryDirectory(prefix="indep-run-") as tmp:
+        true_map = launch(dialect, Path(tmp), cfg, patient, controller)
+    t_s = [k * SAMPLE_PERIOD_S for k in range(n_ticks)]
+    need = patient.steady_state_rate_ml_h(setup.target_mmhg + params.hemorrhage_mmhg, PUMP_MAX_ML_H)
+    m = run_metrics(
+        t_s,
+        true_map,
+        setup.target_mmhg,
+        patient.rates_ml_h,
+        PUMP_MAX_ML_H,
+        step_time_s=0.0,
+        step_mmhg=setup.target_mmhg - true_map[0],
+        reachable=need is not None,
+        events=[("hemorrhage", HEMORRHAGE_AT_S), ("bolus", BOLUS_AT_S)],
+    )
+    keep = ("iae_mmhg_s", "step_overshoot_pct", "disturbances", "stable", "reachable")
+    return {k: m[k] for k in keep} | {"final_map_mmhg": true_map[-1]}
+
+
+def _fmt(x: float | None, spec: str) -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def _event(rec: dict[str, Any], kind: str, field: str) -> float | None:
+    return next((e[field] for e in rec["disturbances"] if e["kind"] == kind), None)
+
+
+def print_table(name: str, spec: str, records: list[dict[str, Any]]) -> None:
+    """One controller's per-patient lines."""
+    print(f"\n{name} (--controller {spec})")
+    print(
+        "  patient   IAE mmHg.s  step OS %  hem peak mmHg  hem rec s"
+        "  bolus peak mmHg  bolus rec s  stable"
+    )
+    for i, r in enumerate(records):
+        print(
+            f"  {i:>7}  {_fmt(r['iae_mmhg_s'], '11.0f')}  {_fmt(r['step_overshoot_pct'], '9.2f')}"
+            f"  {_fmt(_event(r, 'hemorrhage', 'peak_deviation_mmhg'), '13.2f')}"
+            f"  {_fmt(_event(r, 'hemorrhage', 'recovery_s'), '9.1f')}"
+            f"  {_fmt(_event(r, 'bolus', 'peak_deviation_mmhg'), '15.2f')}"
+            f"  {_fmt(_event(r, 'bolus', 'recovery_s'), '11.1f')}  {'yes' if r['stable'] else 'NO'}"
+        )
+
+
+def summary_lines(results: dict[str, list[dict[str, Any]]], reference: str = "pi") -> list[str]:
+    """Per controller: "NAME IAE below PI's: k of N" and the median IAE ratio NAME/PI."""
+    if reference not in results:
+        return [f"no {reference} run: no IAE comparison"]
+    ref, lines = results[reference], []
+    for name, records in results.items():
+        if name == reference:
+            continue
+        ratios = [
+            a["iae_mmhg_s"] / b["iae_mmhg_s"]
+            for a, b in zip(records, ref, strict=True)
+            if a["reachable"] and b["iae_mmhg_s"]
+        ]
+        below = sum(r < 1.0 for r in ratios)
+        median = statistics.median(ratios) if ratios else None
+        lines.append(f"{name.upper()} IAE below PI's: {below} of {len(ratios)} reachable")
+        lines.append(f"median IAE ratio {name}/{reference}: {_fmt(median, '.3f')}")
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--patients", type=int, default=10, help="number of patients (default 10)")
+    p.add_argument("--seed", type=int, default=2026, help="cohort seed (default 2026)")
+    p.add_argument(
+        "--controller",
+        action="append",
+        metavar="[NAME=]SPEC",
+        help="a pressor run --controller spec (lpv, pi, smith[:LAMBDA_S], or a generated .py), "
+        "repeatable; NAME labels it (default: a module's folder name) "
+        f"(default: {', '.join(DEFAULT_CONTROLLERS)})",
+    )
+    p.add_argument(
+        "--duration-s", type=float, default=Setup.duration_s, help="simulated s (default 3600)"
+    )
+    p.add_argument(
+        "--target-mmhg", type=float, default=Setup.target_mmhg, help="MAP target (default 70)"
+    )
+    p.add_argument(
+        "--noise-mmhg",
+        type=float,
+        default=Setup.noise_mmhg,
+        help="monitor noise std (mmHg, default 0.3)",
+    )
+    args = p.parse_args(argv)
+    setup = Setup(args.duration_s, args.target_mmhg, args.noise_mmhg)
+    controllers = [controller_label(s) for s in args.controller or DEFAULT_CONTROLLERS]
+    cohort = [draw_patient(args.seed, i) for i in range(args.patients)]
+    print(
+        f"independent patients: {args.patients}, seed {args.seed}, {setup.duration_s:g} s each, "
+        f"target {setup.target_mmhg:g} mmHg, monitor noise {setup.noise_mmhg:g} mmHg, "
+        f"phenylephrine {CONCENTRATION_UG_ML:g} ug/ml, pump max {PUMP_MAX_ML_H:g} ml/h; "
+        f"haemorrhage at {HEMORRHAGE_AT_S:g} s, bolus at {BOLUS_AT_S:g} s"
+    )
+    print(
+        "  patient  baseline mmHg  delay s  hem mmHg  bolus mmHg  steady ml/h at target, after hem"
+    )
+    for i, params in enumerate(cohort):
+        pt = IndependentPatient(params, SAMPLE_PERIOD_S, CONCENTRATION_UG_ML)
+        need = pt.steady_state_rate_ml_h(setup.target_mmhg, PUMP_MAX_ML_H)
+        need_hem = pt.steady_state_rate_ml_h(
+            setup.target_mmhg + params.hemorrhage_mmhg, PUMP_MAX_ML_H
+        )
+        print(
+            f"  {i:>7}  {params.baseline_mmhg:13.1f}  {params.delay_s:7.1f}"
+            f"  {params.hemorrhage_mmhg:8.1f}  {params.bolus_mmhg:10.1f}"
+            f"  {_fmt(need, '.1f'):>21}, {_fmt(need_hem, '.1f')}"
+        )
+    with tempfile.TemporaryDirectory(prefix="indep-dialect-") as tmp:
+        with contextlib.redirect_stdout(io.StringIO()):  # mavgen narrates on stdout
+            dialect = build_dialect(ROOT / "link" / "pressor.xml", Path(tmp))
+    results: dict[str, list[dict[str, Any]]] = {name: [] for name, _ in controllers}
+    total, done = len(cohort) * len(controllers), 0
+    for i, params in enumerate(cohort):
+        for name, spec in controllers:
+            started = time.monotonic()
+            rec = run_patient(dialect, params, spec, setup, seed=args.seed * 1000 + i)
+            results[name].append(rec)
+            done += 1
+            print(
+                f"[{done}/{total}] patient {i} {name}: IAE {rec['iae_mmhg_s']:.0f} mmHg.s "
+                f"({time.monotonic() - started:.1f} s wall)",
+                file=sys.stderr,
+                flush=True,
+            )
+    for name, spec in controllers:
+        print_table(name, spec, results[name])
+    print("\nsummary")
+    for line in summary_lines(results):
+        print(f"  {line}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
