@@ -32,6 +32,7 @@ import sys
 import tempfile
 import time
 import tty
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from types import ModuleType
@@ -175,25 +176,29 @@ def _fmt(x: float | None, spec: str) -> str:
     return "-" if x is None else format(x, spec)
 
 
-def _event(rec: dict[str, Any], kind: str, field: str) -> float | None:
-    return next((e[field] for e in rec["disturbances"] if e["kind"] == kind), None)
+def _event(kind: str, field: str) -> Callable[[dict[str, Any]], float | None]:
+    return lambda rec: next((e[field] for e in rec["disturbances"] if e["kind"] == kind), None)
+
+
+#: the per-patient table: header, value of a run record, format
+COLUMNS: tuple[tuple[str, Callable[[dict[str, Any]], float | None], str], ...] = (
+    ("IAE mmHg.s", lambda rec: rec["iae_mmhg_s"], ".0f"),
+    ("step OS %", lambda rec: rec["step_overshoot_pct"], ".2f"),
+    ("hem peak mmHg", _event("hemorrhage", "peak_deviation_mmhg"), ".2f"),
+    ("hem rec s", _event("hemorrhage", "recovery_s"), ".1f"),
+    ("bolus peak mmHg", _event("bolus", "peak_deviation_mmhg"), ".2f"),
+    ("bolus rec s", _event("bolus", "recovery_s"), ".1f"),
+    ("final MAP mmHg", lambda rec: rec["final_map_mmhg"], ".1f"),
+)
 
 
 def print_table(name: str, spec: str, records: list[dict[str, Any]]) -> None:
     """One controller's per-patient lines."""
     print(f"\n{name} (--controller {spec})")
-    print(
-        "  patient   IAE mmHg.s  step OS %  hem peak mmHg  hem rec s"
-        "  bolus peak mmHg  bolus rec s  stable"
-    )
-    for i, r in enumerate(records):
-        print(
-            f"  {i:>7}  {_fmt(r['iae_mmhg_s'], '11.0f')}  {_fmt(r['step_overshoot_pct'], '9.2f')}"
-            f"  {_fmt(_event(r, 'hemorrhage', 'peak_deviation_mmhg'), '13.2f')}"
-            f"  {_fmt(_event(r, 'hemorrhage', 'recovery_s'), '9.1f')}"
-            f"  {_fmt(_event(r, 'bolus', 'peak_deviation_mmhg'), '15.2f')}"
-            f"  {_fmt(_event(r, 'bolus', 'recovery_s'), '11.1f')}  {'yes' if r['stable'] else 'NO'}"
-        )
+    print("  patient  " + "  ".join(h for h, _, _ in COLUMNS) + "  stable")
+    for i, rec in enumerate(records):
+        cells = [_fmt(get(rec), f).rjust(len(h)) for h, get, f in COLUMNS]
+        print(f"  {i:>7}  " + "  ".join(cells) + f"  {'yes' if rec['stable'] else 'NO'}")
 
 
 def summary_lines(results: dict[str, list[dict[str, Any]]], reference: str = "pi") -> list[str]:
