@@ -10,7 +10,7 @@ defaults. Nothing of :mod:`hil_sim` is used::
 
     python benchmarks/independent_patients.py                  # 10 patients x lpv, pi, smith
     python benchmarks/independent_patients.py --controller pi \\
-        --controller s30=/work/briefs/spike/s30/lpv_map_controller.py --patients 3
+        --controller new=out/lpv_map_controller.py --patients 3
 
 Per patient and controller it prints the IAE over the whole run (mmHg·s, on the true MAP), the
 start step's overshoot (% of the step, before the haemorrhage), each disturbance's peak deviation
@@ -237,10 +237,13 @@ def main(argv: list[str] | None = None) -> int:
         f"(default: {', '.join(DEFAULT_CONTROLLERS)})",
     )
     p.add_argument(
-        "--duration-s", type=float, default=Setup.duration_s, help="simulated s (default 3600)"
+        "--duration-s",
+        type=float,
+        default=Setup.duration_s,
+        help="simulated time per run (s, default 3600)",
     )
     p.add_argument(
-        "--target-mmhg", type=float, default=Setup.target_mmhg, help="MAP target (default 70)"
+        "--target-mmhg", type=float, default=Setup.target_mmhg, help="MAP target (mmHg, default 70)"
     )
     p.add_argument(
         "--noise-mmhg",
