@@ -29,9 +29,12 @@ Units: concentrations in ng/ml (= µg/l), volumes in l, clearances in l/min, tim
 mmHg, infusion rates in ml/h of a syringe at ``concentration_ug_ml`` µg/ml. At steady state under a
 rate R (ml/h) every concentration equals Css = R·c / (60·CL) ng/ml and the MAP is
 ``baseline + Emax·Css^h / ((EC50 + g·Css)^h + Css^h)`` (:meth:`IndependentPatient.steady_state_map_mmhg`).
-The ranges put the local sensitivity near the target between about 0.2 and 1 mmHg/(ml/h) for
-phenylephrine at 100 µg/ml, the range the runtime's controllers are designed for; they are a
-plausible population for a benchmark, not fitted values.
+The ranges put the local sensitivity near the target between about 0.1 and 1 mmHg/(ml/h) for
+phenylephrine at 100 µg/ml, near the range the runtime's controllers are designed for; they are a
+plausible population for a benchmark, not fitted values. Unlike the controllers' design model
+(first order plus delay) the response is of higher order: the plasma's fast time constant
+V1/(CL+Q) is 1.7-6 min, the effect-site lag 0.5-1.5 min comes after it, and the peripheral creep
+and the tolerance keep moving the sensitivity for the whole hour.
 """
 
 from __future__ import annotations

@@ -18,7 +18,13 @@ from benchmarks.independent_patient_model import (
     PatientParams,
     draw_patient,
 )
-from benchmarks.independent_patients import Setup, controller_label, run_patient, summary_lines
+from benchmarks.independent_patients import (
+    Setup,
+    controller_label,
+    main,
+    run_patient,
+    summary_lines,
+)
 from tests.protocol_device import build_dialect
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -126,3 +132,18 @@ def test_pi_through_pressor_run_brings_an_independent_patient_to_target(
     assert abs(rec["final_map_mmhg"] - 70.0) <= 5.0
     # the whole 15 mmHg step contributes at least the delay's worth of error before MAP moves
     assert rec["iae_mmhg_s"] > 15.0 * params.delay_s
+
+
+def test_same_seed_prints_the_same_bytes_and_progress_goes_to_stderr(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    argv = ["--patients", "1", "--duration-s", "30", "--controller", "pi", "--controller", "smith"]
+    outputs = []
+    for _ in range(2):
+        assert main(argv) == 0
+        out, err = capsys.readouterr()
+        outputs.append(out)
+        assert err.count("wall)") == 2 and "[2/2] patient 0 smith" in err
+    assert outputs[0] == outputs[1]
+    assert "SMITH IAE below PI's: " in outputs[0] and "median IAE ratio smith/pi: " in outputs[0]
+    assert "wall" not in outputs[0]
