@@ -137,7 +137,7 @@ def run_patient(
 ) -> dict[str, Any]:
     """One patient under one controller through ``pressor run``: the metrics of the run.
 
-    Returns ``iae_mmhg_s``, ``step_overshoot_pct``, ``disturbances`` (run_metrics of
+    Returns ``iae_mmhg_s``, ``step_iae_mmhg_s``, ``step_overshoot_pct``, ``disturbances`` (run_metrics of
     docs/METRICS.md, judged on the true MAP, events at :data:`HEMORRHAGE_AT_S` and
     :data:`BOLUS_AT_S` when inside the run), ``stable``, ``reachable`` and ``final_map_mmhg``.
     """
@@ -168,8 +168,8 @@ def run_patient(
         reachable=need is not None,
         events=[("hemorrhage", HEMORRHAGE_AT_S), ("bolus", BOLUS_AT_S)],
     )
-    keep = ("iae_mmhg_s", "step_overshoot_pct", "disturbances", "stable", "reachable")
-    return {k: m[k] for k in keep} | {"final_map_mmhg": true_map[-1]}
+    keep = ("iae_mmhg_s", "step_iae_mmhg_s", "step_overshoot_pct", "disturbances", "stable")
+    return {k: m[k] for k in keep} | {"reachable": need is not None, "final_map_mmhg": true_map[-1]}
 
 
 def _fmt(x: float | None, spec: str) -> str:
@@ -201,23 +201,50 @@ def print_table(name: str, spec: str, records: list[dict[str, Any]]) -> None:
         print(f"  {i:>7}  " + "  ".join(cells) + f"  {'yes' if rec['stable'] else 'NO'}")
 
 
+def _median(values: list[float]) -> float | None:
+    return statistics.median(values) if values else None
+
+
+#: the parts of a run the summary compares separately: label, IAE of a run record (mmHg·s)
+SEGMENTS: tuple[tuple[str, Callable[[dict[str, Any]], float | None]], ...] = (
+    ("step window", lambda rec: rec["step_iae_mmhg_s"]),
+    ("haemorrhage", _event("hemorrhage", "iae_mmhg_s")),
+    ("bolus", _event("bolus", "iae_mmhg_s")),
+)
+
+
+def _ratios(
+    records: list[dict[str, Any]],
+    ref: list[dict[str, Any]],
+    iae: Callable[[dict[str, Any]], float | None],
+) -> list[float]:
+    """Per reachable patient, the IAE ratio record/reference (where both have the IAE)."""
+    return [
+        iae(a) / iae(b)  # type: ignore[operator]
+        for a, b in zip(records, ref, strict=True)
+        if a["reachable"] and iae(a) is not None and iae(b)
+    ]
+
+
 def summary_lines(results: dict[str, list[dict[str, Any]]], reference: str = "pi") -> list[str]:
-    """Per controller: "NAME IAE below PI's: k of N" and the median IAE ratio NAME/PI."""
+    """Per controller: "NAME IAE below PI's: k of N", the median IAE ratio NAME/PI, and the same
+    median over the step window and each disturbance event alone (docs/METRICS.md)."""
     if reference not in results:
         return [f"no {reference} run: no IAE comparison"]
     ref, lines = results[reference], []
     for name, records in results.items():
         if name == reference:
             continue
-        ratios = [
-            a["iae_mmhg_s"] / b["iae_mmhg_s"]
-            for a, b in zip(records, ref, strict=True)
-            if a["reachable"] and b["iae_mmhg_s"]
-        ]
+        ratios = _ratios(records, ref, lambda rec: rec["iae_mmhg_s"])
         below = sum(r < 1.0 for r in ratios)
-        median = statistics.median(ratios) if ratios else None
         lines.append(f"{name.upper()} IAE below PI's: {below} of {len(ratios)} reachable")
-        lines.append(f"median IAE ratio {name}/{reference}: {_fmt(median, '.3f')}")
+        parts = [
+            f"{label} {_fmt(_median(_ratios(records, ref, iae)), '.3f')}" for label, iae in SEGMENTS
+        ]
+        lines.append(
+            f"median IAE ratio {name}/{reference}: {_fmt(_median(ratios), '.3f')}"
+            f" ({', '.join(parts)})"
+        )
     return lines
 
 

@@ -91,17 +91,23 @@ def test_patient_draws_are_seeded_per_index_and_inside_the_documented_ranges() -
             assert lo <= value <= hi, (name, value)
 
 
-def test_summary_counts_patients_below_the_pi_and_takes_the_median_ratio() -> None:
-    def rec(iae: float, reachable: bool = True) -> dict[str, object]:
-        return {"iae_mmhg_s": iae, "reachable": reachable}
+def test_summary_counts_patients_below_the_pi_and_takes_median_ratios_per_segment() -> None:
+    def rec(iae: float, step: float | None, reachable: bool = True) -> dict[str, object]:
+        events = [{"kind": "hemorrhage", "iae_mmhg_s": iae / 4}, {"kind": "bolus", "iae_mmhg_s": 1}]
+        return {
+            "iae_mmhg_s": iae,
+            "step_iae_mmhg_s": step,
+            "disturbances": events,
+            "reachable": reachable,
+        }
 
     results = {
-        "pi": [rec(100.0), rec(200.0), rec(100.0), rec(50.0, reachable=False)],
-        "lpv": [rec(50.0), rec(300.0), rec(200.0), rec(10.0, reachable=False)],
+        "pi": [rec(100.0, 10.0), rec(200.0, 20.0), rec(100.0, 30.0), rec(50.0, 1.0, False)],
+        "lpv": [rec(50.0, 10.0), rec(300.0, None), rec(200.0, 90.0), rec(10.0, 1.0, False)],
     }
     assert summary_lines(results) == [
         "LPV IAE below PI's: 1 of 3 reachable",
-        "median IAE ratio lpv/pi: 1.500",
+        "median IAE ratio lpv/pi: 1.500 (step window 2.000, haemorrhage 1.500, bolus 1.000)",
     ]
     assert summary_lines({"lpv": results["lpv"]}) == ["no pi run: no IAE comparison"]
 
