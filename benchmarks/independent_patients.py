@@ -137,9 +137,10 @@ def run_patient(
 ) -> dict[str, Any]:
     """One patient under one controller through ``pressor run``: the metrics of the run.
 
-    Returns ``iae_mmhg_s``, ``step_iae_mmhg_s``, ``step_overshoot_pct``, ``disturbances`` (run_metrics of
-    docs/METRICS.md, judged on the true MAP, events at :data:`HEMORRHAGE_AT_S` and
-    :data:`BOLUS_AT_S` when inside the run), ``stable``, ``reachable`` and ``final_map_mmhg``.
+    Returns ``iae_mmhg_s``, ``step_iae_mmhg_s``, ``step_overshoot_pct``, ``disturbances``,
+    ``stable`` (run_metrics of docs/METRICS.md, judged on the true MAP, events at
+    :data:`HEMORRHAGE_AT_S` and :data:`BOLUS_AT_S` when inside the run), ``reachable`` and
+    ``final_map_mmhg``.
     """
     patient = RecordingPatient(params, SAMPLE_PERIOD_S, CONCENTRATION_UG_ML)
     n_ticks = round(setup.duration_s / SAMPLE_PERIOD_S)
