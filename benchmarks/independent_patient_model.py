@@ -28,7 +28,8 @@ literature uses (the numbers are ranges drawn per patient, listed in :data:`RANG
 Units: concentrations in ng/ml (= µg/l), volumes in l, clearances in l/min, times in s, MAP in
 mmHg, infusion rates in ml/h of a syringe at ``concentration_ug_ml`` µg/ml. At steady state under a
 rate R (ml/h) every concentration equals Css = R·c / (60·CL) ng/ml and the MAP is
-``baseline + Emax·Css^h / ((EC50 + g·Css)^h + Css^h)`` (:meth:`IndependentPatient.steady_state_map_mmhg`).
+``baseline + Emax·Css^h / ((EC50 + g·Css)^h + Css^h)``
+(:meth:`IndependentPatient.steady_state_map_mmhg`).
 The ranges put the local sensitivity near the target between about 0.1 and 1 mmHg/(ml/h) for
 phenylephrine at 100 µg/ml, near the range the runtime's controllers are designed for; they are a
 plausible population for a benchmark, not fitted values. Unlike the controllers' design model

@@ -1,4 +1,4 @@
-"""LPV vs PI vs Smith on a patient model that is not this project's, through the real ``pressor run``.
+"""LPV vs PI vs Smith on a patient model not this project's, through the real ``pressor run``.
 
 Each seeded patient of :mod:`benchmarks.independent_patient_model` (two-compartment
 pharmacokinetics, an effect compartment, a sigmoid Emax on MAP, a transport delay, tachyphylaxis,
