@@ -258,8 +258,9 @@ def verify_artifact(
     in_box = bool(np.all((nominal >= box[:, 0]) & (nominal <= box[:, 1])))
     rho_step = nominal if in_box else np.clip(nominal, *box.T)
     lpv_cl = _closed_loop_at(artifact, cfg, rho_step)
-    lmi = analysis_check(artifact, systems, mesh, lpv_cl, p_dependence, all_points_at_once, say)
-    res_certified = bool(lmi["certified"])
+    lmi = analysis_check(
+        artifact, systems, mesh, (lpv_cl, rho_step), p_dependence, all_points_at_once, say
+    )
 
     # (c) nominal step, LPV, PI and Smith
     max_rate = float(getattr(artifact, "max_rate_ml_h", 120.0))
@@ -321,7 +322,7 @@ def verify_artifact(
         sett is not None and smith_sett is not None and sett < smith_sett
     )
     step_ok = sett is not None and bool(lpv["stable"])
-    passed = bool(res_certified and stability["stable"] and step_ok)
+    passed = bool(lmi["certified"] and stability["stable"] and step_ok)
     meta = {"sha256": getattr(artifact, "sha256", None), "gamma": float(artifact.gamma)}
     if artifact.family.is_smith:  # theorem3 reports (stored in artifacts) keep their bytes
         meta["controller"] = artifact.family.to_dict()

@@ -25,7 +25,6 @@ import numpy as np
 
 from synthesis.analysis_lmi import analyse
 from synthesis.closed_loop import DelaySystem
-from synthesis.config import NOMINAL_RHO
 from synthesis.reconstruct import scaling_of
 from synthesis.smith_design import certify_smith
 from synthesis.state_transform import conditioning_transform
@@ -47,26 +46,28 @@ def analysis_check(
     artifact: Any,
     systems: list[DelaySystem],
     mesh: np.ndarray,
-    centre: DelaySystem,
+    centre: tuple[DelaySystem, np.ndarray],
     p_dependence: str,
     all_points_at_once: bool,
     say: Progress,
 ) -> dict[str, Any]:
     """Run check (a) on the frozen loops ``systems`` at the dense points ``mesh`` (G, 3).
 
-    ``centre`` is the loop at the nominal ρ (clipped to the box), used by the "smith" family to
-    condition the state. Returns the ``analysis_lmi`` entry of the report.
+    ``centre`` is the loop at the nominal ρ (clipped to the box) and that ρ, used by the "smith"
+    family to condition the state. Returns the ``analysis_lmi`` entry of the report.
     """
-    family = artifact.family
-    model = artifact.model_config
-    box = np.asarray(artifact.box, dtype=float)
-    sc = scaling_of(artifact)
-    if family.is_smith:
-        nominal = np.clip(np.asarray(NOMINAL_RHO, dtype=float), box[:, 0], box[:, 1])
+    if artifact.family.is_smith:
         cap = SMITH_GAMMA_CAP_FACTOR * float(artifact.gamma)
         say(f"analysis LMI (Wirtinger, smith family): gamma <= {cap:.4g}, {len(mesh)} points")
         res = certify_smith(
-            systems, mesh, (centre, nominal), model, sc, cap, say, p_dependence=p_dependence
+            systems,
+            mesh,
+            centre,
+            artifact.model_config,
+            scaling_of(artifact),
+            cap,
+            say,
+            p_dependence=p_dependence,
         )
     else:
         res = _jensen(artifact, systems, mesh, p_dependence, all_points_at_once, say)
