@@ -22,6 +22,7 @@ from synthesis.family import ControllerFamily, smith_coef_shapes
 from synthesis.reconstruct import controller_at
 from synthesis.smith_design import SmithDesignError, design_smith
 from synthesis.smith_lpv import SmithLPV
+from synthesis.verify_cli import main as verify_main
 
 SMITH_2 = '[controller]\nstructure = "smith"\nloop_gain = 2.0\n[grid]\npoints = [2, 2, 2]\n'
 
@@ -173,8 +174,6 @@ def test_synth_then_verify_passes_and_an_uncertifiable_gain_exits_1_writing_noth
     assert rep["passed"] is True and rep["grid"]["n_points_unseen_by_synthesis"] == 19
     assert rep["analysis_lmi"]["certified"] is True
     json_out = tmp_path / "v.json"
-    from synthesis.verify_cli import main as verify_main
-
     assert verify_main("verify", [str(out), "--json", str(json_out)]) == 0
     report = json.loads(json_out.read_text())
     assert report["artifact"]["controller"] == {"structure": "smith", "loop_gain": 2.0}
