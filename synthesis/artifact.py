@@ -8,11 +8,18 @@ Layout (``numpy.savez``, no pickled objects):
   config), ``scaling``, ``lambda2``, ``lambda3``, ``gamma``, ``solver`` (name, status, times,
   iterations), ``verification`` (``null`` until :func:`with_verification` fills it), ``created_by``,
   and optionally ``reference`` (``enabled``, ``lambda_s``, ``pump_fraction``, ``k_min``: the 2-DOF
-  prefilter of :mod:`synthesis.reference`; absent in older artifacts, read as disabled).
-* ``coef_<name>`` — decision-variable basis coefficients (scaled coordinates; see
-  :mod:`synthesis.lmi`): P, Q, R, X, Y, Ah, Adh, Bh, Ch, Cdh, Dk.
-* ``node_<name>`` — the reconstructed controller at the grid nodes, physical units (time in s),
-  shape ``(nK, nT, ntau, rows, cols)`` for Ak, Adk, Bk, Ck, Cdk, Dk.
+  prefilter of :mod:`synthesis.reference`; absent in older artifacts, read as disabled), and
+  optionally ``controller`` (``structure``, ``loop_gain``: the family of :mod:`synthesis.family`;
+  absent in older artifacts and in every "theorem3" artifact, read as "theorem3"; for "smith"
+  ``lambda2``/``lambda3`` are null and ``gamma`` is the Wirtinger analysis' bound on the design
+  grid).
+* ``coef_<name>`` — "theorem3": decision-variable basis coefficients (scaled coordinates; see
+  :mod:`synthesis.lmi`): P, Q, R, X, Y, Ah, Adh, Bh, Ch, Cdh, Dk. "smith": the certificate of the
+  Wirtinger analysis, P, S, R and its state ``transform``
+  (:func:`synthesis.family.smith_coef_shapes`).
+* ``node_<name>`` — the controller at the grid nodes, physical units (time in s), shape
+  ``(nK, nT, ntau, rows, cols)`` for Ak, Adk, Bk, Ck, Cdk, Dk (controller order n for
+  "theorem3", 2 for "smith").
 * ``sha256`` — uint8 bytes of the hex digest of everything above (canonical order).
 
 Loading checks the format version, every expected field's presence, dtype, shape and finiteness and
@@ -34,6 +41,7 @@ import numpy as np
 
 from contracts.files import AtomicFile
 from synthesis.config import ModelConfig
+from synthesis.family import SMITH_ORDER, ControllerFamily, smith_coef_shapes
 from synthesis.model import dims
 from synthesis.reference import ReferenceConfig
 
@@ -65,7 +73,10 @@ def coef_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
 
 
 def node_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
-    """Controller at the grid nodes: name -> (rows, cols); the controller order equals ``n``."""
+    """Controller of order ``n`` at the grid nodes: name -> (rows, cols).
+
+    A "theorem3" controller has the plant's order; a "smith" one has order 2.
+    """
     return {
         "Ak": (n, n),
         "Adk": (n, n),
@@ -162,6 +173,11 @@ class ControllerArtifact:
         artifact carries none."""
         ref = self.metadata.get("reference")
         return ReferenceConfig() if ref is None else ReferenceConfig.from_dict(ref)
+
+    @property
+    def family(self) -> ControllerFamily:
+        """The controller family (:mod:`synthesis.family`); "theorem3" when the artifact has none."""
+        return ControllerFamily.from_metadata(self.metadata)
 
     @property
     def model_config(self) -> ModelConfig:
@@ -285,7 +301,20 @@ def _validate(
             raise _err(path, "metadata.grid", f"axis {i} not increasing inside the box")
     if not np.isfinite(gamma) or gamma <= 0:
         raise _err(path, "metadata.gamma", f"{gamma!r} is not a positive finite number")
-    for name, (r, c) in coef_shapes(pd.n, pd.ny).items():
+    try:
+        family = ControllerFamily.from_metadata(meta)
+    except (TypeError, ValueError) as exc:
+        raise _err(path, "metadata.controller", str(exc)) from None
+    if family.is_smith:
+        shapes = smith_coef_shapes(pd.n)
+        extra = sorted(set(coefs) - set(shapes))
+        if extra:
+            raise _err(path, f"coef_{extra[0]}", "not a coefficient of a 'smith' artifact")
+        for name, shape in shapes.items():
+            if name not in coefs:
+                raise _err(path, f"coef_{name}", "missing")
+            _check_array(path, f"coef_{name}", coefs[name], shape)
+    for name, (r, c) in ({} if family.is_smith else coef_shapes(pd.n, pd.ny)).items():
         if name not in coefs:
             raise _err(path, f"coef_{name}", "missing")
         nb = coefs[name].shape[0] if coefs[name].ndim == 3 else -1
@@ -293,7 +322,8 @@ def _validate(
             raise _err(path, f"coef_{name}", f"shape {coefs[name].shape}, expected (1|7, {r}, {c})")
         _check_array(path, f"coef_{name}", coefs[name], (nb, r, c))
     gshape = tuple(g.size for g in grid)
-    for name, (r, c) in node_shapes(pd.n, pd.ny).items():
+    order = SMITH_ORDER if family.is_smith else pd.n
+    for name, (r, c) in node_shapes(order, pd.ny).items():
         if name not in nodes:
             raise _err(path, f"node_{name}", "missing")
         _check_array(path, f"node_{name}", nodes[name], (*gshape, r, c))

@@ -11,16 +11,26 @@ verification verdict (from :func:`synthesis.verify.verify_artifact`; the result 
 ``verification`` field). Exit codes: 0 ok, 1 the synthesis finished but the solver or the
 verification failed, 2 bad usage or a bad config value (one line naming file, field, value and
 allowed range).
+
+A design whose ``[controller] structure = "smith"`` (:mod:`synthesis.family`) has no synthesis LMI:
+the design stage is the Wirtinger analysis of its closed-form law on the design grid
+(:func:`synthesis.smith_design.design_smith`, progress on stderr); if it does not certify, the
+command says so, writes nothing and exits 1. ``--lambda-search``, ``--lambda2``, ``--lambda3`` and
+``--backoff`` are Theorem-3 options and a usage error (exit 2) for that family.
 """
 
 from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from contracts.usage import UsageError, UsageParser, run_command
+
+if TYPE_CHECKING:
+    from synthesis.artifact import ControllerArtifact
 
 DEFAULT_OUT = "design.npz"
 
@@ -109,7 +119,6 @@ def _synth(argv: Sequence[str]) -> int:
 
     from dataclasses import replace
 
-    from synthesis.artifact import save_artifact, with_verification
     from synthesis.config import ConfigError
     from synthesis.config_toml import load_config
     from synthesis.synthesize import SynthesisError, synthesize
@@ -145,6 +154,27 @@ def _synth(argv: Sequence[str]) -> int:
 
     out = Path(args.out)
     say(f"config {cfg.source}; grid {cfg.grid_points}; box {cfg.model.box.tolist()}")
+    if cfg.controller.is_smith:
+        theorem3_only = {
+            "--lambda-search": args.lambda_search,
+            "--lambda2": args.lambda2 is not None,
+            "--lambda3": args.lambda3 is not None,
+            "--backoff": args.backoff is not None,
+        }
+        for option, given in theorem3_only.items():
+            if given:
+                raise UsageError(f"{option}: a Theorem-3 option, unused by structure 'smith'")
+        from synthesis.smith_design import SmithDesignError, design_smith
+
+        try:
+            art = design_smith(cfg, progress=say)
+        except SmithDesignError as exc:
+            print(f"pressor synth: not certified: {exc}", file=sys.stderr)
+            return 1
+        print(f"controller       smith, loop gain {cfg.controller.loop_gain:g}")
+        print(f"gamma            {art.gamma:.6g} (Wirtinger analysis, design grid)")
+        print(f"solver status    {art.metadata['solver']['status']}")
+        return _verify_and_save(art, out, args.no_verify, say, t0)
     extra: dict = {}
     if args.lambda_search:
         from contracts.parallel import BackendError
@@ -175,8 +205,17 @@ def _synth(argv: Sequence[str]) -> int:
     print(f"gamma            {res.result.gamma:.6g}")
     print(f"solver status    {res.result.status} ({res.result.iterations} iterations)")
     print(f"build / solve    {res.result.build_time_s:.2f} s / {res.result.solve_time_s:.1f} s")
+    return _verify_and_save(art, out, args.no_verify, say, t0)
+
+
+def _verify_and_save(
+    art: ControllerArtifact, out: Path, no_verify: bool, say: Callable[[str], None], t0: float
+) -> int:
+    """Verify (unless ``no_verify``), store the verdict in the artifact, write it; the exit code."""
+    from synthesis.artifact import save_artifact, with_verification
+
     verdict_code = 0
-    if args.no_verify:
+    if no_verify:
         print("verification     skipped (--no-verify)")
     else:
         from synthesis.verify import verify_artifact

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from synthesis.family import ControllerFamily
 from synthesis.reference import ReferenceConfig
 
 #: Nominal plant the default box must contain: K (mmHg/(ml/h)), T (s), tau (s).
@@ -220,12 +221,14 @@ class SolverConfig:
 
 @dataclass(frozen=True)
 class DesignConfig:
-    """A full design: model, grid, solver settings, line-search candidates and the prefilter."""
+    """A full design: model, grid, solver settings, line-search candidates, the prefilter and the
+    controller family (:mod:`synthesis.family`; for "smith" the solver settings are unused)."""
 
     model: ModelConfig
     grid_points: tuple[int, int, int]
     solver: SolverConfig
     reference: ReferenceConfig = field(default_factory=ReferenceConfig)
+    controller: ControllerFamily = field(default_factory=ControllerFamily)
     lambda2_candidates: tuple[float, ...] = (0.5, 1.0, 2.0)
     lambda3_candidates: tuple[float, ...] = (0.25, 0.5, 1.0)
     source: str = "<default>"
@@ -248,8 +251,9 @@ class DesignConfig:
         return replace(self, solver=replace(self.solver, lambda2=lambda2, lambda3=lambda3))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict of the full design (stored in the artifact)."""
-        return {
+        """JSON-ready dict of the full design (stored in the artifact; ``controller`` only for a
+        family other than "theorem3", so theorem3 artifacts keep their bytes)."""
+        out = {
             "model": self.model.to_dict(),
             "grid_points": list(self.grid_points),
             "solver": asdict(self.solver),
@@ -259,3 +263,6 @@ class DesignConfig:
             },
             "reference": self.reference.to_dict(),
         }
+        if self.controller.is_smith:
+            out["controller"] = self.controller.to_dict()
+        return out

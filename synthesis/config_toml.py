@@ -18,6 +18,12 @@ A design is described by a TOML file with the sections below (all physical units
                  ("vertices" | "bound"), mean_gamma_weight
     [line_search] lambda2 = [...], lambda3 = [...]   candidate values for ``--lambda-search``
     [pump]       max_rate_ml_h
+    [controller] structure ("theorem3" | "smith"), loop_gain (dimensionless, in (0, 10], only and
+                 required for "smith"): the controller family of :mod:`synthesis.family`. Unlike
+                 the other sections it never takes the shipped default: no [controller] section
+                 (or no ``structure``) means "theorem3", so a design file written before the
+                 section existed keeps its meaning. For "smith" the [solver] and [line_search]
+                 keys are unused (no synthesis LMI; they are still validated if present)
     [reference]  enabled (bool), lambda_s (s, in [1, 1000]), pump_fraction (in [0.1, 1]),
                  k_min (mmHg/(ml/h), in [0.001, box K upper])
                  the two-degree-of-freedom prefilter of :mod:`synthesis.reference` (outside the
@@ -48,6 +54,7 @@ from synthesis.config import (
     check_range,
     field_error,
 )
+from synthesis.family import LOOP_GAIN_RANGE, ControllerFamily
 from synthesis.reference import K_MIN_RANGE, LAMBDA_RANGE_S, PUMP_FRACTION_RANGE, ReferenceConfig
 
 __all__ = ["SHAPING_DEFAULTS", "default_config_path", "load_config", "parse_config"]
@@ -234,10 +241,33 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         grid_points=grid,
         solver=solver,
         reference=reference,
+        controller=_parse_controller(table, source),
         lambda2_candidates=cands[0],
         lambda3_candidates=cands[1],
         source=source,
         raw=table,
+    )
+
+
+def _parse_controller(table: dict[str, Any], source: str) -> ControllerFamily:
+    """The [controller] section, read from ``table`` only (absent: "theorem3", see module doc)."""
+    sec = table.get("controller", {})
+    structure = sec.get("structure", "theorem3")
+    if structure not in ("theorem3", "smith"):
+        raise field_error(source, "controller.structure", structure, "one of 'theorem3', 'smith'")
+    lo, hi = LOOP_GAIN_RANGE
+    if structure == "theorem3":
+        if "loop_gain" in sec:
+            raise field_error(
+                source, "controller.loop_gain", sec["loop_gain"], "absent for structure 'theorem3'"
+            )
+        return ControllerFamily()
+    if "loop_gain" not in sec:
+        raise field_error(
+            source, "controller.loop_gain", None, f"given for 'smith', in ({lo:g}, {hi:g}]"
+        )
+    return ControllerFamily(
+        "smith", check_pos(source, "controller.loop_gain", sec["loop_gain"], hi)
     )
 
 

@@ -6,17 +6,14 @@ from the artifact (:func:`synthesis.reconstruct.controller_at`) and the plant mo
 each cell of the synthesis grid ``density`` times and always contains the cell midpoints (points
 the synthesis never saw), then:
 
-(a) ``analysis_lmi`` — the delay-dependent analysis LMI of :mod:`synthesis.analysis_lmi` (Theorem 1,
-    P quadratic in rho in the synthesis basis, Q, R constant, all rate vertices) over the whole
-    dense grid in one solve, in state coordinates whitened by the centre point's own Lyapunov
-    matrix and then balanced (a constant congruence: it changes conditioning, not feasibility);
-    solved in feasibility form (gain <= ANALYSIS_GAMMA_CAP_FACTOR x synthesis gamma, maximise a
-    common strictness margin). Solved fast: in the rate-bound form (one LMI per point, slacks
-    bounding dP/dt, which implies every rate vertex) on a working set (as many dense points as the
-    synthesis grid has nodes, spread over the grid, grown by the points whose re-check fails;
-    P(rho_k) > 0 imposed everywhere), with the all-vertex form as fallback. Certified = every LMI
-    at every dense point and every rate vertex, and every P(rho_k), re-evaluated in floating
-    point, is definite (measured on the shipped design: 27 points suffice, 6 s instead of 67 s);
+(a) ``analysis_lmi`` — a delay-dependent analysis LMI over the whole dense grid, by controller
+    family (:mod:`synthesis.verify_analysis`): for "theorem3" the Jensen analysis of
+    :mod:`synthesis.analysis_lmi` (Theorem 1, P quadratic in rho, all rate vertices, feasibility
+    form with the gain capped at 20 x the synthesis gamma, on a working set); for "smith" the
+    Wirtinger analysis the design ran (:mod:`synthesis.smith_design`), every dense point in one
+    feasibility solve with the gain capped at 2 x the artifact's gamma. Certified = every LMI at
+    every dense point and every rate vertex, and every P(rho_k), re-evaluated in floating point,
+    is definite;
 (b) ``delay_stability`` — the rightmost characteristic roots of the frozen closed-loop delay system
     at every dense point (delays up to tau_max are on the grid), by the spectral method of
     :mod:`synthesis.delay_stability`;
@@ -44,15 +41,13 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.analysis_lmi import analyse
 from synthesis.closed_loop import DelaySystem, close_loop
 from synthesis.delay_stability import rightmost_roots
 from synthesis.model import plant_at
 from synthesis.pi_baseline import PIBaseline
-from synthesis.reconstruct import controller_at, scaling_of
+from synthesis.reconstruct import controller_at
 from synthesis.reference import ReferenceConfig, frozen_step_reference
 from synthesis.smith_baseline import smith_step_response
-from synthesis.state_transform import conditioning_transform
 from synthesis.step_response import (
     NOMINAL_K,
     NOMINAL_STEP_MMHG,
@@ -64,17 +59,13 @@ from synthesis.step_response import (
     simulate_prefiltered_step,
     simulate_step,
 )
+from synthesis.verify_analysis import analysis_check
 
 __all__ = ["VerificationReport", "dense_axes", "verify_artifact"]
 
 PAPER_OVERSHOOT_PCT = 1.0
 PAPER_SETTLING_S = 200.0
 STEP_HORIZON_S = 1500.0
-# (a) is solved in feasibility form: L2 gain <= this factor x the synthesis gamma, maximise a
-# common strictness margin (minimising gamma on the dense grid ended in Clarabel NumericalError or
-# a bogus "optimal" whose re-check failed). The certificate is the rate-bounded stability and the
-# reported (not tightened) gain bound.
-ANALYSIS_GAMMA_CAP_FACTOR = 20.0
 
 Progress = Callable[[str], None]
 
@@ -262,70 +253,17 @@ def verify_artifact(
         "tau_max_s": float(box[2, 1]),
     }
 
-    # (a) analysis LMI over the dense grid
-    # the synthesis' own scaling (numerics only: feasibility and gamma are unaffected)
-    sc = scaling_of(artifact)
-    rho_hat, half, ts = sc.to_hat(mesh), sc.rho_half, sc.time_s
-    # conditioning: whiten the state by the centre point's own Lyapunov matrix (a constant
-    # congruence, so feasibility and gamma are unchanged), then balance; see analysis_lmi
-    ic = int(np.argmin(np.sum(rho_hat**2, axis=1)))
-    centre = analyse(
-        [systems[ic]],
-        rho_hat[ic : ic + 1],
-        rates / half,
-        np.array([0.0, 0.0, half[2]]),
-        float(box[2, 1]),
-        p_dependence="constant",
-        time_scale_s=ts,
-        backoff=0.0,
-    )
-    transform = None
-    if centre.p0_phys is not None and centre.status in ("optimal", "optimal_inaccurate"):
-        try:
-            transform = conditioning_transform(centre.p0_phys, systems[ic], ts)
-        except ValueError:
-            transform = None
-    say(f"analysis LMI: conditioning transform from the centre point ({transform is not None})")
-    res = analyse(
-        systems,
-        rho_hat,
-        rates / half,
-        np.array([0.0, 0.0, half[2]]),
-        float(box[2, 1]),
-        p_dependence=p_dependence,
-        time_scale_s=ts,
-        progress=say,
-        state_transform=transform,
-        gamma_cap=ANALYSIS_GAMMA_CAP_FACTOR * float(artifact.gamma),
-        working_set=None if all_points_at_once else int(np.prod([len(g) for g in grid])),
-        rate_bound=not all_points_at_once,
-    )
-    finite = np.isfinite(res.margins)
-    worst_lmi = int(np.nanargmin(res.margins)) if finite.any() else None
-    lmi = {
-        "certified": res.certified,
-        "status": res.status,
-        "gamma": res.gamma,
-        "synthesis_gamma": float(artifact.gamma),
-        "min_margin": float(np.min(res.margins)) if finite.all() else None,
-        "n_failed_points": int(np.sum(~(res.margins > 0))),
-        "worst_rho": mesh[worst_lmi].tolist() if worst_lmi is not None else None,
-        "n_lmis": res.n_lmis,
-        "p_dependence": res.p_dependence,
-        "solve_time_s": res.solve_time_s,
-        "notes": res.notes,
-    }
-    say(
-        f"analysis LMI: certified={res.certified} status={res.status} gamma={res.gamma} "
-        f"({res.solve_time_s:.1f} s)"
+    # (a) analysis LMI over the dense grid (by controller family, see synthesis.verify_analysis)
+    nominal = np.array([NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S])
+    in_box = bool(np.all((nominal >= box[:, 0]) & (nominal <= box[:, 1])))
+    rho_step = nominal if in_box else np.clip(nominal, *box.T)
+    lpv_cl = _closed_loop_at(artifact, cfg, rho_step)
+    lmi = analysis_check(
+        artifact, systems, mesh, (lpv_cl, rho_step), p_dependence, all_points_at_once, say
     )
 
     # (c) nominal step, LPV, PI and Smith
-    nominal = np.array([NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S])
-    in_box = bool(np.all((nominal >= box[:, 0]) & (nominal <= box[:, 1])))
     max_rate = float(getattr(artifact, "max_rate_ml_h", 120.0))
-    rho_step = nominal if in_box else np.clip(nominal, *box.T)
-    lpv_cl = _closed_loop_at(artifact, cfg, rho_step)
     reference = getattr(artifact, "reference", ReferenceConfig())
     lpv = response_metrics(nominal_lpv_step(lpv_cl, rho_step, reference, max_rate), max_rate)
     feedback_only = (
@@ -384,6 +322,8 @@ def verify_artifact(
         sett is not None and smith_sett is not None and sett < smith_sett
     )
     step_ok = sett is not None and bool(lpv["stable"])
-    passed = bool(res.certified and stability["stable"] and step_ok)
+    passed = bool(lmi["certified"] and stability["stable"] and step_ok)
     meta = {"sha256": getattr(artifact, "sha256", None), "gamma": float(artifact.gamma)}
+    if artifact.family.is_smith:  # theorem3 reports (stored in artifacts) keep their bytes
+        meta["controller"] = artifact.family.to_dict()
     return VerificationReport(passed, lmi, stability, step, claim, grid_info, meta)

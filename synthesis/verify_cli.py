@@ -4,7 +4,8 @@ Runs :func:`synthesis.verify.verify_artifact` on ARTIFACT (default: the shipped
 ``synthesis/data/default_design.npz``), prints progress on stderr (one line per stage and per
 solver iteration: iteration, cost, relative gap, residuals) and a summary on stdout, and
 optionally writes the full report as JSON (``nominal_step.lpv`` / ``.pi`` / ``.smith`` carry the
-metric names of docs/METRICS.md; ``smith`` is the scheduled Smith predictor, lambda 30 s). Exit codes:
+metric names of docs/METRICS.md; ``smith`` is the scheduled Smith predictor, lambda 30 s;
+``artifact.controller`` the artifact's family, :mod:`synthesis.family`). Exit codes:
 0 every check passed, 1 a check failed, 2 bad input (a missing, unreadable or corrupt artifact, a
 bad option value) with one line naming it.
 """
@@ -96,6 +97,7 @@ def _verify(command: str, argv: Sequence[str]) -> int:
         artifact, density=args.density, progress=progress, p_dependence=args.p_dependence
     )
     d = report.to_dict()
+    d["artifact"]["controller"] = artifact.family.to_dict()
     lmi, stab, step, claim = (
         d["analysis_lmi"],
         d["delay_stability"],

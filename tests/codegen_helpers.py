@@ -162,13 +162,15 @@ def continuous_reference(
     omega: float = 0.1,
     lambda_: float = 0.1,
 ):
-    """RK4 on the exact continuous controller (composite [x_k, u, x_e]); rho clamped and rate-limited
-    as specified; x_k(t - tau) read from a fine history; u returned at the end of each sample."""
+    """RK4 on the exact continuous controller (composite [x_k, u, x_e], any controller order n_k);
+    rho clamped and rate-limited as specified; x_k(t - tau) read from a fine history; u returned at
+    the end of each sample."""
     BOX, RATES = np.asarray(box, float), np.asarray(rates, float)  # noqa: N806
     lo, hi = BOX[:, 0], BOX[:, 1]
     h = TS / substeps
-    z = np.zeros(5)
-    hist_t, hist_x = [0.0], [np.zeros(3)]
+    nk = np.atleast_2d(np.asarray(controller_fn(lo).Ak)).shape[0]
+    z = np.zeros(nk + 2)
+    hist_t, hist_x = [0.0], [np.zeros(nk)]
     prev = None
     out = []
     for k, (mp, target, *rho) in enumerate(seq):
@@ -183,8 +185,8 @@ def continuous_reference(
         def xd_at(t, r=r, ht=ht, hx=hx):
             tq = t - r[2]
             if tq <= 0.0:
-                return np.zeros(3)
-            return np.array([np.interp(tq, ht, hx[:, i]) for i in range(3)])
+                return np.zeros(nk)
+            return np.array([np.interp(tq, ht, hx[:, i]) for i in range(nk)])
 
         t0 = k * TS
         for s in range(substeps):
@@ -199,6 +201,6 @@ def continuous_reference(
             k4 = f(t + h, z + h * k3)
             z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
             hist_t.append(t + h)
-            hist_x.append(z[:3].copy())
-        out.append(z[3])
+            hist_x.append(z[:nk].copy())
+        out.append(z[nk])
     return out

@@ -94,8 +94,8 @@ def test_nan_in_a_node_table_names_the_field(shipped, tmp_path):
 
 
 def test_missing_entry_names_the_field(shipped, tmp_path):
-    dst = _damaged(shipped, tmp_path, "coef_X", lambda a: None)
-    with pytest.raises(ArtifactError, match="coef_X.*missing"):
+    dst = _damaged(shipped, tmp_path, "coef_S", lambda a: None)
+    with pytest.raises(ArtifactError, match="coef_S.*missing"):
         load_artifact(dst)
 
 
@@ -140,6 +140,6 @@ def test_verification_results_change_the_hash_and_survive_a_round_trip(shipped, 
 
 def test_make_artifact_rejects_non_finite_coefficients(shipped):
     coefs = dict(shipped.coefficients)
-    coefs["Y"] = coefs["Y"] * np.inf
-    with pytest.raises(ArtifactError, match="coef_Y"):
+    coefs["R"] = coefs["R"] * np.inf
+    with pytest.raises(ArtifactError, match="coef_R"):
         make_artifact(shipped.metadata, coefs, shipped.nodes)

@@ -38,20 +38,25 @@ def test_backoff_out_of_range_exits_2(tmp_path, capsys):
     assert "solver.backoff" in capsys.readouterr().err
 
 
-def test_tiny_synthesis_writes_exactly_the_requested_artifact(tmp_path, capsys):
+def test_tiny_theorem3_synthesis_writes_exactly_the_requested_artifact(tmp_path, capsys):
     out = tmp_path / "deep" / "tiny.npz"
-    code = cli.main("synth", ["--grid", "2,2,2", "--out", str(out), "--no-verify"])
+    cfg = tmp_path / "theorem3.toml"
+    cfg.write_text('[controller]\nstructure = "theorem3"\n')
+    argv = ["--config", str(cfg), "--grid", "2,2,2", "--out", str(out), "--no-verify"]
+    code = cli.main("synth", argv)
     captured = capsys.readouterr()
     text = captured.out
     assert code == 0, text
     art = load_artifact(out)
     assert art.metadata["solver"]["status"] == "optimal"
+    assert art.family.structure == "theorem3" and "controller" not in art.metadata
     assert [g.size for g in art.grid] == [2, 2, 2]
     assert f"{art.gamma:.6g}" in text and "solver status" in text and "optimal" in text
     # progress on stderr: stage lines and one line per solver iteration with gap and residuals
     iters = [ln for ln in captured.err.splitlines() if ln.startswith("[synth") and " iter " in ln]
     assert len(iters) >= 5 and all("gap" in ln and "pres" in ln for ln in iters)
     assert sorted(p.name for p in out.parent.iterdir()) == ["tiny.npz"]
+    assert sorted(p.name for p in out.parent.parent.iterdir()) == ["deep", "theorem3.toml"]
 
 
 def test_wall_clock_entries_are_dropped_but_step_metrics_kept():
