@@ -142,7 +142,8 @@ def prepare(
     if k_scaling is not None:
         k_scaling.check(len(systems), systems[0].n, rho_hat.shape[1], tau_max)
         systems = [
-            k_scaled_system(q, float(kk), k_scaling.states) for q, kk in zip(systems, k_scaling.k)
+            k_scaled_system(q, float(kk), k_scaling.states)
+            for q, kk in zip(systems, k_scaling.k, strict=True)
         ]
     n, nw = systems[0].n, systems[0].B.shape[1]
     m = len(systems)
