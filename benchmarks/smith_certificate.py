@@ -15,8 +15,15 @@ largest common margin), whose solution is off the boundary of the points left ou
 ``--rate-form bound`` is the cheap form (one LMI per point with rate slacks; ``--epsilon 5e-5``
 keeps its minimum-γ solution inside the vertex LMIs, so no back-off solve is needed);
 ``--coupling per_point`` gives each point its own copy of P, ``--p-params K,tau`` lets P depend on
-those parameters only. ``--compare`` first runs the current formulation (every rate vertex, dense
-coupling, P in every parameter, ε = 1e-6, same grid and cap) in a child process and prints the
+those parameters only. ``--coordinates k_scaled`` uses the K-scaled functional
+(:mod:`synthesis.k_scaling`: u and û times K, the K rate and r = K(t)/K(t − τ) as rate
+coordinates), which certifies loop gain 3::
+
+    python benchmarks/smith_certificate.py --loop-gain 3 --grid 5,5,5 --rate-form bound \
+        --coordinates k_scaled --gamma-cap 8
+
+``--compare`` first runs the current formulation (every rate vertex, dense coupling, P in every
+parameter, ε = 1e-6, plain coordinates, same grid and cap) in a child process and prints the
 ratios of wall time, CPU time and peak RSS::
 
     python benchmarks/smith_certificate.py --grid 3,3,3 --rate-form bound --epsilon 5e-5 --compare
