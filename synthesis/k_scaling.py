@@ -77,10 +77,6 @@ class KScaling:
             raise ValueError("K may reach 0 within one delay (k - k_rate_per_s * tau_max <= 0)")
 
 
-def _pi(n: int, states: Sequence[int]) -> Array:
-    return np.diag(np.isin(np.arange(n), states).astype(float))
-
-
 def k_scaled_system(system: DelaySystem, k: float, states: Sequence[int]) -> DelaySystem:
     """The frozen loop in ``x~ = D(k) x`` (r = 1, kappa = 0): ``D A D^-1``, ``D A_d D^-1``, ``D B``,
     ``C D^-1``, ``C_d D^-1``.
@@ -107,8 +103,12 @@ def k_scaled_system(system: DelaySystem, k: float, states: Sequence[int]) -> Del
 
 def k_terms(
     ks: KScaling, ad_scaled: Array, tx: Array, txi: Array, time_scale_s: float, tau_max_s: float
-) -> tuple[Array, Array, Array]:
-    """The r centre factor and the two rate directions of ``Ga = [A Ad 0 B]`` per point.
+) -> tuple[Array, Array, Array, Array]:
+    """The r centre factor and the two rate directions of ``Ga = [A Ad 0 B]`` per point, factored.
+
+    With ``S`` the (n, n_s) selector of the scaled states, ``Pi = S S'`` and in the analysis'
+    state ``x^`` (``x~ = tx x^``) ``txi Pi tx = (txi S)(S' tx)``: the kappa direction of A is
+    ``u_kappa (S' tx)`` and the r direction of A_d is ``u_r (S' tx)``.
 
     Parameters
     ----------
@@ -125,16 +125,18 @@ def k_terms(
     -------
     tuple
         ``ad_centre`` (m, n, n): A_d at the centre ``r_c`` of each point's r interval;
-        ``d_kappa`` (m, n, n): the kappa direction of A at the K rate vertex +1 (``ts nu/K Pi``);
-        ``d_r`` (m, n, n): the r direction of A_d at the r vertex +1 (half-width times A_d Pi).
+        ``u_kappa`` (m, n, n_s): ``ts nu/K txi S`` (the K rate vertex +1);
+        ``u_r`` (m, n, n_s): half-width of the r interval times ``A_d txi S`` (r vertex +1);
+        ``s_tx`` (n_s, n): ``S' tx``.
     """
     k = np.asarray(ks.k, dtype=float)
     n = ad_scaled.shape[1]
-    pi_t = txi @ _pi(n, ks.states) @ tx
+    sel = np.eye(n)[:, list(ks.states)]
+    txi_s, s_tx = txi @ sel, sel.T @ tx
     reach = ks.k_rate_per_s * tau_max_s
     r_lo, r_hi = k / (k + reach), k / (k - reach)
     r_c, r_half = 0.5 * (r_lo + r_hi), 0.5 * (r_hi - r_lo)
-    ad_pi = ad_scaled @ pi_t
-    ad_centre = ad_scaled + (r_c - 1.0)[:, None, None] * ad_pi
-    d_kappa = (time_scale_s * ks.k_rate_per_s / k)[:, None, None] * pi_t[None]
-    return ad_centre, d_kappa, r_half[:, None, None] * ad_pi
+    ad_s = ad_scaled @ txi_s
+    ad_centre = ad_scaled + (r_c - 1.0)[:, None, None] * (ad_s @ s_tx)
+    u_kappa = (time_scale_s * ks.k_rate_per_s / k)[:, None, None] * txi_s[None]
+    return ad_centre, u_kappa, r_half[:, None, None] * ad_s, s_tx

@@ -32,7 +32,7 @@ from synthesis.conic import svec_rows
 from synthesis.k_scaling import KScaling, k_scaled_system, k_terms
 from synthesis.state_transform import transform_of
 
-__all__ = ["WirtingerData", "point_maps", "prepare", "sym", "vertex_lmis"]
+__all__ = ["WirtingerData", "point_maps", "prepare", "sym", "vertex_lmis", "young_maps"]
 
 Array = NDArray[np.float64]
 
@@ -85,6 +85,9 @@ class WirtingerData:
     #: K-scaled coordinates only: (m, s', n, big) direction of Ga = [A Ad 0 B] at rate vertex
     #: sigma_i = +1 (kappa on the K vertex, r on the last one), see :mod:`synthesis.k_scaling`
     dga: Array | None = None
+    #: the same directions factored, ``Delta = U Phi``: (U (m, 2, n, n_s), Phi (2, n_s, big),
+    #: position of the K vertex in ``moving``) for kappa and r (:func:`young_maps`)
+    young: tuple[Array, Array, int] | None = None
 
     @property
     def big(self) -> int:
@@ -157,7 +160,7 @@ def prepare(
     h = taus / ts
     k_moves = k_scaling is not None and k_scaling.k_rate_per_s > 0
     if k_moves:
-        ad, d_kappa, d_r = k_terms(k_scaling, ad, tx, txi, ts, tau_max)
+        ad, u_kappa, u_r, s_tx = k_terms(k_scaling, ad, tx, txi, ts, tau_max)
     ga = np.concatenate([a, ad, np.zeros((m, n, n)), b], axis=2)
     gz = np.concatenate([c, cd, np.zeros((m, c.shape[1], n)), d], axis=2)
     g1 = np.zeros((m, 2 * n, 3 * n + nw))
@@ -176,7 +179,7 @@ def prepare(
     mv = list(moving)
     dw_m = dw_p[:, :, mv] * (rate[mv] * ts)[None, None, :]
     c_tau = rate[mv] * dtau[mv]
-    dga = None
+    dga, young = None, None
     if k_moves:
         s = rho_hat.shape[1]
         ik = k_scaling.k_index
@@ -187,9 +190,12 @@ def prepare(
             axis=2,
         )
         c_tau = np.append(rate[real] * dtau[real], 0.0)
+        scale = np.linalg.norm(s_tx, 2)  # Phi of unit norm, the size in U
+        phi = np.zeros((2, s_tx.shape[0], 3 * n + nw))  # kappa acts on x, r on x(t - tau)
+        phi[0, :, :n], phi[1, :, n : 2 * n] = s_tx / scale, s_tx / scale
+        young = (scale * np.stack([u_kappa, u_r], axis=1), phi, moving.index(ik))
         dga = np.zeros((m, len(moving), n, 3 * n + nw))
-        dga[:, moving.index(ik), :, :n] = d_kappa
-        dga[:, -1, :, n : 2 * n] = d_r
+        dga[:, [young[2], -1]] = np.einsum("mjns,jsb->mjnb", young[0], phi)
     return WirtingerData(
         g1=g1,
         g0=g0,
@@ -207,6 +213,7 @@ def prepare(
         txi=txi,
         time_scale_s=ts,
         dga=dga,
+        young=young,
     )
 
 
@@ -218,7 +225,11 @@ def local_map(data: WirtingerData, k: int) -> sp.csr_matrix:
 
 
 def _parts(
-    data: WirtingerData, loc: Array, pts: NDArray[np.int64], quad_bound: bool = True
+    data: WirtingerData,
+    loc: Array,
+    pts: NDArray[np.int64],
+    quad_bound: bool = True,
+    dga_linear: bool = True,
 ) -> tuple[Array, Array]:
     """L0 without Gz'Gz, (J, P, big, big), and M (J, P, s', big, big) for local vectors
     ``loc`` (J, P, nloc) at the points ``pts`` (P of them).
@@ -227,7 +238,8 @@ def _parts(
     ``He(G1' P [Delta_i; 0]) + taubar^2 He(Ga0' R Delta_i)`` and the rest,
     ``taubar^2 Delta' R Delta``, is bounded by ``taubar^2 q sum_i Delta_i' R Delta_i`` (q the
     number of nonzero directions) in L0 when ``quad_bound``; otherwise it is left out (the
-    re-check adds it exactly per vertex)."""
+    re-check adds it exactly per vertex). ``dga_linear=False`` leaves out the M_i terms of
+    Delta (the bound form takes them by :func:`young_maps` instead)."""
     n, n2, ns, ns2, n_pd = data.n, 2 * data.n, data.ns, data.ns2, data.n_pd
     nm, big = len(data.moving), data.big
     j, npt = loc.shape[:2]
@@ -268,26 +280,50 @@ def _parts(
     mt += data.c_tau[None, None, :, None, None] * rate_tau[:, :, None]
     if data.dga is not None:
         dq = data.dga[pts]
-        dm = np.einsum("pra,jprs,pisb->jpiab", g1, p[..., :n], dq, optimize=True)
-        dm += data.hbar**2 * np.einsum("psa,jpst,pitb->jpiab", ga, rm, dq, optimize=True)
-        mt += dm + np.swapaxes(dm, -1, -2)
+        if dga_linear:
+            dm = np.einsum("pra,jprs,pisb->jpiab", g1, p[..., :n], dq, optimize=True)
+            dm += data.hbar**2 * np.einsum("psa,jpst,pitb->jpiab", ga, rm, dq, optimize=True)
+            mt += dm + np.swapaxes(dm, -1, -2)
         if quad_bound:
             nq = np.count_nonzero(np.any(data.dga != 0.0, axis=(0, 2, 3)))
             l0 += (nq * data.hbar**2) * np.einsum("pisa,jpst,pitb->jpab", dq, rm, dq, optimize=True)
     return l0, mt
 
 
-def point_maps(data: WirtingerData, pts: NDArray[np.int64]) -> tuple[Array, Array, Array]:
+def young_maps(data: WirtingerData, pts: NDArray[np.int64]) -> Array:
+    """``W_j`` (P, 2, big * n_s, nloc) at ``pts`` as maps of the local variables: the kappa (j = 0)
+    and r (j = 1) terms of M are ``He(W_j Phi_j)``, ``W_j = (G1' P[:, :n] + taubar^2 Ga0' R) U_j``
+    (row-major (big, n_s) entries; ``data.young`` holds U_j and Phi_j)."""
+    n, ns, n_pd, nloc = data.n, data.ns, data.n_pd, data.nloc
+    u = data.young[0]
+    out = []
+    for lo in range(0, len(pts), _BATCH):
+        sub = pts[lo : lo + _BATCH]
+        unit = np.broadcast_to(np.eye(nloc)[:, None, :], (nloc, len(sub), nloc))
+        p = sym(unit[..., : data.ns2], 2 * n)
+        rm = sym(unit[..., n_pd + ns : n_pd + 2 * ns], n)
+        w = np.einsum("pra,jprs,pisc->jpiac", data.g1[sub], p[..., :n], u[sub], optimize=True)
+        w += data.hbar**2 * np.einsum(
+            "psa,jpst,pitc->jpiac", data.ga[sub], rm, u[sub], optimize=True
+        )
+        out.append(np.moveaxis(w.reshape(nloc, len(sub), 2, -1), 0, -1))
+    return np.concatenate(out)
+
+
+def point_maps(
+    data: WirtingerData, pts: NDArray[np.int64], dga_linear: bool = True
+) -> tuple[Array, Array, Array]:
     """Exact maps at ``pts`` on the local variables, in Clarabel's PSD-triangle order:
     ``F0`` (P, nsv, nloc) and ``FM`` (P, s', nsv, nloc) with ``svec(L0) = F0 loc + f0`` and
-    ``svec(M_i) = FM_i loc``, and ``f0`` (P, nsv) = svec(Gz'Gz)."""
+    ``svec(M_i) = FM_i loc``, and ``f0`` (P, nsv) = svec(Gz'Gz); ``dga_linear`` as in
+    :func:`_parts`."""
     idx, wsv = svec_rows(data.big)
     nloc = data.nloc
     f0_all, fm_all = [], []
     for lo in range(0, len(pts), _BATCH):
         sub = pts[lo : lo + _BATCH]
         unit = np.broadcast_to(np.eye(nloc)[:, None, :], (nloc, len(sub), nloc))
-        l0, mt = _parts(data, unit, sub)
+        l0, mt = _parts(data, unit, sub, dga_linear=dga_linear)
         f0_all.append(np.moveaxis(l0.reshape(nloc, len(sub), -1)[..., idx] * wsv, 0, -1))
         fm_all.append(
             np.moveaxis(mt.reshape(nloc, len(sub), mt.shape[2], data.big**2)[..., idx] * wsv, 0, -1)

@@ -132,7 +132,8 @@ def test_k_terms_span_the_r_interval_of_each_point() -> None:
         [k_scaled_system(q, k, SMITH_STATES).Ad for q, k in zip(loops, rhos[:, 0], strict=True)]
     )
     eye = np.eye(5)
-    center, d_kappa, d_r = k_terms(ks, ad, eye, eye, 45.0, 45.0)
+    center, u_kappa, u_r, s_tx = k_terms(ks, ad, eye, eye, 45.0, 45.0)
+    d_kappa, d_r = u_kappa @ s_tx, u_r @ s_tx
     pi = np.diag([0.0, 1.0, 0.0, 1.0, 0.0])
     for j, k in enumerate(rhos[:, 0]):
         for r, sign in ((k / (k - RATES[0] * 45.0), 1.0), (k / (k + RATES[0] * 45.0), -1.0)):
