@@ -59,9 +59,19 @@ above with G0, Ga at sigma. It is affine in sigma except ``taubar^2 Ga' R Ga``, 
 matrix-convex in sigma (R > 0), so the whole LMI is matrix-convex in sigma: negative definite at
 every vertex of the sigma box implies negative definite at every sigma inside (every rate, every
 r in the interval). The solve uses ``Ga'RGa <= Ga0'RGa0 + He(Ga0'R sum_i sigma_i Delta_i) + q sum_i
-Delta_i'R Delta_i`` (Cauchy-Schwarz, q = 2 nonzero directions, |sigma_i| <= 1), affine in sigma,
-in both rate forms (the bound form's slacks then cover kappa and r like any rate); the re-check
-(the verdict) evaluates the exact LMI at every vertex of every grid point. Then V is a
+Delta_i'R Delta_i`` (Cauchy-Schwarz, q = 2 nonzero directions, |sigma_i| <= 1), affine in sigma;
+the vertex form imposes that at every vertex. The bound form keeps the slacks Z_i of the P and
+tau rates; the kappa and r terms are ``sigma_j He(W_j Phi_j)`` with ``W_j = (G1' P[:, :n] +
+taubar^2 Ga0' R) U_j`` linear in the variables and ``Phi_j`` data of n_s rows (``Delta_j = U_j
+Phi_j``, n_s the scaled states), and Young's inequality ``sigma He(W Phi) <= W W'/e + e Phi'Phi``
+(|sigma| <= 1, e > 0) with a Schur complement turns them into one block per point::
+
+    [[L0 + sum_i E_i'Z_i E_i + e_1 Phi_1'Phi_1 + e_2 Phi_2'Phi_2,  W_1,      W_2     ],
+     [W_1',                                                       -e_1 I,   0       ],
+     [W_2',                                                       0,        -e_2 I  ]]  <=  -eps I
+
+(2 n_s more rows instead of two full slacks). The re-check (the verdict) evaluates the exact LMI
+at every vertex of every grid point. Then V is a
 Lyapunov-Krasovskii functional of the x~ system along every admissible trajectory, with L2 gain
 w -> z below gamma; since ``x = D(K)^-1 x~`` with K in [K_min, K_max] > 0, the original closed
 loop is asymptotically stable with the same gain bound (z and w are not rescaled).

@@ -12,6 +12,10 @@ Rate forms (L0, M_i of :mod:`synthesis.wirtinger_lmi`; s' moving parameters):
   implies every vertex LMI (and every rate inside the bounds); with one moving parameter and full
   Z it is equivalent to the vertex form (take Z = -L0 - eps I).
 
+K-scaled coordinates (``data.young``, :mod:`synthesis.k_scaling`): the bound form takes the
+kappa and r directions by Young's inequality, one block of size big + 2 n_s per point
+(:func:`synthesis.analysis_wirtinger.analyse_wirtinger` gives the inequality and why it suffices).
+
 Couplings of the P basis terms (the ~n_p (2n)(2n+1)/2 variables every point shares):
 
 * ``"dense"``: each LMI is written directly in the basis terms (``P(rho_k) = sum_j w_kj P_j``).
@@ -141,6 +145,9 @@ def build_conic(
     npt, verts = len(pts), vertices_of(data)
     nsv = big * (big + 1) // 2
     supports = _supports(fm, big) if rate_form == "bound" else []
+    if young:  # r (and K if only kappa moves it) has no P-rate or tau term left: no slack
+        live = np.any(data.dw_m != 0.0, axis=(0, 1)) | (data.c_tau != 0.0)
+        supports = [sup if live[i] else sup[:0] for i, sup in enumerate(supports)]
     z_sizes = [len(s) * (len(s) + 1) // 2 for s in supports]
     nz = sum(z_sizes)
     off_y = nvar
@@ -194,7 +201,7 @@ def build_conic(
         lmi = sp.csr_matrix(f0[q]) @ sel
         z0 = off_z + q * nz
         for i, sup in enumerate(supports):
-            if len(sup) == 0:  # r without its Young terms: nothing left
+            if len(sup) == 0:
                 continue
             sub = _sub_rows(sup, big)
             zcols = z0 + sum(z_sizes[:i])
