@@ -36,13 +36,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from synthesis.conic import svec_eye, svec_rows
-from synthesis.wirtinger_lmi import (
-    POINT_BATCH,
-    WirtingerData,
-    local_map,
-    point_maps,
-    young_maps,
-)
+from synthesis.wirtinger_lmi import WirtingerData, local_map, point_maps, young_maps
 
 __all__ = ["ConicData", "RATE_FORMS", "COUPLINGS", "build_conic", "vertices_of", "svec_of_triu"]
 
@@ -145,17 +139,12 @@ def build_conic(
             f"rate_form={rate_form!r} / coupling={coupling!r} not in {RATE_FORMS} / {COUPLINGS}"
         )
     young = rate_form == "bound" and data.young is not None
-    # the maps are built a batch of points at a time (bounded memory): one pass for the slack
-    # supports (bound form), one for the rows
-    batches = [pts[lo : lo + POINT_BATCH] for lo in range(0, len(pts), POINT_BATCH)]
+    f0, fm, const = point_maps(data, pts, dga_linear=not young)
     big, nvar, n_pd, nloc, ns2 = data.big, data.nvar, data.n_pd, data.nloc, data.ns2
     n_c = data.n_p * ns2
     npt, verts = len(pts), vertices_of(data)
     nsv = big * (big + 1) // 2
-    supports: list[NDArray[np.int64]] = []
-    if rate_form == "bound":
-        per = [_supports(point_maps(data, c, dga_linear=not young)[1], big) for c in batches]
-        supports = [np.unique(np.concatenate([sp_[i] for sp_ in per])) for i in range(len(per[0]))]
+    supports = _supports(fm, big) if rate_form == "bound" else []
     if young:  # r (and K if only kappa moves it) has no P-rate or tau term left: no slack
         live = np.any(data.dw_m != 0.0, axis=(0, 1)) | (data.c_tau != 0.0)
         supports = [sup if live[i] else sup[:0] for i, sup in enumerate(supports)]
@@ -181,21 +170,17 @@ def build_conic(
 
     tail = cols(sp.eye(nloc - n_pd), n_c)  # S, R, mu rows of the local variables
     t_col = cols(sp.csr_matrix(eye_big[:, None]), it) if with_t else None
+    b_lmi = -(const + (0.0 if with_t else epsilon) * eye_big)
     if young:  # kappa, r: [[L + sum e_j Phi_j'Phi_j, W_1, W_2], [W', -diag(e_j I)]] <= -eps I
         phi = data.young[1]
         bb = big + 2 * phi.shape[1]
         emb, w_place, e_svec = _young_layout(big, phi)
+        wm = young_maps(data, pts)
         eye_bb = svec_eye(bb)
         t_col = cols(sp.csr_matrix(eye_bb[:, None]), it) if with_t else None
+        b_lmi = -(const @ emb.T + (0.0 if with_t else epsilon) * eye_bb)
     n_psd = 0
     for q, k in enumerate(pts):
-        r = q % POINT_BATCH
-        if r == 0:
-            f0, fm, const = point_maps(data, batches[q // POINT_BATCH], dga_linear=not young)
-            b_lmi = -(const + (0.0 if with_t else epsilon) * eye_big)
-            if young:
-                wm = young_maps(data, batches[q // POINT_BATCH])
-                b_lmi = -(const @ emb.T + (0.0 if with_t else epsilon) * eye_bb)
         tk = local_map(data, int(k))
         if coupling == "per_point":
             head = cols(sp.eye(n_pd), off_y + q * n_pd)
@@ -207,13 +192,13 @@ def build_conic(
         sel = sp.vstack([head, tail], format="csr")  # local variables of point k from z
         if rate_form == "vertex":
             for sig in verts:
-                lmi = sp.csr_matrix(f0[r] + np.tensordot(sig, fm[r], axes=(0, 0))) @ sel
+                lmi = sp.csr_matrix(f0[q] + np.tensordot(sig, fm[q], axes=(0, 0))) @ sel
                 rows_a.append(lmi + t_col if with_t else lmi)
-                rows_b.append(b_lmi[r])
+                rows_b.append(b_lmi[q])
                 cones.append(clarabel.PSDTriangleConeT(big))
                 n_psd += 1
             continue
-        lmi = sp.csr_matrix(f0[r]) @ sel
+        lmi = sp.csr_matrix(f0[q]) @ sel
         z0 = off_z + q * nz
         for i, sup in enumerate(supports):
             if len(sup) == 0:
@@ -223,7 +208,7 @@ def build_conic(
             lmi = lmi + sp.csr_matrix(
                 (np.ones(len(sub)), (sub, zcols + np.arange(len(sub)))), shape=(nsv, ncol)
             )
-            m_i = sp.csr_matrix(fm[r, i][sub]) @ sel
+            m_i = sp.csr_matrix(fm[q, i][sub]) @ sel
             z_i = cols(sp.eye(len(sub)), zcols)
             for sign in (1.0, -1.0):  # Z_i - sign M_i >= 0
                 rows_a.append(sign * m_i - z_i)
@@ -233,10 +218,10 @@ def build_conic(
         if young:
             lmi = emb @ lmi
             for j in range(2):
-                lmi = lmi + w_place[j] @ sp.csr_matrix(wm[r, j]) @ sel
+                lmi = lmi + w_place[j] @ sp.csr_matrix(wm[q, j]) @ sel
                 lmi = lmi + cols(sp.csr_matrix(e_svec[j][:, None]), off_e + 2 * q + j)
         rows_a.append(lmi + t_col if with_t else lmi)
-        rows_b.append(b_lmi[r])
+        rows_b.append(b_lmi[q])
         cones.append(clarabel.PSDTriangleConeT(bb if young else big))
         n_psd += 1
     # P(rho_k) at every point, S and R: >= eps I

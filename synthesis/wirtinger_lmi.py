@@ -32,20 +32,12 @@ from synthesis.conic import svec_rows
 from synthesis.k_scaling import KScaling, k_scaled_system, k_terms
 from synthesis.state_transform import transform_of
 
-__all__ = [
-    "WirtingerData",
-    "point_maps",
-    "prepare",
-    "sym",
-    "vertex_lmis",
-    "young_maps",
-    "POINT_BATCH",
-]
+__all__ = ["WirtingerData", "point_maps", "prepare", "sym", "vertex_lmis", "young_maps"]
 
 Array = NDArray[np.float64]
 
 #: points evaluated per batch (bounds the probe arrays to ~ nloc x batch x (1 + s') x big^2)
-POINT_BATCH = 12
+_BATCH = 12
 
 
 def sym(vec: Array, n: int) -> Array:
@@ -305,8 +297,8 @@ def young_maps(data: WirtingerData, pts: NDArray[np.int64]) -> Array:
     n, ns, n_pd, nloc = data.n, data.ns, data.n_pd, data.nloc
     u = data.young[0]
     out = []
-    for lo in range(0, len(pts), POINT_BATCH):
-        sub = pts[lo : lo + POINT_BATCH]
+    for lo in range(0, len(pts), _BATCH):
+        sub = pts[lo : lo + _BATCH]
         unit = np.broadcast_to(np.eye(nloc)[:, None, :], (nloc, len(sub), nloc))
         p = sym(unit[..., : data.ns2], 2 * n)
         rm = sym(unit[..., n_pd + ns : n_pd + 2 * ns], n)
@@ -328,8 +320,8 @@ def point_maps(
     idx, wsv = svec_rows(data.big)
     nloc = data.nloc
     f0_all, fm_all = [], []
-    for lo in range(0, len(pts), POINT_BATCH):
-        sub = pts[lo : lo + POINT_BATCH]
+    for lo in range(0, len(pts), _BATCH):
+        sub = pts[lo : lo + _BATCH]
         unit = np.broadcast_to(np.eye(nloc)[:, None, :], (nloc, len(sub), nloc))
         l0, mt = _parts(data, unit, sub, dga_linear=dga_linear)
         f0_all.append(np.moveaxis(l0.reshape(nloc, len(sub), -1)[..., idx] * wsv, 0, -1))
@@ -355,8 +347,8 @@ def vertex_lmis(data: WirtingerData, x: Array, vertices: Array) -> Array:
     K-scaled coordinates with the exact ``taubar^2 Delta_v' R Delta_v`` of each vertex."""
     loc = local_values(data, x)
     out = []
-    for lo in range(0, len(loc), POINT_BATCH):
-        pts = np.arange(lo, min(len(loc), lo + POINT_BATCH))
+    for lo in range(0, len(loc), _BATCH):
+        pts = np.arange(lo, min(len(loc), lo + _BATCH))
         l0, mt = _parts(data, loc[None, pts], pts, quad_bound=False)
         val = l0[0][:, None] + np.einsum("vi,piab->pvab", vertices, mt[0])
         if data.dga is not None:
