@@ -76,7 +76,7 @@ class WirtingerData:
     w_p: Array  # (m, n_p) P basis weights
     dw_m: Array  # (m, n_p, s') nu_i d w / d rho_i of the moving parameters
     c_tau: Array  # (s',) nu_i d tau / d rho_i (s/s)
-    moving: tuple[int, ...]
+    moving: tuple[int, ...]  # moving parameter indices (K-scaled: then s, the r coordinate)
     n: int
     nw: int
     tx: Array
