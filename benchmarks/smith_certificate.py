@@ -15,8 +15,15 @@ largest common margin), whose solution is off the boundary of the points left ou
 ``--rate-form bound`` is the cheap form (one LMI per point with rate slacks; ``--epsilon 5e-5``
 keeps its minimum-γ solution inside the vertex LMIs, so no back-off solve is needed);
 ``--coupling per_point`` gives each point its own copy of P, ``--p-params K,tau`` lets P depend on
-those parameters only. ``--compare`` first runs the current formulation (every rate vertex, dense
-coupling, P in every parameter, ε = 1e-6, same grid and cap) in a child process and prints the
+those parameters only. ``--coordinates k_scaled`` uses the K-scaled functional
+(:mod:`synthesis.k_scaling`: u and û times K, the K rate and r = K(t)/K(t − τ) as rate
+coordinates), which certifies loop gain 3::
+
+    python benchmarks/smith_certificate.py --loop-gain 3 --grid 5,5,5 --rate-form bound \
+        --coordinates k_scaled --gamma-cap 8
+
+``--compare`` first runs the current formulation (every rate vertex, dense coupling, P in every
+parameter, ε = 1e-6, plain coordinates, same grid and cap) in a child process and prints the
 ratios of wall time, CPU time and peak RSS::
 
     python benchmarks/smith_certificate.py --grid 3,3,3 --rate-form bound --epsilon 5e-5 --compare
@@ -54,7 +61,8 @@ def main() -> None:
     from synthesis.artifact import default_artifact_path, load_artifact
     from synthesis.closed_loop import close_loop
     from synthesis.config import NOMINAL_RHO
-    from synthesis.model import plant_at
+    from synthesis.k_scaling import KScaling, k_scaled_system
+    from synthesis.model import I_U, plant_at
     from synthesis.reconstruct import scaling_of
     from synthesis.smith_lpv import SmithLPV
     from synthesis.state_transform import conditioning_transform
@@ -97,6 +105,12 @@ def main() -> None:
         action="store_true",
         help="also run the current formulation (vertex, dense, P in K,T,tau, epsilon 1e-6) in a child process",
     )
+    ap.add_argument(
+        "--coordinates",
+        default="plain",
+        choices=("plain", "k_scaled"),
+        help="functional in the loop's own states or with u, u-hat scaled by K (default plain)",
+    )
     ap.add_argument("--progress", action="store_true", help="solver progress lines on stderr")
     args = ap.parse_args()
     names = ("K", "T", "tau")
@@ -107,7 +121,7 @@ def main() -> None:
     if args.compare:
         argv = [a for a in sys.argv[1:] if a != "--compare"]
         argv += ["--rate-form", "vertex", "--coupling", "dense", "--p-params", "K,T,tau"]
-        argv += ["--epsilon", "1e-6"]  # the last occurrence of an option wins
+        argv += ["--epsilon", "1e-6", "--coordinates", "plain"]  # the last occurrence wins
         reference = _figures(
             subprocess.run(
                 [sys.executable, os.path.abspath(__file__), *argv],
@@ -133,6 +147,11 @@ def main() -> None:
     # conditioning: whiten by the nominal point's own frozen certificate, then balance
     nominal = np.asarray(NOMINAL_RHO, dtype=float)
     centre = close_loop(plant_at(nominal, cfg), ctrl.at(nominal), float(nominal[2]))
+    k_scaling = None
+    if args.coordinates == "k_scaled":  # the ml/h states: the plant's u and the model's u-hat
+        states = (I_U, plant_at(nominal, cfg).A.shape[0])
+        k_scaling = KScaling(pts[:, 0], float(art.rate_bounds[0]), states)
+        centre = k_scaled_system(centre, float(nominal[0]), states)
     zero = np.zeros(3)
     c0 = analyse_wirtinger(
         [centre], sc.to_hat(nominal)[None], zero, zero, float(nominal[2]), p_dependence="constant"
@@ -154,12 +173,13 @@ def main() -> None:
         coupling=args.coupling,
         p_params=p_params,
         epsilon=args.epsilon,
+        k_scaling=k_scaling,
     )
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux
     print(
         f"loop gain {args.loop_gain:g}, grid {args.grid}, P {args.p_dependence} in "
-        f"{args.p_params}, {args.rate_form}/{args.coupling}, epsilon {args.epsilon:g}, working set {args.working_set}, "
+        f"{args.p_params}, {args.coordinates}, {args.rate_form}/{args.coupling}, epsilon {args.epsilon:g}, working set {args.working_set}, "
         f"gamma cap {args.gamma_cap}: certified={res.certified} status={res.status} "
         f"gamma={res.gamma} min margin={np.min(res.margins):.3g} LMIs={res.n_lmis} "
         f"wall={wall:.1f} s cpu={cpu:.1f} s peak RSS={rss_gb:.2f} GB "

@@ -43,6 +43,38 @@ EVERY vertex LMI at EVERY grid point, P(rho_k) > 0, S > 0, R > 0. Clarabel is ca
 data directly (:mod:`synthesis.conic`, one progress line per iteration). Scaling, state transform,
 strictness margins, the feasibility form (``gamma_cap``) and the working set (``working_set``) are
 those of :func:`synthesis.analysis_lmi.analyse`; the result type is the same.
+
+K-scaled coordinates (``k_scaling``, :mod:`synthesis.k_scaling`): the same functional written in
+``x~ = D(K) x`` (the ml/h states times K), i.e. ``V = xi~' P~(rho) xi~ + int x~'S~x~ +
+taubar int int dx~'R~ dx~`` with ``x~(s) = D(K(s)) x(s)`` inside the integrals: S, R constant in
+x~ are K(s)-dependent in x. x~ obeys a delay system whose matrices also depend on
+``kappa = dK/dt / K`` and ``r = K(t)/K(t - tau)``::
+
+    Ga(sigma) = [A~ + sigma_K kappa_max Pi,  Ad~(r_c) + sigma_r dr Ad~ Pi,  0,  B~] = Ga0 + sum_i sigma_i Delta_i
+
+(``Ad~(r_c)``: Ad at the centre r_c of the point's r interval, half-width dr). Wirtinger's
+inequality holds for any absolutely continuous x~, so the derivation above holds verbatim for the
+x~ system, and the condition at a point and a rate vertex sigma (now also sigma_r) is the one
+above with G0, Ga at sigma. It is affine in sigma except ``taubar^2 Ga' R Ga``, which is
+matrix-convex in sigma (R > 0), so the whole LMI is matrix-convex in sigma: negative definite at
+every vertex of the sigma box implies negative definite at every sigma inside (every rate, every
+r in the interval). The solve uses ``Ga'RGa <= Ga0'RGa0 + He(Ga0'R sum_i sigma_i Delta_i) + q sum_i
+Delta_i'R Delta_i`` (Cauchy-Schwarz, q = 2 nonzero directions, |sigma_i| <= 1), affine in sigma;
+the vertex form imposes that at every vertex. The bound form keeps the slacks Z_i of the P and
+tau rates; the kappa and r terms are ``sigma_j He(W_j Phi_j)`` with ``W_j = (G1' P[:, :n] +
+taubar^2 Ga0' R) U_j`` linear in the variables and ``Phi_j`` data of n_s rows (``Delta_j = U_j
+Phi_j``, n_s the scaled states), and Young's inequality ``sigma He(W Phi) <= W W'/e + e Phi'Phi``
+(|sigma| <= 1, e > 0) with a Schur complement turns them into one block per point::
+
+    [[L0 + sum_i E_i'Z_i E_i + e_1 Phi_1'Phi_1 + e_2 Phi_2'Phi_2,  W_1,      W_2     ],
+     [W_1',                                                       -e_1 I,   0       ],
+     [W_2',                                                       0,        -e_2 I  ]]  <=  -eps I
+
+(2 n_s more rows instead of two full slacks). The re-check (the verdict) evaluates the exact LMI
+at every vertex of every grid point. Then V is a
+Lyapunov-Krasovskii functional of the x~ system along every admissible trajectory, with L2 gain
+w -> z below gamma; since ``x = D(K)^-1 x~`` with K in [K_min, K_max] > 0, the original closed
+loop is asymptotically stable with the same gain bound (z and w are not rescaled).
 """
 
 from __future__ import annotations
@@ -57,6 +89,7 @@ from numpy.typing import NDArray
 from synthesis.analysis_interface import AnalysisResult, checked_inputs
 from synthesis.closed_loop import DelaySystem
 from synthesis.conic import solve_conic
+from synthesis.k_scaling import KScaling
 from synthesis.wirtinger_conic import build_conic, vertices_of
 from synthesis.wirtinger_lmi import prepare, sym, vertex_lmis
 from synthesis.working_set import first_points, grow_working_set
@@ -84,6 +117,7 @@ def analyse_wirtinger(
     coupling: str = "dense",
     p_params: Sequence[int] | None = None,
     backoff: float = 0.02,
+    k_scaling: KScaling | None = None,
 ) -> AnalysisResult:
     """Solve the Wirtinger-based analysis LMI over a set of frozen closed loops.
 
@@ -107,6 +141,10 @@ def analyse_wirtinger(
         If the minimum-gamma solution fails the re-check at an imposed point (it sits on the
         boundary), solve again with gamma <= (1 + backoff) times that optimum, maximising the
         common margin; 0 skips it. Not used with ``gamma_cap``.
+    k_scaling
+        None (the functional in the systems' own coordinates) or the K-scaled functional (see
+        above): K per point, its rate bound and the ml/h states. ``state_transform``, ``p0_phys``
+        and the certificate are then in the K-scaled coordinates x~.
 
     Returns
     -------
@@ -141,6 +179,7 @@ def analyse_wirtinger(
         params,
         float(time_scale_s) if time_scale_s is not None else tau_max,
         state_transform,
+        k_scaling,
     )
     verts = vertices_of(data)
     nv, kk = len(verts), m * len(verts)
@@ -214,6 +253,8 @@ def analyse_wirtinger(
         notes.append(f"working set: LMI imposed at {len(points)} of {m} points")
     if rate_form == "bound":
         notes.append("rate-bound form (one LMI per point), re-checked at every rate vertex")
+    if k_scaling is not None:
+        notes.append(f"K-scaled coordinates: states {tuple(k_scaling.states)} times K")
     gamma = float(np.sqrt(max(float(xv[-1]), 0.0)))
     g = max(gamma, 1e-300)
     certificate = {
@@ -223,6 +264,8 @@ def analyse_wirtinger(
         "transform": data.tx,
         "time_scale_s": data.time_scale_s,
     }
+    if k_scaling is not None:
+        certificate["k_scaled_states"] = tuple(k_scaling.states)
     p0 = sym(xv[:ns2], n2)[:n, :n]
     return AnalysisResult(
         certified,

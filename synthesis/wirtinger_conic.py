@@ -12,6 +12,10 @@ Rate forms (L0, M_i of :mod:`synthesis.wirtinger_lmi`; s' moving parameters):
   implies every vertex LMI (and every rate inside the bounds); with one moving parameter and full
   Z it is equivalent to the vertex form (take Z = -L0 - eps I).
 
+K-scaled coordinates (``data.young``, :mod:`synthesis.k_scaling`): the bound form takes the
+kappa and r directions by Young's inequality, one block of size big + 2 n_s per point
+(:func:`synthesis.analysis_wirtinger.analyse_wirtinger` gives the inequality and why it suffices).
+
 Couplings of the P basis terms (the ~n_p (2n)(2n+1)/2 variables every point shares):
 
 * ``"dense"``: each LMI is written directly in the basis terms (``P(rho_k) = sum_j w_kj P_j``).
@@ -32,7 +36,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from synthesis.conic import svec_eye, svec_rows
-from synthesis.wirtinger_lmi import WirtingerData, local_map, point_maps
+from synthesis.wirtinger_lmi import WirtingerData, local_map, point_maps, young_maps
 
 __all__ = ["ConicData", "RATE_FORMS", "COUPLINGS", "build_conic", "vertices_of", "svec_of_triu"]
 
@@ -79,6 +83,40 @@ def _sub_rows(support: NDArray[np.int64], big: int) -> NDArray[np.int64]:
     return where[np.minimum(r, c) * big + np.maximum(r, c)]
 
 
+def _young_layout(big: int, phi: Array) -> tuple[sp.csr_matrix, list[sp.csr_matrix], Array]:
+    """PSD-triangle layout of the Young block of size ``bb = big + 2 n_s``: the embedding of the
+    big triangle (nsv_bb x nsv_big), the placement of each W_j's (big, n_s) entries at rows
+    0..big, columns big + j n_s.. (nsv_bb x big n_s, weight sqrt 2), and the svec of
+    ``[[Phi_j' Phi_j, 0], [0, -I_j]]`` (2, nsv_bb): the coefficient of e_j."""
+    nsel = phi.shape[1]
+    bb = big + 2 * nsel
+    idx_bb, w_bb = svec_rows(bb)
+    where = np.full(bb * bb, -1, dtype=np.int64)
+    where[idx_bb] = np.arange(len(idx_bb))
+    idx, _ = svec_rows(big)
+    r, c = idx // big, idx % big
+    rows = where[np.minimum(r, c) * bb + np.maximum(r, c)]
+    emb = sp.csr_matrix(
+        (np.ones(len(idx)), (rows, np.arange(len(idx)))), shape=(len(idx_bb), len(idx))
+    )
+    place, e_svec = [], []
+    rr, cc = np.divmod(np.arange(big * nsel), nsel)
+    for j in range(2):
+        pos = where[rr * bb + big + j * nsel + cc]
+        place.append(
+            sp.csr_matrix(
+                (np.full(len(pos), np.sqrt(2.0)), (pos, np.arange(len(pos)))),
+                shape=(len(idx_bb), big * nsel),
+            )
+        )
+        mat = np.zeros((bb, bb))
+        mat[:big, :big] = phi[j].T @ phi[j]
+        d = big + j * nsel + np.arange(nsel)
+        mat[d, d] = -1.0
+        e_svec.append(mat.reshape(-1)[idx_bb] * w_bb)
+    return emb, place, np.array(e_svec)
+
+
 def build_conic(
     data: WirtingerData,
     pts: NDArray[np.int64],
@@ -100,17 +138,22 @@ def build_conic(
         raise ValueError(
             f"rate_form={rate_form!r} / coupling={coupling!r} not in {RATE_FORMS} / {COUPLINGS}"
         )
-    f0, fm, const = point_maps(data, pts)
+    young = rate_form == "bound" and data.young is not None
+    f0, fm, const = point_maps(data, pts, dga_linear=not young)
     big, nvar, n_pd, nloc, ns2 = data.big, data.nvar, data.n_pd, data.nloc, data.ns2
     n_c = data.n_p * ns2
     npt, verts = len(pts), vertices_of(data)
     nsv = big * (big + 1) // 2
     supports = _supports(fm, big) if rate_form == "bound" else []
+    if young:  # r (and K if only kappa moves it) has no P-rate or tau term left: no slack
+        live = np.any(data.dw_m != 0.0, axis=(0, 1)) | (data.c_tau != 0.0)
+        supports = [sup if live[i] else sup[:0] for i, sup in enumerate(supports)]
     z_sizes = [len(s) * (len(s) + 1) // 2 for s in supports]
     nz = sum(z_sizes)
     off_y = nvar
     off_z = off_y + (npt * n_pd if coupling == "per_point" else 0)
-    it = off_z + npt * nz
+    off_e = off_z + npt * nz
+    it = off_e + (2 * npt if young else 0)
     with_t = gamma_cap is not None
     ncol = it + int(with_t)
     eye_big = svec_eye(big)
@@ -128,6 +171,14 @@ def build_conic(
     tail = cols(sp.eye(nloc - n_pd), n_c)  # S, R, mu rows of the local variables
     t_col = cols(sp.csr_matrix(eye_big[:, None]), it) if with_t else None
     b_lmi = -(const + (0.0 if with_t else epsilon) * eye_big)
+    if young:  # kappa, r: [[L + sum e_j Phi_j'Phi_j, W_1, W_2], [W', -diag(e_j I)]] <= -eps I
+        phi = data.young[1]
+        bb = big + 2 * phi.shape[1]
+        emb, w_place, e_svec = _young_layout(big, phi)
+        wm = young_maps(data, pts)
+        eye_bb = svec_eye(bb)
+        t_col = cols(sp.csr_matrix(eye_bb[:, None]), it) if with_t else None
+        b_lmi = -(const @ emb.T + (0.0 if with_t else epsilon) * eye_bb)
     n_psd = 0
     for q, k in enumerate(pts):
         tk = local_map(data, int(k))
@@ -150,6 +201,8 @@ def build_conic(
         lmi = sp.csr_matrix(f0[q]) @ sel
         z0 = off_z + q * nz
         for i, sup in enumerate(supports):
+            if len(sup) == 0:
+                continue
             sub = _sub_rows(sup, big)
             zcols = z0 + sum(z_sizes[:i])
             lmi = lmi + sp.csr_matrix(
@@ -162,9 +215,14 @@ def build_conic(
                 rows_b.append(np.zeros(len(sub)))
                 cones.append(clarabel.PSDTriangleConeT(len(sup)))
                 n_psd += 1
+        if young:
+            lmi = emb @ lmi
+            for j in range(2):
+                lmi = lmi + w_place[j] @ sp.csr_matrix(wm[q, j]) @ sel
+                lmi = lmi + cols(sp.csr_matrix(e_svec[j][:, None]), off_e + 2 * q + j)
         rows_a.append(lmi + t_col if with_t else lmi)
         rows_b.append(b_lmi[q])
-        cones.append(clarabel.PSDTriangleConeT(big))
+        cones.append(clarabel.PSDTriangleConeT(bb if young else big))
         n_psd += 1
     # P(rho_k) at every point, S and R: >= eps I
     m, n, n2 = data.w_p.shape[0], data.n, 2 * data.n

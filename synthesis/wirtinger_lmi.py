@@ -29,9 +29,10 @@ from numpy.typing import NDArray
 
 from synthesis.closed_loop import DelaySystem
 from synthesis.conic import svec_rows
+from synthesis.k_scaling import KScaling, k_scaled_system, k_terms
 from synthesis.state_transform import transform_of
 
-__all__ = ["WirtingerData", "point_maps", "prepare", "sym", "vertex_lmis"]
+__all__ = ["WirtingerData", "point_maps", "prepare", "sym", "vertex_lmis", "young_maps"]
 
 Array = NDArray[np.float64]
 
@@ -75,12 +76,18 @@ class WirtingerData:
     w_p: Array  # (m, n_p) P basis weights
     dw_m: Array  # (m, n_p, s') nu_i d w / d rho_i of the moving parameters
     c_tau: Array  # (s',) nu_i d tau / d rho_i (s/s)
-    moving: tuple[int, ...]
+    moving: tuple[int, ...]  # moving parameter indices (K-scaled: then s, the r coordinate)
     n: int
     nw: int
     tx: Array
     txi: Array
     time_scale_s: float
+    #: K-scaled coordinates only: (m, s', n, big) direction of Ga = [A Ad 0 B] at rate vertex
+    #: sigma_i = +1 (kappa on the K vertex, r on the last one), see :mod:`synthesis.k_scaling`
+    dga: Array | None = None
+    #: the same directions factored, ``Delta = U Phi``: (U (m, 2, n, n_s), Phi (2, n_s, big),
+    #: position of the K vertex in ``moving``) for kappa and r (:func:`young_maps`)
+    young: tuple[Array, Array, int] | None = None
 
     @property
     def big(self) -> int:
@@ -124,10 +131,23 @@ def prepare(
     p_params: Sequence[int],
     time_scale_s: float,
     state_transform: Array | None,
+    k_scaling: KScaling | None = None,
 ) -> WirtingerData:
     """Scale time and state (:func:`synthesis.state_transform.transform_of`), build G1, G0, Ga,
-    Gz'Gz and the P basis; a parameter moves if its rate is > 0 and P or tau depends on it."""
+    Gz'Gz and the P basis; a parameter moves if its rate is > 0 and P or tau depends on it.
+
+    With ``k_scaling`` the systems are first written in ``x~ = D(K) x``
+    (:func:`synthesis.k_scaling.k_scaled_system`; ``state_transform`` then acts on x~), Ad is
+    taken at the centre of each point's r interval, K moves whenever its rate bound is > 0, and
+    r is one more moving coordinate (index ``s``, after the parameters) with no P or tau term.
+    """
     ts = float(time_scale_s)
+    if k_scaling is not None:
+        k_scaling.check(len(systems), systems[0].n, rho_hat.shape[1], tau_max)
+        systems = [
+            k_scaled_system(q, float(kk), k_scaling.states)
+            for q, kk in zip(systems, k_scaling.k, strict=True)
+        ]
     n, nw = systems[0].n, systems[0].B.shape[1]
     m = len(systems)
     tx, txi = transform_of(systems, ts, state_transform)
@@ -138,6 +158,9 @@ def prepare(
     cd = np.stack([q.Cd @ tx for q in systems])
     d = np.stack([q.D for q in systems])
     h = taus / ts
+    k_moves = k_scaling is not None and k_scaling.k_rate_per_s > 0
+    if k_moves:
+        ad, u_kappa, u_r, s_tx = k_terms(k_scaling, ad, tx, txi, ts, tau_max)
     ga = np.concatenate([a, ad, np.zeros((m, n, n)), b], axis=2)
     gz = np.concatenate([c, cd, np.zeros((m, c.shape[1], n)), d], axis=2)
     g1 = np.zeros((m, 2 * n, 3 * n + nw))
@@ -154,6 +177,25 @@ def prepare(
         if rate[i] > 0 and (np.any(dw_p[:, :, i] != 0) or dtau[i] != 0)
     )
     mv = list(moving)
+    dw_m = dw_p[:, :, mv] * (rate[mv] * ts)[None, None, :]
+    c_tau = rate[mv] * dtau[mv]
+    dga, young = None, None
+    if k_moves:
+        s = rho_hat.shape[1]
+        ik = k_scaling.k_index
+        moving = tuple(sorted({*moving, ik})) + (s,)
+        real = list(moving[:-1])
+        dw_m = np.concatenate(
+            [dw_p[:, :, real] * (rate[real] * ts)[None, None, :], np.zeros((m, w_p.shape[1], 1))],
+            axis=2,
+        )
+        c_tau = np.append(rate[real] * dtau[real], 0.0)
+        scale = np.linalg.norm(s_tx, 2)  # Phi of unit norm, the size in U
+        phi = np.zeros((2, s_tx.shape[0], 3 * n + nw))  # kappa acts on x, r on x(t - tau)
+        phi[0, :, :n], phi[1, :, n : 2 * n] = s_tx / scale, s_tx / scale
+        young = (scale * np.stack([u_kappa, u_r], axis=1), phi, moving.index(ik))
+        dga = np.zeros((m, len(moving), n, 3 * n + nw))
+        dga[:, [young[2], -1]] = np.einsum("mjns,jsb->mjnb", young[0], phi)
     return WirtingerData(
         g1=g1,
         g0=g0,
@@ -162,14 +204,16 @@ def prepare(
         h=h,
         hbar=tau_max / ts,
         w_p=w_p,
-        dw_m=dw_p[:, :, mv] * (rate[mv] * ts)[None, None, :],
-        c_tau=rate[mv] * dtau[mv],
+        dw_m=dw_m,
+        c_tau=c_tau,
         moving=moving,
         n=n,
         nw=nw,
         tx=tx,
         txi=txi,
         time_scale_s=ts,
+        dga=dga,
+        young=young,
     )
 
 
@@ -180,9 +224,22 @@ def local_map(data: WirtingerData, k: int) -> sp.csr_matrix:
     return sp.kron(sp.csr_matrix(np.array(rows)), sp.eye(data.ns2), format="csr")
 
 
-def _parts(data: WirtingerData, loc: Array, pts: NDArray[np.int64]) -> tuple[Array, Array]:
+def _parts(
+    data: WirtingerData,
+    loc: Array,
+    pts: NDArray[np.int64],
+    quad_bound: bool = True,
+    dga_linear: bool = True,
+) -> tuple[Array, Array]:
     """L0 without Gz'Gz, (J, P, big, big), and M (J, P, s', big, big) for local vectors
-    ``loc`` (J, P, nloc) at the points ``pts`` (P of them)."""
+    ``loc`` (J, P, nloc) at the points ``pts`` (P of them).
+
+    K-scaled coordinates (``data.dga``): Ga = Ga0 + sum_i sigma_i Delta_i, so M_i gains
+    ``He(G1' P [Delta_i; 0]) + taubar^2 He(Ga0' R Delta_i)`` and the rest,
+    ``taubar^2 Delta' R Delta``, is bounded by ``taubar^2 q sum_i Delta_i' R Delta_i`` (q the
+    number of nonzero directions) in L0 when ``quad_bound``; otherwise it is left out (the
+    re-check adds it exactly per vertex). ``dga_linear=False`` leaves out the M_i terms of
+    Delta (the bound form takes them by :func:`young_maps` instead)."""
     n, n2, ns, ns2, n_pd = data.n, 2 * data.n, data.ns, data.ns2, data.n_pd
     nm, big = len(data.moving), data.big
     j, npt = loc.shape[:2]
@@ -221,20 +278,52 @@ def _parts(data: WirtingerData, loc: Array, pts: NDArray[np.int64]) -> tuple[Arr
     rate_tau = hg + np.swapaxes(hg, -1, -2) + embed(sm, n)
     mt = np.einsum("pra,jpirs,psb->jpiab", g1, dmat, g1, optimize=True)
     mt += data.c_tau[None, None, :, None, None] * rate_tau[:, :, None]
+    if data.dga is not None:
+        dq = data.dga[pts]
+        if dga_linear:
+            dm = np.einsum("pra,jprs,pisb->jpiab", g1, p[..., :n], dq, optimize=True)
+            dm += data.hbar**2 * np.einsum("psa,jpst,pitb->jpiab", ga, rm, dq, optimize=True)
+            mt += dm + np.swapaxes(dm, -1, -2)
+        if quad_bound:
+            nq = np.count_nonzero(np.any(data.dga != 0.0, axis=(0, 2, 3)))
+            l0 += (nq * data.hbar**2) * np.einsum("pisa,jpst,pitb->jpab", dq, rm, dq, optimize=True)
     return l0, mt
 
 
-def point_maps(data: WirtingerData, pts: NDArray[np.int64]) -> tuple[Array, Array, Array]:
+def young_maps(data: WirtingerData, pts: NDArray[np.int64]) -> Array:
+    """``W_j`` (P, 2, big * n_s, nloc) at ``pts`` as maps of the local variables: the kappa (j = 0)
+    and r (j = 1) terms of M are ``He(W_j Phi_j)``, ``W_j = (G1' P[:, :n] + taubar^2 Ga0' R) U_j``
+    (row-major (big, n_s) entries; ``data.young`` holds U_j and Phi_j)."""
+    n, ns, n_pd, nloc = data.n, data.ns, data.n_pd, data.nloc
+    u = data.young[0]
+    out = []
+    for lo in range(0, len(pts), _BATCH):
+        sub = pts[lo : lo + _BATCH]
+        unit = np.broadcast_to(np.eye(nloc)[:, None, :], (nloc, len(sub), nloc))
+        p = sym(unit[..., : data.ns2], 2 * n)
+        rm = sym(unit[..., n_pd + ns : n_pd + 2 * ns], n)
+        w = np.einsum("pra,jprs,pisc->jpiac", data.g1[sub], p[..., :n], u[sub], optimize=True)
+        w += data.hbar**2 * np.einsum(
+            "psa,jpst,pitc->jpiac", data.ga[sub], rm, u[sub], optimize=True
+        )
+        out.append(np.moveaxis(w.reshape(nloc, len(sub), 2, -1), 0, -1))
+    return np.concatenate(out)
+
+
+def point_maps(
+    data: WirtingerData, pts: NDArray[np.int64], dga_linear: bool = True
+) -> tuple[Array, Array, Array]:
     """Exact maps at ``pts`` on the local variables, in Clarabel's PSD-triangle order:
     ``F0`` (P, nsv, nloc) and ``FM`` (P, s', nsv, nloc) with ``svec(L0) = F0 loc + f0`` and
-    ``svec(M_i) = FM_i loc``, and ``f0`` (P, nsv) = svec(Gz'Gz)."""
+    ``svec(M_i) = FM_i loc``, and ``f0`` (P, nsv) = svec(Gz'Gz); ``dga_linear`` as in
+    :func:`_parts`."""
     idx, wsv = svec_rows(data.big)
     nloc = data.nloc
     f0_all, fm_all = [], []
     for lo in range(0, len(pts), _BATCH):
         sub = pts[lo : lo + _BATCH]
         unit = np.broadcast_to(np.eye(nloc)[:, None, :], (nloc, len(sub), nloc))
-        l0, mt = _parts(data, unit, sub)
+        l0, mt = _parts(data, unit, sub, dga_linear=dga_linear)
         f0_all.append(np.moveaxis(l0.reshape(nloc, len(sub), -1)[..., idx] * wsv, 0, -1))
         fm_all.append(
             np.moveaxis(mt.reshape(nloc, len(sub), mt.shape[2], data.big**2)[..., idx] * wsv, 0, -1)
@@ -254,12 +343,18 @@ def local_values(data: WirtingerData, x: Array) -> Array:
 
 
 def vertex_lmis(data: WirtingerData, x: Array, vertices: Array) -> Array:
-    """Every vertex LMI (m, nv, big, big) at the global vector x (the re-check's input)."""
+    """Every vertex LMI (m, nv, big, big) at the global vector x (the re-check's input); in
+    K-scaled coordinates with the exact ``taubar^2 Delta_v' R Delta_v`` of each vertex."""
     loc = local_values(data, x)
     out = []
     for lo in range(0, len(loc), _BATCH):
         pts = np.arange(lo, min(len(loc), lo + _BATCH))
-        l0, mt = _parts(data, loc[None, pts], pts)
+        l0, mt = _parts(data, loc[None, pts], pts, quad_bound=False)
         val = l0[0][:, None] + np.einsum("vi,piab->pvab", vertices, mt[0])
+        if data.dga is not None:
+            n, ns, n_pd = data.n, data.ns, data.n_pd
+            rm = sym(loc[pts, n_pd + ns : n_pd + 2 * ns], n)
+            dv = np.einsum("vi,pinb->pvnb", vertices, data.dga[pts])
+            val += data.hbar**2 * np.einsum("pvsa,pst,pvtb->pvab", dv, rm, dv, optimize=True)
         out.append(val + data.const[pts][:, None])
     return np.concatenate(out)
