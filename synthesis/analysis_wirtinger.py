@@ -206,10 +206,14 @@ def analyse_wirtinger(
         if gamma_cap is not None:
             return solve_once(pts, float(gamma_cap))
         status, xv = solve_once(pts, None)
-        if xv is None or backoff <= 0.0 or np.all(recheck(xv)[1][pts] > 0):
+        if xv is None or backoff <= 0.0:
+            return status, xv
+        _, margins, p_min = recheck(xv)
+        if np.all(margins[pts] > recheck_tol[0]) and np.all(p_min > 0) and sr_positive(xv):
             return status, xv
         # the optimum sits on the boundary (in the bound form the slack cones Z_i >= +/- M_i
-        # too): back off gamma by a few percent and maximise the common margin instead
+        # too; S or R may end singular): back off gamma by a few percent and maximise the
+        # common margin instead
         cap = float(np.sqrt(max(float(xv[-1]), 0.0))) * (1.0 + backoff)
         if progress:
             progress(f"Wirtinger LMI: back-off solve at gamma = {cap:.4g}")
@@ -220,6 +224,8 @@ def analyse_wirtinger(
         notes.append(f"back-off: gamma {cap / (1.0 + backoff):.6g} -> {cap:.6g}")
         return status2, xb
 
+    recheck_tol = [0.0]  # the last re-check's strictness tolerance (scaled to the LMI's size)
+
     def recheck(xv: Array) -> tuple[bool, Array, Array]:
         # the certificate: every vertex LMI evaluated at the solution at EVERY point
         lmi_val = vertex_lmis(data, xv, verts)
@@ -227,13 +233,16 @@ def analyse_wirtinger(
         margins = -np.linalg.eigvalsh(lmi_val)[:, -1].reshape(m, nv).max(axis=1)
         pos = np.einsum("mj,jab->mab", data.w_p, sym(xv[:off_s].reshape(data.n_p, ns2), n2))
         p_min = np.linalg.eigvalsh(pos)[:, 0]
+        tol = recheck_tol[0] = 1e-10 * max(1.0, float(np.max(np.abs(lmi_val))))
+        certified = bool(np.all(margins > tol) and np.all(p_min > 0) and sr_positive(xv))
+        return certified, margins, p_min
+
+    def sr_positive(xv: Array) -> bool:
         sr_min = min(
             np.linalg.eigvalsh(sym(xv[off_s : off_s + ns], n))[0],
             np.linalg.eigvalsh(sym(xv[off_s + ns : off_s + 2 * ns], n))[0],
         )
-        tol = 1e-10 * max(1.0, float(np.max(np.abs(lmi_val))))
-        certified = bool(np.all(margins > tol) and np.all(p_min > 0) and sr_min > 0)
-        return certified, margins, p_min
+        return bool(sr_min > 0)
 
     status, xv, points, (certified, margins, p_min) = grow_working_set(
         points,

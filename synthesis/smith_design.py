@@ -3,13 +3,16 @@
 There is no synthesis LMI for this family (:mod:`synthesis.family`): the law is
 ``SmithLPV(loop_gain, Ω, Λ).at(ρ)`` (:mod:`synthesis.smith_lpv`) and the design stage is the
 Wirtinger-based analysis LMI (:func:`synthesis.analysis_wirtinger.analyse_wirtinger`, one LMI per
-point with rate slacks, ``rate_form="bound"``, P(ρ) quadratic in ρ̂, S and R constant) over the
-closed loops at the grid nodes. :func:`certify_smith` is that analysis on any set of points; the
+point with rate slacks, ``rate_form="bound"``, P(ρ) quadratic in ρ̂, S and R constant) written in
+K-scaled coordinates (:mod:`synthesis.k_scaling`: the ml/h states u and û times K, so S and R are
+K(t)-dependent in the original state; docs/CERTIFICATE-STRUCTURE.md, section 2c) over the closed
+loops at the grid nodes. The law's gains scale like 1/K; in the original coordinates the same
+functional certifies loop gains up to ~2.6 only, in K-scaled ones loop gain 3 at γ ≈ 8. :func:`certify_smith` is that analysis on any set of points; the
 design (:func:`design_smith`, the design grid, minimum γ with back-off) and the verification
 (``pressor verify``, a denser grid, γ capped, one solve) both call it.
 
-Conditioning, as in ``benchmarks/smith_certificate.py``: the state is whitened by the nominal
-point's own frozen certificate and balanced (a constant congruence: feasibility and γ unchanged);
+Conditioning, as in ``benchmarks/smith_certificate.py``: the K-scaled state is whitened by the
+nominal point's own frozen certificate and balanced (a constant congruence: feasibility and γ unchanged);
 time is scaled by the design's ``solver.time_scale_s`` (the only [solver] key this family uses).
 """
 
@@ -25,7 +28,8 @@ from synthesis.analysis_wirtinger import analyse_wirtinger
 from synthesis.artifact import FORMAT_VERSION, ControllerArtifact, make_artifact
 from synthesis.closed_loop import DelaySystem, close_loop
 from synthesis.config import NOMINAL_RHO, DesignConfig, ModelConfig
-from synthesis.model import dims, plant_at
+from synthesis.k_scaling import KScaling, k_scaled_system
+from synthesis.model import I_U, dims, plant_at
 from synthesis.scaling import Scaling
 from synthesis.smith_lpv import SmithLPV
 from synthesis.state_transform import conditioning_transform
@@ -81,6 +85,10 @@ def certify_smith(
     pts = np.atleast_2d(np.asarray(points, dtype=float))
     box = np.asarray(model.box, dtype=float)
     c_sys, c_rho = centre
+    # the ml/h states: the plant's infusion u and the controller's model input û (its first state)
+    scaled = (I_U, plant_at(c_rho, model).A.shape[0])
+    k_scaling = KScaling(pts[:, 0], float(model.rate_bounds[0]), scaled)
+    c_sys = k_scaled_system(c_sys, float(c_rho[0]), scaled)
     zero = np.zeros(3)
     c0 = analyse_wirtinger(
         [c_sys], scaling.to_hat(c_rho)[None], zero, zero, float(c_rho[2]), "constant"
@@ -107,6 +115,7 @@ def certify_smith(
         gamma_cap=gamma_cap,
         progress=progress,
         rate_form="bound",
+        k_scaling=k_scaling,
     )
 
 
@@ -178,7 +187,7 @@ def design_smith(cfg: DesignConfig, progress: Progress | None = None) -> Control
         "solver": {
             "name": "CLARABEL",
             "status": res.status,
-            "analysis": "wirtinger, rate_form bound",
+            "analysis": "wirtinger, k_scaled, rate_form bound",
             "p_dependence": res.p_dependence,
             "n_lmi": res.n_lmis,
             "notes": list(res.notes),
