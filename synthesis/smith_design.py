@@ -47,8 +47,13 @@ P_DEPENDENCE = "quadratic"
 #: the back-off solve ends at 7.431, two solves; ε 1e-3 -> γ 7.357 certified in one solve)
 DESIGN_EPSILON = 1e-3
 #: Clarabel settings of the capped (feasibility) solve: maximising the common margin t to 1e-8
-#: only sharpens t, the verdict is the re-check (measured 3x3x3: 44 -> 40 iterations, t 0.114)
-FEASIBILITY_SOLVER_OPTIONS: dict[str, Any] = {"tol_gap_abs": 1e-4, "tol_gap_rel": 1e-4}
+#: only sharpens t and iterative refinement of each KKT solve only sharpens the iterate; the
+#: verdict is the re-check (measured 3x3x3: 44 -> 40 iterations, ~25 % less wall, t 0.114 both)
+FEASIBILITY_SOLVER_OPTIONS: dict[str, Any] = {
+    "tol_gap_abs": 1e-4,
+    "tol_gap_rel": 1e-4,
+    "iterative_refinement_enable": False,
+}
 
 
 class SmithDesignError(RuntimeError):
