@@ -2,21 +2,29 @@
 
 Each case runs in its own subprocess (so peak memory is its own ``ru_maxrss``), all in the same
 run so machine load is comparable. Prints wall time, peak RSS and the outcome of each case, and the
-ratio of the straightforward formulation to the one ``pressor synth`` / ``pressor verify`` use:
+ratio of the straightforward formulation to the one ``pressor synth`` / ``pressor verify`` use.
+The cases follow the controller family of the config (synth) and of the artifact (verify),
+:mod:`synthesis.family`:
 
-* synth: the batched sparse formulation (:func:`synthesis.lmi_solve.solve`) vs the naive per-point
-  cvxpy formulation (:mod:`synthesis.lmi_naive`), on the design's grid;
-* verify: :func:`synthesis.verify.verify_artifact` with the analysis LMI on a working set (the
-  default) vs every dense point in one solve (``all_points_at_once``), on an artifact.
+* "smith" (the shipped default): synth is :func:`synthesis.smith_design.design_smith`, the
+  Wirtinger analysis on the design grid in the rate-bound form (one LMI per point, one solve at
+  the strictness ``DESIGN_EPSILON``), vs the same analysis with every rate / delay-ratio vertex as
+  its own LMI (``rate_form="vertex"``); verify is :func:`synthesis.verify.verify_artifact` (one
+  capped solve over the dense grid, rate-bound form) vs the same with every vertex as its own LMI
+  (``all_points_at_once``);
+* "theorem3": synth is the batched sparse formulation (:func:`synthesis.lmi_solve.solve`) vs the
+  naive per-point cvxpy formulation (:mod:`synthesis.lmi_naive`), on the design's grid; verify is
+  :func:`synthesis.verify.verify_artifact` with the analysis LMI on a working set (the default) vs
+  every dense point in one solve (``all_points_at_once``).
 
 ::
 
     python benchmarks/synthesis.py [--config FILE.toml] [--grid 3,3,3] [--rate-terms vertices]
                                    [--artifact FILE.npz] [--only synth|verify] [--skip-naive]
 
-``--rate-terms vertices`` benchmarks the paper's 2³-vertex synthesis (8 LMIs per node) instead of
-the design's setting; ``--skip-naive`` leaves out both straightforward cases (they are the slow
-ones).
+``--rate-terms vertices`` benchmarks the paper's 2³-vertex Theorem-3 synthesis (8 LMIs per node)
+instead of the design's setting; ``--skip-naive`` leaves out both straightforward cases (they are
+the slow ones).
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ import resource
 import subprocess
 import sys
 import time
+from typing import Any
 
 
 def _child(kind: str, args: argparse.Namespace) -> None:
@@ -48,31 +57,49 @@ def _child(kind: str, args: argparse.Namespace) -> None:
             "detail": f"{lmi['n_lmis']} LMIs re-checked, analysis {lmi['solve_time_s']:.1f} s",
         }
     else:
-        from synthesis import lmi, lmi_solve
         from synthesis.config_toml import load_config
 
         cfg = load_config(args.config)
         if args.grid:
             cfg = cfg.with_grid(tuple(int(v) for v in args.grid.split(",")))
-        if args.rate_terms:
-            from dataclasses import replace
-
-            cfg = replace(cfg, solver=replace(cfg.solver, rate_terms=args.rate_terms))
-        prob = lmi.make_problem(cfg)
-        if kind == "synth":
-            res = lmi_solve.solve(prob)
-        else:
-            from synthesis.lmi_naive import solve_naive
-
-            res = solve_naive(prob)
-        row = {
-            "outcome": f"gamma={res.gamma:.4f} {res.status}",
-            "detail": f"{res.n_lmi} LMIs of {res.lmi_size}, build {res.build_time_s:.2f} s, "
-            f"{res.iterations} iterations",
-        }
+        row = (
+            _smith_synth(cfg, kind) if cfg.controller.is_smith else _theorem3_synth(cfg, kind, args)
+        )
     row["wall_s"] = time.perf_counter() - t0
     row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     print(json.dumps({"kind": kind, **row}))
+
+
+def _smith_synth(cfg: Any, kind: str) -> dict[str, str]:
+    from synthesis.smith_design import design_smith
+
+    art = design_smith(cfg, rate_form="vertex" if kind == "naive" else "bound")
+    sol = art.metadata["solver"]
+    return {
+        "outcome": f"gamma={art.gamma:.4f} {sol['status']}",
+        "detail": f"smith, {sol['n_lmi']} vertex LMIs re-checked, {sol['analysis']}",
+    }
+
+
+def _theorem3_synth(cfg: Any, kind: str, args: argparse.Namespace) -> dict[str, str]:
+    from synthesis import lmi, lmi_solve
+
+    if args.rate_terms:
+        from dataclasses import replace
+
+        cfg = replace(cfg, solver=replace(cfg.solver, rate_terms=args.rate_terms))
+    prob = lmi.make_problem(cfg)
+    if kind == "synth":
+        res = lmi_solve.solve(prob)
+    else:
+        from synthesis.lmi_naive import solve_naive
+
+        res = solve_naive(prob)
+    return {
+        "outcome": f"gamma={res.gamma:.4f} {res.status}",
+        "detail": f"{res.n_lmi} LMIs of {res.lmi_size}, build {res.build_time_s:.2f} s, "
+        f"{res.iterations} iterations",
+    }
 
 
 def _run(kind: str, argv: list[str]) -> dict:

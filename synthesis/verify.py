@@ -202,8 +202,9 @@ def verify_artifact(
         straightforward formulation, for comparison) instead of the fast path: the rate-bound
         form on a working set (as many points as the synthesis grid has nodes, spread over the
         dense grid, grown by the points whose re-check fails; the vertex form if that does not
-        certify). The certificate is the same either way: the re-check at every point and rate
-        vertex.
+        certify; the "smith" family: every rate vertex as its own LMI instead of the rate-bound
+        form, see :mod:`synthesis.verify_analysis`). The certificate is the same either way: the
+        re-check at every point and rate vertex.
 
     Returns
     -------

@@ -107,6 +107,16 @@ def test_smith_artifact_round_trip_keeps_hash_family_and_certificate(smith_artif
         np.testing.assert_array_equal(back.coefficients[k], v)
 
 
+def test_smith_design_is_certified_by_its_first_solve_without_a_back_off_solve(smith_artifact):
+    # the design's strictness (DESIGN_EPSILON) keeps the minimum-gamma point inside the LMIs
+    shipped = load_artifact(default_artifact_path())
+    for art in (smith_artifact, shipped):
+        solver = art.metadata["solver"]
+        assert solver["analysis"].endswith("rate_form bound")
+        assert not any("back-off" in note for note in solver["notes"]), solver["notes"]
+    assert shipped.gamma < 7.4  # below the back-off point of the two-solve design (7.431)
+
+
 def test_older_artifact_without_controller_entry_reads_as_theorem3():
     assert ControllerFamily.from_metadata({"gamma": 1.0}) == ControllerFamily()
 
