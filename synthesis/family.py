@@ -10,8 +10,9 @@ Two families (design TOML ``[controller]``, artifact metadata ``controller``):
 * ``"smith"`` — the scheduled Smith predictor + PI of :class:`synthesis.smith_lpv.SmithLPV` with
   one parameter, ``loop_gain`` = K·Kc = T/λ (dimensionless, in (0, 10]); the law is fixed in
   closed form, so there is no synthesis LMI: the design stage is the Wirtinger-based analysis of
-  :mod:`synthesis.analysis_wirtinger` on the design grid, and the artifact stores its certificate
-  (``P``, ``S``, ``R`` and the state ``transform`` it lives in, see :func:`smith_coef_shapes`).
+  :mod:`synthesis.analysis_wirtinger` in K-scaled coordinates (:mod:`synthesis.k_scaling`) on the
+  design grid, and the artifact stores its certificate (``P``, ``S``, ``R`` and the state
+  ``transform`` it lives in, all in those coordinates, see :func:`smith_coef_shapes`).
 
 This module is a leaf of the synthesis package (numpy only): the config reader, the artifact
 loader and the reconstruction share its names, ranges and shapes.
