@@ -1,5 +1,6 @@
-"""A device written from docs/PROTOCOL.md alone (tests/protocol_device.py) drives the real
-``pressor run`` over a real pty, signed, in both link modes (issue 12)."""
+"""A device written from docs/PROTOCOL.md alone (tests/protocol_device.py and its bedside,
+tests/protocol_device_bedside.py) drives the real ``pressor run`` over a real pty, signed, in both
+link modes (issue 12)."""
 
 from __future__ import annotations
 
@@ -124,20 +125,40 @@ def assert_lockstep_reaches_target(run: Run, n_ticks: int) -> None:
     assert 2 in run.log.runtime_states, "no FINISHED heartbeat from the runtime"
 
 
-def test_protocol_device_imports_only_the_standard_library_and_pymavlink() -> None:
-    source = (ROOT / "tests" / "protocol_device.py").read_text()
-    tree = ast.parse(source)
+def imported_modules(tree: ast.Module) -> set[str]:
+    """Every module an ``import`` or ``from ... import`` in ``tree`` names (a relative one: from tests)."""
     names = {
         alias.name
         for node in ast.walk(tree)
         if isinstance(node, ast.Import)
         for alias in node.names
     }
-    names |= {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
-    top = {name.split(".")[0] for name in names}
-    assert top & PROJECT_PACKAGES == set()
-    assert top - {"pymavlink", "__future__"} <= sys.stdlib_module_names, top
-    assert "link.dialect" not in source and "link/dialect" not in source
+    return names | {
+        "tests." * bool(node.level) + (node.module or "")
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom)
+    }
+
+
+def test_protocol_device_modules_import_only_the_standard_library_pymavlink_and_each_other() -> (
+    None
+):
+    device_modules = {f"tests.{path.stem}" for path in (ROOT / "tests").glob("protocol_device*.py")}
+    checked: set[str] = set()
+    to_check = ["tests.protocol_device"]
+    while to_check:
+        module = to_check.pop()
+        checked.add(module)
+        source = (ROOT / (module.replace(".", "/") + ".py")).read_text()
+        names = imported_modules(ast.parse(source))
+        siblings = {name for name in names if name.split(".")[0] == "tests"}
+        assert siblings <= device_modules, f"{module} imports test code {siblings}"
+        to_check += sorted(siblings - checked)
+        top = {name.split(".")[0] for name in names - siblings}
+        assert top & PROJECT_PACKAGES == set(), f"{module} imports the project"
+        assert top - {"pymavlink", "__future__"} <= sys.stdlib_module_names, (module, top)
+        assert "link.dialect" not in source and "link/dialect" not in source, module
+    assert checked == device_modules, "a protocol_device*.py module the device does not use"
 
 
 def test_lockstep_signed_pi_with_scheduling_params_brings_map_to_target(
