@@ -116,13 +116,21 @@ class DelayModel:
         self.age = other.age
         self.nll = nll
 
-    def step(self, u_ml_h: float, y_dev_mmhg: float) -> bool:
+    def step(self, u_ml_h: float, y_dev_mmhg: float, dT_s: float = 0.0) -> bool:
         """Simulate one window with the delayed rate, then fit the window's ȳ − y_ref (mmHg).
 
-        A NaN rate holds the last one; a NaN ``y_dev_mmhg`` only simulates. Returns whether the
-        filter was updated; a filter whose covariance loses positivity restarts from the prior.
+        ``dT_s`` (s, >= 0) is the lag's expected rise over the window (the T-drift prior): before
+        a fit, θ moves to T + ``dT_s`` at the same K. A NaN rate holds the last one; a NaN
+        ``y_dev_mmhg`` only simulates (θ does not move). Returns whether the filter was updated; a
+        filter whose covariance loses positivity restarts from the prior.
         """
         st, sim, th, P = self.settings, self.sim, self.theta, self.P
+        if dT_s > 0.0 and y_dev_mmhg == y_dev_mmhg and 0.0 < th[0] < 1.0:
+            a_old = th[0]
+            K = th[1] / (1.0 - a_old)
+            a_new = math.exp(-st.window_s / (dT_s - st.window_s / math.log(a_old)))
+            th[0] = min(a_new, st.a_hi)
+            th[1] = K * (1.0 - th[0])
         u = u_ml_h if u_ml_h == u_ml_h else sim[3]
         sim[3] = u
         a, b, c = th

@@ -1,0 +1,180 @@
+"""How close can any estimated schedule get to the oracle? The start-up bound, measured.
+
+Usage::
+
+    python benchmarks/estimation_bound.py                        # 40 patients, seed 11, 2 jobs
+    python benchmarks/estimation_bound.py --patients 100 --seed 2026 --switch-s 30,40,50,60
+
+Each patient of the seeded cohort runs the shipped LPV in ``--scenario`` (default
+``paper-tracking``) under several scheduling sources, through the trial's own closed loop
+(:func:`hil_sim.closed_loop.simulate`, the runtime's core):
+
+``oracle``
+    The simulator's true K, T, τ from the first tick (the denominator of every ratio).
+``estimated``
+    The shipped online estimator (:class:`runtime.estimation.schedule.EstimatedSchedule`).
+``K from 0 s``
+    The estimator's T and τ, but the true K from the first tick: which parameter the gap is made of.
+``truth from S s``
+    The estimated source's start-up schedule (the prior's cautious corner, what it schedules while
+    learning) until S s, then the true K, T, τ: a source that learns *perfectly* S s into the step.
+    No estimator that learns from the MAP can do better than this row for an S after the MAP first
+    moves, because before that the data hold nothing about the patient.
+
+Printed per source: the median over reachable patients of IAE(source)/IAE(oracle) (and the
+90th percentile), and the median times (s) at which the MAP first moved by 0.5 mmHg and at which
+the estimator first reported a learned estimate. The generated module limits the rate of the
+feedback's scheduled ρ to the certificate's bounds (K 2e-4 per s), so a switch moves the prefilter
+at once and the feedback slowly, exactly as a real estimate does.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+from pathlib import Path
+
+# benchmarks/synthesis.py would shadow the synthesis package when run as a script: repo root first.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+if sys.path[1:2] == [str(Path(__file__).resolve().parent)]:
+    del sys.path[1]
+
+import numpy as np  # noqa: E402
+
+from contracts.parallel import run_ordered  # noqa: E402
+from hil_sim.closed_loop import simulate  # noqa: E402
+from hil_sim.cohort import cohort_seeds  # noqa: E402
+from hil_sim.scenario import load_scenario  # noqa: E402
+from hil_sim.world import World  # noqa: E402
+from runtime.controller_loader import load_controller  # noqa: E402
+from runtime.estimation.schedule import EstimatedSchedule, OracleSchedule, Schedule  # noqa: E402
+
+TS = 0.1  # s, the loop's sample period
+MOVED_MMHG = 0.5  # MAP change from the first sample that counts as "the MAP has moved"
+
+
+class PartialTruth:
+    """The estimated source with some of its values replaced by the device's truth.
+
+    Parameters
+    ----------
+    truth_fields
+        Which of ``"K"``, ``"T_s"``, ``"tau_s"`` come from the device.
+    from_s
+        From which time (s) on; before, the start-up schedule (the prior's cautious corner) is
+        used for every field, whatever the estimator reports.
+    """
+
+    source = "estimated"
+
+    def __init__(self, truth_fields: tuple[str, ...], from_s: float) -> None:
+        self._est = EstimatedSchedule(sample_period_s=TS)
+        self._fields = truth_fields
+        self._from_tick = round(from_s / TS)
+        self._tick = 0
+        K, T = self._est.cautious(self._est.estimator.estimate)
+        self._startup = (K, T, self._est.estimator.estimate.tau_s)
+        self.learned_s = float("nan")
+
+    def update(
+        self,
+        map_mmhg: float,
+        quality: int,
+        delivered_ml_h: float,
+        device_K: float,
+        device_T_s: float,
+        device_tau_s: float,
+        device_valid: bool,
+    ) -> Schedule:
+        """The estimator's schedule, with the chosen fields from the device from ``from_s`` on."""
+        args = (map_mmhg, quality, delivered_ml_h, device_K, device_T_s, device_tau_s, device_valid)
+        sched = self._est.update(*args)
+        if not sched.from_prior and self.learned_s != self.learned_s:
+            self.learned_s = self._tick * TS
+        self._tick += 1
+        if not self._fields:
+            return sched
+        if self._tick <= self._from_tick:
+            return Schedule(*self._startup, "estimated", True, True, True, "learning")
+        truth = {"K": device_K, "T_s": device_T_s, "tau_s": device_tau_s}
+        K, T, tau = (
+            truth[f] if f in self._fields else getattr(sched, f) for f in ("K", "T_s", "tau_s")
+        )
+        return Schedule(K, T, tau, "estimated", True, True, False, "ok")
+
+
+def _sources(switch_s: list[float]) -> list[tuple[str, tuple[str, ...], float]]:
+    rows = [("estimated", (), 0.0), ("K from 0 s", ("K",), 0.0)]
+    rows += [(f"truth from {s:g} s", ("K", "T_s", "tau_s"), s) for s in switch_s]
+    return rows
+
+
+def _patient(task: tuple[str, int, list[float]]) -> dict[str, float] | None:
+    """IAE ratios (source / oracle) of one patient, the MAP's first move and the learn time (s)."""
+    scenario_name, seed, switch_s = task
+    scenario = load_scenario(scenario_name)
+
+    def iae(schedule: OracleSchedule | PartialTruth) -> tuple[float, np.ndarray]:
+        world = World(scenario, seed, TS)
+        traj = simulate(world, load_controller("lpv", TS), schedule=schedule)
+        err = np.abs(traj.map_true_mmhg - traj.target_mmhg)
+        return float(np.sum(err) * TS), traj.map_true_mmhg
+
+    if not World(scenario, seed, TS).reachable():
+        return None
+    oracle, map_mmhg = iae(OracleSchedule())
+    moved = np.flatnonzero(np.abs(map_mmhg - map_mmhg[0]) > MOVED_MMHG)
+    out = {"moved_s": float(moved[0]) * TS if moved.size else float("nan")}
+    for name, fields, from_s in _sources(switch_s):
+        src = PartialTruth(fields, from_s)
+        out[name] = iae(src)[0] / oracle
+        if name == "estimated":
+            out["learned_s"] = src.learned_s
+    return out
+
+
+def main() -> None:
+    """Parse the arguments, run the cohort under every source, print the ratios."""
+    ap = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    ap.add_argument("--patients", type=int, default=40, help="cohort size, >= 1")
+    ap.add_argument("--seed", type=int, default=11, help="cohort seed")
+    ap.add_argument("--scenario", default="paper-tracking", help="scenario name or TOML path")
+    ap.add_argument(
+        "--switch-s", default="30,40,50,60", help="times (s, >= 0) at which the truth takes over"
+    )
+    ap.add_argument("--jobs", type=int, default=2, help="local worker processes, >= 1")
+    args = ap.parse_args()
+    if args.patients < 1 or args.jobs < 1:
+        ap.error(f"--patients={args.patients} and --jobs={args.jobs} must be >= 1")
+    try:
+        switch_s = [float(v) for v in args.switch_s.split(",")]
+    except ValueError:
+        ap.error(f"--switch-s={args.switch_s!r}: comma-separated times in s")
+    if any(not (s >= 0.0) for s in switch_s):
+        ap.error(f"--switch-s={args.switch_s!r}: every time must be >= 0 s")
+    load_scenario(args.scenario)  # a bad name fails here, with the scenario module's message
+    tasks = [(args.scenario, s, switch_s) for s in cohort_seeds(args.seed, args.patients)]
+
+    def progress(done: int, total: int) -> None:
+        print(f"\r{done}/{total} patients", end="", file=sys.stderr, flush=True)
+
+    rows = [r for r in run_ordered(_patient, tasks, jobs=args.jobs, progress=progress) if r]
+    print(file=sys.stderr)
+    print(
+        f"{args.scenario}, cohort seed {args.seed}: {len(rows)} of {args.patients} patients "
+        f"reachable; MAP first moved (> {MOVED_MMHG} mmHg) at median "
+        f"{statistics.median(r['moved_s'] for r in rows):.1f} s; the estimator learned at median "
+        f"{statistics.median(r['learned_s'] for r in rows):.1f} s"
+    )
+    print(f"{'source':20s} {'IAE / oracle':>13s} {'p90':>6s}")
+    for name, _, _ in _sources(switch_s):
+        ratios = [r[name] for r in rows]
+        print(f"{name:20s} {statistics.median(ratios):13.3f} {np.percentile(ratios, 90):6.2f}")
+
+
+if __name__ == "__main__":
+    main()
