@@ -2,16 +2,21 @@
 
 Builds the scheduled Smith predictor (:class:`synthesis.smith_lpv.SmithLPV`) at every point of a
 grid over the shipped design's box, closes it with the shipped plant model and weights (so γ
-compares with the shipped design's), and solves :func:`synthesis.analysis_wirtinger.analyse_wirtinger`
-with all rate vertices or one LMI per point. Prints the certificate verdict, γ, the smallest
-re-checked margin, wall and CPU time and peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
+compares with the shipped design's, :func:`synthesis.smith_design.smith_loops`), and runs the
+design's own certificate, :func:`synthesis.smith_design.certify_smith` (the Wirtinger analysis LMI
+conditioned by the nominal point's frozen certificate), with all rate vertices or one LMI per
+point. Prints the certificate verdict, γ, the smallest re-checked margin, wall and CPU time and
+peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
 
     python benchmarks/smith_certificate.py --loop-gain 2 --grid 3,3,3 [--p-dependence quadratic]
     python benchmarks/smith_certificate.py --loop-gain 2 --grid 5,5,5 --working-set 27 --gamma-cap 15
 
 ``--working-set K`` imposes the LMI at K spread points and re-checks every point and rate vertex
 (the verdict covers the whole grid either way); ``--gamma-cap G`` solves the feasibility form (γ ≤ G,
-largest common margin), whose solution is off the boundary of the points left out.
+largest common margin), whose solution is off the boundary of the points left out; it uses the
+Clarabel settings of ``certify_smith``'s feasibility solve (``FEASIBILITY_SOLVER_OPTIONS``: looser
+gap tolerances, no iterative refinement), so its margin t and timings can differ slightly from
+capped figures measured before that (the verdict is the floating-point re-check either way).
 ``--rate-form bound`` is the cheap form (one LMI per point with rate slacks; ``--epsilon 5e-5``
 keeps its minimum-γ solution inside the vertex LMIs, so no back-off solve is needed);
 ``--coupling per_point`` gives each point its own copy of P, ``--p-params K,tau`` lets P depend on
@@ -57,15 +62,10 @@ def main() -> None:
     here = os.path.dirname(os.path.abspath(__file__))
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != here]
     sys.modules.pop("synthesis", None)
-    from synthesis.analysis_wirtinger import analyse_wirtinger
     from synthesis.artifact import default_artifact_path, load_artifact
-    from synthesis.closed_loop import close_loop
-    from synthesis.config import NOMINAL_RHO
-    from synthesis.k_scaling import KScaling, k_scaled_system
-    from synthesis.model import I_U, plant_at
     from synthesis.reconstruct import scaling_of
+    from synthesis.smith_design import certify_smith, nominal_centre, smith_loops
     from synthesis.smith_lpv import SmithLPV
-    from synthesis.state_transform import conditioning_transform
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loop-gain", type=float, default=2.0, help="K*Kc = T/lambda (default 2)")
@@ -137,43 +137,26 @@ def main() -> None:
         ap.error(f"--grid={args.grid!r}: need three integers >= 2")
 
     art = load_artifact(default_artifact_path())
-    cfg, box = art.model_config, np.asarray(art.box, dtype=float)
-    sc = scaling_of(art)
+    model, box = art.model_config, np.asarray(art.box, dtype=float)
     axes = [np.linspace(box[i, 0], box[i, 1], counts[i]) for i in range(3)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    ctrl = SmithLPV(args.loop_gain, cfg.omega, cfg.lambda_)
+    law = SmithLPV(args.loop_gain, model.omega, model.lambda_)
     t0, cpu0 = time.perf_counter(), time.process_time()
-    systems = [close_loop(plant_at(p, cfg), ctrl.at(p), float(p[2])) for p in pts]
-    # conditioning: whiten by the nominal point's own frozen certificate, then balance
-    nominal = np.asarray(NOMINAL_RHO, dtype=float)
-    centre = close_loop(plant_at(nominal, cfg), ctrl.at(nominal), float(nominal[2]))
-    k_scaling = None
-    if args.coordinates == "k_scaled":  # the ml/h states: the plant's u and the model's u-hat
-        states = (I_U, plant_at(nominal, cfg).A.shape[0])
-        k_scaling = KScaling(pts[:, 0], float(art.rate_bounds[0]), states)
-        centre = k_scaled_system(centre, float(nominal[0]), states)
-    zero = np.zeros(3)
-    c0 = analyse_wirtinger(
-        [centre], sc.to_hat(nominal)[None], zero, zero, float(nominal[2]), p_dependence="constant"
-    )
-    tx = conditioning_transform(c0.p0_phys, centre, sc.time_s) if c0.p0_phys is not None else None
-    res = analyse_wirtinger(
-        systems,
-        sc.to_hat(pts),
-        np.asarray(art.rate_bounds, dtype=float) / sc.rho_half,
-        np.array([0.0, 0.0, sc.rho_half[2]]),
-        float(box[2, 1]),
-        p_dependence=args.p_dependence,
-        time_scale_s=sc.time_s,
-        state_transform=tx,
-        working_set=args.working_set,
+    res = certify_smith(
+        smith_loops(law, model, pts),
+        pts,
+        nominal_centre(law, model),
+        model,
+        scaling_of(art),
         gamma_cap=args.gamma_cap,
         progress=_progress(t0) if args.progress else None,
+        p_dependence=args.p_dependence,
         rate_form=args.rate_form,
+        epsilon=args.epsilon,
+        working_set=args.working_set,
         coupling=args.coupling,
         p_params=p_params,
-        epsilon=args.epsilon,
-        k_scaling=k_scaling,
+        coordinates=args.coordinates,
     )
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB on Linux

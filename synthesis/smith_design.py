@@ -13,14 +13,16 @@ design grid, minimum γ at the strictness :data:`DESIGN_EPSILON`, one solve; a b
 if that optimum fails the re-check) and the verification (``pressor verify``, a denser grid, γ
 capped, one solve) both call it.
 
-Conditioning, as in ``benchmarks/smith_certificate.py``: the K-scaled state is whitened by the
-nominal point's own frozen certificate and balanced (a constant congruence: feasibility and γ unchanged);
-time is scaled by the design's ``solver.time_scale_s`` (the only [solver] key this family uses).
+Conditioning: the K-scaled state is whitened by the nominal point's own frozen certificate and
+balanced (a constant congruence: feasibility and γ unchanged); time is scaled by the design's
+``solver.time_scale_s`` (the only [solver] key this family uses). ``benchmarks/smith_certificate.py``
+calls :func:`certify_smith` too, with the options the design leaves at their defaults (working set,
+coupling, parameters of P, plain coordinates).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -35,8 +37,16 @@ from synthesis.model import I_U, dims, plant_at
 from synthesis.scaling import Scaling
 from synthesis.smith_lpv import SmithLPV
 from synthesis.state_transform import conditioning_transform
+from synthesis.wirtinger_conic import COUPLINGS, RATE_FORMS
 
-__all__ = ["SmithDesignError", "certify_smith", "design_smith"]
+__all__ = [
+    "COORDINATES",
+    "SmithDesignError",
+    "certify_smith",
+    "design_smith",
+    "nominal_centre",
+    "smith_loops",
+]
 
 Progress = Callable[[str], None]
 #: Lyapunov matrix P(ρ) of the certificate (the artifact stores its 7 basis terms)
@@ -56,6 +66,11 @@ FEASIBILITY_SOLVER_OPTIONS: dict[str, Any] = {
 }
 
 
+#: coordinates of the functional: "k_scaled" (u and û times K, what ``pressor`` runs) or "plain"
+#: (the loop's own states; certifies loop gains up to ~2.6 only)
+COORDINATES = ("k_scaled", "plain")
+
+
 class SmithDesignError(RuntimeError):
     """The Wirtinger analysis did not certify the Smith law on the design grid."""
 
@@ -63,6 +78,12 @@ class SmithDesignError(RuntimeError):
 def smith_loops(law: SmithLPV, model: ModelConfig, points: np.ndarray) -> list[DelaySystem]:
     """The frozen closed loops plant + Smith law at each ρ (rows of ``points``, physical units)."""
     return [close_loop(plant_at(p, model), law.at(p), float(p[2])) for p in points]
+
+
+def nominal_centre(law: SmithLPV, model: ModelConfig) -> tuple[DelaySystem, np.ndarray]:
+    """The ``centre`` of :func:`certify_smith`: the loop at the nominal ρ (clipped to the box), ρ."""
+    nominal = np.clip(np.asarray(NOMINAL_RHO, dtype=float), model.box[:, 0], model.box[:, 1])
+    return smith_loops(law, model, nominal[None, :])[0], nominal
 
 
 def certify_smith(
@@ -76,6 +97,10 @@ def certify_smith(
     p_dependence: str = P_DEPENDENCE,
     rate_form: str = "bound",
     epsilon: float = 1e-6,
+    working_set: int | None = None,
+    coupling: str = "dense",
+    p_params: Sequence[int] | None = None,
+    coordinates: str = "k_scaled",
 ) -> AnalysisResult:
     """The Wirtinger analysis (rate-bound form) of the frozen Smith loops ``systems`` at ``points``.
 
@@ -103,14 +128,41 @@ def certify_smith(
         rate vertex as its own LMI: the straightforward form ``benchmarks/synthesis.py`` compares).
     epsilon
         Strictness of the solve (scaled units; :data:`DESIGN_EPSILON` for the design).
+    working_set
+        None (default: the LMI imposed at every point) or k >= 1: imposed at k spread points, every
+        point and rate vertex re-checked (the verdict covers all of ``points`` either way).
+    coupling
+        "dense" (default: the LMIs written in the P basis terms) or "per_point" (a copy of P(ρ_k)
+        per imposed point, tied by equalities: the same feasible set, a sparser solve).
+    p_params
+        Indices into (K, T, τ) of the parameters P depends on (default None: all three).
+    coordinates
+        "k_scaled" (default: the ml/h states u and û times K, :mod:`synthesis.k_scaling`) or
+        "plain" (the functional in the loops' own states, no K-scaling).
+
+    Raises
+    ------
+    ValueError
+        ``coordinates``, ``coupling`` or ``rate_form`` outside its allowed set (before any solve);
+        ``working_set`` below 1 or ``p_params`` not distinct indices in 0..2 (from
+        :func:`synthesis.analysis_wirtinger.analyse_wirtinger`).
     """
+    for name, value, allowed in (
+        ("coordinates", coordinates, COORDINATES),
+        ("coupling", coupling, COUPLINGS),
+        ("rate_form", rate_form, RATE_FORMS),
+    ):
+        if value not in allowed:
+            raise ValueError(f"certify_smith: {name}={value!r} must be one of {allowed}")
     pts = np.atleast_2d(np.asarray(points, dtype=float))
     box = np.asarray(model.box, dtype=float)
     c_sys, c_rho = centre
-    # the ml/h states: the plant's infusion u and the controller's model input û (its first state)
-    scaled = (I_U, plant_at(c_rho, model).A.shape[0])
-    k_scaling = KScaling(pts[:, 0], float(model.rate_bounds[0]), scaled)
-    c_sys = k_scaled_system(c_sys, float(c_rho[0]), scaled)
+    k_scaling = None
+    if coordinates == "k_scaled":
+        # the ml/h states: the plant's infusion u and the controller's model input û (its first state)
+        scaled = (I_U, plant_at(c_rho, model).A.shape[0])
+        k_scaling = KScaling(pts[:, 0], float(model.rate_bounds[0]), scaled)
+        c_sys = k_scaled_system(c_sys, float(c_rho[0]), scaled)
     zero = np.zeros(3)
     c0 = analyse_wirtinger(
         [c_sys], scaling.to_hat(c_rho)[None], zero, zero, float(c_rho[2]), "constant"
@@ -137,8 +189,11 @@ def certify_smith(
         epsilon=epsilon,
         gamma_cap=gamma_cap,
         solver_options=None if gamma_cap is None else FEASIBILITY_SOLVER_OPTIONS,
+        working_set=working_set,
         progress=progress,
         rate_form=rate_form,
+        coupling=coupling,
+        p_params=p_params,
         k_scaling=k_scaling,
     )
 
@@ -170,12 +225,10 @@ def design_smith(
         f"smith loop gain {family.loop_gain:g}: Wirtinger analysis on the design grid "
         f"{cfg.grid_points} ({flat.shape[0]} points), P {P_DEPENDENCE}, rate-bound form"
     )
-    nominal = np.clip(np.asarray(NOMINAL_RHO, dtype=float), model.box[:, 0], model.box[:, 1])
-    centre = (smith_loops(law, model, nominal[None, :])[0], nominal)
     res = certify_smith(
         smith_loops(law, model, flat),
         flat,
-        centre,
+        nominal_centre(law, model),
         model,
         scaling,
         progress=progress,
