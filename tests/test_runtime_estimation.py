@@ -198,6 +198,8 @@ def test_per_tick_work_allocates_nothing_that_grows():
         ({"prior": (0.5, -1.0, 40.0)}, "prior_T_s"),
         ({"K_plausible": (0.0, 1.0)}, "K_plausible"),
         ({"box": ((0.25, 1.0), (100.0, 200.0))}, "box"),
+        ({"T_drift_per_ml_h": -1e-4}, "T_drift_per_ml_h"),
+        ({"T_drift_per_ml_h": math.inf}, "T_drift_per_ml_h"),
     ],
 )
 def test_constructor_rejects_bad_parameters_with_a_clear_error(kwargs, match):
@@ -231,3 +233,42 @@ def test_tau_prior_decides_only_where_the_data_carry_no_delay_information():
     b = run(DelayBankEstimator(TS, tau_prior_s=high), y, ramp)[-1]
     assert not a.from_prior and not b.from_prior
     assert b.tau_s - a.tau_s >= 5.0 and b.tau_lo_s - a.tau_lo_s >= 5.0
+
+
+def rising_lag_map(
+    u: np.ndarray, K: float, b_T: float, tau_s: float, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Measured MAP (mmHg) and true T (s) per tick of K·e^(−τs)/(T s + 1) whose lag rises with the
+    infused volume, T = 100 s + b_T·∫u dt (u ml/h, t s), as in the literature patient model."""
+    rng = np.random.default_rng([seed, 3])
+    nd = round(tau_s / TS)
+    x = infused = 0.0
+    y, T = np.empty(u.size), np.empty(u.size)
+    for k in range(u.size):
+        T[k] = 100.0 + b_T * infused
+        y[k] = 55.0 + x
+        x += (1.0 - math.exp(-TS / T[k])) * (K * (u[k - nd] if k >= nd else 0.0) - x)
+        infused += u[k] * TS
+    return y + 0.1 * rng.standard_normal(u.size), T
+
+
+def _second_half_T_error(estimates: list, T: np.ndarray) -> float:
+    half = len(estimates) // 2
+    return statistics.median(abs(e.T_s - T[k]) / T[k] for k, e in enumerate(estimates) if k >= half)
+
+
+@pytest.mark.parametrize("b_T", [1e-4, 3e-4])  # the ends of the literature model's range
+def test_T_drift_prior_follows_a_lag_that_rises_with_the_infused_volume(b_T):
+    # 10 min of steps to learn from, then 50 min at a steady 40 ml/h: no information on T
+    u = np.concatenate([staircase(5, 600.0), np.full(round(3000.0 / TS), 40.0)])
+    y, T = rising_lag_map(u, 0.5, b_T, 20.0, 5)
+    assert T[-1] - T[0] > 0.14 * T[0]  # the lag rose 14-43 % over the run
+    assert _second_half_T_error(run(DelayBankEstimator(TS), y, u), T) < 0.08
+
+
+def test_without_the_T_drift_prior_a_settled_loop_keeps_the_start_up_lag():
+    u = np.concatenate([staircase(5, 600.0), np.full(round(3000.0 / TS), 40.0)])
+    y, T = rising_lag_map(u, 0.5, 2e-4, 20.0, 5)
+    on = _second_half_T_error(run(DelayBankEstimator(TS), y, u), T)
+    off = _second_half_T_error(run(DelayBankEstimator(TS, T_drift_per_ml_h=0.0), y, u), T)
+    assert off > 0.15 and on < off / 5.0
