@@ -12,15 +12,11 @@ with the output-error gradient ψ = (∂x̂/∂a, ∂x̂/∂b, 1))::
 
 ``y_ref`` is the first valid window (the MAP before the drug acts). Per window the random walks
 have standard deviations ``q_a``, ``q_b`` and ``q_c`` (mmHg: a haemorrhage of 10 mmHg over 5 min is
-≈ 0.07 mmHg per window; 0.03–0.05 tracked K better in paper-tracking, 2–6 %, but then the
-haemorrhage entered K: 21 % on paper-disturbance, cohort seed 11); an innovation beyond ``jump_sigma``
+≈ 0.07 mmHg per window); an innovation beyond ``jump_sigma``
 standard deviations is taken as a baseline jump (the offset's variance is raised by its square, so
 c absorbs it rather than a, b).
 Each model keeps an exponentially forgotten negative log-likelihood of its innovations (memory
-``memory_s``, default 200 s: with 600 s the start-up's evidence for a long delay outlived the
-transient by 20 minutes: median τ error 11.0 s on paper-disturbance, 30 patients of cohort seed 11,
-T-drift prior on; 200 s gave 3.4 s, K 14.7 % instead of 13.5 %, T and IAE unchanged within noise;
-120 s moved K more); the best model (log-likelihood plus the τ prior's −2 log-density, below) gives
+``memory_s``, default 200 s); the best model (log-likelihood plus the τ prior's −2 log-density, below) gives
 K = b/(1 − a) and T = −Δ/ln a, and τ is refined between bank members by a parabola through those
 sums, minus half a window (the averaged MAP lags the window's end by Δ/2; measured bias on
 synthetic data). Models that fall more than ``reseed_nll`` behind the best, or fail the health
@@ -39,12 +35,10 @@ estimate returns to the prior's mode. So in a settled loop τ̂ is the prior's, 
 The T-drift prior (``T_drift_per_ml_h``, default :data:`T_DRIFT_PER_ML_H`): in the literature
 patient model this project simulates (the paper's Table 1, ``hil_sim/patient.py``) the lag rises
 with the infused volume, T = T_min + b_T·∫i dt, b_T in [1e-4, 3e-4] s per (ml/h)·s. A settled loop
-carries no information on T, so without this prior the estimate kept the start-up's ≈ 100 s while
-the patient's T rose 10–30 s an hour (median error 23 % and 28 % over the second half of
-paper-tracking and paper-disturbance, cohort seed 11); with it, ≈ 10 % on both. Before each fitted
-window every model's T moves by b_T·ū·Δ at the same K (ū the window's delivered rate), and the
-data correct it whenever the rate moves. 0 disables it, for a patient whose lag is known not to
-follow this law.
+carries no information on T (without this prior the estimate kept the start-up's ≈ 100 s while
+the patient's T rose 10–30 s an hour). Before each fitted window every model's T moves by b_T·ū·Δ
+at the same K (ū the window's delivered rate), and the data correct it whenever the rate moves.
+0 disables it, for a patient whose lag is known not to follow this law.
 
 Why this method (evidence: ``benchmarks/estimator.py`` and ``tests/test_runtime_estimation.py``):
 
@@ -77,15 +71,8 @@ step's first minute does not lock the estimate out for ``min_age_s``). Bad sampl
 kept out by :class:`runtime.estimation.gate.SampleGate`; a window with fewer than half its samples
 accepted is not fitted (the models still simulate through it).
 
-Known limits (closed loop, LPV on this schedule, README "Scheduling sources" for the figures and
-commands): K is tracked (the MAP's level against the pre-drug baseline); T and τ are observable
-only while the rate moves. Once the loop has settled the simulated patient (``hil_sim.patient``)
-keeps moving while the data say nothing new: T grows with the infused volume, which the T-drift
-prior, not the data, then follows; τ, raised for minutes by every rate change, decays to
-≈ 10 + i/12 s, which the τ prior, not the data, then reports. On a patient whose lag and delay
-follow other laws those two priors are what is wrong. With the rate excited
-throughout (open-loop staircase, ``benchmarks/estimator.py``) the estimator reaches ≈ 9 %, 12 %,
-6.4 s.
+The tuning evidence (q_c, memory, drift prior) and the known limits (what a settled loop cannot
+tell): ``docs/ESTIMATION.md``.
 """
 
 from __future__ import annotations
