@@ -31,6 +31,7 @@ at once and the feedback slowly, exactly as a real estimate does.
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import sys
 from pathlib import Path
@@ -60,7 +61,8 @@ class PartialTruth:
     Parameters
     ----------
     truth_fields
-        Which of ``"K"``, ``"T_s"``, ``"tau_s"`` come from the device.
+        Which of ``"K"``, ``"T_s"``, ``"tau_s"`` come from the device (none: the shipped source,
+        unchanged).
     from_s
         From which time (s) on; before, the start-up schedule (the prior's cautious corner) is
         used for every field, whatever the estimator reports.
@@ -90,7 +92,7 @@ class PartialTruth:
         """The estimator's schedule, with the chosen fields from the device from ``from_s`` on."""
         args = (map_mmhg, quality, delivered_ml_h, device_K, device_T_s, device_tau_s, device_valid)
         sched = self._est.update(*args)
-        if not sched.from_prior and self.learned_s != self.learned_s:
+        if not sched.from_prior and math.isnan(self.learned_s):
             self.learned_s = self._tick * TS
         self._tick += 1
         if not self._fields:
