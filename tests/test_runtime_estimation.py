@@ -272,3 +272,14 @@ def test_without_the_T_drift_prior_a_settled_loop_keeps_the_start_up_lag():
     on = _second_half_T_error(run(DelayBankEstimator(TS), y, u), T)
     off = _second_half_T_error(run(DelayBankEstimator(TS, T_drift_per_ml_h=0.0), y, u), T)
     assert off > 0.15 and on < off / 5.0
+
+
+def test_a_bedside_monitor_1_hz_whole_mmhg_1_mmhg_noise_still_gives_k_and_t():
+    # what a real monitor sends: a new integer MAP once a second, held in between, noise 1 mmHg;
+    # the estimator reads the window means' noise from the data instead of trusting its floor
+    u = staircase(21, 3600.0)
+    y = fopdt_map(u, np.full(u.size, 0.5), 150.0, 25.0, 21, noise_mmhg=1.0)
+    held = np.round(y[(np.arange(y.size) // 10) * 10])
+    estimates = run(DelayBankEstimator(TS), held, u)
+    K_err, T_err, tau_err = second_half_errors(estimates, np.full(u.size, 0.5), 150.0, 25.0)
+    assert K_err < 0.15 and T_err < 0.25 and tau_err < 5.0, (K_err, T_err, tau_err)

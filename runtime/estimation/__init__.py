@@ -5,6 +5,8 @@ hot path, no solver, no simulator). Modules:
 
 :mod:`runtime.estimation.gate`
     Which MAP samples may enter the estimator (NaN, quality bits, range, spikes, flatlines).
+:mod:`runtime.estimation.noise`
+    The monitor noise of a window mean, read from the data.
 :mod:`runtime.estimation.estimator`
     The delay-bank Kalman estimator (method, prior, health check: see its docstring).
 :mod:`runtime.estimation.estimate`

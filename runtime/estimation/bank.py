@@ -116,7 +116,7 @@ class DelayModel:
         self.age = other.age
         self.nll = nll
 
-    def step(self, u_ml_h: float, y_dev_mmhg: float, dT_s: float = 0.0) -> bool:
+    def step(self, u_ml_h: float, y_dev_mmhg: float, dT_s: float = 0.0, r2: float = 0.0) -> bool:
         """Simulate one window with the delayed rate, then fit the window's ȳ − y_ref (mmHg).
 
         ``dT_s`` (s, >= 0) is the lag's expected rise over the window (the T-drift prior): before
@@ -147,7 +147,7 @@ class DelayModel:
         g0 = p00 * pa + p01 * pb + p02
         g1 = p01 * pa + p11 * pb + p12
         g2 = p02 * pa + p12 * pb + p22
-        s = pa * g0 + pb * g1 + g2 + st.r2
+        s = pa * g0 + pb * g1 + g2 + (r2 if r2 > 0.0 else st.r2)
         nu2 = e * e / s
         self.nll = st.forget * self.nll + min(nu2, 25.0) + math.log(s)
         if nu2 > st.jump2:  # unexplained jump: a baseline shift, let the offset take it

@@ -12,8 +12,9 @@ with the output-error gradient ψ = (∂x̂/∂a, ∂x̂/∂b, 1))::
 
 ``y_ref`` is the first valid window (the MAP before the drug acts). Per window the random walks
 have standard deviations ``q_a``, ``q_b`` and ``q_c`` (mmHg: a haemorrhage of 10 mmHg over 5 min is
-≈ 0.07 mmHg per window); an innovation beyond ``jump_sigma``
-standard deviations is taken as a baseline jump (the offset's variance is raised by its square, so
+≈ 0.07 mmHg per window); the output error's variance is ``r_mmhg``² or, when larger, the monitor
+noise the window means show (:class:`runtime.estimation.noise.WindowNoise`). An innovation beyond
+``jump_sigma`` standard deviations is taken as a baseline jump (the offset's variance is raised by its square, so
 c absorbs it rather than a, b).
 Each model keeps an exponentially forgotten negative log-likelihood of its innovations (memory
 ``memory_s``, default 200 s); the best model (log-likelihood plus the τ prior's −2 log-density, below) gives
@@ -24,21 +25,16 @@ check, restart from the best healthy model's θ, covariance and simulation (only
 differs, so the comparison of delays stays fair). Uncertainty: K and T standard deviations from the
 filter covariance (first order); τ an interval holding ~90 % of the bank's posterior weight.
 
-The τ prior (``tau_prior_s``, Gaussian, default mode 15 s, std 10 s: the delay of a held infusion
-in the literature patient model this project simulates, 10–15 s at steady rates within its
-[10, 35] s range; ``hil_sim/patient.py``) weighs the delays where the data do not: after a rate
-change the likelihood differences between delays are hundreds of units and the prior (at most 9)
-does not matter; once the loop has settled the forgetting shrinks those differences and the
-estimate returns to the prior's mode. So in a settled loop τ̂ is the prior's, not a measurement
-(the data carry no delay information there; see "Known limits").
-
-The T-drift prior (``T_drift_per_ml_h``, default :data:`T_DRIFT_PER_ML_H`): in the literature
-patient model this project simulates (the paper's Table 1, ``hil_sim/patient.py``) the lag rises
-with the infused volume, T = T_min + b_T·∫i dt, b_T in [1e-4, 3e-4] s per (ml/h)·s. A settled loop
-carries no information on T (without this prior the estimate kept the start-up's ≈ 100 s while
-the patient's T rose 10–30 s an hour). Before each fitted window every model's T moves by b_T·ū·Δ
-at the same K (ū the window's delivered rate), and the data correct it whenever the rate moves.
-0 disables it, for a patient whose lag is known not to follow this law.
+Two priors from the literature patient model this project simulates (the paper's Table 1,
+``hil_sim/patient.py``) stand in where a settled loop carries no information. The τ prior
+(``tau_prior_s``, Gaussian, mode 15 s, std 10 s: a held infusion's delay) weighs the delays where
+the data do not: after a rate change the likelihood differences between delays are hundreds of
+units and the prior (at most 9) does not matter; once the loop has settled the forgetting shrinks
+them and τ̂ returns to the prior's mode. The T-drift prior (``T_drift_per_ml_h``): the lag rises
+with the infused volume, T = T_min + b_T·∫i dt, b_T in [1e-4, 3e-4] s per (ml/h)·s; before each
+fitted window every model's T moves by b_T·ū·Δ at the same K (ū the window's delivered rate),
+and the data correct it whenever the rate moves (without it T̂ kept the start-up's ≈ 100 s while
+T rose 10–30 s an hour). 0 disables it, for a patient whose lag does not follow this law.
 
 Why this method (evidence: ``benchmarks/estimator.py`` and ``tests/test_runtime_estimation.py``):
 
@@ -83,6 +79,7 @@ from baselines.smith import INITIAL_SCHEDULE
 from runtime.estimation.bank import DelayModel, FilterSettings
 from runtime.estimation.estimate import Estimate
 from runtime.estimation.gate import SampleGate
+from runtime.estimation.noise import WindowNoise
 
 #: the prior: the nominal patient the design and the PI were tuned for (K mmHg/(ml/h), T s, τ s)
 NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
@@ -122,7 +119,8 @@ class DelayBankEstimator:
     q_a, q_b, q_c
         Random-walk standard deviations per window of a (1), b (mmHg/(ml/h)) and c (mmHg), > 0.
     r_mmhg
-        Standard deviation of a window's output error (mmHg), > 0.
+        Floor of the standard deviation of a window's output error (mmHg), > 0; the filters use
+        the larger monitor noise the window means show (module docstring).
     jump_sigma
         Innovation (in standard deviations) above which it is taken as a baseline jump, > 0.
     baseline_std_mmhg
@@ -246,6 +244,8 @@ class DelayBankEstimator:
         self._y_dev = math.nan  # newest window's ȳ − y_ref (mmHg)
         self._drift = T_drift_per_ml_h * self.window_s  # s of T per ml/h of a window's rate
         self._dT = 0.0  # the newest window's expected rise of T (s)
+        self._noise = WindowNoise(r_mmhg, self.window_s)
+        self._r2 = self._noise.variance  # the filters' output-error variance (mmHg²)
         self._y_ref = math.nan
         self._next = n  # next model to update (n: none pending)
         self._w = [0.0] * n
@@ -285,7 +285,8 @@ class DelayBankEstimator:
             ring, j, y = self._uring, self._j, self._y_dev
             for m in range(self._next, stop):
                 model = bank[m]
-                self.updates += model.step(ring[(j - model.delay_windows) % len(ring)], y, self._dT)
+                u_d = ring[(j - model.delay_windows) % len(ring)]
+                self.updates += model.step(u_d, y, self._dT, self._r2)
             self._next = stop
             if stop == n:
                 self.estimate = self._select()
@@ -300,6 +301,7 @@ class DelayBankEstimator:
         self._j += 1
         self._uring[self._j % len(self._uring)] = u
         self._dT = self._drift * u if u == u else 0.0
+        self._r2 = self._noise.update(y)
         if self._y_ref != self._y_ref and y == y:
             self._y_ref = y
         self._y_dev = y - self._y_ref
