@@ -32,8 +32,6 @@ class FilterSettings:
         Standard deviation of the offset c at a (re)start (mmHg).
     q_a2, q_b2, q_c2
         Random-walk variances of a (1), b ((mmHg/(ml/h))²), c (mmHg²).
-    r2
-        Variance of a window's output error (mmHg²).
     jump2
         Squared normalised innovation above which the offset takes the innovation as a jump.
     forget
@@ -51,7 +49,6 @@ class FilterSettings:
     q_a2: float
     q_b2: float
     q_c2: float
-    r2: float
     jump2: float
     forget: float
     a_lo: float
@@ -116,11 +113,12 @@ class DelayModel:
         self.age = other.age
         self.nll = nll
 
-    def step(self, u_ml_h: float, y_dev_mmhg: float, dT_s: float = 0.0, r2: float = 0.0) -> bool:
+    def step(self, u_ml_h: float, y_dev_mmhg: float, dT_s: float, r2: float) -> bool:
         """Simulate one window with the delayed rate, then fit the window's ȳ − y_ref (mmHg).
 
         ``dT_s`` (s, >= 0) is the lag's expected rise over the window (the T-drift prior): before
-        a fit, θ moves to T + ``dT_s`` at the same K. A NaN rate holds the last one; a NaN
+        a fit, θ moves to T + ``dT_s`` at the same K. ``r2`` (mmHg², > 0) is the variance of the
+        window's output error. A NaN rate holds the last one; a NaN
         ``y_dev_mmhg`` only simulates (θ does not move). Returns whether the filter was updated; a
         filter whose covariance loses positivity restarts from the prior.
         """
@@ -147,7 +145,7 @@ class DelayModel:
         g0 = p00 * pa + p01 * pb + p02
         g1 = p01 * pa + p11 * pb + p12
         g2 = p02 * pa + p12 * pb + p22
-        s = pa * g0 + pb * g1 + g2 + (r2 if r2 > 0.0 else st.r2)
+        s = pa * g0 + pb * g1 + g2 + r2
         nu2 = e * e / s
         self.nll = st.forget * self.nll + min(nu2, 25.0) + math.log(s)
         if nu2 > st.jump2:  # unexplained jump: a baseline shift, let the offset take it

@@ -216,7 +216,6 @@ class DelayBankEstimator:
             q_a2=q_a * q_a,
             q_b2=q_b * q_b,
             q_c2=q_c * q_c,
-            r2=r_mmhg * r_mmhg,
             jump2=jump_sigma * jump_sigma,
             forget=math.exp(-window_s / memory_s),
             # a kept within T in [T_lo / 2, 2 T_hi]: beyond the plausible range, so the check sees it
@@ -244,8 +243,7 @@ class DelayBankEstimator:
         self._y_dev = math.nan  # newest window's ȳ − y_ref (mmHg)
         self._drift = T_drift_per_ml_h * self.window_s  # s of T per ml/h of a window's rate
         self._dT = 0.0  # the newest window's expected rise of T (s)
-        self._noise = WindowNoise(r_mmhg, self.window_s)
-        self._r2 = self._noise.variance  # the filters' output-error variance (mmHg²)
+        self._noise = WindowNoise(r_mmhg, self.window_s)  # the filters' output-error variance
         self._y_ref = math.nan
         self._next = n  # next model to update (n: none pending)
         self._w = [0.0] * n
@@ -283,10 +281,11 @@ class DelayBankEstimator:
         if self._next < n and self._y_ref == self._y_ref:
             stop = min(n, self._next + self._per_tick)
             ring, j, y = self._uring, self._j, self._y_dev
+            dT, r2 = self._dT, self._noise.variance
             for m in range(self._next, stop):
                 model = bank[m]
                 u_d = ring[(j - model.delay_windows) % len(ring)]
-                self.updates += model.step(u_d, y, self._dT, self._r2)
+                self.updates += model.step(u_d, y, dT, r2)
             self._next = stop
             if stop == n:
                 self.estimate = self._select()
@@ -301,7 +300,7 @@ class DelayBankEstimator:
         self._j += 1
         self._uring[self._j % len(self._uring)] = u
         self._dT = self._drift * u if u == u else 0.0
-        self._r2 = self._noise.update(y)
+        self._noise.update(y)
         if self._y_ref != self._y_ref and y == y:
             self._y_ref = y
         self._y_dev = y - self._y_ref

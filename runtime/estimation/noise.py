@@ -30,6 +30,11 @@ class WindowNoise:
         Window length (s), > 0.
     memory_s
         Averaging time (s), > ``window_s``.
+
+    Attributes
+    ----------
+    variance
+        The current estimate (mmHg²), never below ``floor_mmhg``².
     """
 
     def __init__(self, floor_mmhg: float, window_s: float, memory_s: float = 120.0) -> None:
@@ -49,7 +54,7 @@ class WindowNoise:
         Returns
         -------
         float
-            The current variance estimate (mmHg²).
+            The current variance estimate (mmHg², also :attr:`variance`).
         """
         d3 = y_mmhg - 3.0 * self._y1 + 3.0 * self._y2 - self._y3
         if d3 == d3:
