@@ -20,6 +20,13 @@ Each patient of the seeded cohort runs the shipped LPV in ``--scenario`` (defaul
     learning) until S s, then the true K, T, τ: a source that learns *perfectly* S s into the step.
     No estimator that learns from the MAP can do better than this row for an S after the MAP first
     moves, because before that the data hold nothing about the patient.
+``true K from S s``
+    The shipped estimator's schedule until S s, then the true K (the estimator's T and τ): what a
+    perfect K *after* the start-up would be worth (``--late-k-s``).
+
+It also prints where the estimated source's excess IAE over the oracle accrues: the sums over
+patients of IAE(estimated) − IAE(oracle) in the phases [0, 50) s, [50, 200) s and from 200 s on, as
+shares of the whole excess (the start-up transient, its landing, the settled loop).
 
 Printed per source: the median over reachable patients of IAE(source)/IAE(oracle) (and the
 90th percentile), and the median times (s) at which the MAP first moved by 0.5 mmHg and at which
@@ -64,15 +71,18 @@ class PartialTruth:
         Which of ``"K"``, ``"T_s"``, ``"tau_s"`` come from the device (none: the shipped source,
         unchanged).
     from_s
-        From which time (s) on; before, the start-up schedule (the prior's cautious corner) is
-        used for every field, whatever the estimator reports.
+        From which time (s) on.
+    startup
+        Before ``from_s``: True, the start-up schedule (the prior's cautious corner) for every
+        field, whatever the estimator reports; False, the estimator's schedule.
     """
 
     source = "estimated"
 
-    def __init__(self, truth_fields: tuple[str, ...], from_s: float) -> None:
+    def __init__(self, truth_fields: tuple[str, ...], from_s: float, startup: bool = True) -> None:
         self._est = EstimatedSchedule(sample_period_s=TS)
         self._fields = truth_fields
+        self._use_startup = startup
         self._from_tick = round(from_s / TS)
         self._tick = 0
         K, T = self._est.cautious(self._est.estimator.estimate)
@@ -98,6 +108,8 @@ class PartialTruth:
         if not self._fields:
             return sched
         if self._tick <= self._from_tick:
+            if not self._use_startup:
+                return sched
             return Schedule(*self._startup, "estimated", True, True, True, "learning")
         truth = {"K": device_K, "T_s": device_T_s, "tau_s": device_tau_s}
         K, T, tau = (
@@ -106,33 +118,47 @@ class PartialTruth:
         return Schedule(K, T, tau, "estimated", True, True, False, "ok")
 
 
-def _sources(switch_s: list[float]) -> list[tuple[str, tuple[str, ...], float]]:
-    rows = [("estimated", (), 0.0), ("K from 0 s", ("K",), 0.0)]
-    rows += [(f"truth from {s:g} s", ("K", "T_s", "tau_s"), s) for s in switch_s]
+#: phase edges (s) of the excess-IAE breakdown: start-up transient, its landing, settled loop
+PHASES_S = (0.0, 50.0, 200.0, math.inf)
+
+
+def _sources(
+    switch_s: list[float], late_k_s: list[float]
+) -> list[tuple[str, tuple[str, ...], float, bool]]:
+    """(row name, fields from the truth, from s, start-up schedule before) of every source."""
+    rows = [("estimated", (), 0.0, True), ("K from 0 s", ("K",), 0.0, True)]
+    rows += [(f"truth from {s:g} s", ("K", "T_s", "tau_s"), s, True) for s in switch_s]
+    rows += [(f"true K from {s:g} s", ("K",), s, False) for s in late_k_s]
     return rows
 
 
-def _patient(task: tuple[str, int, list[float]]) -> dict[str, float] | None:
-    """IAE ratios (source / oracle) of one patient, the MAP's first move and the learn time (s)."""
-    scenario_name, seed, switch_s = task
+def _patient(task: tuple[str, int, list[float], list[float]]) -> dict[str, float] | None:
+    """IAE ratios (source / oracle) of one patient, the MAP's first move and the learn time (s),
+    and the estimated source's excess IAE (mmHg·s) per phase of :data:`PHASES_S`."""
+    scenario_name, seed, switch_s, late_k_s = task
     scenario = load_scenario(scenario_name)
 
-    def iae(schedule: OracleSchedule | PartialTruth) -> tuple[float, np.ndarray]:
+    def iae(schedule: OracleSchedule | PartialTruth) -> tuple[np.ndarray, np.ndarray]:
+        """IAE (mmHg·s) per phase, and the true MAP (mmHg)."""
         world = World(scenario, seed, TS)
         traj = simulate(world, load_controller("lpv", TS), schedule=schedule)
-        err = np.abs(traj.map_true_mmhg - traj.target_mmhg)
-        return float(np.sum(err) * TS), traj.map_true_mmhg
+        err = np.abs(traj.map_true_mmhg - traj.target_mmhg) * TS
+        edges = np.searchsorted(traj.t_s, PHASES_S[1:-1])
+        return np.array([part.sum() for part in np.split(err, edges)]), traj.map_true_mmhg
 
     if not World(scenario, seed, TS).reachable():
         return None
     oracle, map_mmhg = iae(OracleSchedule())
     moved = np.flatnonzero(np.abs(map_mmhg - map_mmhg[0]) > MOVED_MMHG)
     out = {"moved_s": float(moved[0]) * TS if moved.size else float("nan")}
-    for name, fields, from_s in _sources(switch_s):
-        src = PartialTruth(fields, from_s)
-        out[name] = iae(src)[0] / oracle
+    for name, fields, from_s, startup in _sources(switch_s, late_k_s):
+        src = PartialTruth(fields, from_s, startup)
+        phases = iae(src)[0]
+        out[name] = float(phases.sum() / oracle.sum())
         if name == "estimated":
             out["learned_s"] = src.learned_s
+            for k, excess in enumerate(phases - oracle):
+                out[f"excess {k}"] = float(excess)
     return out
 
 
@@ -148,18 +174,19 @@ def main() -> None:
     ap.add_argument(
         "--switch-s", default="30,40,50,60", help="times (s, >= 0) at which the truth takes over"
     )
+    ap.add_argument(
+        "--late-k-s",
+        default="100,200",
+        help="times (s, >= 0) from which the true K replaces the estimated one (empty: no rows)",
+    )
     ap.add_argument("--jobs", type=int, default=2, help="local worker processes, >= 1")
     args = ap.parse_args()
     if args.patients < 1 or args.jobs < 1:
         ap.error(f"--patients={args.patients} and --jobs={args.jobs} must be >= 1")
-    try:
-        switch_s = [float(v) for v in args.switch_s.split(",")]
-    except ValueError:
-        ap.error(f"--switch-s={args.switch_s!r}: comma-separated times in s")
-    if any(not (s >= 0.0) for s in switch_s):
-        ap.error(f"--switch-s={args.switch_s!r}: every time must be >= 0 s")
+    switch_s = _times(ap, "--switch-s", args.switch_s)
+    late_k_s = _times(ap, "--late-k-s", args.late_k_s)
     load_scenario(args.scenario)  # a bad name fails here, with the scenario module's message
-    tasks = [(args.scenario, s, switch_s) for s in cohort_seeds(args.seed, args.patients)]
+    tasks = [(args.scenario, s, switch_s, late_k_s) for s in cohort_seeds(args.seed, args.patients)]
 
     def progress(done: int, total: int) -> None:
         print(f"\r{done}/{total} patients", end="", file=sys.stderr, flush=True)
@@ -173,9 +200,26 @@ def main() -> None:
         f"{statistics.median(r['learned_s'] for r in rows):.1f} s"
     )
     print(f"{'source':20s} {'IAE / oracle':>13s} {'p90':>6s}")
-    for name, _, _ in _sources(switch_s):
+    for name, *_ in _sources(switch_s, late_k_s):
         ratios = [r[name] for r in rows]
         print(f"{name:20s} {statistics.median(ratios):13.3f} {np.percentile(ratios, 90):6.2f}")
+    excess = [sum(r[f"excess {k}"] for r in rows) for k in range(len(PHASES_S) - 1)]
+    shares = ", ".join(
+        f"[{lo:g}, {hi:g}) s {round(100.0 * e / sum(excess)):d} %"
+        for lo, hi, e in zip(PHASES_S[:-1], PHASES_S[1:], excess, strict=True)
+    )
+    print(f"estimated's excess IAE over the oracle, summed over patients, by phase: {shares}")
+
+
+def _times(ap: argparse.ArgumentParser, flag: str, text: str) -> list[float]:
+    """Comma-separated times (s, >= 0) of ``flag``; empty text gives none."""
+    try:
+        times = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        ap.error(f"{flag}={text!r}: comma-separated times in s")
+    if any(not (t >= 0.0) for t in times):
+        ap.error(f"{flag}={text!r}: every time must be >= 0 s")
+    return times
 
 
 if __name__ == "__main__":

@@ -135,6 +135,33 @@ def test_cautious_shift_is_on_the_low_gain_side_and_shrinks_with_the_uncertainty
 
 
 @pytest.mark.parametrize(
+    ("K", "T_s", "expected"),
+    [
+        (0.3, 60.0, (0.5, 100.0)),  # below the box's T low edge: onto it, K/T = 0.005 kept
+        (0.6, 25.0, (2.4, 100.0)),  # far below: K rises by the same factor, beyond the box's K
+        (0.3, 100.0, (0.3, 100.0)),  # on the edge: unchanged
+        (0.3, 150.0, (0.3, 150.0)),  # inside: unchanged
+        (0.3, 400.0, (0.3, 400.0)),  # above the box: the controller clamps T, K as is
+    ],
+)
+def test_keep_slope_moves_a_lag_below_the_box_onto_its_edge_at_the_same_K_over_T(K, T_s, expected):
+    assert EstimatedSchedule().keep_slope(K, T_s) == pytest.approx(expected)
+    assert EstimatedSchedule(keep_slope=False).keep_slope(K, T_s) == (K, T_s)
+
+
+def test_a_prior_lag_below_the_box_is_scheduled_on_the_box_edge_with_the_sensitivity_raised():
+    # prior T 60 s is below the design box (100-200 s): caution leaves it there, keep_slope moves it
+    est = DelayBankEstimator(0.1, prior=(0.3, 60.0, 20.0))
+    s = EstimatedSchedule(est).update(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
+    cautious_K = 0.3 + 0.75 * 0.6 * 0.3
+    assert s.from_prior and s.T_s == 100.0
+    assert s.K == pytest.approx(cautious_K * 100.0 / 60.0)
+    off = EstimatedSchedule(DelayBankEstimator(0.1, prior=(0.3, 60.0, 20.0)), keep_slope=False)
+    s_off = off.update(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
+    assert s_off.T_s == 60.0 and s_off.K == pytest.approx(cautious_K)
+
+
+@pytest.mark.parametrize(
     ("kwargs", "match"),
     [({"caution_sigma": -1.0}, "caution_sigma"), ({"caution_rel_std": math.nan}, "caution_rel")],
 )

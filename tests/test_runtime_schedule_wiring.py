@@ -22,7 +22,7 @@ from link import DeviceSession, ManualClock, PtyPair, TickInputs, open_port
 from link.dialect import pressor as mavlink
 from runtime.controller_loader import load_controller
 from runtime.core import CLEAN_LINK, ClosedLoopCore, LinkHealth
-from runtime.estimation.estimator import NOMINAL_PLANT
+from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT
 from runtime.estimation.schedule import Schedule, make_schedule
 from runtime.session import run_runtime
 from runtime.supervisor import Supervisor
@@ -165,9 +165,15 @@ def test_lockstep_sil_and_trial_agree_tick_for_tick_on_the_estimator(estimated_s
     K_hat = np.array([cols["/schedule/estimated/K"][k] for k in range(n)])
     np.testing.assert_array_equal(K_hat, ref.sched_K)
     assert np.any(K_hat != NOMINAL_PLANT[0])  # the estimator left its prior
-    lo = np.array([cols["/schedule/estimated/K_lo"][k] for k in range(n)])
-    hi = np.array([cols["/schedule/estimated/K_hi"][k] for k in range(n)])
-    assert np.all(lo < K_hat) and np.all(K_hat < hi)
+    lo, hi, T_lo, T_hi = (
+        np.array([cols[f"/schedule/estimated/{name}"][k] for k in range(n)])
+        for name in ("K_lo", "K_hi", "T_lo_s", "T_hi_s")
+    )
+    # the scheduled K sits on the low-gain side of the estimate, inside its band, except where the
+    # estimate's T fell below the design box: then it moved along K/T onto the box's T edge
+    below_box = (T_lo + T_hi) / 2.0 < DESIGN_BOX[1][0]
+    assert np.all(lo < K_hat) and np.all(K_hat[~below_box] < hi[~below_box])
+    assert np.all(ref.sched_T_s[below_box] == DESIGN_BOX[1][0])
     # the device's truth is still recorded beside the estimate
     K_dev = np.array([cols["/schedule/K"][k] for k in range(n)])
     np.testing.assert_array_equal(K_dev, ref.K.astype(np.float32))
