@@ -27,8 +27,8 @@ T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
     the shift is 0.75 σ: K 0.80, T 100 s (the box's low edge), τ the prior's 40 s, so the start-up
     step does not overshoot a sensitive patient; once learned (σ_K ≈ 2–5 %, σ_T ≈ 5–10 %) it is
     at most 0.06 σ_K and 0.13 σ_T. A T below the design box is then projected onto the box's low
-    edge at the same K/T (:meth:`EstimatedSchedule.keep_slope`). Tuned on cohort seed 11 (README,
-    "Scheduling sources").
+    edge at the same K/T (:meth:`EstimatedSchedule.keep_slope`). Tuned on cohort seed 11
+    (``docs/ESTIMATION.md``; the held-out figures are in the README, "Scheduling sources").
 """
 
 from __future__ import annotations
@@ -224,11 +224,12 @@ class EstimatedSchedule:
         The first minute of data identifies the response's initial slope K/T, not K and T apart
         (a fast, weak plant and a slow, strong one rise alike at first), and an early fit often
         lands at a T below the box with K low by the same factor. The controller clamps T to the
-        box; scheduling it on that low K as well would make it push as if for a patient of that
-        slope times T_lo/T, too hard. Moving along the line of constant K/T keeps what the data
-        say and gives the smallest K a patient with T ≥ T_lo can have: always the low-gain side.
-        Cohort seed 11: step overshoot 9.9 % → 6.4 % (45 patients), IAE unchanged; bedside
-        monitor IAE ÷ oracle 1.67 → 1.54 (README, "Scheduling sources").
+        box; scheduling it on that low K as well makes it push as if the patient were T_lo/T
+        times less sensitive than the data say: too hard, into the pump's limit and an overshoot.
+        Moving along the line of constant K/T keeps what the data say and gives the smallest K a
+        patient with T ≥ T_lo can have: always towards the low-gain side. Cohort seed 11: step
+        overshoot 9.9 % → 6.4 % (45 patients), IAE unchanged; bedside monitor IAE ÷ oracle
+        1.67 → 1.54 (``docs/ESTIMATION.md``).
         """
         if self._keep_slope and T_s < self._T_lo:
             return K * self._T_lo / T_s, self._T_lo
