@@ -14,16 +14,17 @@ with the output-error gradient ψ = (∂x̂/∂a, ∂x̂/∂b, 1))::
 have standard deviations ``q_a``, ``q_b`` and ``q_c`` (mmHg: a haemorrhage of 10 mmHg over 5 min is
 ≈ 0.07 mmHg per window); the output error's variance is ``r_mmhg``² or, when larger, the monitor
 noise the window means show (:class:`runtime.estimation.noise.WindowNoise`). An innovation beyond
-``jump_sigma`` standard deviations is taken as a baseline jump (the offset's variance is raised by its square, so
-c absorbs it rather than a, b).
+``jump_sigma`` standard deviations is taken as a baseline jump (the offset's variance is raised by
+its square, so c absorbs it rather than a, b).
 Each model keeps an exponentially forgotten negative log-likelihood of its innovations (memory
-``memory_s``, default 200 s); the best model (log-likelihood plus the τ prior's −2 log-density, below) gives
-K = b/(1 − a) and T = −Δ/ln a, and τ is refined between bank members by a parabola through those
-sums, minus half a window (the averaged MAP lags the window's end by Δ/2; measured bias on
-synthetic data). Models that fall more than ``reseed_nll`` behind the best, or fail the health
-check, restart from the best healthy model's θ, covariance and simulation (only the delay then
-differs, so the comparison of delays stays fair). Uncertainty: K and T standard deviations from the
-filter covariance (first order); τ an interval holding ~90 % of the bank's posterior weight.
+``memory_s``, default 200 s); the best model (log-likelihood plus the τ prior's −2 log-density,
+below) gives K = b/(1 − a) and T = −Δ/ln a, and τ is refined between bank members by a parabola
+through those sums, minus half a window (the averaged MAP lags the window's end by Δ/2; measured
+bias on synthetic data). Models that fall more than ``reseed_nll`` behind the best, or fail the
+health check, restart from the best healthy model's θ, covariance and simulation (only the delay
+then differs, so the comparison of delays stays fair). Uncertainty: K and T standard deviations
+from the filter covariance (first order); τ an interval holding ~90 % of the bank's posterior
+weight.
 
 Two priors from the literature patient model this project simulates (the paper's Table 1,
 ``hil_sim/patient.py``) stand in where a settled loop carries no information. The τ prior

@@ -9,8 +9,9 @@ third difference of the window means over 20 (its variance for white noise), ave
 ``memory_s`` and never below the floor. A MAP that moves along a parabola over four windows adds
 nothing, whatever the model, so the step response's curvature is not read as noise (the second
 difference was: it slowed learning on the paper's monitor, K error 15.5 % instead of 14.3 % on
-paper-disturbance, held-out cohort seed 2026). One sample is capped at 25 times the current estimate, so a single jump (a
-haemorrhage's onset, an artefact that passed the gate) cannot inflate it.
+paper-disturbance, held-out cohort seed 2026). One sample is capped at 25 times the current
+estimate, so a single jump (a haemorrhage's onset, an artefact that passed the gate) cannot
+inflate it.
 """
 
 from __future__ import annotations
