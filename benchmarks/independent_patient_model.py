@@ -71,6 +71,22 @@ RANGES: dict[str, tuple[float, float]] = {
     "bolus_decay_s": (480.0, 900.0),
 }
 
+#: the one-compartment variant (``draw_patient(..., model="one-compartment")``): no peripheral
+#: compartment (Q = 0), no tolerance, a Hill effect and a wider spread of kinetics and potency
+ONE_COMPARTMENT_RANGES: dict[str, tuple[float, float]] = RANGES | {
+    "delay_s": (10.0, 60.0),
+    "cl_l_min": (1.5, 4.0),
+    "v1_l": (4.0, 12.0),
+    "q_l_min": (0.0, 0.0),
+    "effect_lag_s": (20.0, 90.0),
+    "emax_mmhg": (40.0, 100.0),
+    "ec50_ng_ml": (15.0, 80.0),
+    "hill": (1.0, 2.5),
+    "tolerance_gain": (0.0, 0.0),
+}
+#: the models :func:`draw_patient` draws from
+MODELS = {"two-compartment": RANGES, "one-compartment": ONE_COMPARTMENT_RANGES}
+
 
 @dataclass(frozen=True)
 class PatientParams:
@@ -95,13 +111,19 @@ class PatientParams:
     bolus_decay_s: float
 
 
-def draw_patient(seed: int, index: int) -> PatientParams:
-    """Patient ``index`` of the cohort ``seed``: every parameter uniform in its :data:`RANGES`.
+def draw_patient(seed: int, index: int, model: str = "two-compartment") -> PatientParams:
+    """Patient ``index`` of the cohort ``seed``: every parameter uniform in its range of
+    :data:`MODELS` [``model``] (:data:`RANGES` for the default two-compartment model).
 
-    The draw depends on ``(seed, index)`` only, so a patient is the same in any cohort size.
+    The draw depends on ``(seed, index, model)`` only, so a patient is the same in any cohort size
+    (and the two-compartment draws are those of the model's first version).
     """
-    rng = random.Random(f"independent-patient:{seed}:{index}")
-    return PatientParams(**{f.name: rng.uniform(*RANGES[f.name]) for f in fields(PatientParams)})
+    if model not in MODELS:
+        raise ValueError(f"model={model!r} not one of {tuple(MODELS)}")
+    ranges = MODELS[model]
+    tag = "" if model == "two-compartment" else f"{model}:"
+    rng = random.Random(f"independent-patient:{tag}{seed}:{index}")
+    return PatientParams(**{f.name: rng.uniform(*ranges[f.name]) for f in fields(PatientParams)})
 
 
 class IndependentPatient:

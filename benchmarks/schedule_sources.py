@@ -1,0 +1,294 @@
+"""Scheduling sources on patients outside the FOPDT class, in-process: is adaptation worth it?
+
+Usage::
+
+    python benchmarks/schedule_sources.py                          # both models, 10 patients
+    python benchmarks/schedule_sources.py --model one-compartment --patients 20 --seed 7
+
+Each seeded patient of :mod:`benchmarks.independent_patient_model` (``--model two-compartment``:
+the benchmark's own pharmacology with its haemorrhage and bolus, target 70 mmHg, 60 min;
+``--model one-compartment``: one-compartment kinetics, a Hill effect, no tolerance, a wide
+spread, a +15 mmHg step over the patient's baseline, 30 min, no disturbance) runs through the
+runtime's own closed-loop core (:class:`runtime.core.ClosedLoopCore`: supervisor, scheduling
+source, controller), in process, without a link: a 0.3 mmHg Gaussian monitor at 10 Hz (seeded)
+and a pump that delivers the command within [0, 120] ml/h. Runs per patient: the LPV with the
+``nominal`` and the ``estimated`` schedule, the PI and the Smith predictor on ``estimated`` (the
+default of ``pressor run``).
+
+Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
+arrival (%), SCHED_RATE / SCHED_OUT_OF_BOX ticks, HOLD or FAILSAFE ticks; then per model the
+figures of issue 25 (LPV/PI, LPV/Smith, estimated/nominal medians over reachable patients,
+overshoot median and p90). ``pressor run`` over a pty (``benchmarks/independent_patients.py``) is
+the reference for the two-compartment model; this harness is for sweeps (about 3 s per run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import random
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.independent_patient_model import (  # noqa: E402
+    BOLUS_AT_S,
+    HEMORRHAGE_AT_S,
+    IndependentPatient,
+    draw_patient,
+)
+from contracts.metrics import run_metrics  # noqa: E402
+from link import PumpStatus, TickInputs  # noqa: E402
+from runtime.controller_loader import load_controller  # noqa: E402
+from runtime.core import CLEAN_LINK, ClosedLoopCore  # noqa: E402
+from runtime.estimation.fitted import FittedSchedule  # noqa: E402
+from runtime.estimation.schedule import EstimatedSchedule, make_schedule  # noqa: E402
+from runtime.estimation.validation import ModelBank  # noqa: E402
+from runtime.supervisor import Supervisor  # noqa: E402
+from runtime.supervisor_config import Fault, State, supervisor_config_for  # noqa: E402
+
+TS_S = 0.1
+PUMP_MAX_ML_H = 120.0
+CONCENTRATION_UG_ML = 100.0
+NOISE_MMHG = 0.3
+#: label -> (controller spec, schedule source)
+RUNS = {
+    "lpv-nominal": ("lpv", "nominal"),
+    "lpv-estimated": ("lpv", "estimated"),
+    "lpv-fitted": ("lpv", "fitted"),
+    "lpv-fit-hold": ("lpv", "fit-hold"),
+    "lpv-fit-slew": ("lpv", "fit-slew"),
+    "pi": ("pi", "nominal"),
+    "smith": ("smith", "estimated"),
+}
+
+
+#: keyword arguments of the ``estimated`` source and of its bank (``--sched``, ``--bank``)
+VARIANT: dict[str, dict[str, Any]] = {"sched": {}, "bank": {}}
+
+
+class LimitedFit:
+    """Experiment: the fitted source's schedule, box-clamped; one jump at the first learned
+    estimate, then slewed at 0.9x the certified rates (``hold``: frozen after the jump)."""
+
+    source = "estimated"
+
+    def __init__(self, hold: bool) -> None:
+        self.fit = FittedSchedule(sample_period_s=TS_S)
+        self.hold, self.jumped, self.rho = hold, False, None
+        self.box = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
+        self.step_ = tuple(0.9 * r * TS_S for r in (2e-4, 0.06, 0.1))
+
+    def update(self, *args: Any) -> Any:
+        s = self.fit.update(*args)
+        goal = [
+            min(max(v, lo), hi) for v, (lo, hi) in zip((s.K, s.T_s, s.tau_s), self.box, strict=True)
+        ]
+        if self.rho is None or (not self.jumped and not s.from_prior):
+            self.jumped = self.rho is not None
+            self.rho = goal
+        elif not (self.jumped and self.hold):
+            for i in range(3):
+                d = goal[i] - self.rho[i]
+                self.rho[i] += max(-self.step_[i], min(self.step_[i], d))
+        from dataclasses import replace
+
+        return replace(s, K=self.rho[0], T_s=self.rho[1], tau_s=self.rho[2])
+
+
+def make_source(source: str) -> Any:
+    """The scheduling source ``source``; ``fitted`` is the previous estimated source."""
+    if source.startswith("fixed:"):
+        from runtime.estimation.schedule import NominalSchedule
+
+        return NominalSchedule(*(float(v) for v in source[6:].split("/")))
+    if source in ("fit-hold", "fit-slew"):
+        return LimitedFit(source == "fit-hold")
+    if source == "fitted":
+        return FittedSchedule(sample_period_s=TS_S)
+    if source == "estimated" and (VARIANT["sched"] or VARIANT["bank"]):
+        kw = dict(VARIANT["sched"])
+        start = kw.get("start", (0.55, 150.0, 40.0))
+        bank = ModelBank(2.0, round(2.0 / TS_S), start, **VARIANT["bank"])
+        return EstimatedSchedule(sample_period_s=TS_S, bank=bank, **kw)
+    return make_schedule(source, TS_S)
+
+
+def _kwargs(text: str) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for item in filter(None, text.split(";")):
+        key, _, value = item.partition("=")
+        out[key] = eval(value, {})  # a benchmark's own command line (tuples, floats)
+    return out
+
+
+def run_one(
+    patient: IndependentPatient, spec: str, source: str, target_mmhg: float, duration_s: float,
+    seed: int, events: list[tuple[str, float]],
+) -> dict[str, Any]:  # fmt: skip
+    """One closed-loop run in process; the run's metrics and its supervisor counts."""
+    controller = load_controller(spec, TS_S)
+    supervisor = Supervisor(supervisor_config_for(controller, NOISE_MMHG))
+    core = ClosedLoopCore(controller, supervisor, make_source(source))
+    rng = random.Random(seed)
+    n = round(duration_s / TS_S)
+    true_map, rates, k_sched = [0.0] * n, [0.0] * n, [0.0] * n
+    counts = {"SCHED_RATE": 0, "SCHED_OUT_OF_BOX": 0, "HOLD/FAILSAFE": 0}
+    status: PumpStatus | None = None
+    volume = 0.0
+    nan = math.nan
+    for k in range(n):
+        y = patient.map_mmhg
+        true_map[k] = y
+        inp = TickInputs(k, k * TS_S, y + rng.gauss(0.0, NOISE_MMHG), 0, target_mmhg, nan, nan,
+                         nan, False, -1, k)  # fmt: skip
+        rec = core.step(inp, k * TS_S, status, CLEAN_LINK)
+        faults = rec.supervisor.faults
+        counts["SCHED_RATE"] += bool(faults & Fault.SCHED_RATE)
+        counts["SCHED_OUT_OF_BOX"] += bool(faults & Fault.SCHED_OUT_OF_BOX)
+        counts["HOLD/FAILSAFE"] += rec.supervisor.state in (State.HOLD, State.FAILSAFE)
+        k_sched[k] = rec.schedule.K
+        rate = min(max(rec.command_ml_h, 0.0), PUMP_MAX_ML_H)
+        rates[k] = rate
+        patient.step(rate)
+        volume += rate * TS_S / 3600.0
+        status = PumpStatus(k + 1, rate, volume, 0)
+    t_s = [k * TS_S for k in range(n)]
+    m = run_metrics(t_s, true_map, target_mmhg, rates, PUMP_MAX_ML_H, step_time_s=0.0,
+                    step_mmhg=target_mmhg - true_map[0], events=events)  # fmt: skip
+    return {
+        "iae": m["iae_mmhg_s"],
+        "os": m["step_overshoot_pct"] or 0.0,
+        "band": m["time_in_band_pct"],
+        "stable": m["stable"],
+        "K_end": k_sched[-1],
+    } | counts
+
+
+def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dict[str, Any]:
+    """One patient of the project's own cohort (:mod:`hil_sim`) through the trial's closed loop."""
+    import hil_sim.trial as trial
+
+    trial.make_schedule = lambda name, ts: make_source(name)  # type: ignore[assignment]
+    rec, traj = trial._simulate_patient(scenario, spec, patient_seed, TS_S, source)
+    faults = traj.faults
+    return {
+        "iae": rec["iae_mmhg_s"],
+        "os": rec["step_overshoot_pct"] or 0.0,
+        "band": rec["time_in_band_pct"],
+        "stable": rec["stable"],
+        "K_end": float(traj.sched_K[-1]),
+        "reachable": rec["reachable"],
+        "SCHED_RATE": int(((faults & int(Fault.SCHED_RATE)) != 0).sum()),
+        "SCHED_OUT_OF_BOX": int(((faults & int(Fault.SCHED_OUT_OF_BOX)) != 0).sum()),
+        "HOLD/FAILSAFE": int(((traj.state == State.HOLD) | (traj.state == State.FAILSAFE)).sum()),
+    }
+
+
+def cohort(model: str, seed: int, n: int) -> list[tuple[IndependentPatient, float, float, list]]:
+    """(fresh-patient factory args) per patient: patient, target mmHg, duration s, events."""
+    out = []
+    for i in range(n):
+        params = draw_patient(seed, i, model)
+        if model == "two-compartment":
+            p = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML)
+            events = [("hemorrhage", HEMORRHAGE_AT_S), ("bolus", BOLUS_AT_S)]
+            need = p.steady_state_rate_ml_h(70.0 + params.hemorrhage_mmhg, PUMP_MAX_ML_H)
+            out.append((params, 70.0, 3600.0, events, need is not None))
+        else:
+            p = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=False)
+            target = params.baseline_mmhg + 15.0
+            need = p.steady_state_rate_ml_h(target, PUMP_MAX_ML_H)
+            out.append((params, target, 1800.0, [], need is not None))
+    return out
+
+
+def _q(values: list[float], q: float) -> float:
+    s = sorted(values)
+    return s[min(len(s) - 1, max(0, math.ceil(q * len(s)) - 1))]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--model", choices=("two-compartment", "one-compartment", "both"),
+                   default="both")  # fmt: skip
+    p.add_argument("--scenario", default="", help="the project's cohort in this scenario instead")
+    p.add_argument("--patients", type=int, default=10)
+    p.add_argument("--seed", type=int, default=2026)
+    p.add_argument("--runs", default=",".join(RUNS), help="comma-separated of " + ", ".join(RUNS))
+    p.add_argument("--sched", default="", help="EstimatedSchedule kwargs: key=value;...")
+    p.add_argument("--bank", default="", help="ModelBank kwargs: key=value;...")
+    args = p.parse_args(argv)
+    VARIANT["sched"], VARIANT["bank"] = _kwargs(args.sched), _kwargs(args.bank)
+    labels = args.runs.split(",")
+    for lab in labels:
+        if lab.startswith("fixed:"):
+            RUNS[lab] = ("lpv", lab)
+    models = ("two-compartment", "one-compartment") if args.model == "both" else (args.model,)
+    if args.scenario:
+        from hil_sim.cohort import cohort_seeds
+        from hil_sim.scenario import load_scenario
+
+        scenario = load_scenario(args.scenario)
+        seeds = cohort_seeds(args.seed, args.patients)
+        models = (f"project cohort, {args.scenario}",)
+    for model in models:
+        print(f"\n{model}: {args.patients} patients, seed {args.seed}")
+        res: dict[str, list[dict[str, Any]]] = {lab: [] for lab in labels}
+        reach = []
+        plan = (
+            [(None, 0.0, 0.0, [], True)] * args.patients
+            if args.scenario
+            else cohort(model, args.seed, args.patients)
+        )
+        for i, (params, target, dur, events, ok) in enumerate(plan):
+            line = [f"  {i:>2}"]
+            for lab in labels:
+                spec, src = RUNS[lab]
+                if args.scenario:
+                    r = run_project(scenario, spec, src, seeds[i])
+                    ok = r["reachable"]
+                else:
+                    disturb = model == "two-compartment"
+                    pt = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=disturb)
+                    r = run_one(pt, spec, src, target, dur, args.seed * 1000 + i, events)
+                res[lab].append(r)
+                line.append(
+                    f"{lab} {r['iae']:6.0f} os {r['os']:5.1f} band {r['band'] or 0:5.1f}"
+                    f" rate {r['SCHED_RATE']:4d} box {r['SCHED_OUT_OF_BOX']:5d}"
+                    f" hold {r['HOLD/FAILSAFE']} K {r['K_end']:.2f}"
+                )
+            reach.append(ok)
+            line[0] += " R" if ok else " -"
+            print(" | ".join(line), flush=True)
+        idx = [i for i, ok in enumerate(reach) if ok]
+        print(f"  reachable: {len(idx)} of {len(reach)}")
+
+        def ratio(a: str, b: str, res: Any = res, idx: list[int] = idx) -> list[float]:
+            return [res[a][i]["iae"] / res[b][i]["iae"] for i in idx]
+
+        for lab in labels:
+            os_ = [res[lab][i]["os"] for i in idx]
+            band = [res[lab][i]["band"] or 0.0 for i in idx]
+            print(
+                f"  {lab:14s} overshoot median {statistics.median(os_):5.1f} %, p90"
+                f" {_q(os_, 0.9):5.1f} %; band median {statistics.median(band):5.1f} % (min"
+                f" {min(band):5.1f}); SCHED_RATE total {sum(r['SCHED_RATE'] for r in res[lab])};"
+                f" HOLD/FAILSAFE total {sum(r['HOLD/FAILSAFE'] for r in res[lab])}"
+            )
+        for a, b in (("lpv-estimated", "pi"), ("lpv-nominal", "pi"), ("lpv-estimated", "smith"),
+                     ("lpv-estimated", "lpv-nominal")):  # fmt: skip
+            if a in res and b in res:
+                r = ratio(a, b)
+                print(
+                    f"  {a}/{b}: median {statistics.median(r):.3f}, max {max(r):.3f},"
+                    f" below 1 on {sum(x < 1.0 for x in r)} of {len(r)}"
+                )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
