@@ -3,7 +3,8 @@
 ``pressor run`` takes the target from the device's MAP_TARGET by default. ``--target-mmhg`` (or
 ``--target-file``) makes it the runtime's own: the device's value is then ignored and MAP_TARGET is
 no longer required for a tick. ``--target-file`` and ``--target-stdin`` change it while the loop
-runs (:mod:`runtime.target_source`). ``--drug`` and ``--concentration-ug-ml`` state the drug and
+runs (:mod:`runtime.target_source`), and carry the clinician's acknowledgement (a line ``ack``:
+HOLD or FAILSAFE resume once the fault cleared, :mod:`runtime.supervisor_io`). ``--drug`` and ``--concentration-ug-ml`` state the drug and
 concentration the loaded controller's gain units assume (the shipped controllers carry neither:
 :data:`contracts.controller.DESIGN_DRUG`, :data:`~contracts.controller.DESIGN_CONCENTRATION_UG_ML`);
 :func:`check_device_hello` refuses a device whose hello announces another drug, another
@@ -31,6 +32,8 @@ TARGET_MAX_MMHG = 120.0
 MAX_CONCENTRATION_UG_ML = 100000.0
 #: longest drug name (the hello's ``drug`` is char[16])
 MAX_DRUG_CHARS = 16
+#: the line that acknowledges an alarm and asks to resume (stdin, the target file)
+ACK_WORD = "ack"
 
 
 @dataclass(frozen=True)
@@ -76,18 +79,27 @@ def number_in(text: str, lo: float, hi: float, unit: str, *, lo_open: bool = Fal
     return value
 
 
+def split_ack(text: str) -> tuple[str, bool]:
+    """``text`` without its :data:`ACK_WORD` lines, and whether it had one (case and surrounding
+    blanks ignored): the clinician's acknowledgement rides on stdin and the target file."""
+    lines = text.splitlines()
+    rest = [line for line in lines if line.strip().lower() != ACK_WORD]
+    return "\n".join(rest), len(rest) < len(lines)
+
+
 def parse_target(text: str) -> float:
     """A MAP target (mmHg) from ``text``; ``ValueError`` naming the allowed range otherwise."""
     return number_in(text, TARGET_MIN_MMHG, TARGET_MAX_MMHG, "mmHg")
 
 
 def read_target_file(path: Path) -> float:
-    """The target (mmHg) ``path`` holds; ``ValueError`` if it cannot be read or is out of range."""
+    """The target (mmHg) ``path`` holds (an ``ack`` line in it is not a target); ``ValueError`` if
+    it cannot be read or is out of range."""
     try:
         text = path.read_text(encoding="ascii", errors="replace")
     except OSError as exc:
         raise ValueError(f"cannot read: {exc.strerror}") from None
-    return parse_target(text)
+    return parse_target(split_ack(text)[0])
 
 
 def argtype(name: str, parse: Any) -> Any:
@@ -134,13 +146,16 @@ def add_clinician_options(p: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help=f"a file holding one number, the MAP target (mmHg, {rng}): read at start (the"
         " starting target, instead of --target-mmhg) and again whenever it changes; a bad value"
-        " is refused with one line on stderr and the target kept (default: none)",
+        " is refused with one line on stderr and the target kept; a line 'ack' in it"
+        " acknowledges an alarm and resumes automatic control once the fault cleared"
+        " (default: none)",
     )
     p.add_argument(
         "--target-stdin",
         action="store_true",
-        help=f"read a new MAP target (mmHg, {rng}) from each line on stdin while running; needs"
-        " --target-mmhg or --target-file for the starting target (default: off)",
+        help=f"read a new MAP target (mmHg, {rng}) from each line on stdin while running, or"
+        " 'ack' to acknowledge an alarm and resume automatic control once the fault cleared;"
+        " needs --target-mmhg or --target-file for the starting target (default: off)",
     )
     p.add_argument(
         "--drug",
@@ -293,4 +308,6 @@ def describe_target(record: dict[str, Any]) -> str:
         text += f"; at {c['sim_time_s']:g} s {c['old_mmhg']:g} -> {c['new_mmhg']:g} mmHg"
     if record["refused"]:
         text += f"; {record['refused']} refused"
+    for a in record.get("acks", ()):
+        text += f"; ack at {a['sim_time_s']:g} s {'accepted' if a['accepted'] else 'not taken'}"
     return text
