@@ -37,7 +37,7 @@ Sim time comes from the device. The run clock used for signing timestamps and th
 world's sim time, so a lockstep run is byte-for-byte reproducible.
 
 Exit codes: 0 run completed (or the runtime closed the link), 1 link lost / handshake failed,
-2 bad usage or input.
+2 bad usage or input, or a hello refused (PRESSOR_REFUSAL: one line with the reason).
 """
 
 from __future__ import annotations
@@ -101,6 +101,7 @@ def _main(command: str, argv: Sequence[str]) -> int:
         LinkClosedError,
         LinkError,
         ManualClock,
+        Refusal,
         TlogWriter,
         fast_port,
         open_port,
@@ -140,9 +141,9 @@ def _main(command: str, argv: Sequence[str]) -> int:
     except LinkClosedError:
         result = DeviceResult(world.tick, "runtime closed the link", ep.counters.as_dict())
         ok = True
-    except LinkError as exc:
+    except LinkError as exc:  # a refused hello exits 2 (either end told the other why)
         print(f"pressor {command}: {exc}", file=sys.stderr)
-        return 1
+        return 2 if isinstance(exc, Refusal) else 1
     finally:
         ep.close()
         if tlog is not None:
@@ -274,6 +275,7 @@ def run_device(
         STATE_RUNNING,
         Hello,
         LinkError,
+        Refusal,
         SigningMismatch,
     )
 
@@ -300,9 +302,9 @@ def run_device(
         try:
             ep.handshake(hello, timeout_s=min(0.5, max(0.0, deadline - time.monotonic())))
             break
-        except LinkError as exc:
-            if ep.peer_hello is not None or isinstance(exc, SigningMismatch):
-                raise  # a peer of the wrong role, protocol or signing
+        except LinkError as exc:  # wrong role, system id or protocol: the runtime was told
+            if ep.peer_hello is not None or isinstance(exc, (SigningMismatch, Refusal)):
+                raise  # or the runtime refused this device, or signs differently
             if time.monotonic() >= deadline:
                 raise LinkError(
                     f"no hello from the runtime within {handshake_timeout_s} s"

@@ -14,10 +14,12 @@ from hil_sim.closed_loop import simulate
 from hil_sim.device import main as device_main
 from hil_sim.world import World
 from link import (
+    REFUSAL_DRUG,
     STATE_FAULT,
     STATE_FINISHED,
     DeviceSession,
     Hello,
+    HelloRefused,
     LinkClosedError,
     PtyPair,
     RuntimeSession,
@@ -142,6 +144,20 @@ def test_device_refuses_an_unsigned_runtime_at_once_naming_signing(tmp_path):
     assert _finish(proc, pair, ep) == 1
     assert ep.counters.frames_received >= 1
     assert "signing mismatch: the runtime's frames are unsigned" in proc.stderr.read()
+
+
+def test_a_device_the_runtime_refuses_exits_2_with_the_runtime_s_reason():
+    pair = PtyPair.open()
+    ep = RuntimeSession(pair.leader_port())
+    proc = spawn_device(pair, "--scenario", "paper-tracking", "--drug", "norepinephrine")
+    peer = ep.handshake(Hello("pi"), timeout_s=30.0)
+    line = f"device drug {peer.drug} differs from the controller's phenylephrine (--drug)"
+    ep.refuse(HelloRefused(REFUSAL_DRUG, line))
+    assert proc.wait(timeout=30) == 2
+    pair.close_follower()
+    ep.close()
+    last = proc.stderr.read().strip().splitlines()[-1]  # after the unsigned-link warning
+    assert last == f"pressor device: refused by the runtime: {line}"
 
 
 def test_device_retransmits_a_tick_without_answer_then_reports_fault():
