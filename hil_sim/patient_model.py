@@ -42,7 +42,7 @@ PATIENT_MODELS: dict[str, str] = {
     "phenylephrine-2c": "hil_sim.phenylephrine:Phenylephrine2C",
 }
 
-#: members a model class must have (callables except ``coefficient_units``)
+#: members a model class must have (methods, except the mapping ``coefficient_units``)
 CLASS_MEMBERS = ("from_seed", "step", "coefficients", "max_delta_map_mmhg", "coefficient_units")
 #: numeric members a model instance must have (attributes or properties, float)
 INSTANCE_MEMBERS = ("baseline_mmhg", "map_mmhg", "delta_map_mmhg", "K", "T_s", "tau_s")
@@ -155,10 +155,15 @@ def load_patient_model(spec: str) -> type[PatientModel]:
     if not isinstance(cls, type):
         raise PatientModelError(f"{where}: module {module_name!r} has no class {cls_name!r}")
     what = f"{where}: class {cls_name!r} of module {module_name!r}"
-    missing = [m for m in CLASS_MEMBERS if not hasattr(cls, m)]
+    missing = [
+        m
+        for m in CLASS_MEMBERS
+        if not (hasattr(cls, m) if m == "coefficient_units" else callable(getattr(cls, m, None)))
+    ]
     if missing:
         raise PatientModelError(
-            f"{what} does not satisfy hil_sim.patient_model.PatientModel: missing {', '.join(missing)}"
+            f"{what} does not satisfy hil_sim.patient_model.PatientModel: missing (or not"
+            f" callable) {', '.join(missing)}"
         )
     try:
         probe = cls.from_seed(0, 0.1)  # type: ignore[attr-defined]
