@@ -25,7 +25,9 @@ class FirstOrderPatient:
         "baseline_mmhg": "mmHg",
     }
 
-    def __init__(self, K: float, T_s: float, tau_s: float, baseline_mmhg: float, step_s: float):
+    def __init__(
+        self, K: float, T_s: float, tau_s: float, baseline_mmhg: float, step_s: float
+    ) -> None:
         self.K, self.T_s, self.baseline_mmhg = K, T_s, baseline_mmhg
         n = max(1, round(tau_s / step_s))
         self.tau_s = n * step_s

@@ -220,7 +220,7 @@ def test_every_named_model_loads_and_plays_a_world_with_the_same_bytes_per_seed(
         runs = []
         for _ in range(2):
             world = World("paper-tracking", 7, 0.1, patient_model=name)
-            assert isinstance(world.patient, model)
+            assert isinstance(world.patient, model) and isinstance(world.patient, PatientModel)
             for _ in range(900):  # 90 s: past every model's transport delay
                 world.apply_command(40.0)
                 world.advance()
