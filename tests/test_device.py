@@ -95,6 +95,22 @@ def test_device_process_in_lockstep_over_a_pty_matches_the_in_process_simulation
     assert ep.pump_status is not None and ep.pump_status.tick == 3000
 
 
+def test_device_process_plays_a_named_patient_model_as_the_in_process_simulation():
+    pair = PtyPair.open()
+    ep = RuntimeSession(pair.leader_port())
+    model = ("--patient-model", "phenylephrine-2c")
+    proc = spawn_device(
+        pair, "--scenario", "paper-tracking", "--patient-seed", "4", "--duration", "60", *model
+    )
+    maps, cmds = _run_pi_runtime(ep)
+    assert _finish(proc, pair, ep) == 0, proc.stderr.read()
+    world = World("paper-tracking", 4, 0.1, patient_model="phenylephrine-2c")
+    ref = simulate(world, PIController(0.1), duration_s=60.0)
+    assert np.array_equal(np.array(maps), ref.map_mmhg, equal_nan=True)
+    assert np.array_equal(np.array(cmds, dtype=np.float32).astype(float), ref.command_ml_h)
+    assert ref.map_true_mmhg[-1] > world.baseline_mmhg  # the model's drug effect arrived
+
+
 def _signed_device_run(tmp_path: Path, tag: str, key: Path) -> tuple[bytes, bytes]:
     pair = PtyPair.open()
     rlog = TlogWriter(tmp_path / f"{tag}-runtime.tlog")
