@@ -1,12 +1,13 @@
-"""LPV vs PI vs Smith on a patient model not this project's, through the real ``pressor run``.
+"""LPV vs PI vs Smith on a patient model not the paper's, through the real ``pressor run``.
 
-Each seeded patient of :mod:`benchmarks.independent_patient_model` (two-compartment
+Each seeded patient of :mod:`hil_sim.pkpd` (the ``pkpd`` patient model: two-compartment
 pharmacokinetics, an effect compartment, a sigmoid Emax on MAP, a transport delay, tachyphylaxis,
 a haemorrhage-like drop at 20 min and a fluid-bolus-like rise at 40 min) is played by the device
 of ``tests/protocol_device.py`` (written from docs/PROTOCOL.md alone) on a pty, signed, in
 lockstep, against a real ``pressor run --controller SPEC`` with its default estimated schedule (a
 real monitor sends no K, T, tau). The device announces phenylephrine at 100 µg/ml, the runtime's
-defaults. Nothing of :mod:`hil_sim` is used::
+defaults. Of :mod:`hil_sim` only the patient model's module is used (its world, device and paper
+model are not)::
 
     python benchmarks/independent_patients.py                  # 10 patients x lpv, pi, smith
     python benchmarks/independent_patients.py --controller pi \\
@@ -40,14 +41,14 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.independent_patient_model import (  # noqa: E402
+from contracts.metrics import run_metrics  # noqa: E402
+from hil_sim.pkpd import (  # noqa: E402
     BOLUS_AT_S,
     HEMORRHAGE_AT_S,
     IndependentPatient,
     PatientParams,
     draw_patient,
 )
-from contracts.metrics import run_metrics  # noqa: E402
 from tests.protocol_device import DeviceConfig, ProtocolDevice, build_dialect, read_key  # noqa: E402
 from tests.test_protocol_device import wait_for_port_open, write_key  # noqa: E402
 

@@ -1,6 +1,6 @@
 """``pressor scenarios`` and ``pressor trial``: the named scenarios and the in-silico cohort trial.
 
-``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal] [--jobs J | --scheduler ADDRESS] --out DIR``
+``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal] [--patient-model NAME|MODULE:CLASS] [--jobs J | --scheduler ADDRESS] --out DIR``
 prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
 (reachable patients; unreachable ones counted and listed apart) and of each disturbance event's
 peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.usage import UsageError, UsageParser, run_command, usage_exit
+from hil_sim.patient_model import add_patient_model_option
 
 
 def _scenarios(argv: Sequence[str]) -> int:
@@ -54,8 +55,9 @@ def format_table(summary: dict[str, Any]) -> str:
     from contracts.metrics import HIGHER_IS_BETTER, RUN_METRICS
 
     m = summary["metrics"]
+    model = f" patient_model={summary['patient_model']}" if "patient_model" in summary else ""
     lines = [
-        f"trial: controller={summary['controller']} scenario={summary['scenario']}"
+        f"trial: controller={summary['controller']} scenario={summary['scenario']}{model}"
         f" seed={summary['cohort_seed']} patients={summary['n_patients']}"
         f" (reachable {m['n_reachable']}, unreachable {m['n_unreachable']},"
         f" unstable {m['n_unstable']})",
@@ -136,6 +138,7 @@ def _trial(argv: Sequence[str]) -> int:
         "--schedule", choices=SOURCES, default="oracle", help=f"{SCHEDULE_HELP}{ORACLE_DEFAULT_WHY}"
     )
     p.add_argument("--rate", type=float, default=10.0, help="loop rate in Hz (default 10)")
+    add_patient_model_option(p)
     p.add_argument("--out", required=True, type=Path, help="output directory")
     args = p.parse_args(argv)
     if not 1 <= args.patients <= 100000:
@@ -150,6 +153,7 @@ def _trial(argv: Sequence[str]) -> int:
     from contracts.files import write_atomic
     from contracts.parallel import BackendError
     from hil_sim.paired import compare_controllers, format_comparison
+    from hil_sim.patient_model import PatientModelError, check_model_for_scenario
     from hil_sim.report import write_report
     from hil_sim.scenario import ScenarioError, load_scenario
     from hil_sim.trial import (
@@ -164,7 +168,8 @@ def _trial(argv: Sequence[str]) -> int:
     period = 1.0 / args.rate
     try:
         scenario = load_scenario(args.scenario)
-    except ScenarioError as exc:
+        check_model_for_scenario(args.patient_model, scenario.name, scenario.frozen is not None)
+    except (ScenarioError, PatientModelError) as exc:
         raise UsageError(str(exc)) from None
     specs = [c.strip() for c in args.controller.split(",")]
     if "" in specs or len(set(specs)) != len(specs):
@@ -192,13 +197,16 @@ def _trial(argv: Sequence[str]) -> int:
                 _progress_bar,
                 scheduler=args.scheduler,
                 schedule=args.schedule,
+                patient_model=args.patient_model,
             )
         except (ValueError, BackendError) as exc:  # e.g. a rate the patient step does not divide
             raise UsageError(str(exc)) from None
         records[spec], trajectory = result if args.report else (result, None)
         if trajectory is not None:
             trajectories[spec] = trajectory
-        summary = summarize(records[spec], scenario, spec, args.seed, args.schedule)
+        summary = summarize(
+            records[spec], scenario, spec, args.seed, args.schedule, args.patient_model
+        )
         write_outputs(out, records[spec], summary)
         print(format_table(summary))
         print(f"wrote {out / 'patients.json'}, {out / 'patients.csv'}, {out / 'summary.json'}")

@@ -6,7 +6,7 @@ Wraps :class:`hil_sim.world.World` (the pure core) in the link protocol of :mod:
    created, or one end of a ``socat`` pair), handshake: announce itself with a hello (scenario,
    patient seed, sample period, sensor noise, number of ticks, link mode, and the syringe:
    ``--drug``, ``--concentration-ug-ml``, the pump's maximum rate) every 0.5 s until the runtime
-   answers;
+   answers; the patient is ``--patient-model`` (:mod:`hil_sim.patient_model`, default the paper's);
 2. per tick k (lockstep, PX4 SITL style): send tick k's scheduling parameters, target and MAP sample
    (plus a heartbeat once per simulated second), wait for the infusion command answering tick k,
    apply it, advance the world one sample period, queue the pump status (it leaves with the next
@@ -37,7 +37,7 @@ Sim time comes from the device. The run clock used for signing timestamps and th
 world's sim time, so a lockstep run is byte-for-byte reproducible.
 
 Exit codes: 0 run completed (or the runtime closed the link), 1 link lost / handshake failed,
-2 bad usage or input.
+2 bad usage or input, or a hello refused (PRESSOR_REFUSAL: one line with the reason).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +57,7 @@ from hil_sim.device_options import (
     RETRANSMIT_S,
     check_range,
     device_parser,
+    make_world,
 )
 from hil_sim.truth import TruthLog
 from runtime.interrupt import exit_code, signal_name, stop_requested
@@ -92,15 +93,14 @@ def _main(command: str, argv: Sequence[str]) -> int:
         check_range("--pump-max-ml-h", args.pump_max_ml_h, 0.0, 10000.0, "ml/h", lo_open=True)
     faults = _parse_faults(args.fault)
     pin_thread(args.cpu)  # the lockstep ends on their CPUs (runtime.placement)
-    world = _make_world(
-        args.scenario, args.patient_seed, 1.0 / args.rate, faults, args.pump_max_ml_h
-    )
+    world = make_world(args, faults)
 
     from link import (
         DeviceSession,
         LinkClosedError,
         LinkError,
         ManualClock,
+        Refusal,
         TlogWriter,
         fast_port,
         open_port,
@@ -140,9 +140,9 @@ def _main(command: str, argv: Sequence[str]) -> int:
     except LinkClosedError:
         result = DeviceResult(world.tick, "runtime closed the link", ep.counters.as_dict())
         ok = True
-    except LinkError as exc:
+    except LinkError as exc:  # a refused hello exits 2 (either end told the other why)
         print(f"pressor {command}: {exc}", file=sys.stderr)
-        return 1
+        return 2 if isinstance(exc, Refusal) else 1
     finally:
         ep.close()
         if tlog is not None:
@@ -162,32 +162,6 @@ def _parse_faults(texts: list[str]) -> tuple:
         return tuple(parse_faults(texts))
     except FaultSpecError as exc:
         raise UsageError(str(exc)) from exc
-
-
-def _make_world(
-    scenario: str,
-    seed: int,
-    period_s: float,
-    faults: tuple = (),
-    pump_max_ml_h: float | None = None,
-) -> Any:
-    """The world of ``scenario``, its pump's maximum replaced by ``pump_max_ml_h`` (ml/h) if given."""
-    from hil_sim.scenario import ScenarioError, load_scenario
-    from hil_sim.world import World
-
-    try:
-        sc = load_scenario(scenario)
-    except ScenarioError as exc:
-        raise UsageError(str(exc)) from exc
-    if pump_max_ml_h is not None:
-        try:
-            sc = replace(sc, pump=replace(sc.pump, max_rate_ml_h=pump_max_ml_h))
-        except ValueError as exc:  # e.g. the scenario's safe rate above the new maximum
-            raise UsageError(f"--pump-max-ml-h {pump_max_ml_h:g}: {exc}") from exc
-    try:
-        return World(sc, seed, period_s, faults=faults)
-    except ValueError as exc:
-        raise UsageError(f"--rate: {exc}") from exc
 
 
 def _load_signing(path: str | None, no_signing: bool, prog: str) -> Any:
@@ -274,6 +248,7 @@ def run_device(
         STATE_RUNNING,
         Hello,
         LinkError,
+        Refusal,
         SigningMismatch,
     )
 
@@ -300,9 +275,9 @@ def run_device(
         try:
             ep.handshake(hello, timeout_s=min(0.5, max(0.0, deadline - time.monotonic())))
             break
-        except LinkError as exc:
-            if ep.peer_hello is not None or isinstance(exc, SigningMismatch):
-                raise  # a peer of the wrong role, protocol or signing
+        except LinkError as exc:  # wrong role, system id or protocol: the runtime was told
+            if ep.peer_hello is not None or isinstance(exc, (SigningMismatch, Refusal)):
+                raise  # or the runtime refused this device, or signs differently
             if time.monotonic() >= deadline:
                 raise LinkError(
                     f"no hello from the runtime within {handshake_timeout_s} s"

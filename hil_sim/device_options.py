@@ -1,11 +1,16 @@
-"""The options of ``pressor device``: the parser, its defaults and the range checks."""
+"""The options of ``pressor device``: the parser, its defaults, the range checks and the world
+they describe."""
 
 from __future__ import annotations
 
+import argparse
 import math
+from dataclasses import replace
+from typing import Any
 
 from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
 from contracts.usage import UsageError, UsageParser
+from hil_sim.patient_model import add_patient_model_option
 from runtime.clinician import argtype, parse_concentration, parse_drug
 from runtime.placement import parse_cpu
 
@@ -105,6 +110,7 @@ def device_parser(command: str) -> UsageParser:
         help="write the simulated patient's true MAP per tick (mmHg) to FILE.npz when the device"
         " ends (default: none; pressor sil adds it to its recording)",
     )
+    add_patient_model_option(p)
     return p
 
 
@@ -114,3 +120,28 @@ def check_range(name: str, value: float, lo: float, hi: float, unit: str, lo_ope
     if not ok:
         bracket = "(" if lo_open else "["
         raise UsageError(f"{name}: value {value} outside {bracket}{lo}, {hi}] {unit}".rstrip())
+
+
+def make_world(args: argparse.Namespace, faults: tuple = ()) -> Any:
+    """The :class:`hil_sim.world.World` of the parsed options: ``--scenario``, ``--patient-seed``,
+    ``--rate`` (Hz), ``--patient-model``, and the pump's maximum replaced by ``--pump-max-ml-h``
+    (ml/h) if given; ``faults`` injected. Bad input raises :class:`UsageError` naming the option."""
+    from hil_sim.patient_model import PatientModelError
+    from hil_sim.scenario import ScenarioError, load_scenario
+    from hil_sim.world import World
+
+    try:
+        sc = load_scenario(args.scenario)
+    except ScenarioError as exc:
+        raise UsageError(str(exc)) from exc
+    if args.pump_max_ml_h is not None:
+        try:
+            sc = replace(sc, pump=replace(sc.pump, max_rate_ml_h=args.pump_max_ml_h))
+        except ValueError as exc:  # e.g. the scenario's safe rate above the new maximum
+            raise UsageError(f"--pump-max-ml-h {args.pump_max_ml_h:g}: {exc}") from exc
+    try:
+        return World(sc, args.patient_seed, 1.0 / args.rate, faults, args.patient_model)
+    except PatientModelError as exc:
+        raise UsageError(str(exc)) from exc
+    except ValueError as exc:
+        raise UsageError(f"--rate: {exc}") from exc

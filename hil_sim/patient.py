@@ -36,7 +36,9 @@ A *frozen* patient (``FrozenParams``) keeps K, T, τ constant (the nominal-step 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.linalg import expm
@@ -212,7 +214,10 @@ def _tau_filter(p: PatientParams, h: float) -> tuple[tuple[float, ...], tuple[fl
 
 
 class Patient:
-    """Nonlinear (or frozen) patient integrated on a fixed internal step.
+    """Nonlinear (or frozen) patient integrated on a fixed internal step: the ``paper`` model.
+
+    Satisfies :class:`hil_sim.patient_model.PatientModel` with its true K, T, τ; ``from_seed``
+    draws the nonlinear Table 1 patient (:func:`hil_sim.cohort.draw_patient`).
 
     Parameters
     ----------
@@ -226,6 +231,9 @@ class Patient:
     time_s, delta_map_mmhg, K, T_s, tau_s, infused_ml_h_s
         Current state: time (s), ΔMAP (mmHg), sensitivity, lag (s), delay (s), ∫ i dt ((ml/h)·s).
     """
+
+    #: unit of every coefficient :meth:`coefficients` returns (both parameter kinds)
+    coefficient_units: ClassVar[Mapping[str, str]] = COEFFICIENT_UNITS
 
     def __init__(self, params: PatientParams | FrozenParams, step_s: float = 0.1) -> None:
         if not 0.0 < step_s <= 1.0:
@@ -292,3 +300,23 @@ class Patient:
     def map_mmhg(self) -> float:
         """MAP without disturbances (mmHg): baseline + ΔMAP."""
         return self.params.baseline_mmhg + self.delta_map_mmhg
+
+    @property
+    def baseline_mmhg(self) -> float:
+        """MAP without drug (mmHg)."""
+        return self.params.baseline_mmhg
+
+    @classmethod
+    def from_seed(cls, patient_seed: int, step_s: float) -> Patient:
+        """The nonlinear patient of ``patient_seed`` (:func:`hil_sim.cohort.draw_patient`)."""
+        from hil_sim.cohort import draw_patient  # cohort imports this module
+
+        return cls(draw_patient(patient_seed), step_s)
+
+    def coefficients(self) -> dict[str, float]:
+        """The parameters, JSON-ready (``PatientParams`` or ``FrozenParams`` fields)."""
+        return self.params.to_dict()
+
+    def max_delta_map_mmhg(self, max_rate_ml_h: float) -> float:
+        """Largest steady-state ΔMAP (mmHg) any rate in [0, ``max_rate_ml_h``] (ml/h) holds."""
+        return self.params.max_delta_map_mmhg(max_rate_ml_h)

@@ -9,8 +9,14 @@ Metrics judge the *true* MAP (what the patient experiences; a flushed or disconn
 count as hypertension), with the settling band chosen by whether the scenario's monitor is noisy
 (docs/METRICS.md). ``reachable`` compares the largest ΔMAP the scenario asks for (target step minus
 disturbances) with the largest steady-state ΔMAP the pump's maximum rate gives at this patient's
-sensitivity (max over i ≤ max of k0·i·e^(−k1·i)): a patient whose shortfall exceeds the metrics'
-band (:func:`contracts.metrics.reachable_band_mmhg`) is unreachable.
+sensitivity (the model's ``max_delta_map_mmhg``; the paper model: max over i ≤ max of
+k0·i·e^(−k1·i)): a patient whose shortfall exceeds the metrics' band
+(:func:`contracts.metrics.reachable_band_mmhg`) is unreachable.
+
+``patient_model`` picks the patient model (:mod:`hil_sim.patient_model`: a registry name or
+``MODULE:CLASS``, resolved again in each worker process from that string); the records and the
+summary of a model other than the default ``paper`` carry its name as ``patient_model`` (the
+default's keep their bytes) and its own ``coefficients`` with their units.
 
 The scenario's hemorrhages and boluses are the disturbance events the metrics split the run at
 (``docs/METRICS.md``): the step metrics stop at the first one and each gets a record in the
@@ -45,7 +51,7 @@ from contracts.metrics import (
 from contracts.parallel import run_ordered
 from hil_sim.closed_loop import Trajectory, simulate
 from hil_sim.cohort import cohort_seeds
-from hil_sim.patient import COEFFICIENT_UNITS
+from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, load_patient_model
 from hil_sim.scenario import Scenario
 from hil_sim.world import World
 from runtime.controller_loader import load_controller
@@ -88,14 +94,18 @@ def run_patient(
     patient_seed: int,
     sample_period_s: float = 0.1,
     schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
 ) -> dict[str, Any]:
     """Simulate one patient and return its JSON-ready record (seed, coefficients, metrics).
 
     ``schedule`` names the scheduling source (:func:`runtime.estimation.schedule.make_schedule`),
     run by the runtime's core exactly as ``pressor run``/``sil`` run it; when it is not the oracle
-    the record gains ``estimation`` (:func:`estimation_errors`).
+    the record gains ``estimation`` (:func:`estimation_errors`). ``patient_model`` names the
+    patient model (:mod:`hil_sim.patient_model`).
     """
-    return _simulate_patient(scenario, controller_spec, patient_seed, sample_period_s, schedule)[0]
+    return _simulate_patient(
+        scenario, controller_spec, patient_seed, sample_period_s, schedule, patient_model
+    )[0]
 
 
 def _simulate_patient(
@@ -104,8 +114,9 @@ def _simulate_patient(
     patient_seed: int,
     sample_period_s: float,
     schedule: str,
+    patient_model: str = DEFAULT_PATIENT_MODEL,
 ) -> tuple[dict[str, Any], Trajectory]:
-    world = World(scenario, patient_seed, sample_period_s)
+    world = World(scenario, patient_seed, sample_period_s, patient_model=patient_model)
     controller = load_controller(controller_spec, sample_period_s)
     traj = simulate(world, controller, schedule=make_schedule(schedule, sample_period_s))
     has_step = scenario.step_mmhg != 0.0
@@ -122,13 +133,13 @@ def _simulate_patient(
         map_true_mmhg=traj.map_true_mmhg,
         events=scenario_events(scenario),
     )
-    record: dict[str, Any] = {
-        "patient_seed": int(patient_seed),
-        "coefficients": world.params.to_dict(),
-        "schedule_range": _schedule_range(traj),
-        "required_delta_mmhg": world.required_delta_mmhg(),
-        "max_delta_mmhg": world.params.max_delta_map_mmhg(scenario.pump.max_rate_ml_h),
-    }
+    record: dict[str, Any] = {"patient_seed": int(patient_seed)}
+    if patient_model != DEFAULT_PATIENT_MODEL:  # the default's records keep their bytes
+        record["patient_model"] = patient_model
+    record["coefficients"] = world.patient.coefficients()
+    record["schedule_range"] = _schedule_range(traj)
+    record["required_delta_mmhg"] = world.required_delta_mmhg()
+    record["max_delta_mmhg"] = world.patient.max_delta_map_mmhg(scenario.pump.max_rate_ml_h)
     record.update(metrics)
     record["commands_out_of_range"] = int(world.pump.commands_out_of_range)
     if schedule != "oracle":  # oracle records keep their bytes
@@ -148,11 +159,14 @@ def _schedule_range(traj: Trajectory) -> dict[str, list[float]]:
     }
 
 
-def _worker(args: tuple[Scenario, str, int, float, str]) -> dict[str, Any]:
+Task = tuple[Scenario, str, int, float, str, str]
+
+
+def _worker(args: Task) -> dict[str, Any]:
     return run_patient(*args)
 
 
-def _worker_traced(args: tuple[Scenario, str, int, float, str]) -> tuple[dict[str, Any], dict]:
+def _worker_traced(args: Task) -> tuple[dict[str, Any], dict]:
     record, traj = _simulate_patient(*args)
     every = max(1, int(round(REPORT_SAMPLE_S / args[3])))
     thinned = {
@@ -174,6 +188,7 @@ def run_trial(
     progress: Callable[[int, int], None] | None = None,
     scheduler: str | None = None,
     schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
 ) -> list[dict[str, Any]]:
     """Run the cohort ``(cohort_seed, n_patients)``; records in patient order.
 
@@ -194,8 +209,13 @@ def run_trial(
         processes (:mod:`contracts.parallel`); does not change the results.
     schedule
         The scheduling source (``oracle``, ``estimated``, ``nominal``; :func:`run_patient`).
+    patient_model
+        The patient model, a registry name or ``MODULE:CLASS`` (:mod:`hil_sim.patient_model`);
+        every worker must be able to import it.
     """
-    tasks = _tasks(scenario, controller_spec, cohort_seed, n_patients, sample_period_s, schedule)
+    tasks = _tasks(
+        scenario, controller_spec, cohort_seed, n_patients, sample_period_s, schedule, patient_model
+    )
     return run_ordered(_worker, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
 
 
@@ -206,9 +226,10 @@ def _tasks(
     n_patients: int,
     sample_period_s: float,
     schedule: str,
-) -> list[tuple[Scenario, str, int, float, str]]:
+    patient_model: str,
+) -> list[Task]:
     return [
-        (scenario, spec, s, sample_period_s, schedule)
+        (scenario, spec, s, sample_period_s, schedule, patient_model)
         for s in cohort_seeds(cohort_seed, n_patients)
     ]
 
@@ -223,6 +244,7 @@ def run_trial_traced(
     progress: Callable[[int, int], None] | None = None,
     scheduler: str | None = None,
     schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
 ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """:func:`run_trial` that also keeps every patient's trajectory, thinned to 1 Hz, for a report.
 
@@ -233,7 +255,9 @@ def run_trial_traced(
         :data:`hil_sim.report.TRAJECTORY_KEYS` names: ``t_s`` (ticks,), ``map_true_mmhg``,
         ``target_mmhg``, ``rate_ml_h`` (patients × ticks; mmHg, mmHg, ml/h) and ``patient_seed``.
     """
-    tasks = _tasks(scenario, controller_spec, cohort_seed, n_patients, sample_period_s, schedule)
+    tasks = _tasks(
+        scenario, controller_spec, cohort_seed, n_patients, sample_period_s, schedule, patient_model
+    )
     runs = run_ordered(_worker_traced, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
     records = [r for r, _ in runs]
     arrays = {
@@ -251,20 +275,22 @@ def summarize(
     controller_spec: str,
     cohort_seed: int,
     schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
 ) -> dict[str, Any]:
     """The ``summary.json`` document: trial identity and the aggregated metrics; with a schedule
     other than the oracle also ``schedule`` and ``estimation`` (median over patients of each
-    record's ``estimation`` figure)."""
-    doc: dict[str, Any] = {
-        "scenario": scenario.name,
-        "controller": controller_spec,
+    record's ``estimation`` figure); with a patient model other than ``paper`` also
+    ``patient_model``. ``coefficient_units`` gives the unit of every coefficient of the records."""
+    units = load_patient_model(patient_model).coefficient_units
+    doc: dict[str, Any] = {"scenario": scenario.name, "controller": controller_spec}
+    if patient_model != DEFAULT_PATIENT_MODEL:  # the default's summaries keep their bytes
+        doc["patient_model"] = patient_model
+    doc |= {
         "cohort_seed": int(cohort_seed),
         "n_patients": len(records),
         "unreachable_patient_seeds": [r["patient_seed"] for r in records if not r["reachable"]],
         "unstable_patient_seeds": [r["patient_seed"] for r in records if not r["stable"]],
-        "coefficient_units": {
-            k: COEFFICIENT_UNITS[k] for k in (records[0]["coefficients"] if records else {})
-        },
+        "coefficient_units": {k: units[k] for k in (records[0]["coefficients"] if records else {})},
         "metrics": aggregate(records),
     }
     if schedule != "oracle":  # oracle summaries keep their bytes
@@ -279,7 +305,7 @@ def summarize(
 _EVENT_COLUMNS = ("start_s",) + EVENT_METRICS
 
 
-def _csv_text(records: Sequence[dict[str, Any]]) -> str:
+def _csv_text(records: Sequence[dict[str, Any]], units: dict[str, str]) -> str:
     coeff_keys = list(records[0]["coefficients"]) if records else []
     scalar_keys = (
         ["required_delta_mmhg", "max_delta_mmhg"]
@@ -291,7 +317,7 @@ def _csv_text(records: Sequence[dict[str, Any]]) -> str:
     ranges = list(records[0]["schedule_range"]) if records else []
     header = (
         ["patient_seed"]
-        + [f"{k} ({COEFFICIENT_UNITS[k]})" for k in coeff_keys]
+        + [f"{k} ({units[k]})" for k in coeff_keys]
         + [f"{name}_{end}" for name in ranges for end in ("min", "max")]
         + scalar_keys
         + [f"{label}_{col}" for label in labels for col in _EVENT_COLUMNS]
@@ -311,8 +337,9 @@ def _csv_text(records: Sequence[dict[str, Any]]) -> str:
 def write_outputs(
     out_dir: Path, records: Sequence[dict[str, Any]], summary: dict[str, Any]
 ) -> None:
-    """Write ``patients.json``, ``patients.csv`` and ``summary.json`` atomically into ``out_dir``."""
+    """Write ``patients.json``, ``patients.csv`` and ``summary.json`` atomically into ``out_dir``
+    (the CSV's coefficient units from the summary's ``coefficient_units``)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     write_atomic(out_dir / "patients.json", json.dumps(list(records), indent=1) + "\n")
-    write_atomic(out_dir / "patients.csv", _csv_text(records))
+    write_atomic(out_dir / "patients.csv", _csv_text(records, summary["coefficient_units"]))
     write_atomic(out_dir / "summary.json", json.dumps(summary, indent=1) + "\n")

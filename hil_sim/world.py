@@ -15,6 +15,10 @@ are the patient's truth (the paper's "parameter generation" block; an estimator 
 Random numbers (sensor noise) come from the patient's own seeded stream, so a trajectory depends only
 on (scenario, patient_seed, sample period, commands).
 
+The patient is any :class:`hil_sim.patient_model.PatientModel` (``patient_model=``, a registry name
+or ``MODULE:CLASS``; default the paper's model, :class:`hil_sim.patient.Patient`); a frozen scenario
+fixes the paper model's LTI mode and takes no other model.
+
 Faults (``faults=``, plus the scenario's own ``[[faults]]``) are injected here for the sensor, the
 pump and the scheduling parameters (:class:`hil_sim.faults.WorldFaults`); link faults belong to the
 device process. A world without faults behaves exactly as before.
@@ -28,10 +32,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from hil_sim.cohort import draw_patient, patient_rng
+from hil_sim.cohort import patient_rng
 from hil_sim.disturbance import DisturbanceSum
 from hil_sim.faults import WorldFaults
 from hil_sim.patient import FrozenParams, Patient, PatientParams
+from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, PatientModel, check_model_for_scenario
 from hil_sim.pump import Pump
 from hil_sim.scenario import Scenario, load_scenario
 from hil_sim.sensor import Sensor
@@ -62,6 +67,13 @@ class World:
         Loop period (s); a whole multiple of the scenario's internal patient step.
     faults
         Extra injected faults (:class:`contracts.faults.FaultSpec`), after the scenario's own.
+    patient_model
+        The patient model: a :data:`hil_sim.patient_model.PATIENT_MODELS` name or ``MODULE:CLASS``.
+
+    Raises
+    ------
+    hil_sim.patient_model.PatientModelError
+        A model that cannot be loaded, or a frozen scenario with a model other than ``paper``.
     """
 
     def __init__(
@@ -70,6 +82,7 @@ class World:
         patient_seed: int,
         sample_period_s: float = 0.1,
         faults: tuple = (),
+        patient_model: str = DEFAULT_PATIENT_MODEL,
     ) -> None:
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         sc = self.scenario
@@ -83,12 +96,18 @@ class World:
             )
         self.sample_period_s = float(sample_period_s)
         self.patient_seed = int(patient_seed)
-        self.params: PatientParams | FrozenParams = (
-            sc.frozen if sc.frozen is not None else draw_patient(patient_seed)
-        )
+        model = check_model_for_scenario(patient_model, sc.name, sc.frozen is not None)
+        self.patient_model = patient_model
         self._h = sample_period_s / n_sub
         self._n_sub = n_sub
-        self.patient = Patient(self.params, self._h)
+        self.patient: PatientModel = (
+            Patient(sc.frozen, self._h)
+            if sc.frozen is not None
+            else model.from_seed(self.patient_seed, self._h)
+        )
+        params = getattr(self.patient, "params", None)
+        #: the paper model's coefficients (None for another model: see ``patient.coefficients()``)
+        self.params = params if isinstance(params, (PatientParams, FrozenParams)) else None
         self.pump = Pump(sc.pump)
         self.fault_specs = (*sc.faults, *faults)
         self.faults = WorldFaults(self.fault_specs, self.sample_period_s)
@@ -101,7 +120,7 @@ class World:
         self._pump_faults = bool(self.faults.pump)
         self.sensor = Sensor(sensor_cfg, patient_rng(patient_seed, 1))
         self.disturbance = DisturbanceSum(sc.disturbances)
-        self.baseline_mmhg = self.params.baseline_mmhg
+        self.baseline_mmhg = self.patient.baseline_mmhg
         self.tick = 0
         self.last_command_ml_h = math.nan
         self.last_mean_rate_ml_h = 0.0
@@ -217,5 +236,5 @@ class World:
 
         sc = self.scenario
         band = reachable_band_mmhg(sc.step_mmhg if sc.step_mmhg != 0.0 else None, sc.noisy)
-        achievable = self.params.max_delta_map_mmhg(sc.pump.max_rate_ml_h)
+        achievable = self.patient.max_delta_map_mmhg(sc.pump.max_rate_ml_h)
         return self.required_delta_mmhg() - band <= achievable

@@ -6,20 +6,22 @@ imports no other package of this project.
 Modules
 -------
 ``pressor.xml``
-    The dialect (message ids 45000-45006, a block no dialect in pymavlink's ``all`` uses).
+    The dialect (message ids 45000-45007, a block no dialect in pymavlink's ``all`` uses).
 ``dialect/pressor.py``
     The module mavgen generates from it (committed; ``python -m link.generate``).
 ``messages``
     One typed message per frame, the same on both ends: :class:`Hello`, :class:`Heartbeat`,
     :class:`TickInputs` (a tick's scheduling, target and MAP frames), :class:`Command`,
-    :class:`PumpStatus`; the dialect's enums (``MODE_*``, ``STATE_*``, ``LINK_*``, ``ROLE_*``).
+    :class:`PumpStatus`; the dialect's enums (``MODE_*``, ``STATE_*``, ``LINK_*``, ``ROLE_*``,
+    ``REFUSAL_*``).
 ``codec``
     :class:`~link.codec.FrameCodec` - framing with resynchronisation, CRC, sequence and signature
     checks, the fast pack/decode path.
 ``counters``, ``signing``
     :class:`LinkCounters` (``DROP_CAUSES``: the ones counting what is dropped, by cause),
-    :class:`LinkError`, :class:`LinkClosedError`, :class:`SigningMismatch`; :class:`Signing`,
-    :func:`~link.signing.default_key_path`.
+    :class:`LinkError`, :class:`LinkClosedError`, :class:`SigningMismatch`,
+    :class:`HelloRefused` (this end refuses the peer's hello), :class:`PeerRefused` (the peer
+    refused ours), both a :class:`Refusal`; :class:`Signing`, :func:`~link.signing.default_key_path`.
 ``session``, ``runtime_session``, ``device_session``
     :class:`Session` (what both ends share: hellos, handshake, heartbeats, reading, dispatch),
     :class:`RuntimeSession` (assembles ticks, sends commands), :class:`DeviceSession` (sends ticks
@@ -77,9 +79,12 @@ Values are float32 on the wire (sim time is double), matching ``hil_sim.world``'
 
 from link.counters import (
     DROP_CAUSES,
+    HelloRefused,
     LinkClosedError,
     LinkCounters,
     LinkError,
+    PeerRefused,
+    Refusal,
     SigningMismatch,
 )
 from link.device_session import DeviceSession
@@ -91,6 +96,15 @@ from link.messages import (
     MODE_SAFE,
     MODE_STOP,
     PROTOCOL_VERSION,
+    REFUSAL_CONCENTRATION,
+    REFUSAL_DRUG,
+    REFUSAL_LINK_MODE,
+    REFUSAL_PROTOCOL_VERSION,
+    REFUSAL_PUMP_MAXIMUM,
+    REFUSAL_ROLE,
+    REFUSAL_SAMPLE_PERIOD,
+    REFUSAL_SENSOR_NOISE,
+    REFUSAL_SYSTEM_ID,
     ROLE_DEVICE,
     ROLE_RUNTIME,
     STATE_BOOT,
@@ -119,6 +133,15 @@ __all__ = [
     "MODE_SAFE",
     "MODE_STOP",
     "PROTOCOL_VERSION",
+    "REFUSAL_CONCENTRATION",
+    "REFUSAL_DRUG",
+    "REFUSAL_LINK_MODE",
+    "REFUSAL_PROTOCOL_VERSION",
+    "REFUSAL_PUMP_MAXIMUM",
+    "REFUSAL_ROLE",
+    "REFUSAL_SAMPLE_PERIOD",
+    "REFUSAL_SENSOR_NOISE",
+    "REFUSAL_SYSTEM_ID",
     "ROLE_DEVICE",
     "ROLE_RUNTIME",
     "STATE_BOOT",
@@ -130,13 +153,16 @@ __all__ = [
     "FdPort",
     "Heartbeat",
     "Hello",
+    "HelloRefused",
     "LinkClosedError",
     "LinkCounters",
     "LinkError",
     "ManualClock",
+    "PeerRefused",
     "PortWrapper",
     "PtyPair",
     "PumpStatus",
+    "Refusal",
     "RuntimeSession",
     "Session",
     "Signing",

@@ -18,6 +18,48 @@ class LinkClosedError(LinkError):
     """The peer closed the link (or the port vanished)."""
 
 
+class Refusal(LinkError):
+    """A hello refused, by this end (:class:`HelloRefused`) or by the peer
+    (:class:`PeerRefused`); the commands exit 2 on it."""
+
+
+class HelloRefused(Refusal):
+    """This end refuses the peer's hello (docs/PROTOCOL.md, "Refusals").
+
+    Parameters
+    ----------
+    reason
+        The ``PRESSOR_REFUSAL_REASON`` value (``link.REFUSAL_*``).
+    text
+        One line naming both values; the message of the exception, and what
+        :meth:`link.Session.refuse` sends the peer.
+    """
+
+    def __init__(self, reason: int, text: str) -> None:
+        super().__init__(text)
+        self.reason = reason
+        self.text = text
+
+
+class PeerRefused(Refusal):
+    """The peer refused this end's hello: its PRESSOR_REFUSAL arrived.
+
+    Parameters
+    ----------
+    reason
+        The ``PRESSOR_REFUSAL_REASON`` value the peer sent.
+    text
+        The peer's one line.
+    peer
+        The peer's name, for the message (``refused by the runtime: TEXT``).
+    """
+
+    def __init__(self, reason: int, text: str, peer: str = "peer") -> None:
+        super().__init__(f"refused by the {peer}: {text}")
+        self.reason = reason
+        self.text = text
+
+
 @dataclass(slots=True)
 class LinkCounters:
     """What the session saw and did; all counts since the session was made.

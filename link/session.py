@@ -5,7 +5,7 @@ signing, sequence checks), a send queue and :class:`~link.counters.LinkCounters`
 except inside a bounded wait on the port. What the two roles send and wait for lives in the
 subclasses, :class:`link.runtime_session.RuntimeSession` and
 :class:`link.device_session.DeviceSession`; this base holds what both ends share: hellos and the
-handshake, heartbeats, reading, dispatching, the tlog and closing.
+handshake and its refusals, heartbeats, reading, dispatching, the tlog and closing.
 """
 
 from __future__ import annotations
@@ -18,15 +18,24 @@ from typing import Any
 import serial
 
 from link.codec import FrameCodec, message_object
-from link.counters import LinkClosedError, LinkCounters, LinkError, SigningMismatch
+from link.counters import (
+    HelloRefused,
+    LinkClosedError,
+    LinkCounters,
+    LinkError,
+    PeerRefused,
+    SigningMismatch,
+)
 from link.dialect import pressor as mavlink
-from link.messages import PROTOCOL_VERSION, Heartbeat, Hello
+from link.handshake import check_peer_hello, signing_mismatch
+from link.messages import PROTOCOL_VERSION, REFUSAL_TEXT_CHARS, STATE_FAULT, Heartbeat, Hello
 from link.signing import Signing
 from link.tlog import TlogWriter
 
 _ID_HEARTBEAT = mavlink.MAVLINK_MSG_ID_PRESSOR_HEARTBEAT
 _ID_HELLO = mavlink.MAVLINK_MSG_ID_PRESSOR_HELLO
 _ID_STD_HEARTBEAT = mavlink.MAVLINK_MSG_ID_HEARTBEAT
+_ID_REFUSAL = mavlink.MAVLINK_MSG_ID_PRESSOR_REFUSAL
 #: standard HEARTBEAT system_status for each PRESSOR_STATE
 _MAV_STATE = {
     mavlink.PRESSOR_STATE_BOOT: mavlink.MAV_STATE_BOOT,
@@ -107,13 +116,19 @@ class Session:
         #: called with every accepted message object (after the session's own handling)
         self.on_message: Callable[[Any], None] | None = None
         self.peer_hello: Hello | None = None
+        #: MAVLink system id the peer's hello came from
+        self.peer_system_id: int | None = None
         self.peer_heartbeat: Heartbeat | None = None
+        #: the peer's PRESSOR_REFUSAL (reason, text), once one arrived; waits then raise
+        #: :class:`PeerRefused`
+        self.peer_refusal: tuple[int, str] | None = None
         self._hello: Hello | None = None
         #: handlers per message id: called with the field values in XML order (messages without
         #: arrays or strings) or with the message object (the hello)
         self._handlers: dict[int, Callable[[Any], None]] = {
             _ID_HEARTBEAT: self._on_heartbeat,
             _ID_HELLO: self._on_hello,
+            _ID_REFUSAL: self._on_refusal,
         }
 
     # ------------------------------------------------------------------ sending
@@ -198,6 +213,17 @@ class Session:
         )
         self.send_fields(_ID_HEARTBEAT, tick, self.ROLE, state, flush=flush)
 
+    def refuse(self, refusal: HelloRefused) -> None:
+        """Tell the peer why its hello is refused: PRESSOR_REFUSAL (reason, this end's protocol
+        version, the text cut to 200 ASCII characters), then a heartbeat FAULT, written at once.
+        The caller then closes the link (docs/PROTOCOL.md, "Refusals")."""
+        text = refusal.text.encode("ascii", "replace")[:REFUSAL_TEXT_CHARS]
+        self.send(
+            self.codec.mav.pressor_refusal_encode(refusal.reason, PROTOCOL_VERSION, text),
+            flush=False,
+        )
+        self.send_heartbeat(0, STATE_FAULT)
+
     # ---------------------------------------------------------------- receiving
     def poll(self, timeout_s: float = 0.0) -> int:
         """Read what the port has (waiting up to ``timeout_s`` for a first byte) and process it.
@@ -244,6 +270,8 @@ class Session:
         deadline = now + timeout_s
         while True:
             if self._read_once(True, deadline - now):
+                if self.peer_refusal is not None:
+                    raise PeerRefused(*self.peer_refusal, self.PEER_NAME)
                 result = ready()
                 if result is not None:
                     return result
@@ -271,7 +299,11 @@ class Session:
         tick, _role, state = fields
         self.peer_heartbeat = Heartbeat(tick, state)
 
+    def _on_refusal(self, msg: Any) -> None:
+        self.peer_refusal = (int(msg.reason), _text(msg.text))
+
     def _on_hello(self, msg: Any) -> None:
+        self.peer_system_id = msg.get_srcSystem()
         self.peer_hello = Hello(
             _text(msg.name),
             msg.patient_seed,
@@ -305,23 +337,11 @@ class Session:
     def check_signing(self) -> None:
         """Raise :class:`SigningMismatch` naming the cause if a received frame showed that the
         peer signs differently from this end (unsigned, another key, stale timestamps, or signed
-        while this end has no key)."""
-        peer, codec = self.PEER_NAME, self.codec
-        why = {
-            "unsigned": f"the {peer}'s frames are unsigned but this end signs: give the {peer}"
-            " the same key (--signing-key FILE) or run both ends with --no-signing",
-            "key": f"the {peer} signs with another key: give both ends the same key file"
-            " (pressor keygen; --signing-key FILE)",
-            "stale": f"the {peer}'s signing timestamps are replayed or more than a minute old"
-            f" (frames of an earlier run, or a wrong clock on the {peer})",
-        }.get(codec.refusal or "")
-        if why is None and codec.peer_signed:
-            why = (
-                f"the {peer} signs its frames but this end has no key: give it the same key"
-                f" (--signing-key FILE) or start the {peer} with --no-signing"
-            )
+        while this end has no key: :func:`link.handshake.signing_mismatch`)."""
+        codec = self.codec
+        why = signing_mismatch(self.PEER_NAME, codec.refusal, codec.peer_signed)
         if why is not None:
-            raise SigningMismatch(f"signing mismatch: {why}")
+            raise SigningMismatch(why)
 
     def handshake(self, hello: Hello, timeout_s: float = 10.0, resend_s: float = 0.5) -> Hello:
         """Establish the link after both ends opened their ports; return the peer's hello.
@@ -331,19 +351,23 @@ class Session:
         Raises
         ------
         LinkError
-            No hello within ``timeout_s`` (s, wall clock), or a peer of the wrong role or protocol;
-            :class:`SigningMismatch` at once when the peer signs differently.
+            No hello within ``timeout_s`` (s, wall clock); :class:`SigningMismatch` at once when
+            the peer signs differently; :class:`PeerRefused` when the peer refused this end's
+            hello.
+        HelloRefused
+            The peer's hello announces the wrong role, comes from a system id other than its role
+            or carries another protocol version (:func:`link.handshake.check_peer_hello`); the
+            peer has been sent the refusal (:meth:`refuse`).
         """
         peer = self._exchange_hellos(hello, timeout_s, resend_s)
         self.check_signing()
         if peer is None:
             raise LinkError(f"no hello from the {self.PEER_NAME} within {timeout_s} s")
-        if peer.role != self.PEER_ROLE:
-            raise LinkError(f"peer announced role {peer.role}, expected {self.PEER_ROLE}")
-        if peer.protocol_version != PROTOCOL_VERSION:
-            raise LinkError(
-                f"peer protocol_version {peer.protocol_version}, expected {PROTOCOL_VERSION}"
-            )
+        try:
+            check_peer_hello(peer, self.peer_system_id, self.PEER_NAME, self.PEER_ROLE)
+        except HelloRefused as exc:
+            self.refuse(exc)  # the peer is told why before its owner closes the link
+            raise
         return peer
 
     def _exchange_hellos(self, hello: Hello, timeout_s: float, resend_s: float) -> Hello | None:

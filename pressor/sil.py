@@ -12,7 +12,9 @@ status line shows simulated time and the real-time factor (:mod:`runtime.progres
 itself never imports the simulator: the control path learns of the patient, and of any fault, only
 through what arrives on the link. ``--schedule`` picks where the controller's K, T, τ come from
 (:mod:`runtime.estimation.schedule`); the default here is still the oracle (the device's truth),
-because the online estimator's figures do not all hold yet (README).
+because the online estimator's figures do not all hold yet (README). ``--patient-model`` picks the
+device's patient model (:mod:`hil_sim.patient_model`); a model other than ``paper`` is named in the
+summary as ``patient_model``.
 
 Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
 Faults the scenario declares (``[[faults]]``) are injected by the device too; both are scored
@@ -38,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.usage import USAGE_EXIT, UsageError, UsageParser
+from hil_sim.patient_model import add_patient_model_option
 from runtime.config import ORACLE_DEFAULT_WHY, RunConfig, add_run_options, positive, run_config
 from runtime.placement import CpuChoice, parse_lockstep_cpus
 
@@ -71,6 +74,9 @@ class SilConfig:
         The scenario's disturbance events ``(kind, start_s)`` for the metrics.
     noisy
         Whether the scenario's monitor adds noise (the metrics' settling band, docs/METRICS.md).
+    patient_model
+        The device's patient model (a :data:`hil_sim.patient_model.PATIENT_MODELS` name or
+        ``MODULE:CLASS``).
     """
 
     run: RunConfig
@@ -82,6 +88,7 @@ class SilConfig:
     cpu: CpuChoice
     events: tuple[tuple[str, float], ...]
     noisy: bool
+    patient_model: str = "paper"
 
 
 def _seed(text: str) -> int:
@@ -125,12 +132,14 @@ def sil_parser() -> UsageParser:
         " device on another; N both on CPU N; N,M the loop on N and the device on M; none let"
         " the scheduler place them. Ignored with --realtime",
     )
+    add_patient_model_option(p)
     return p
 
 
 def sil_config(argv: Sequence[str]) -> SilConfig:
     """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
     disturbance events (raises :class:`contracts.usage.UsageError`)."""
+    from hil_sim.patient_model import PatientModelError, check_model_for_scenario
     from hil_sim.scenario import ScenarioError, is_scenario_path, load_scenario
     from hil_sim.trial import scenario_events
 
@@ -143,7 +152,8 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
     run = run_config(args)
     try:
         scenario = load_scenario(args.scenario)
-    except ScenarioError as exc:
+        check_model_for_scenario(args.patient_model, scenario.name, scenario.frozen is not None)
+    except (ScenarioError, PatientModelError) as exc:
         raise UsageError(str(exc)) from None
     if args.link != "pty":
         raise UsageError(
@@ -163,6 +173,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         cpu=args.cpu,
         events=tuple(scenario_events(scenario)),
         noisy=scenario.noisy,
+        patient_model=args.patient_model,
     )
 
 
@@ -202,6 +213,8 @@ def device_command(
     cmd += ["--signing-key", str(key_file)] if key_file is not None else ["--no-signing"]
     if truth_out is not None:
         cmd += ["--truth-out", str(truth_out)]
+    if config.patient_model != "paper":  # the default's command line is unchanged
+        cmd += ["--patient-model", config.patient_model]
     return cmd
 
 
@@ -229,6 +242,8 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
         "duration_s": config.duration_s,
         "signed": signing is not None,
     }
+    if config.patient_model != "paper":  # the default's summaries keep their bytes
+        identity["patient_model"] = config.patient_model
     cpus = lockstep_cpus(config.cpu, run.realtime)
     pair = PtyPair.open()
     with tempfile.TemporaryDirectory(prefix="pressor-sil-") as tmp:

@@ -9,10 +9,11 @@ send no K, T, τ, and a device that never sends SCHEDULING_PARAMS works; ``--sch
 a device that sends them. ``pressor run --fault ...`` scores a schedule injected by that device;
 the device's scenario is not known here, so the step-window metrics and ``disturbances`` are null.
 ``pressor run --target-mmhg`` (or ``--target-file``, changed live with it or ``--target-stdin``)
-sets the MAP target on the runtime side instead of the device's MAP_TARGET; the device's hello must
-announce the drug and concentration the controller assumes (``--drug``,
+sets the MAP target on the runtime side instead of the device's MAP_TARGET (a line ``ack`` on the
+same inputs acknowledges an alarm: HOLD or FAILSAFE resume once the fault cleared); the device's
+hello must announce the drug and concentration the controller assumes (``--drug``,
 ``--concentration-ug-ml``) and a pump that reaches the controller's maximum rate, else the run
-refuses to start (:mod:`runtime.clinician`).
+refuses the device, telling it why (PRESSOR_REFUSAL), and exits 2 (:mod:`runtime.clinician`).
 ``pressor sil``, which also starts the device, is served by the front door (:mod:`pressor.sil`).
 
 ``pressor keygen`` writes a fresh signing key (default :func:`link.signing.default_key_path`):
@@ -22,7 +23,8 @@ refuses to start (:mod:`runtime.clinician`).
 defaults, detection bounds and safe states, then what the supervisor detects.
 
 Exit codes: 0 success, 1 the run completed but a check failed (or the device stalled, or the link
-failed), 2 bad usage or input (one line on stderr naming the option or file, value and range).
+failed), 2 bad usage or input (one line on stderr naming the option or file, value and range) or
+a refused device hello (one line; the device was sent the same line and a reason code).
 """
 
 from __future__ import annotations

@@ -3,12 +3,15 @@
 ``pressor run`` takes the target from the device's MAP_TARGET by default. ``--target-mmhg`` (or
 ``--target-file``) makes it the runtime's own: the device's value is then ignored and MAP_TARGET is
 no longer required for a tick. ``--target-file`` and ``--target-stdin`` change it while the loop
-runs (:mod:`runtime.target_source`). ``--drug`` and ``--concentration-ug-ml`` state the drug and
+runs (:mod:`runtime.target_source`), and carry the clinician's acknowledgement (a line ``ack``:
+HOLD or FAILSAFE resume once the fault cleared, :mod:`runtime.supervisor_io`). ``--drug`` and ``--concentration-ug-ml`` state the drug and
 concentration the loaded controller's gain units assume (the shipped controllers carry neither:
 :data:`contracts.controller.DESIGN_DRUG`, :data:`~contracts.controller.DESIGN_CONCENTRATION_UG_ML`);
 :func:`check_device_hello` refuses a device whose hello announces another drug, another
 concentration or a pump that cannot reach the controller's maximum rate (docs/PROTOCOL.md,
-"Clinician's input").
+"Clinician's input"), :func:`check_link_hello` one whose sample period, link mode or announced
+noise does not fit the run; each raises :class:`link.HelloRefused` with its reason code, which the
+runtime sends the device before it closes the link (docs/PROTOCOL.md, "Refusals").
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ TARGET_MAX_MMHG = 120.0
 MAX_CONCENTRATION_UG_ML = 100000.0
 #: longest drug name (the hello's ``drug`` is char[16])
 MAX_DRUG_CHARS = 16
+#: the line that acknowledges an alarm and asks to resume (stdin, the target file)
+ACK_WORD = "ack"
 
 
 @dataclass(frozen=True)
@@ -74,18 +79,27 @@ def number_in(text: str, lo: float, hi: float, unit: str, *, lo_open: bool = Fal
     return value
 
 
+def split_ack(text: str) -> tuple[str, bool]:
+    """``text`` without its :data:`ACK_WORD` lines, and whether it had one (case and surrounding
+    blanks ignored): the clinician's acknowledgement rides on stdin and the target file."""
+    lines = text.splitlines()
+    rest = [line for line in lines if line.strip().lower() != ACK_WORD]
+    return "\n".join(rest), len(rest) < len(lines)
+
+
 def parse_target(text: str) -> float:
     """A MAP target (mmHg) from ``text``; ``ValueError`` naming the allowed range otherwise."""
     return number_in(text, TARGET_MIN_MMHG, TARGET_MAX_MMHG, "mmHg")
 
 
 def read_target_file(path: Path) -> float:
-    """The target (mmHg) ``path`` holds; ``ValueError`` if it cannot be read or is out of range."""
+    """The target (mmHg) ``path`` holds (an ``ack`` line in it is not a target); ``ValueError`` if
+    it cannot be read or is out of range."""
     try:
         text = path.read_text(encoding="ascii", errors="replace")
     except OSError as exc:
         raise ValueError(f"cannot read: {exc.strerror}") from None
-    return parse_target(text)
+    return parse_target(split_ack(text)[0])
 
 
 def argtype(name: str, parse: Any) -> Any:
@@ -132,13 +146,16 @@ def add_clinician_options(p: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help=f"a file holding one number, the MAP target (mmHg, {rng}): read at start (the"
         " starting target, instead of --target-mmhg) and again whenever it changes; a bad value"
-        " is refused with one line on stderr and the target kept (default: none)",
+        " is refused with one line on stderr and the target kept; a line 'ack' in it"
+        " acknowledges an alarm and resumes automatic control once the fault cleared"
+        " (default: none)",
     )
     p.add_argument(
         "--target-stdin",
         action="store_true",
-        help=f"read a new MAP target (mmHg, {rng}) from each line on stdin while running; needs"
-        " --target-mmhg or --target-file for the starting target (default: off)",
+        help=f"read a new MAP target (mmHg, {rng}) from each line on stdin while running, or"
+        " 'ack' to acknowledge an alarm and resume automatic control once the fault cleared;"
+        " needs --target-mmhg or --target-file for the starting target (default: off)",
     )
     p.add_argument(
         "--drug",
@@ -188,6 +205,54 @@ def clinician_input(args: argparse.Namespace) -> ClinicianInput:
     )
 
 
+def check_link_hello(peer: Any, period_s: float, rate_hz: float, link_mode: int) -> None:
+    """Refuse a device whose hello does not fit the run's timing or announces impossible noise.
+
+    Parameters
+    ----------
+    peer
+        The device's :class:`link.Hello`.
+    period_s, rate_hz
+        The runtime's loop period (s) and rate (Hz, as given by ``--rate``).
+    link_mode
+        The runtime's ``LINK_LOCKSTEP`` / ``LINK_REALTIME``.
+
+    Raises
+    ------
+    link.HelloRefused
+        One line naming both values: ``REFUSAL_SAMPLE_PERIOD`` (the periods differ by more than
+        1e-9 s), ``REFUSAL_SENSOR_NOISE`` (noise not in [0, 50] mmHg) or ``REFUSAL_LINK_MODE``.
+    """
+    from link import (
+        LINK_REALTIME,
+        REFUSAL_LINK_MODE,
+        REFUSAL_SAMPLE_PERIOD,
+        REFUSAL_SENSOR_NOISE,
+        HelloRefused,
+    )
+
+    if not abs(peer.sample_period_s - period_s) <= 1e-9:  # NaN refused too
+        raise HelloRefused(
+            REFUSAL_SAMPLE_PERIOD,
+            f"device sample_period_s {peer.sample_period_s} s differs from --rate"
+            f" {rate_hz} Hz (period {period_s} s)",
+        )
+    if not 0.0 <= peer.sensor_noise_mmhg <= 50.0:  # False for NaN too
+        raise HelloRefused(
+            REFUSAL_SENSOR_NOISE,
+            f"device announces sensor_noise_mmhg {peer.sensor_noise_mmhg}: allowed [0, 50] mmHg",
+        )
+    if peer.link_mode != link_mode:  # the device's clock and ours would both think they lead
+        theirs, ours = (
+            "real time" if m == LINK_REALTIME else "lockstep" for m in (peer.link_mode, link_mode)
+        )
+        raise HelloRefused(
+            REFUSAL_LINK_MODE,
+            f"device runs {theirs} (hello link_mode {peer.link_mode}) but this runtime"
+            f" runs {ours}: {'add' if peer.link_mode == LINK_REALTIME else 'drop'} --realtime",
+        )
+
+
 def check_device_hello(peer: Any, max_rate_ml_h: float, clinician: ClinicianInput) -> None:
     """Refuse a device whose syringe or pump does not fit the loaded controller.
 
@@ -202,29 +267,35 @@ def check_device_hello(peer: Any, max_rate_ml_h: float, clinician: ClinicianInpu
 
     Raises
     ------
-    contracts.usage.UsageError
-        One line naming both values: another drug, another concentration (beyond float32
-        rounding), or a pump maximum below the controller's (a pump that cannot deliver every
-        rate the controller commands; a larger pump maximum is fine: the runtime never commands
-        more than the controller's).
+    link.HelloRefused
+        One line naming both values: another drug (``REFUSAL_DRUG``), another concentration
+        beyond float32 rounding (``REFUSAL_CONCENTRATION``), or a pump maximum below the
+        controller's (``REFUSAL_PUMP_MAXIMUM``: a pump that cannot deliver every rate the
+        controller commands; a larger pump maximum is fine: the runtime never commands more than
+        the controller's).
     """
+    from link import REFUSAL_CONCENTRATION, REFUSAL_DRUG, REFUSAL_PUMP_MAXIMUM, HelloRefused
+
     drug = peer.drug.strip().lower()
     if drug != clinician.drug:
-        raise UsageError(
+        raise HelloRefused(
+            REFUSAL_DRUG,
             f"device drug {drug or '(none announced)'} differs from the controller's"
-            f" {clinician.drug} (--drug)"
+            f" {clinician.drug} (--drug)",
         )
     conc, want = float(peer.concentration_ug_ml), clinician.concentration_ug_ml
     if not math.isclose(conc, want, rel_tol=1e-6):
-        raise UsageError(
+        raise HelloRefused(
+            REFUSAL_CONCENTRATION,
             f"device concentration {conc:g} ug/ml differs from the controller's {want:g} ug/ml"
-            " (--concentration-ug-ml)"
+            " (--concentration-ug-ml)",
         )
     pump_max = float(peer.pump_max_ml_h)
     if not pump_max >= max_rate_ml_h * (1.0 - 1e-6):  # NaN refused too
-        raise UsageError(
+        raise HelloRefused(
+            REFUSAL_PUMP_MAXIMUM,
             f"device pump maximum {pump_max:g} ml/h differs from the controller's"
-            f" {max_rate_ml_h:g} ml/h: the pump cannot deliver every rate the controller commands"
+            f" {max_rate_ml_h:g} ml/h: the pump cannot deliver every rate the controller commands",
         )
 
 
@@ -237,4 +308,6 @@ def describe_target(record: dict[str, Any]) -> str:
         text += f"; at {c['sim_time_s']:g} s {c['old_mmhg']:g} -> {c['new_mmhg']:g} mmHg"
     if record["refused"]:
         text += f"; {record['refused']} refused"
+    for a in record.get("acks", ()):
+        text += f"; ack at {a['sim_time_s']:g} s {'accepted' if a['accepted'] else 'not taken'}"
     return text

@@ -14,8 +14,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from contracts.usage import UsageError, run_command
-from runtime.clinician import ClinicianInput, check_device_hello
+from contracts.usage import USAGE_EXIT, run_command
+from runtime.clinician import ClinicianInput, check_device_hello, check_link_hello
 from runtime.config import RunConfig, load_controller
 from runtime.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
 from runtime.placement import Pinned
@@ -82,6 +82,7 @@ def run_runtime(
         LINK_LOCKSTEP,
         LINK_REALTIME,
         Hello,
+        HelloRefused,
         LinkError,
         RuntimeSession,
         SigningMismatch,
@@ -128,7 +129,7 @@ def run_runtime(
             try:
                 peer = ep.handshake(hello, timeout_s=0.25)
                 break
-            except SigningMismatch:
+            except (SigningMismatch, HelloRefused):  # a refused device was told why
                 raise
             except LinkError:
                 waited += 0.25
@@ -136,24 +137,12 @@ def run_runtime(
                     raise
         if on_connected is not None:
             on_connected()
-        if abs(peer.sample_period_s - period_s) > 1e-9:
-            raise UsageError(
-                f"device sample_period_s {peer.sample_period_s} s differs from --rate"
-                f" {config.rate_hz} Hz (period {period_s} s)"
-            )
-        if not 0.0 <= peer.sensor_noise_mmhg <= 50.0:  # False for NaN too
-            raise UsageError(
-                f"device announces sensor_noise_mmhg {peer.sensor_noise_mmhg}: allowed [0, 50] mmHg"
-            )
-        if peer.link_mode != mode:  # the device's clock and ours would both think they lead
-            theirs, ours = (
-                "real time" if m == LINK_REALTIME else "lockstep" for m in (peer.link_mode, mode)
-            )
-            raise UsageError(
-                f"device runs {theirs} (hello link_mode {peer.link_mode}) but this runtime"
-                f" runs {ours}: {'add' if peer.link_mode == LINK_REALTIME else 'drop'} --realtime"
-            )
-        check_device_hello(peer, controller.max_rate_ml_h, clinician)
+        try:
+            check_link_hello(peer, period_s, config.rate_hz, mode)
+            check_device_hello(peer, controller.max_rate_ml_h, clinician)
+        except HelloRefused as exc:  # the device is told why before the link closes
+            ep.refuse(exc)
+            raise
         if config.schedule != "oracle":  # oracle summaries keep their pre-schedule bytes
             identity = {**identity, "schedule": config.schedule}
         identity = {
@@ -251,17 +240,21 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
     """Run a runtime command with its exit codes.
 
     0 success; 1 the run completed but a check failed, or the device stalled or the link failed
-    (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`); 130 / 143
+    (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`), or the
+    device's hello refused (:class:`link.Refusal`: one line, the device was told); 130 / 143
     stopped by SIGINT / SIGTERM (:mod:`runtime.interrupt`: the run stops at a tick boundary,
     commands the safe rate, and keeps its outputs).
     """
-    from link import LinkError
+    from link import LinkError, Refusal
     from runtime.loop import DeviceStalled
 
     def guarded(args: Sequence[str]) -> int:
         with stop_on_signals():
             try:
                 return handler(args)
+            except Refusal as exc:  # a hello refused, by either end: the other was told why
+                print(f"{prog}: {exc}", file=sys.stderr)
+                return USAGE_EXIT
             except (DeviceStalled, LinkError) as exc:
                 print(f"{prog}: {exc}", file=sys.stderr)
                 return 1

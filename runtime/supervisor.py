@@ -23,9 +23,15 @@ FAILSAFE
     Link loss (immediately) or a long fault: the command ramps at ``failsafe_ramp_ml_h_per_s`` to
     ``safe_rate_ml_h`` (``None``: keep the held rate). Alarm raised.
 RECOVERING
-    From HOLD or FAILSAFE once every input has been good for ``recover_after_s``: the controller is
-    stepped again and the output slews towards its command by at most ``reentry_step_ml_h`` per tick
-    (bumpless transfer); when the two meet the state is AUTO. A new fault → HOLD.
+    From HOLD or FAILSAFE once every input has been good for ``recover_after_s``, or at once on a
+    clinician's acknowledgement (:meth:`Supervisor.acknowledge`) at a tick without a holding fault:
+    the controller is stepped again and the output slews towards its command by at most
+    ``reentry_step_ml_h`` per tick (bumpless transfer); when the two meet the state is AUTO. A new
+    fault → HOLD.
+
+Nothing latches: a HOLD or FAILSAFE lasts exactly as long as a fault persists, plus
+``recover_after_s`` (or until the acknowledgement). What clears each fault, and so ends the state:
+docs/PROTOCOL.md, "Alarms"; the acknowledgement rule: :mod:`runtime.supervisor_io`.
 
 The fault kinds, their detection bounds and the configuration are in
 :mod:`runtime.supervisor_config`.
@@ -36,7 +42,6 @@ Deviation from the paper: the paper has no supervisor; this is the IEC 60601-1-1
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 from contracts.faults import PUMP_ALARM_WATCHDOG
 from runtime.flatline import FlatlineRules
@@ -49,88 +54,12 @@ from runtime.supervisor_config import (
     SupervisorConfig,
     fault_names,
 )
+from runtime.supervisor_io import AckOutcome, SupervisorInput, SupervisorOutput, judge_ack
+
+__all__ = ["AckOutcome", "Supervisor", "SupervisorInput", "SupervisorOutput"]
 
 #: slack (s) on time comparisons so that k·Ts sums reach a bound that is a whole number of ticks
 _EPS_S = 1e-9
-
-
-class SupervisorInput(NamedTuple):
-    """Everything the supervisor checks at one tick (every field required: nothing fails open).
-
-    Immutable; a named tuple rather than a frozen dataclass because one is built every tick of
-    every trial patient (~0.3 µs against ~1.4 µs).
-
-    Attributes
-    ----------
-    now_s
-        Time (s) of this tick on the loop's clock.
-    map_mmhg, quality
-        Newest MAP sample (mmHg) and its monitor quality bits.
-    K, T_s, tau_s, sched_valid
-        Newest scheduling parameters (mmHg/(ml/h), s, s) and their validity flag.
-    sample_age_s
-        Age (s) of the sample: since it was received, or for a ``QUALITY_HELD`` repeat since the
-        last sample without the bit (:mod:`runtime.core`); 0 marks a new sample, the only kind
-        the flatline rules judge. The MAP checks are skipped once stale.
-    link_silence_s
-        Time (s) since any frame was received from the device.
-    target_mmhg
-        The MAP target (mmHg) the controller will be given.
-    link_errors
-        Frames the link layer discarded since the last tick (advisory ``LINK_ERRORS``).
-    pump_delivered_ml_h, pump_alarms
-        This tick's pump status (delivered ml/h, alarm bits); NaN and 0: no fresh status.
-    estimated
-        Whether K, T, τ come from the online estimator (``--schedule estimated``).
-    estimate_healthy
-        False when the estimator rejected its estimate and reports the prior instead.
-    """
-
-    now_s: float
-    map_mmhg: float
-    quality: int
-    K: float
-    T_s: float
-    tau_s: float
-    sched_valid: bool
-    sample_age_s: float
-    link_silence_s: float
-    target_mmhg: float
-    link_errors: int
-    pump_delivered_ml_h: float
-    pump_alarms: int
-    estimated: bool
-    estimate_healthy: bool
-
-
-class SupervisorOutput(NamedTuple):
-    """What the supervisor decided at one tick (immutable; a named tuple for the per-tick cost).
-
-    Attributes
-    ----------
-    run_controller
-        Whether the controller was to be stepped this tick.
-    state
-        The state after the tick.
-    faults
-        Fault bits found this tick.
-    new_faults
-        Fault bits that rose this tick (for event logs).
-    transition
-        ``(from_state, to_state, faults)`` if the tick changed the state, else ``None``.
-    command_ml_h
-        The pump command (ml/h), finite and in [0, max_rate_ml_h].
-    alarm
-        Whether the alarm is raised (HOLD, FAILSAFE or any fault but a clamped command).
-    """
-
-    run_controller: bool
-    state: State
-    faults: int
-    new_faults: int
-    transition: tuple[State, State, int] | None
-    command_ml_h: float
-    alarm: bool
 
 
 def _clamp(value: float, high: float) -> float:
@@ -158,6 +87,8 @@ class Supervisor:
         The last command output (ml/h), always in [0, max_rate_ml_h]; held between ticks.
     detections
         Count of rising edges of each fault kind (by name) over the run.
+    last_ack
+        What became of the acknowledgement taken at the last :meth:`assess`, else ``None``.
     """
 
     def __init__(self, config: SupervisorConfig | None = None) -> None:
@@ -197,11 +128,18 @@ class Supervisor:
         self._entry_state = State.STARTUP
         self._mismatch_since_s: float | None = None
         self._out_of_box_since_s: float | None = None
+        self._ack_requested = False
+        self.last_ack: AckOutcome | None = None
 
     @property
     def alarm(self) -> bool:
         """True while the supervisor is not in normal automatic control or a fault is present."""
         return self.state in (State.HOLD, State.FAILSAFE) or bool(self.faults & ALARM_FAULTS)
+
+    def acknowledge(self) -> None:
+        """The clinician acknowledges the alarm and asks to resume; judged at the next
+        :meth:`assess` (:func:`runtime.supervisor_io.judge_ack`), its outcome in ``last_ack``."""
+        self._ack_requested = True
 
     # -- input checks ---------------------------------------------------------------------------
     def _check_map(self, now_s: float, map_mmhg: float, quality: int, new: bool) -> int:
@@ -337,6 +275,12 @@ class Supervisor:
                 state in (State.HOLD, State.FAILSAFE)
                 and now_s - self._good_since_s >= cfg.recover_after_s - _EPS_S
             ):
+                state = State.RECOVERING
+        self.last_ack = None
+        if self._ack_requested:
+            self._ack_requested = False
+            self.last_ack = judge_ack(state, faults & self._holding_faults)
+            if self.last_ack.accepted:
                 state = State.RECOVERING
         self.state = state
         self._run_controller = state in (State.AUTO, State.RECOVERING)

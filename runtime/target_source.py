@@ -12,6 +12,13 @@ new, source). A bad value (not a number, outside [50, 120] mmHg, an unreadable f
 with one line on stderr, logged, counted, and the old target kept; an empty file or a blank line
 is ignored (a writer that truncates the file before it writes).
 
+The same two inputs carry the clinician's acknowledgement: the line ``ack`` on stdin, or an
+``ack`` line in the target file (each time the file changes and holds one; the file read at start
+acknowledges nothing). It is taken at the next tick: the supervisor judges it
+(:func:`runtime.supervisor_io.judge_ack`: HOLD or FAILSAFE resume at once, through RECOVERING,
+only if no fault holds the loop at that tick) and the outcome is printed on stderr, logged to the
+event log with the tick and the time, and listed in :meth:`~TargetSource.summary` (``acks``).
+
 Which tick a change lands on depends on when it was written in wall-clock time, so a lockstep run
 with live changes is not reproducible byte for byte; a run with a fixed ``--target-mmhg`` is.
 """
@@ -26,8 +33,9 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from link import TickInputs
-from runtime.clinician import ClinicianInput, parse_target
+from runtime.clinician import ClinicianInput, parse_target, split_ack
 from runtime.loop import Loop
+from runtime.supervisor import AckOutcome
 
 
 class TargetSource:
@@ -62,10 +70,14 @@ class TargetSource:
         self.changes: list[dict[str, Any]] = []
         #: values refused (bad text, out of range, unreadable file)
         self.refused = 0
+        #: acknowledgements taken: tick, sim_time_s, from, state, accepted, outcome
+        self.acks: list[dict[str, Any]] = []
+        self._pending_acks: list[str] = []
         self._path = clinician.target_file
         # never a real state: the first poll reads the file again (it may have changed since
         # the command line read the starting target)
         self._file_state: tuple[int, int, int] | None | str = "unread"
+        self._first_read = True
         self._fd: int | None = stdin_fd if clinician.target_stdin else None
         self._buf = b""
         self._err = err
@@ -87,8 +99,9 @@ class TargetSource:
                     text = path.read_text(encoding="ascii", errors="replace")
                 except OSError as exc:
                     self._refuse(f"file {path}", f"cannot read: {exc.strerror}")
-                else:
-                    self._offer(text, f"file {path}")
+                else:  # the file as read at start acknowledges nothing
+                    first, self._first_read = self._first_read, False
+                    self._offer(text, f"file {path}", ack=not first)
         if self._fd is not None:
             for line in self._read_lines():
                 self._offer(line, "stdin")
@@ -110,7 +123,10 @@ class TargetSource:
         *lines, self._buf = (self._buf + data).split(b"\n")
         return [line.decode("ascii", "replace") for line in lines]
 
-    def _offer(self, text: str, source: str) -> None:
+    def _offer(self, text: str, source: str, *, ack: bool = True) -> None:
+        text, acked = split_ack(text)
+        if acked and ack:
+            self._pending_acks.append(source)
         if not text.strip():
             return  # an empty file (being rewritten) or a blank line
         try:
@@ -159,13 +175,41 @@ class TargetSource:
         self._pending.clear()
         return replace(inp, target_mmhg=self.target_mmhg, target_tick=tick)
 
+    def take_acks(self) -> list[str]:
+        """The sources of the acknowledgements read since the last call (taken by the tick)."""
+        acks, self._pending_acks = self._pending_acks, []
+        return acks
+
+    def log_ack(
+        self, outcome: AckOutcome, sources: list[str], tick: int, t: float, recorder: Any = None
+    ) -> None:
+        """Keep, print and log (to ``recorder``, a :class:`runtime.recorder.Recorder`) what
+        became of the acknowledgement from ``sources`` taken at ``tick`` (sim time ``t``, s)."""
+        source = ", ".join(dict.fromkeys(sources))
+        self.acks.append(
+            {
+                "tick": tick,
+                "sim_time_s": t,
+                "from": source,
+                "state": outcome.state.name,
+                "accepted": outcome.accepted,
+                "outcome": outcome.text,
+            }
+        )
+        line = f"ack ({source}) at {t:g} s, tick {tick}: {outcome.text}"
+        print(f"{self._prog}: {line}", file=self._err or sys.stderr)
+        if recorder is not None:
+            recorder.event(tick, t, line, warn=not outcome.accepted)
+
     def summary(self) -> dict[str, Any]:
-        """The summary's ``target`` record: source, starting target, changes, refusals."""
+        """The summary's ``target`` record: source, starting target, changes, refusals,
+        acknowledgements."""
         return {
             "source": "runtime",
             "initial_mmhg": self.initial_mmhg,
             "changes": list(self.changes),
             "refused": self.refused,
+            "acks": list(self.acks),
         }
 
 
@@ -178,7 +222,8 @@ class TargetedLoop(Loop):
         As for :class:`runtime.loop.Loop`.
     target
         The runtime's target; applied to each tick's inputs before the core steps, its changes
-        logged to the loop's recorder.
+        logged to the loop's recorder; the acknowledgements it read are handed to the supervisor
+        for the tick and their outcome logged.
     """
 
     def __init__(self, *args: Any, target: TargetSource, **kw: Any) -> None:
@@ -187,8 +232,16 @@ class TargetedLoop(Loop):
 
     def tick(self, inp: TickInputs, *args: Any, **kw: Any) -> float:
         """:meth:`runtime.loop.Loop.tick` on ``inp`` with the runtime's target in place of the
-        device's."""
-        return super().tick(self.target.apply(inp, self.recorder), *args, **kw)
+        device's, and the clinician's acknowledgement, if one came, judged at this tick."""
+        target = self.target
+        inp = target.apply(inp, self.recorder)
+        acks = target.take_acks()
+        if acks:
+            self.sup.acknowledge()
+        command = super().tick(inp, *args, **kw)
+        if acks and self.sup.last_ack is not None:
+            target.log_ack(self.sup.last_ack, acks, inp.tick, inp.sim_time_s, self.recorder)
+        return command
 
 
 def _file_state(path: Path) -> tuple[int, int, int] | None:

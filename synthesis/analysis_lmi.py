@@ -289,6 +289,7 @@ def analyse(
             progress,
             label,
         )
+        notes.extend(f"KKT fallback: {f}, then {sol.kkt_method}" for f in sol.fallbacks)
         if sol.status == "solver_error":
             notes.append(f"Clarabel ended {sol.clarabel_status}")
         t_val = float(sol.x[it]) if sol.x is not None and with_t else 0.0

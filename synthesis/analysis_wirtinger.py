@@ -91,10 +91,10 @@ from synthesis.closed_loop import DelaySystem
 from synthesis.conic import solve_conic
 from synthesis.k_scaling import KScaling
 from synthesis.wirtinger_conic import build_conic, vertices_of
-from synthesis.wirtinger_lmi import prepare, sym, vertex_lmis
+from synthesis.wirtinger_lmi import WirtingerData, prepare, sym, vertex_lmis
 from synthesis.working_set import first_points, grow_working_set
 
-__all__ = ["analyse_wirtinger"]
+__all__ = ["analyse_wirtinger", "recheck_certificate"]
 
 Array = NDArray[np.float64]
 
@@ -196,6 +196,7 @@ def analyse_wirtinger(
         if progress:
             progress(f"{label}: solving {n_psd} PSD blocks, {ncol} variables with Clarabel")
         sol = solve_conic(q, a, b, cones, opts, progress, label)
+        notes.extend(f"KKT fallback: {f}, then {sol.kkt_method}" for f in sol.fallbacks)
         if sol.status == "solver_error":
             notes.append(f"Clarabel ended {sol.clarabel_status}")
         if sol.x is not None and cap is not None:
@@ -209,7 +210,7 @@ def analyse_wirtinger(
         if xv is None or backoff <= 0.0:
             return status, xv
         _, margins, p_min = recheck(xv)
-        if np.all(margins[pts] > recheck_tol[0]) and np.all(p_min > 0) and sr_positive(xv):
+        if np.all(margins[pts] > recheck_tol[0]) and np.all(p_min > 0) and _sr_positive(data, xv):
             return status, xv
         # the optimum sits on the boundary (in the bound form the slack cones Z_i >= +/- M_i
         # too; S or R may end singular): back off gamma by a few percent and maximise the
@@ -227,22 +228,8 @@ def analyse_wirtinger(
     recheck_tol = [0.0]  # the last re-check's strictness tolerance (scaled to the LMI's size)
 
     def recheck(xv: Array) -> tuple[bool, Array, Array]:
-        # the certificate: every vertex LMI evaluated at the solution at EVERY point
-        lmi_val = vertex_lmis(data, xv, verts)
-        lmi_val = 0.5 * (lmi_val + np.swapaxes(lmi_val, -1, -2)).reshape(kk, data.big, data.big)
-        margins = -np.linalg.eigvalsh(lmi_val)[:, -1].reshape(m, nv).max(axis=1)
-        pos = np.einsum("mj,jab->mab", data.w_p, sym(xv[:off_s].reshape(data.n_p, ns2), n2))
-        p_min = np.linalg.eigvalsh(pos)[:, 0]
-        tol = recheck_tol[0] = 1e-10 * max(1.0, float(np.max(np.abs(lmi_val))))
-        certified = bool(np.all(margins > tol) and np.all(p_min > 0) and sr_positive(xv))
+        certified, margins, p_min, recheck_tol[0] = _recheck(data, xv)
         return certified, margins, p_min
-
-    def sr_positive(xv: Array) -> bool:
-        sr_min = min(
-            np.linalg.eigvalsh(sym(xv[off_s : off_s + ns], n))[0],
-            np.linalg.eigvalsh(sym(xv[off_s + ns : off_s + 2 * ns], n))[0],
-        )
-        return bool(sr_min > 0)
 
     status, xv, points, (certified, margins, p_min) = grow_working_set(
         points,
@@ -289,3 +276,102 @@ def analyse_wirtinger(
         data.txi.T @ p0 @ data.txi,
         certificate,
     )
+
+
+def _recheck(data: WirtingerData, xv: Array) -> tuple[bool, Array, Array, float]:
+    """The certificate's verdict at the global vector ``xv``: every vertex LMI evaluated in floating
+    point at EVERY point of ``data``, P(rho_k) > 0, S > 0, R > 0; (certified, margins (m,),
+    smallest eigenvalue of each P(rho_k) (m,), the strictness tolerance used)."""
+    verts = vertices_of(data)
+    m, nv, n2 = len(data.h), len(verts), 2 * data.n
+    lmi_val = vertex_lmis(data, xv, verts)
+    lmi_val = 0.5 * (lmi_val + np.swapaxes(lmi_val, -1, -2)).reshape(m * nv, data.big, data.big)
+    margins = -np.linalg.eigvalsh(lmi_val)[:, -1].reshape(m, nv).max(axis=1)
+    off_s = data.n_p * data.ns2
+    pos = np.einsum("mj,jab->mab", data.w_p, sym(xv[:off_s].reshape(data.n_p, data.ns2), n2))
+    p_min = np.linalg.eigvalsh(pos)[:, 0]
+    tol = 1e-10 * max(1.0, float(np.max(np.abs(lmi_val))))
+    certified = bool(np.all(margins > tol) and np.all(p_min > 0) and _sr_positive(data, xv))
+    return certified, margins, p_min, tol
+
+
+def _sr_positive(data: WirtingerData, xv: Array) -> bool:
+    off_s, ns, n = data.n_p * data.ns2, data.ns, data.n
+    sr_min = min(
+        np.linalg.eigvalsh(sym(xv[off_s : off_s + ns], n))[0],
+        np.linalg.eigvalsh(sym(xv[off_s + ns : off_s + 2 * ns], n))[0],
+    )
+    return bool(sr_min > 0)
+
+
+def recheck_certificate(
+    systems: Sequence[DelaySystem],
+    rho_hat: Array,
+    rate_hat_per_s: Array,
+    dtau_drho_hat_s: Array,
+    tau_max_s: float,
+    certificate: dict[str, Any],
+    gamma: float,
+    p_dependence: str,
+    k_scaling: KScaling | None = None,
+) -> tuple[bool, Array]:
+    """Re-check a stored certificate (no solve): every vertex LMI at every point, in floating point.
+
+    Parameters
+    ----------
+    systems, rho_hat, rate_hat_per_s, dtau_drho_hat_s, tau_max_s, p_dependence, k_scaling
+        As for :func:`analyse_wirtinger` (P depends on every parameter).
+    certificate
+        ``P`` (n_p, 2n, 2n), ``S``, ``R`` (n, n), divided by gamma, with the ``transform`` and
+        ``time_scale_s`` they live in (what :func:`analyse_wirtinger` returns and an artifact
+        stores).
+    gamma
+        The L2-gain bound the certificate claims (> 0).
+
+    Returns
+    -------
+    (certified, margins)
+        Whether every LMI is negative definite (beyond round-off) and P(rho_k), S, R positive;
+        the smallest margin ``-lambda_max`` at each point (scaled units).
+    """
+    rho_hat, rate, dtau, tau_max, taus = checked_inputs(
+        systems,
+        rho_hat,
+        rate_hat_per_s,
+        dtau_drho_hat_s,
+        tau_max_s,
+        p_dependence,
+        zero_delay_ok=False,
+    )
+    data = prepare(
+        systems,
+        rho_hat,
+        rate,
+        dtau,
+        tau_max,
+        taus,
+        p_dependence,
+        tuple(range(rho_hat.shape[1])),
+        float(certificate["time_scale_s"]),
+        np.asarray(certificate["transform"]),
+        k_scaling,
+    )
+    iu = np.triu_indices(data.n)
+    iu2 = np.triu_indices(2 * data.n)
+    p = np.asarray(certificate["P"], dtype=float)
+    if p.shape != (data.n_p, 2 * data.n, 2 * data.n):
+        raise ValueError(
+            f"certificate P has shape {p.shape}, the analysis needs "
+            f"{(data.n_p, 2 * data.n, 2 * data.n)}"
+        )
+    g = float(gamma)
+    xv = np.concatenate(
+        [
+            (g * p)[:, iu2[0], iu2[1]].ravel(),
+            g * np.asarray(certificate["S"], dtype=float)[iu],
+            g * np.asarray(certificate["R"], dtype=float)[iu],
+            [g * g],
+        ]
+    )
+    certified, margins, _, _ = _recheck(data, xv)
+    return certified, margins

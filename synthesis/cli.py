@@ -21,6 +21,7 @@ command says so, writes nothing and exits 1. ``--lambda-search``, ``--lambda2``,
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -28,6 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from contracts.usage import UsageError, UsageParser, run_command
+from synthesis.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 if TYPE_CHECKING:
     from synthesis.artifact import ControllerArtifact
@@ -73,6 +75,14 @@ def _parser() -> UsageParser:
         type=float,
         help="accept gamma up to (1+B) gamma*, B dimensionless in [0, 1] (default: the config's)",
     )
+    p.add_argument(
+        "--kkt",
+        default=",".join(a.method for a in DEFAULT_KKT_CHAIN),
+        metavar="CHAIN",
+        help="Clarabel KKT solvers tried in order while a solve ends in a numerical failure, "
+        f"from {', '.join(KKT_METHODS)} (default: %(default)s; one name forces it; "
+        "in-process solves only, not the --lambda-search workers)",
+    )
     p.add_argument("--no-verify", action="store_true", help="skip the independent verification")
     p.add_argument("--quiet", action="store_true", help="no progress lines (stderr)")
     return p
@@ -116,6 +126,15 @@ def _synth(argv: Sequence[str]) -> int:
     args = _parser().parse_args(argv)
     if not 1 <= args.jobs <= 64:
         raise UsageError(f"field '--jobs' = {args.jobs} outside [1, 64]")
+    try:
+        chain = parse_kkt_chain(args.kkt)
+    except ValueError as exc:
+        raise UsageError(f"--kkt: {exc}") from None
+    with kkt_chain(chain):
+        return _synth_with(args)
+
+
+def _synth_with(args: argparse.Namespace) -> int:
 
     from dataclasses import replace
 
@@ -171,6 +190,9 @@ def _synth(argv: Sequence[str]) -> int:
         except SmithDesignError as exc:
             print(f"pressor synth: not certified: {exc}", file=sys.stderr)
             return 1
+        for note in art.metadata["solver"]["notes"]:
+            if note.startswith("KKT fallback"):  # said even with --quiet: the result depends on it
+                print(f"pressor synth: {note}", file=sys.stderr)
         print(f"controller       smith, loop gain {cfg.controller.loop_gain:g}")
         print(f"gamma            {art.gamma:.6g} (Wirtinger analysis, design grid)")
         print(f"solver status    {art.metadata['solver']['status']}")

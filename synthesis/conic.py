@@ -6,6 +6,17 @@ callback (Clarabel's termination callback, which sees the iteration, the costs, 
 and the primal/dual residuals), and name the outcome with cvxpy's status strings so that callers
 that switched from ``problem.solve`` keep their status logic.
 
+No single KKT solver decides. Clarabel factorises its KKT system with a backend chosen by
+``direct_solve_method``; the default (faer, supernodal and multithreaded) dispatches to SIMD
+kernels by CPU feature, so the same data can meet different rounding on different CPUs. A solve
+that ends in a numerical failure (``NumericalError``, ``InsufficientProgress``) is repeated with the
+next backend of the chain (:data:`synthesis.kkt.DEFAULT_KKT_CHAIN`: faer, then qdldl, a simplicial LDL' with its
+own ordering and no SIMD dispatch), and each retry is reported through ``progress`` and recorded
+in :attr:`ConicSolution.fallbacks`. :func:`synthesis.kkt.kkt_chain` sets the chain for a block of code (the
+``--kkt`` option of ``pressor synth`` and ``pressor verify``, the tests that force one backend).
+An infeasible, unbounded or iteration-limited end is an answer, not a numerical failure: it is
+not retried. Whatever backend solved, the callers' floating-point re-check is the verdict.
+
 PSD blocks use Clarabel's ``PSDTriangleConeT`` convention: the upper triangle by columns (for a
 symmetric matrix the same entries as the lower triangle by rows) with the off-diagonal entries
 scaled by sqrt(2); :func:`svec_rows` gives those positions and weights.
@@ -22,10 +33,14 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
+from synthesis.kkt import DEFAULT_KKT_CHAIN, KktAttempt, current_kkt_chain
+
 __all__ = ["ConicSolution", "solve_conic", "solve_cvxpy", "svec_eye", "svec_rows", "unsvec"]
 
 Progress = Callable[[str], None]
 
+#: Clarabel statuses that are numerical failures of a backend (retried on the next one)
+_NUMERICAL = frozenset({"NumericalError", "InsufficientProgress"})
 #: Clarabel status -> cvxpy status string (the strings the callers already test for)
 _STATUS = {
     "Solved": "optimal",
@@ -58,6 +73,10 @@ class ConicSolution:
         Wall time of setup + solve (s).
     raw
         Clarabel's solution object (for cvxpy's ``unpack_results``).
+    kkt_method
+        The final attempt's KKT backend (``direct_solve_method``, with its own settings if any).
+    fallbacks
+        The attempts that ended in a numerical failure before it, as "method: status".
     """
 
     status: str
@@ -66,6 +85,8 @@ class ConicSolution:
     iterations: int
     solve_time_s: float
     raw: Any = None
+    kkt_method: str = str(DEFAULT_KKT_CHAIN[0])
+    fallbacks: tuple[str, ...] = ()
 
 
 def svec_rows(size: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
@@ -136,12 +157,16 @@ def solve_conic(
 ) -> ConicSolution:
     """Solve ``min 1/2 x'Px + q'x  s.t.  a x + s = b, s in cones`` with Clarabel.
 
+    The KKT backends of :func:`synthesis.kkt.current_kkt_chain` are tried in order while a solve ends in a
+    numerical failure (module docstring); each retry is reported through ``progress``.
+
     Parameters
     ----------
     q, a, b, cones
         Conic data in Clarabel's form (``cones`` a list of ``clarabel.*ConeT``).
     options
-        Clarabel settings by name (e.g. ``{"direct_solve_method": "qdldl"}``); verbose is off.
+        Clarabel settings by name (e.g. ``{"max_iter": 50}``); verbose is off. A
+        ``direct_solve_method`` here forces that backend alone.
     progress
         Called with one line per iteration (at most one per ``every_s`` seconds) while it runs.
     label
@@ -154,10 +179,45 @@ def solve_conic(
     Returns
     -------
     ConicSolution
+        The last attempt's outcome, with the failed attempts in ``fallbacks``.
     """
+    opts = dict(options or {})
+    forced = opts.pop("direct_solve_method", None)
+    chain = (KktAttempt(str(forced)),) if forced is not None else current_kkt_chain()
+    t0 = time.perf_counter()
+    failed: list[str] = []
+    for i, attempt in enumerate(chain):
+        settings = {**opts, **attempt.settings, "direct_solve_method": attempt.method}
+        sol = _solve_once(q, a, b, cones, settings, p, _reporter(label, progress, every_s))
+        name = str(sol.status)
+        if name not in _NUMERICAL or i + 1 == len(chain):
+            break
+        failed.append(f"{attempt}: {name}")
+        if progress:
+            progress(
+                f"{label}: Clarabel ended {name} with the {attempt} KKT solver; "
+                f"solving again with {chain[i + 1]}"
+            )
+    status = _STATUS.get(name, "solver_error")
+    has_x = status in ("optimal", "optimal_inaccurate") and sol.x is not None
+    x = np.asarray(sol.x, dtype=float) if has_x else None
+    elapsed = time.perf_counter() - t0
+    return ConicSolution(
+        status, name, x, int(sol.iterations), elapsed, sol, str(attempt), tuple(failed)
+    )
+
+
+def _solve_once(
+    q: NDArray[np.float64],
+    a: sp.spmatrix,
+    b: NDArray[np.float64],
+    cones: list[Any],
+    options: dict[str, Any],
+    p: sp.spmatrix | None,
+    callback: Callable[[Any], bool],
+) -> Any:
     import clarabel
 
-    t0 = time.perf_counter()
     n = int(np.asarray(q).size)
     p_mat = sp.csc_matrix((n, n)) if p is None else sp.triu(p, format="csc")
     solver = clarabel.DefaultSolver(
@@ -166,15 +226,10 @@ def solve_conic(
         sp.csc_matrix(a),
         np.asarray(b, dtype=float),
         cones,
-        _settings(options or {}),
+        _settings(options),
     )
-    solver.set_termination_callback(_reporter(label, progress, every_s))
-    sol = solver.solve()
-    name = str(sol.status)
-    status = _STATUS.get(name, "solver_error")
-    has_x = status in ("optimal", "optimal_inaccurate") and sol.x is not None
-    x = np.asarray(sol.x, dtype=float) if has_x else None
-    return ConicSolution(status, name, x, int(sol.iterations), time.perf_counter() - t0, sol)
+    solver.set_termination_callback(callback)
+    return solver.solve()
 
 
 def solve_cvxpy(

@@ -28,12 +28,13 @@ from typing import Any
 import numpy as np
 
 from synthesis.analysis_interface import AnalysisResult
-from synthesis.analysis_wirtinger import analyse_wirtinger
+from synthesis.analysis_wirtinger import analyse_wirtinger, recheck_certificate
 from synthesis.artifact import FORMAT_VERSION, ControllerArtifact, make_artifact
 from synthesis.closed_loop import DelaySystem, close_loop
 from synthesis.config import NOMINAL_RHO, DesignConfig, ModelConfig
 from synthesis.k_scaling import KScaling, k_scaled_system
 from synthesis.model import I_U, dims, plant_at
+from synthesis.reconstruct import scaling_of
 from synthesis.scaling import Scaling
 from synthesis.smith_lpv import SmithLPV
 from synthesis.state_transform import conditioning_transform
@@ -45,6 +46,7 @@ __all__ = [
     "certify_smith",
     "design_smith",
     "nominal_centre",
+    "recheck_smith_artifact",
     "smith_loops",
 ]
 
@@ -155,14 +157,11 @@ def certify_smith(
         if value not in allowed:
             raise ValueError(f"certify_smith: {name}={value!r} must be one of {allowed}")
     pts = np.atleast_2d(np.asarray(points, dtype=float))
-    box = np.asarray(model.box, dtype=float)
     c_sys, c_rho = centre
     k_scaling = None
     if coordinates == "k_scaled":
-        # the ml/h states: the plant's infusion u and the controller's model input û (its first state)
-        scaled = (I_U, plant_at(c_rho, model).A.shape[0])
-        k_scaling = KScaling(pts[:, 0], float(model.rate_bounds[0]), scaled)
-        c_sys = k_scaled_system(c_sys, float(c_rho[0]), scaled)
+        k_scaling = _k_scaling(pts, model)
+        c_sys = k_scaled_system(c_sys, float(c_rho[0]), k_scaling.states)
     zero = np.zeros(3)
     c0 = analyse_wirtinger(
         [c_sys], scaling.to_hat(c_rho)[None], zero, zero, float(c_rho[2]), "constant"
@@ -179,10 +178,7 @@ def certify_smith(
         )
     return analyse_wirtinger(
         systems,
-        scaling.to_hat(pts),
-        np.asarray(model.rate_bounds, dtype=float) / scaling.rho_half,
-        np.array([0.0, 0.0, scaling.rho_half[2]]),
-        float(box[2, 1]),
+        *_analysis_inputs(pts, model, scaling),
         p_dependence=p_dependence,
         time_scale_s=scaling.time_s,
         state_transform=tx,
@@ -195,6 +191,62 @@ def certify_smith(
         coupling=coupling,
         p_params=p_params,
         k_scaling=k_scaling,
+    )
+
+
+def _k_scaling(points: np.ndarray, model: ModelConfig) -> KScaling:
+    """The K-scaling of the Smith loops at ``points``: the ml/h states (the plant's infusion u and
+    the controller's model input û, its first state) times K, K's rate bound from the model."""
+    scaled = (I_U, plant_at(points[0], model).A.shape[0])
+    return KScaling(points[:, 0], float(model.rate_bounds[0]), scaled)
+
+
+def _analysis_inputs(
+    points: np.ndarray, model: ModelConfig, scaling: Scaling
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(ρ̂, rate bounds of ρ̂ per s, dτ/dρ̂ in s, τ_max in s) of the analysis at ``points``."""
+    return (
+        scaling.to_hat(points),
+        np.asarray(model.rate_bounds, dtype=float) / scaling.rho_half,
+        np.array([0.0, 0.0, scaling.rho_half[2]]),
+        float(np.asarray(model.box, dtype=float)[2, 1]),
+    )
+
+
+def recheck_smith_artifact(artifact: ControllerArtifact) -> tuple[bool, np.ndarray]:
+    """Re-check a "smith" artifact's stored certificate on its design grid, without a solve.
+
+    The law is rebuilt from the artifact's family and model (closed form), the stored P, S, R,
+    transform and γ are put back into every vertex LMI of every grid point (K-scaled, rate-bound
+    analysis), and each is evaluated in floating point: the verdict does not depend on the solver,
+    its backend or the CPU that found the certificate.
+
+    Returns
+    -------
+    (certified, margins)
+        As :func:`synthesis.analysis_wirtinger.recheck_certificate`: margins per grid point.
+
+    Raises
+    ------
+    ValueError
+        If the artifact is not of the "smith" family or its certificate does not fit the analysis.
+    """
+    family, model = artifact.family, artifact.model_config
+    if not family.is_smith or family.loop_gain is None:
+        raise ValueError(
+            f"recheck_smith_artifact needs a 'smith' artifact, got {family.structure!r}"
+        )
+    law = SmithLPV(family.loop_gain, model.omega, model.lambda_)
+    flat = np.stack(np.meshgrid(*artifact.grid, indexing="ij"), axis=-1).reshape(-1, 3)
+    scaling = scaling_of(artifact)
+    cert = {**artifact.coefficients, "time_scale_s": scaling.time_s}
+    return recheck_certificate(
+        smith_loops(law, model, flat),
+        *_analysis_inputs(flat, model, scaling),
+        cert,
+        artifact.gamma,
+        P_DEPENDENCE,
+        _k_scaling(flat, model),
     )
 
 

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from contracts.usage import UsageError, UsageParser, run_command
+from synthesis.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 DEFAULT_ARTIFACT = Path(__file__).resolve().parent / "data" / "default_design.npz"
 
@@ -46,6 +47,13 @@ def _parser(command: str) -> UsageParser:
         default="quadratic",
         help="Lyapunov matrix of the analysis LMI (default quadratic in rho, the synthesis basis)",
     )
+    p.add_argument(
+        "--kkt",
+        default=",".join(a.method for a in DEFAULT_KKT_CHAIN),
+        metavar="CHAIN",
+        help="Clarabel KKT solvers tried in order while a solve ends in a numerical failure, "
+        f"from {', '.join(KKT_METHODS)} (default: %(default)s; one name forces it)",
+    )
     return p
 
 
@@ -69,6 +77,10 @@ def _verify(command: str, argv: Sequence[str]) -> int:
     args = _parser(command).parse_args(argv)
     if args.density < 2 or args.density > 16:
         raise UsageError(f"--density {args.density} outside the allowed range 2..16")
+    try:
+        chain = parse_kkt_chain(args.kkt)
+    except ValueError as exc:
+        raise UsageError(f"--kkt: {exc}") from None
     path = Path(args.artifact)
     if not path.is_file():
         raise UsageError(f"artifact {path}: file not found")
@@ -93,9 +105,10 @@ def _verify(command: str, argv: Sequence[str]) -> int:
         print(f"[{time.perf_counter() - t0:7.1f} s] {msg}", file=sys.stderr, flush=True)
 
     print(f"verifying {path} (sha256 {str(getattr(artifact, 'sha256', ''))[:16]}...)", flush=True)
-    report = verify_artifact(
-        artifact, density=args.density, progress=progress, p_dependence=args.p_dependence
-    )
+    with kkt_chain(chain):
+        report = verify_artifact(
+            artifact, density=args.density, progress=progress, p_dependence=args.p_dependence
+        )
     d = report.to_dict()
     d["artifact"]["controller"] = artifact.family.to_dict()
     lmi, stab, step, claim = (

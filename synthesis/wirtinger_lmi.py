@@ -32,12 +32,41 @@ from synthesis.conic import svec_rows
 from synthesis.k_scaling import KScaling, k_scaled_system, k_terms
 from synthesis.state_transform import transform_of
 
-__all__ = ["WirtingerData", "point_maps", "prepare", "sym", "vertex_lmis", "young_maps"]
+__all__ = [
+    "WirtingerData",
+    "chop_roundoff",
+    "point_maps",
+    "prepare",
+    "sym",
+    "vertex_lmis",
+    "young_maps",
+]
 
 Array = NDArray[np.float64]
 
 #: points evaluated per batch (bounds the probe arrays to ~ nloc x batch x (1 + s') x big^2)
 _BATCH = 12
+#: a probed coefficient below this many unit round-offs of its point's largest coefficient is
+#: cancellation residue (1e-22..1e-16 where the exact value is 0), not data: the true nonzero
+#: coefficients of the shipped design are >= 2e-6 of the largest (10 orders above the residue)
+ROUNDOFF_ULPS = 64.0
+
+
+def chop_roundoff(maps: Array) -> Array:
+    """``maps`` (P, ...) with every entry below :data:`ROUNDOFF_ULPS` unit round-offs of its own
+    point's largest entry (the first axis indexes points) set to exactly 0.
+
+    Why: the unit probes evaluate sums of products of the scaled data, and a coefficient whose
+    exact value is 0 comes out as residue whose bits depend on the BLAS/SIMD kernels that summed
+    it. Handed to the solver it is a real constraint coefficient: rows of such residue alone
+    (1e-18 norm) sit in every Young block, and the interior-point method's KKT factorisation then
+    differs by CPU family (on an AVX2-only CPU Clarabel's default backend stopped at iteration 1
+    with a NumericalError). Zeroing it makes the conic data the same bits on every machine and
+    removes those rows; the re-check (the verdict) evaluates the unchopped LMIs.
+    """
+    flat = np.abs(maps.reshape(maps.shape[0], -1))
+    tol = ROUNDOFF_ULPS * np.finfo(float).eps * flat.max(axis=1, initial=0.0)
+    return np.where(np.abs(maps) < tol.reshape(-1, *(1,) * (maps.ndim - 1)), 0.0, maps)
 
 
 def sym(vec: Array, n: int) -> Array:
@@ -307,7 +336,7 @@ def young_maps(data: WirtingerData, pts: NDArray[np.int64]) -> Array:
             "psa,jpst,pitc->jpiac", data.ga[sub], rm, u[sub], optimize=True
         )
         out.append(np.moveaxis(w.reshape(nloc, len(sub), 2, -1), 0, -1))
-    return np.concatenate(out)
+    return chop_roundoff(np.concatenate(out))
 
 
 def point_maps(
@@ -329,7 +358,8 @@ def point_maps(
             np.moveaxis(mt.reshape(nloc, len(sub), mt.shape[2], data.big**2)[..., idx] * wsv, 0, -1)
         )
     const = data.const[pts].reshape(len(pts), -1)[:, idx] * wsv
-    return np.concatenate(f0_all), np.concatenate(fm_all), const
+    f0, fm = np.concatenate(f0_all), np.concatenate(fm_all)
+    return chop_roundoff(f0), chop_roundoff(fm), chop_roundoff(const)
 
 
 def local_values(data: WirtingerData, x: Array) -> Array:

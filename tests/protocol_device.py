@@ -77,6 +77,10 @@ class DeviceConfig:
     retransmit_s: float = 0.5
     link_timeout_s: float = 10.0
     handshake_timeout_s: float = 30.0
+    # what the hello announces and where it comes from; the runtime refuses other values
+    protocol_version: int = 2
+    role: int = 2  # PRESSOR_ROLE_DEVICE
+    system_id: int = 2  # = the role
 
 
 @dataclass
@@ -93,11 +97,8 @@ class DeviceLog:
     missed_commands: int = 0  # real time: ticks without their command by the next release
     resends: int = 0  # lockstep: tick resends
     refused_frames: int = 0  # frames failing the signature check or unparsable
+    refusal: tuple[int, str] | None = None  # the runtime's PRESSOR_REFUSAL: reason, text
     outcome: str = ""
-
-
-#: the PRESSOR_HELLO protocol_version both ends must announce
-PROTOCOL_VERSION = 2
 
 
 def hello_fields(d: ModuleType, cfg: DeviceConfig) -> dict[str, Any]:
@@ -107,9 +108,9 @@ def hello_fields(d: ModuleType, cfg: DeviceConfig) -> dict[str, Any]:
         "patient_seed": cfg.seed,
         "n_ticks": cfg.n_ticks,
         "sensor_noise_mmhg": cfg.noise_mmhg,
-        "role": d.PRESSOR_ROLE_DEVICE,
+        "role": cfg.role,
         "link_mode": d.PRESSOR_LINK_MODE_REALTIME if cfg.realtime else d.PRESSOR_LINK_MODE_LOCKSTEP,
-        "protocol_version": PROTOCOL_VERSION,
+        "protocol_version": cfg.protocol_version,
         "name": cfg.name.encode("ascii"),
         "drug": cfg.drug.encode("ascii"),
         "concentration_ug_ml": cfg.concentration_ug_ml,
@@ -150,7 +151,7 @@ class ProtocolDevice:
     ):
         self.d, self.fd, self.cfg, self.peer_gone = dialect, fd, cfg, peer_gone
         self.out = _Out()
-        self.mav = dialect.MAVLink(self.out, srcSystem=dialect.PRESSOR_ROLE_DEVICE, srcComponent=1)
+        self.mav = dialect.MAVLink(self.out, srcSystem=cfg.system_id, srcComponent=1)
         self.mav.robust_parsing = True
         if cfg.key is not None:
             self.mav.signing.secret_key = cfg.key
@@ -201,6 +202,9 @@ class ProtocolDevice:
             self.log.commands.setdefault(m.tick, (m.rate_ml_h, m.mode, arrived_s))
             if self.pending is None or m.tick >= self.pending[0]:
                 self.pending = (m.tick, m.rate_ml_h, m.mode)
+        elif kind == "PRESSOR_REFUSAL":  # the runtime refused the hello; it closes the link
+            self.log.refusal = (m.reason, m.text)
+            raise LinkDown(f"refused by the runtime: {m.text}")
         elif kind == "PRESSOR_HEARTBEAT":
             self.log.runtime_states.append(m.state)
             if m.state == self.d.PRESSOR_STATE_FAULT:
@@ -225,7 +229,7 @@ class ProtocolDevice:
 
     # -- protocol -----------------------------------------------------------------------------
     def handshake(self) -> None:
-        """Send the hello every 0.5 s until the runtime's hello arrives."""
+        """Send the hello every 0.5 s until the runtime's hello arrives (or its refusal)."""
         deadline = time.monotonic() + self.cfg.handshake_timeout_s
         while self.log.runtime_hello is None:
             if time.monotonic() > deadline:
@@ -236,13 +240,24 @@ class ProtocolDevice:
             while self.log.runtime_hello is None and time.monotonic() < resend_at:
                 for m in self._receive(resend_at - time.monotonic()):
                     if m.get_type() == "PRESSOR_HELLO":
-                        if (
-                            m.role != self.d.PRESSOR_ROLE_RUNTIME
-                            or m.protocol_version != PROTOCOL_VERSION
-                        ):
-                            raise LinkDown(f"bad runtime hello {m}")
+                        self._check_runtime_hello(m)
                         self.log.runtime_hello = m
+                    self._handle(m)
         self.t_start = time.monotonic()
+
+    def _check_runtime_hello(self, m: Any) -> None:
+        """A runtime hello of another role or protocol version ends the run; a runtime that
+        refuses this device's hello sends its refusal right after its hello: wait 2 s for it."""
+        if (
+            m.role == self.d.PRESSOR_ROLE_RUNTIME
+            and m.protocol_version == self.cfg.protocol_version
+        ):
+            return
+        until = time.monotonic() + 2.0
+        while time.monotonic() < until:
+            for later in self._receive(until - time.monotonic()):
+                self._handle(later)  # raises LinkDown on the refusal
+        raise LinkDown(f"bad runtime hello {m}")
 
     def _tick_frames(self, tick: int, with_sample: bool = True) -> None:
         """Queue tick ``tick``: [pump status], [heartbeats], scheduling, target, sample last."""

@@ -14,10 +14,12 @@ from hil_sim.closed_loop import simulate
 from hil_sim.device import main as device_main
 from hil_sim.world import World
 from link import (
+    REFUSAL_DRUG,
     STATE_FAULT,
     STATE_FINISHED,
     DeviceSession,
     Hello,
+    HelloRefused,
     LinkClosedError,
     PtyPair,
     RuntimeSession,
@@ -93,6 +95,22 @@ def test_device_process_in_lockstep_over_a_pty_matches_the_in_process_simulation
     assert ep.pump_status is not None and ep.pump_status.tick == 3000
 
 
+def test_device_process_plays_a_named_patient_model_as_the_in_process_simulation():
+    pair = PtyPair.open()
+    ep = RuntimeSession(pair.leader_port())
+    model = ("--patient-model", "phenylephrine-2c")
+    proc = spawn_device(
+        pair, "--scenario", "paper-tracking", "--patient-seed", "4", "--duration", "60", *model
+    )
+    maps, cmds = _run_pi_runtime(ep)
+    assert _finish(proc, pair, ep) == 0, proc.stderr.read()
+    world = World("paper-tracking", 4, 0.1, patient_model="phenylephrine-2c")
+    ref = simulate(world, PIController(0.1), duration_s=60.0)
+    assert np.array_equal(np.array(maps), ref.map_mmhg, equal_nan=True)
+    assert np.array_equal(np.array(cmds, dtype=np.float32).astype(float), ref.command_ml_h)
+    assert ref.map_true_mmhg[-1] > world.baseline_mmhg  # the model's drug effect arrived
+
+
 def _signed_device_run(tmp_path: Path, tag: str, key: Path) -> tuple[bytes, bytes]:
     pair = PtyPair.open()
     rlog = TlogWriter(tmp_path / f"{tag}-runtime.tlog")
@@ -142,6 +160,20 @@ def test_device_refuses_an_unsigned_runtime_at_once_naming_signing(tmp_path):
     assert _finish(proc, pair, ep) == 1
     assert ep.counters.frames_received >= 1
     assert "signing mismatch: the runtime's frames are unsigned" in proc.stderr.read()
+
+
+def test_a_device_the_runtime_refuses_exits_2_with_the_runtime_s_reason():
+    pair = PtyPair.open()
+    ep = RuntimeSession(pair.leader_port())
+    proc = spawn_device(pair, "--scenario", "paper-tracking", "--drug", "norepinephrine")
+    peer = ep.handshake(Hello("pi"), timeout_s=30.0)
+    line = f"device drug {peer.drug} differs from the controller's phenylephrine (--drug)"
+    ep.refuse(HelloRefused(REFUSAL_DRUG, line))
+    assert proc.wait(timeout=30) == 2
+    pair.close_follower()
+    ep.close()
+    last = proc.stderr.read().strip().splitlines()[-1]  # after the unsigned-link warning
+    assert last == f"pressor device: refused by the runtime: {line}"
 
 
 def test_device_retransmits_a_tick_without_answer_then_reports_fault():

@@ -10,20 +10,20 @@ from types import ModuleType
 
 import pytest
 
-from benchmarks.independent_patient_model import (
-    BOLUS_AT_S,
-    HEMORRHAGE_AT_S,
-    RANGES,
-    IndependentPatient,
-    PatientParams,
-    draw_patient,
-)
 from benchmarks.independent_patients import (
     Setup,
     controller_label,
     main,
     run_patient,
     summary_lines,
+)
+from hil_sim.pkpd import (
+    BOLUS_AT_S,
+    HEMORRHAGE_AT_S,
+    RANGES,
+    IndependentPatient,
+    PatientParams,
+    draw_patient,
 )
 from tests.protocol_device import build_dialect
 

@@ -35,6 +35,7 @@ def test_generation_uses_mavlink2_so_no_message_is_dropped():
         "MAP_TARGET",
         "INFUSION_COMMAND",
         "PUMP_STATUS",
+        "PRESSOR_REFUSAL",
     } <= names
 
 
@@ -47,7 +48,7 @@ def test_message_ids_are_in_our_block_and_unused_by_pymavlink_all_dialect():
     from pymavlink.dialects.v20 import all as all_dialect
 
     ours = _ids_defined_in_our_xml()
-    assert len(ours) == 7 and all(45000 <= mid < 45100 for mid in ours)
+    assert len(ours) == 8 and all(45000 <= mid < 45100 for mid in ours)
     assert not ours & set(all_dialect.mavlink_map), "id collision with pymavlink's all dialect"
 
 
@@ -136,7 +137,7 @@ def test_nan_map_sample_survives_the_wire():
     poll_until(ep, got, 3)
     sample = [m for m in got if m.id == mavlink.MAVLINK_MSG_ID_MAP_SAMPLE][0]
     assert math.isnan(sample.map_mmhg) and sample.quality == 3 and sample.tick == 5
-    assert [m.id for m in got] == [45003, 45004, 45002], "sample must be the last frame of a tick"
+    assert [m.id for m in got] == [45003, 45004, 45002]  # DeviceSession sends the sample last
     port.close()
 
 

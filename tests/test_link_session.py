@@ -12,8 +12,8 @@ from link import (
     STATE_FINISHED,
     DeviceSession,
     Hello,
+    HelloRefused,
     LinkClosedError,
-    LinkError,
     ManualClock,
     PtyPair,
     PumpStatus,
@@ -200,7 +200,7 @@ def test_a_world_tick_and_pump_status_arrive_at_the_runtime_as_equal_messages():
 def test_a_handshake_with_a_peer_of_the_same_role_fails():
     a, b = loop_pair()
     DeviceSession(b).send_hello(Hello("twin"))  # a second device where the runtime should be
-    with pytest.raises(LinkError, match="peer announced role"):
+    with pytest.raises(HelloRefused, match="peer announced role 2 .device., expected 1"):
         DeviceSession(a).handshake(Hello("paper-tracking"), timeout_s=1.0)
 
 
@@ -241,5 +241,5 @@ def test_a_protocol_1_peer_still_decodes_and_is_refused_naming_the_version():
     assert mavlink.MAVLink_pressor_hello_message.crc_extra == 238  # version 1's
     a, b = loop_pair()
     DeviceSession(b).send_hello(Hello("old-device", protocol_version=1))
-    with pytest.raises(LinkError, match="peer protocol_version 1, expected 2"):
+    with pytest.raises(HelloRefused, match="peer protocol_version 1, expected 2"):
         RuntimeSession(a).handshake(Hello("pi"), timeout_s=1.0)

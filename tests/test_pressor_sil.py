@@ -60,6 +60,9 @@ def test_default_recording_name_names_controller_scenario_and_seed():
         (["--link", "/dev/ttyS9"], "--link /dev/ttyS9"),
         (["--patient-seed", "-1"], "--patient-seed '-1': allowed [0, 2**32)"),
         (["--duration", "0"], "--duration '0': allowed (0, 604800]"),
+        (["--patient-model", "nope"], "--patient-model 'nope': unknown model; one of paper,"),
+        (["--patient-model", "hil_sim.pump:Pump"], "class 'Pump' of module 'hil_sim.pump'"),
+        (["--scenario", "nominal-step", "--patient-model", "pkpd"], "fixes a frozen first-order"),
     ],
 )
 def test_bad_sil_input_is_a_usage_error_before_any_device_starts(argv, needle):
@@ -86,6 +89,16 @@ def test_device_command_carries_scenario_seed_duration_rate_faults_cpu_and_key(t
     plain = device_command(sil_config(["--controller", "pi"]), "/dev/pts/9", None, None)
     assert not {"--cpu", "--retransmit", "--signing-key", "--fault"} & set(plain)
     assert plain[-1] == "--no-signing"  # an unsigned sil run: the device must not sign either
+
+
+def test_the_device_plays_the_patient_model_sil_names_and_only_a_named_one_is_passed():
+    cfg = sil_config(["--controller", "pi", "--patient-model", "phenylephrine-2c"])
+    assert cfg.patient_model == "phenylephrine-2c"
+    cmd = device_command(cfg, "/dev/pts/9", None, None)
+    assert cmd[-2:] == ["--patient-model", "phenylephrine-2c"]
+    default = sil_config(["--controller", "pi"])
+    assert default.patient_model == "paper"
+    assert "--patient-model" not in device_command(default, "/dev/pts/9", None, None)
 
 
 def test_relative_scenario_path_reaches_the_device_as_an_absolute_path(tmp_path, monkeypatch):

@@ -196,16 +196,72 @@ def test_realtime_signed_loop_keeps_up_in_auto_with_commands_in_range(
     assert len(run.log.commands) >= cfg.n_ticks // 2
 
 
-def test_realtime_device_and_lockstep_runtime_refuse_to_start_with_one_line(
-    dialect: ModuleType, tmp_path: Path
+#: each refusal the runtime makes: what the device announces, the reason it is told, the one line
+REFUSALS = {
+    "drug": (
+        {"drug": "norepinephrine"},
+        "DRUG",
+        "device drug norepinephrine differs from the controller's phenylephrine (--drug)",
+    ),
+    "concentration": (
+        {"concentration_ug_ml": 40.0},
+        "CONCENTRATION",
+        "device concentration 40 ug/ml differs from the controller's 100 ug/ml"
+        " (--concentration-ug-ml)",
+    ),
+    "pump-maximum": (
+        {"pump_max_ml_h": 100.0},
+        "PUMP_MAXIMUM",
+        "device pump maximum 100 ml/h differs from the controller's 120 ml/h: the pump cannot"
+        " deliver every rate the controller commands",
+    ),
+    "protocol-version": (
+        {"protocol_version": 1},
+        "PROTOCOL_VERSION",
+        "device hello: peer protocol_version 1, expected 2",
+    ),
+    "role": (
+        {"role": 1},
+        "ROLE",
+        "device hello: peer announced role 1 (runtime), expected 2 (device)",
+    ),
+    "system-id": (
+        {"system_id": 42},
+        "SYSTEM_ID",
+        "device hello from MAVLink system id 42, expected 2 (the system id is the role:"
+        " runtime 1, device 2)",
+    ),
+    "sample-period": (
+        {"sample_period_s": 0.05},
+        "SAMPLE_PERIOD",
+        "device sample_period_s 0.05 s differs from --rate 10.0 Hz (period 0.1 s)",
+    ),
+    "link-mode": (
+        {"realtime": True},
+        "LINK_MODE",
+        "device runs real time (hello link_mode 1) but this runtime runs lockstep: add --realtime",
+    ),
+    "sensor-noise": (
+        {"noise_mmhg": 60.0},
+        "SENSOR_NOISE",
+        "device announces sensor_noise_mmhg 60.0: allowed [0, 50] mmHg",
+    ),
+}
+
+
+@pytest.mark.parametrize("kind", list(REFUSALS))
+def test_a_refused_device_is_told_the_reason_and_the_runtime_exits_2_with_the_same_line(
+    dialect: ModuleType, tmp_path: Path, kind: str
 ) -> None:
+    announce, reason, line = REFUSALS[kind]
     key = write_key(tmp_path / "signing.key")
-    cfg = DeviceConfig(realtime=True, n_ticks=100, key=read_key(key), link_timeout_s=3.0)
-    run = drive(dialect, tmp_path, cfg, key)  # no --realtime
+    cfg = DeviceConfig(n_ticks=100, key=read_key(key), link_timeout_s=3.0, **announce)
+    run = drive(dialect, tmp_path, cfg, key)
     assert run.rc == 2
-    lines = (run.stdout + run.stderr).strip().splitlines()
-    assert len(lines) == 1 and "device runs real time" in lines[0], lines
-    assert "add --realtime" in lines[0] and not run.log.commands
+    assert (run.stdout + run.stderr).strip().splitlines() == [f"pressor run: {line}"]
+    assert run.log.refusal == (getattr(dialect, f"PRESSOR_REFUSAL_REASON_{reason}"), line)
+    assert run.log.outcome == f"refused by the runtime: {line}" and not run.log.commands
+    assert run.after_port_open_s < 5.0
 
 
 @pytest.mark.parametrize(

@@ -8,6 +8,7 @@ it knows exactly between which ticks a target file changes.
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -19,10 +20,12 @@ from rerun.chunk import RrdReader
 
 from link import (
     LINK_LOCKSTEP,
+    REFUSAL_CONCENTRATION,
     STATE_FINISHED,
     DeviceSession,
     Hello,
     ManualClock,
+    PeerRefused,
     PumpStatus,
     Signing,
     open_port,
@@ -59,10 +62,12 @@ def _device(
     syringe: dict | None = None,
     send_target: bool = True,
     before_tick: Callable[[int], object] | None = None,
+    map_at: Callable[[int], float] = lambda k: 60.0 + 0.05 * k,
 ) -> DeviceSession:
-    """A lockstep device: hello (with ``syringe``), then ``n`` ticks of MAP 60 mmHg rising, each
-    with its scheduling parameters and (if ``send_target``) a MAP_TARGET of 80 mmHg; waits for
-    every command, reports the pump, finishes. ``before_tick(k)`` runs before tick k is sent."""
+    """A lockstep device: hello (with ``syringe``), then ``n`` ticks of MAP ``map_at(k)`` (60 mmHg
+    rising), each with its scheduling parameters and (if ``send_target``) a MAP_TARGET of 80 mmHg;
+    waits for every command, reports the pump, finishes. ``before_tick(k)`` runs before tick k is
+    sent."""
     ep = DeviceSession(open_port(port), signing=Signing.from_file(key), clock=ManualClock())
     hello = Hello("scripted", 0, TS, 0.0, n, LINK_LOCKSTEP, **(syringe or SYRINGE))
     ep.handshake(hello, timeout_s=60.0)
@@ -72,7 +77,7 @@ def _device(
         if before_tick is not None:
             before_tick(k)
         ep.clock.t = k * TS
-        x = tick_inputs(k, k * TS, 60.0 + 0.05 * k, target_mmhg=DEVICE_TARGET)
+        x = tick_inputs(k, k * TS, map_at(k), target_mmhg=DEVICE_TARGET)
         if send_target:
             ep.send_tick(x)
         else:  # scheduling parameters and the sample, no MAP_TARGET at all
@@ -142,6 +147,7 @@ def test_run_target_mmhg_wins_over_the_device_target_in_summary_and_recording(tm
         "initial_mmhg": 70.0,
         "changes": [],
         "refused": 0,
+        "acks": [],
     }
     assert summary["ticks"] == 30
     assert summary["syringe"] == {**syringe, "pump_max_ml_h": 200.0}  # as the device announced
@@ -202,6 +208,7 @@ def test_a_target_file_change_is_applied_at_the_next_tick_recorded_and_listed(tm
             }
         ],
         "refused": 1,
+        "acks": [],
     }
     [refusal] = [line for line in output.splitlines() if line.startswith("pressor run: target")]
     assert refusal.startswith(f"pressor run: target from file {target} refused: 'abc'")
@@ -231,57 +238,28 @@ def test_a_stdin_line_changes_the_target_at_the_next_tick(tmp_path):
     assert [recorded[k] for k in range(15)] == [70.0] * 7 + [65.0] * 8
 
 
-@pytest.mark.parametrize(
-    ("syringe", "line"),
-    [
-        (
-            {**SYRINGE, "pump_max_ml_h": 100.0},
-            "pressor run: device pump maximum 100 ml/h differs from the controller's 120 ml/h",
-        ),
-        (
-            {**SYRINGE, "concentration_ug_ml": 40.0},
-            "pressor run: device concentration 40 ug/ml differs from the controller's 100 ug/ml",
-        ),
-        (
-            {**SYRINGE, "drug": "norepinephrine"},
-            "pressor run: device drug norepinephrine differs from the controller's phenylephrine",
-        ),
-    ],
-    ids=["pump-max", "concentration", "drug"],
-)
-def test_a_hello_that_does_not_fit_the_controller_refuses_to_start_with_one_line(
-    tmp_path, syringe, line
-):
-    key = _key(tmp_path)
-    with bridged_ttys() as (device_port, runtime_port):
-        run = _start_run(runtime_port, key, tmp_path)
-        try:
-            ep = _device(device_port, key, 0, syringe=syringe)
-            _, err = run.communicate(timeout=60)
-            ep.close()
-        finally:
-            run.kill()
-    assert run.returncode == 2
-    [got] = err.strip().splitlines()
-    assert got.startswith(line), got
-
-
 def test_the_runtime_refuses_another_concentration_than_its_option_says(tmp_path):
-    # the device announces the shipped designs' 100 ug/ml; the runtime was told 50
+    # the device announces the shipped designs' 100 ug/ml; the runtime was told 50. Every
+    # refusal kind against a device written from the document: tests/test_protocol_device.py
     key = _key(tmp_path)
+    line = (
+        "device concentration 100 ug/ml differs from the controller's 50 ug/ml"
+        " (--concentration-ug-ml)"
+    )
     with bridged_ttys() as (device_port, runtime_port):
         run = _start_run(runtime_port, key, tmp_path, "--concentration-ug-ml", "50")
         try:
-            ep = _device(device_port, key, 0)
+            ep = DeviceSession(open_port(device_port), signing=Signing.from_file(key))
+            with pytest.raises(PeerRefused) as refused:  # in the handshake or right after it
+                ep.handshake(Hello("scripted", 0, TS, 0.0, 10, LINK_LOCKSTEP, **SYRINGE), 60.0)
+                ep.wait_for_command(0, 60.0)
             _, err = run.communicate(timeout=60)
             ep.close()
         finally:
             run.kill()
     assert run.returncode == 2
-    assert err.strip() == (
-        "pressor run: device concentration 100 ug/ml differs from the controller's 50 ug/ml"
-        " (--concentration-ug-ml)"
-    )
+    assert err.strip() == f"pressor run: {line}"
+    assert (refused.value.reason, refused.value.text) == (REFUSAL_CONCENTRATION, line)
 
 
 @pytest.mark.parametrize(
@@ -320,3 +298,92 @@ def test_help_shows_the_clinician_options_with_defaults_and_units(tmp_path):
     assert "--pump-max-ml-h ML_H" in device and "(ml/h, (0, 10000])" in device
     assert "120 ml/h in every shipped scenario" in device
     assert "(default: phenylephrine)" in device and "(ug/ml, default 100" in device
+
+
+#: MAP NaN over ticks 20-139: HOLD at tick 20, FAILSAFE at 120 (10 s), good again from 140; the
+#: automatic rule would go to RECOVERING at 190 (inputs good for 5 s)
+FAULT_TICKS = range(20, 140)
+#: acknowledgements written before these ticks: one while the fault persists, one after it cleared
+ACK_BEFORE = (60, 143)
+
+
+def _map_with_fault(k: int) -> float:
+    return math.nan if k in FAULT_TICKS else 60.0 + 0.05 * k
+
+
+def _assert_acks(summary: dict, output: str, rrd: Path, source: str) -> None:
+    refused, accepted = summary["target"]["acks"]
+    assert refused == {
+        "tick": 60,
+        "sim_time_s": pytest.approx(6.0),
+        "from": source,
+        "state": "HOLD",
+        "accepted": False,
+        "outcome": "refused: HOLD, fault persists: MAP_NAN",
+    }
+    assert accepted == {
+        "tick": 143,
+        "sim_time_s": pytest.approx(14.3),
+        "from": source,
+        "state": "FAILSAFE",
+        "accepted": True,
+        "outcome": "FAILSAFE -> RECOVERING, resuming automatic control",
+    }
+    moves = [(t["tick"], t["from"], t["to"]) for t in summary["supervisor"]["transitions"]]
+    assert moves[1:4] == [
+        (20, "AUTO", "HOLD"),
+        (120, "HOLD", "FAILSAFE"),
+        (143, "FAILSAFE", "RECOVERING"),  # the automatic rule: not before tick 190
+    ]
+    assert [m[1:] for m in moves[4:]] in ([], [("RECOVERING", "AUTO")])  # bumpless slew back
+    assert summary["supervisor"]["ticks_in_state"]["FAILSAFE"] == 143 - 120
+    lines = [line for line in output.splitlines() if line.startswith("pressor run: ack")]
+    assert lines == [
+        f"pressor run: ack ({source}) at 6 s, tick 60: refused: HOLD, fault persists: MAP_NAN",
+        f"pressor run: ack ({source}) at 14.3 s, tick 143: FAILSAFE -> RECOVERING, resuming"
+        " automatic control",
+    ]
+    events = _events(rrd)
+    assert (60, lines[0].removeprefix("pressor run: ")) in events
+    assert (143, lines[1].removeprefix("pressor run: ")) in events
+
+
+def test_an_ack_on_stdin_is_refused_while_the_fault_persists_and_resumes_once_it_cleared(
+    tmp_path,
+):
+    def before_tick(k: int, run: subprocess.Popen) -> None:
+        if k in ACK_BEFORE:
+            run.stdin.write("ack\n")
+            run.stdin.flush()
+
+    rc, output, summary, rrd = _run_against_device(
+        tmp_path,
+        ["--target-mmhg", "70", "--target-stdin"],
+        160,
+        before_tick=before_tick,
+        map_at=_map_with_fault,
+    )
+    assert rc == 0, output
+    _assert_acks(summary, output, rrd, "stdin")
+
+
+def test_an_ack_line_in_the_target_file_is_refused_while_the_fault_persists_then_resumes(
+    tmp_path,
+):
+    target = tmp_path / "target.txt"
+    target.write_text("70\n")
+
+    def before_tick(k: int, _run: subprocess.Popen) -> None:
+        if k in ACK_BEFORE:
+            _replace_file(target, "70\nack\n")  # the same text twice: each write is one ack
+
+    rc, output, summary, rrd = _run_against_device(
+        tmp_path,
+        ["--target-file", str(target)],
+        160,
+        before_tick=before_tick,
+        map_at=_map_with_fault,
+    )
+    assert rc == 0, output
+    assert summary["target"]["changes"] == []  # the file's target did not change
+    _assert_acks(summary, output, rrd, f"file {target}")

@@ -83,6 +83,7 @@ def test_stdin_lines_change_the_target_at_the_next_tick_and_bad_ones_are_refused
         "initial_mmhg": 70.0,
         "changes": src.changes,
         "refused": 2,
+        "acks": [],
     }
 
 

@@ -434,6 +434,30 @@ enums["PRESSOR_PUMP_ALARM"][16] = EnumEntry("PRESSOR_PUMP_ALARM_OUT_OF_RANGE", "
 PRESSOR_PUMP_ALARM_ENUM_END = 17
 enums["PRESSOR_PUMP_ALARM"][17] = EnumEntry("PRESSOR_PUMP_ALARM_ENUM_END", """""")
 
+# PRESSOR_REFUSAL_REASON
+enums["PRESSOR_REFUSAL_REASON"] = Enum()
+enums["PRESSOR_REFUSAL_REASON"].bitmask = False
+PRESSOR_REFUSAL_REASON_PROTOCOL_VERSION = 1
+enums["PRESSOR_REFUSAL_REASON"][1] = EnumEntry("PRESSOR_REFUSAL_REASON_PROTOCOL_VERSION", """The hello's protocol_version is not this end's.""")
+PRESSOR_REFUSAL_REASON_ROLE = 2
+enums["PRESSOR_REFUSAL_REASON"][2] = EnumEntry("PRESSOR_REFUSAL_REASON_ROLE", """The hello announces the wrong role (two runtimes or two devices on one line).""")
+PRESSOR_REFUSAL_REASON_SYSTEM_ID = 3
+enums["PRESSOR_REFUSAL_REASON"][3] = EnumEntry("PRESSOR_REFUSAL_REASON_SYSTEM_ID", """The hello's MAVLink system id is not its role (runtime 1, device 2).""")
+PRESSOR_REFUSAL_REASON_SAMPLE_PERIOD = 4
+enums["PRESSOR_REFUSAL_REASON"][4] = EnumEntry("PRESSOR_REFUSAL_REASON_SAMPLE_PERIOD", """The device's sample period differs from the runtime's loop period.""")
+PRESSOR_REFUSAL_REASON_LINK_MODE = 5
+enums["PRESSOR_REFUSAL_REASON"][5] = EnumEntry("PRESSOR_REFUSAL_REASON_LINK_MODE", """The device runs real time and the runtime lockstep, or the reverse.""")
+PRESSOR_REFUSAL_REASON_SENSOR_NOISE = 6
+enums["PRESSOR_REFUSAL_REASON"][6] = EnumEntry("PRESSOR_REFUSAL_REASON_SENSOR_NOISE", """The announced sensor noise is not in [0, 50] mmHg.""")
+PRESSOR_REFUSAL_REASON_DRUG = 7
+enums["PRESSOR_REFUSAL_REASON"][7] = EnumEntry("PRESSOR_REFUSAL_REASON_DRUG", """The device's drug is not the one the controller was designed for.""")
+PRESSOR_REFUSAL_REASON_CONCENTRATION = 8
+enums["PRESSOR_REFUSAL_REASON"][8] = EnumEntry("PRESSOR_REFUSAL_REASON_CONCENTRATION", """The syringe's concentration is not the one the controller's gain assumes.""")
+PRESSOR_REFUSAL_REASON_PUMP_MAXIMUM = 9
+enums["PRESSOR_REFUSAL_REASON"][9] = EnumEntry("PRESSOR_REFUSAL_REASON_PUMP_MAXIMUM", """The pump's maximum rate is below the controller's maximum command.""")
+PRESSOR_REFUSAL_REASON_ENUM_END = 10
+enums["PRESSOR_REFUSAL_REASON"][10] = EnumEntry("PRESSOR_REFUSAL_REASON_ENUM_END", """""")
+
 # MAV_AUTOPILOT
 enums["MAV_AUTOPILOT"] = Enum()
 enums["MAV_AUTOPILOT"].bitmask = False
@@ -942,6 +966,7 @@ MAVLINK_MSG_ID_SCHEDULING_PARAMS = 45003
 MAVLINK_MSG_ID_MAP_TARGET = 45004
 MAVLINK_MSG_ID_INFUSION_COMMAND = 45005
 MAVLINK_MSG_ID_PUMP_STATUS = 45006
+MAVLINK_MSG_ID_PRESSOR_REFUSAL = 45007
 MAVLINK_MSG_ID_HEARTBEAT = 0
 
 
@@ -988,9 +1013,10 @@ setattr(MAVLink_pressor_heartbeat_message, "name", mavlink_msg_deprecated_name_p
 
 class MAVLink_pressor_hello_message(MAVLink_message):
     """
-    Announcement sent on connect (repeated until answered). The device
-    describes the run so the runtime can label its summary; the
-    runtime answers with its own hello.
+    Announcement sent on connect (the device repeats it until
+    answered). The device describes the run; the runtime checks it
+    against its own configuration and answers with its own hello, then
+    refuses with PRESSOR_REFUSAL if the two do not fit.
     """
 
     id = MAVLINK_MSG_ID_PRESSOR_HELLO
@@ -1040,9 +1066,10 @@ setattr(MAVLink_pressor_hello_message, "name", mavlink_msg_deprecated_name_prope
 
 class MAVLink_map_sample_message(MAVLink_message):
     """
-    One measured mean arterial pressure sample; the last frame of a
-    tick, so its arrival means the tick's scheduling parameters and
-    target were sent before it.
+    One measured mean arterial pressure sample of tick k, required
+    every lockstep tick. A tick's frames may arrive in any order: the
+    runtime answers the tick once its sample and the tick's other
+    required frames are all there (docs/PROTOCOL.md, tick assembly).
     """
 
     id = MAVLINK_MSG_ID_MAP_SAMPLE
@@ -1251,6 +1278,50 @@ class MAVLink_pump_status_message(MAVLink_message):
 setattr(MAVLink_pump_status_message, "name", mavlink_msg_deprecated_name_property())
 
 
+class MAVLink_pressor_refusal_message(MAVLink_message):
+    """
+    An end refuses its peer's hello (the runtime: before the first
+    INFUSION_COMMAND). It sends this, then a PRESSOR_HEARTBEAT FAULT,
+    and closes the link. Its layout never changes, so that a peer of
+    another protocol version still decodes it.
+    """
+
+    id = MAVLINK_MSG_ID_PRESSOR_REFUSAL
+    msgname = "PRESSOR_REFUSAL"
+    fieldnames = ["reason", "protocol_version", "text"]
+    ordered_fieldnames = ["reason", "protocol_version", "text"]
+    fieldtypes = ["uint8_t", "uint8_t", "char"]
+    fielddisplays_by_name: Dict[str, str] = {}
+    fieldenums_by_name: Dict[str, str] = {"reason": "PRESSOR_REFUSAL_REASON"}
+    fieldunits_by_name: Dict[str, str] = {}
+    native_format = bytearray(b"<BBc")
+    orders = [0, 1, 2]
+    lengths = [1, 1, 1]
+    array_lengths = [0, 0, 200]
+    crc_extra = 196
+    unpacker = struct.Struct("<BB200s")
+    instance_field = None
+    instance_offset = -1
+
+    def __init__(self, reason: int, protocol_version: int, text: bytes):
+        MAVLink_message.__init__(self, MAVLink_pressor_refusal_message.id, MAVLink_pressor_refusal_message.msgname)
+        self._fieldnames = MAVLink_pressor_refusal_message.fieldnames
+        self._instance_field = MAVLink_pressor_refusal_message.instance_field
+        self._instance_offset = MAVLink_pressor_refusal_message.instance_offset
+        self.reason = reason
+        self.protocol_version = protocol_version
+        self._text_raw = text
+        self.text = text.split(b"\x00", 1)[0].decode("ascii", errors="replace")
+
+    def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.reason, self.protocol_version, self._text_raw), force_mavlink1=force_mavlink1)
+
+
+# Define name on the class for backwards compatibility (it is now msgname).
+# Done with setattr to hide the class variable from mypy.
+setattr(MAVLink_pressor_refusal_message, "name", mavlink_msg_deprecated_name_property())
+
+
 class MAVLink_heartbeat_message(MAVLink_message):
     """
     The heartbeat message shows that a system or component is present
@@ -1307,6 +1378,7 @@ mavlink_map: Dict[int, Type[MAVLink_message]] = {
     MAVLINK_MSG_ID_MAP_TARGET: MAVLink_map_target_message,
     MAVLINK_MSG_ID_INFUSION_COMMAND: MAVLink_infusion_command_message,
     MAVLINK_MSG_ID_PUMP_STATUS: MAVLink_pump_status_message,
+    MAVLINK_MSG_ID_PRESSOR_REFUSAL: MAVLink_pressor_refusal_message,
     MAVLINK_MSG_ID_HEARTBEAT: MAVLink_heartbeat_message,
 }
 
@@ -1728,9 +1800,10 @@ class MAVLink(object):
 
     def pressor_hello_encode(self, sample_period_s: float, patient_seed: int, n_ticks: int, sensor_noise_mmhg: float, role: int, link_mode: int, protocol_version: int, name: bytes, drug: bytes = b"", concentration_ug_ml: float = 0, pump_max_ml_h: float = 0) -> MAVLink_pressor_hello_message:
         """
-        Announcement sent on connect (repeated until answered). The device
-        describes the run so the runtime can label its summary; the
-        runtime answers with its own hello.
+        Announcement sent on connect (the device repeats it until answered).
+        The device describes the run; the runtime checks it against
+        its own configuration and answers with its own hello, then
+        refuses with PRESSOR_REFUSAL if the two do not fit.
 
         sample_period_s           : Sample period of the device. [s] (type:double)
         patient_seed              : Seed of the simulated patient (0 for a real patient). (type:uint32_t)
@@ -1749,9 +1822,10 @@ class MAVLink(object):
 
     def pressor_hello_send(self, sample_period_s: float, patient_seed: int, n_ticks: int, sensor_noise_mmhg: float, role: int, link_mode: int, protocol_version: int, name: bytes, drug: bytes = b"", concentration_ug_ml: float = 0, pump_max_ml_h: float = 0, force_mavlink1: bool = False) -> None:
         """
-        Announcement sent on connect (repeated until answered). The device
-        describes the run so the runtime can label its summary; the
-        runtime answers with its own hello.
+        Announcement sent on connect (the device repeats it until answered).
+        The device describes the run; the runtime checks it against
+        its own configuration and answers with its own hello, then
+        refuses with PRESSOR_REFUSAL if the two do not fit.
 
         sample_period_s           : Sample period of the device. [s] (type:double)
         patient_seed              : Seed of the simulated patient (0 for a real patient). (type:uint32_t)
@@ -1770,9 +1844,11 @@ class MAVLink(object):
 
     def map_sample_encode(self, sim_time_s: float, tick: int, map_mmhg: float, quality: int) -> MAVLink_map_sample_message:
         """
-        One measured mean arterial pressure sample; the last frame of a tick,
-        so its arrival means the tick's scheduling parameters and
-        target were sent before it.
+        One measured mean arterial pressure sample of tick k, required every
+        lockstep tick. A tick's frames may arrive in any order: the
+        runtime answers the tick once its sample and the tick's other
+        required frames are all there (docs/PROTOCOL.md, tick
+        assembly).
 
         sim_time_s                : Device (simulation) time of the sample. [s] (type:double)
         tick                      : Tick number k. (type:uint32_t)
@@ -1784,9 +1860,11 @@ class MAVLink(object):
 
     def map_sample_send(self, sim_time_s: float, tick: int, map_mmhg: float, quality: int, force_mavlink1: bool = False) -> None:
         """
-        One measured mean arterial pressure sample; the last frame of a tick,
-        so its arrival means the tick's scheduling parameters and
-        target were sent before it.
+        One measured mean arterial pressure sample of tick k, required every
+        lockstep tick. A tick's frames may arrive in any order: the
+        runtime answers the tick once its sample and the tick's other
+        required frames are all there (docs/PROTOCOL.md, tick
+        assembly).
 
         sim_time_s                : Device (simulation) time of the sample. [s] (type:double)
         tick                      : Tick number k. (type:uint32_t)
@@ -1903,6 +1981,34 @@ class MAVLink(object):
 
         """
         self.send(self.pump_status_encode(tick, delivered_ml_h, volume_ml, alarms), force_mavlink1=force_mavlink1)
+
+    def pressor_refusal_encode(self, reason: int, protocol_version: int, text: bytes) -> MAVLink_pressor_refusal_message:
+        """
+        An end refuses its peer's hello (the runtime: before the first
+        INFUSION_COMMAND). It sends this, then a PRESSOR_HEARTBEAT
+        FAULT, and closes the link. Its layout never changes, so that
+        a peer of another protocol version still decodes it.
+
+        reason                    : Which check failed. (type:uint8_t, values:PRESSOR_REFUSAL_REASON)
+        protocol_version          : The refusing end's protocol version. (type:uint8_t)
+        text                      : The refusal as one line of ASCII naming both values, as the refusing end prints it. (type:char)
+
+        """
+        return MAVLink_pressor_refusal_message(reason, protocol_version, text)
+
+    def pressor_refusal_send(self, reason: int, protocol_version: int, text: bytes, force_mavlink1: bool = False) -> None:
+        """
+        An end refuses its peer's hello (the runtime: before the first
+        INFUSION_COMMAND). It sends this, then a PRESSOR_HEARTBEAT
+        FAULT, and closes the link. Its layout never changes, so that
+        a peer of another protocol version still decodes it.
+
+        reason                    : Which check failed. (type:uint8_t, values:PRESSOR_REFUSAL_REASON)
+        protocol_version          : The refusing end's protocol version. (type:uint8_t)
+        text                      : The refusal as one line of ASCII naming both values, as the refusing end prints it. (type:char)
+
+        """
+        self.send(self.pressor_refusal_encode(reason, protocol_version, text), force_mavlink1=force_mavlink1)
 
     def heartbeat_encode(self, type: int, autopilot: int, base_mode: int, custom_mode: int, system_status: int, mavlink_version: int = 3) -> MAVLink_heartbeat_message:
         """

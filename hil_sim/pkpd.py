@@ -1,7 +1,10 @@
-"""A vasopressor patient written for this benchmark alone, independent of :mod:`hil_sim`.
+"""The ``pkpd`` patient model: two compartments, effect site, sigmoid Emax, tachyphylaxis.
 
-The model is the usual pharmacometric chain for a vasopressor infusion, each block in the form the
-literature uses (the numbers are ranges drawn per patient, listed in :data:`RANGES`):
+Written for ``benchmarks/independent_patients.py`` independently of the paper's model
+(:mod:`hil_sim.patient`), and played in ``pressor trial``/``sil``/``device`` as
+``--patient-model pkpd`` through :class:`PkpdPatient` (the scenario's disturbances then replace the
+model's own). The model is the usual pharmacometric chain for a vasopressor infusion, each block in
+the form the literature uses (the numbers are ranges drawn per patient, listed in :data:`RANGES`):
 
 * **Transport delay.** The drug reaches the circulation ``delay_s`` after it leaves the pump
   (dead space of the line and the venous transit): a pure delay on the infusion rate.
@@ -36,6 +39,14 @@ plausible population for a benchmark, not fitted values. Unlike the controllers'
 (first order plus delay) the response is of higher order: the plasma's fast time constant
 V1/(CL+Q) is 1.7-6 min, the effect-site lag 0.5-1.5 min comes after it, and the peripheral creep
 and the tolerance keep moving the sensitivity for the whole hour.
+
+As a :class:`~hil_sim.patient_model.PatientModel` (:class:`PkpdPatient`) the syringe holds
+:data:`~contracts.controller.DESIGN_CONCENTRATION_UG_ML` µg/ml, the patient of ``patient_seed`` is
+``draw_patient(patient_seed // 1_000_000, patient_seed % 1_000_000)`` (so the trial's cohort
+``(S, n)`` is the benchmark's cohort ``(S, n)``), and K, T, τ are *apparent* values: K the MAP rise
+one more ml/h gives once the plasma's fast mode settled (peripheral level and tolerance unmoved:
+Emax curve from Ce to Ce + c/(60·(CL + Q))), T = 60·V1/(CL + Q) + ``effect_lag_s`` (the two fast
+time constants added), τ the transport delay on the step grid.
 """
 
 from __future__ import annotations
@@ -43,7 +54,11 @@ from __future__ import annotations
 import math
 import random
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
+from typing import ClassVar
+
+from contracts.controller import DESIGN_CONCENTRATION_UG_ML
 
 #: when the haemorrhage-like drop starts (s after the run's start)
 HEMORRHAGE_AT_S = 1200.0
@@ -231,3 +246,99 @@ class IndependentPatient:
         css = rate_ml_h * self.conc_ug_ml / (60.0 * p.cl_l_min)
         dc = self.conc_ug_ml / (60.0 * (p.cl_l_min + p.q_l_min))
         return self.effect_mmhg(css + dc, css) - self.effect_mmhg(css, css)  # per 1 ml/h
+
+
+#: the constants a :class:`PkpdPatient` acts on (its disturbance constants are not used)
+PHARMACOLOGY = (
+    "baseline_mmhg",
+    "delay_s",
+    "cl_l_min",
+    "v1_l",
+    "q_l_min",
+    "v2_l",
+    "effect_lag_s",
+    "emax_mmhg",
+    "ec50_ng_ml",
+    "hill",
+    "tolerance_tau_s",
+    "tolerance_gain",
+)
+
+
+class PkpdPatient(IndependentPatient):
+    """The ``pkpd`` :class:`~hil_sim.patient_model.PatientModel`: this module's patient, without
+    its own disturbances, on a 100 µg/ml syringe (module docstring: seeds, apparent K, T, τ).
+
+    Parameters
+    ----------
+    params
+        The patient's constants.
+    step_s
+        Internal step (s), in (0, 1] (explicit Euler; every time constant is at least 30 s).
+    """
+
+    coefficient_units: ClassVar[Mapping[str, str]] = {
+        "baseline_mmhg": "mmHg",
+        "delay_s": "s",
+        "cl_l_min": "l/min",
+        "v1_l": "l",
+        "q_l_min": "l/min",
+        "v2_l": "l",
+        "effect_lag_s": "s",
+        "emax_mmhg": "mmHg",
+        "ec50_ng_ml": "ng/ml",
+        "hill": "1",
+        "tolerance_tau_s": "s",
+        "tolerance_gain": "1",
+    }
+
+    def __init__(self, params: PatientParams, step_s: float) -> None:
+        if not 0.0 < step_s <= 1.0:
+            raise ValueError(f"pkpd patient step_s={step_s!r} outside (0, 1] s")
+        super().__init__(params, step_s, DESIGN_CONCENTRATION_UG_ML, disturbances=False)
+        p = params
+        self._fast_dc_ng_ml = self.conc_ug_ml / (60.0 * (p.cl_l_min + p.q_l_min))
+        self._t_app_s = 60.0 * p.v1_l / (p.cl_l_min + p.q_l_min) + p.effect_lag_s
+        self._tau_s = len(self.pipe) * step_s
+
+    @classmethod
+    def from_seed(cls, patient_seed: int, step_s: float) -> PkpdPatient:
+        """Patient ``patient_seed % 1_000_000`` of the benchmark's cohort ``patient_seed //
+        1_000_000`` (:func:`draw_patient`)."""
+        seed, index = divmod(int(patient_seed), 1_000_000)
+        return cls(draw_patient(seed, index), step_s)
+
+    @property
+    def baseline_mmhg(self) -> float:
+        """MAP without drug (mmHg)."""
+        return self.p.baseline_mmhg
+
+    @property
+    def delta_map_mmhg(self) -> float:
+        """The drug's MAP rise now (mmHg)."""
+        return self.effect_mmhg(self.ce_ng_ml, self.tol_ng_ml)
+
+    @property
+    def K(self) -> float:
+        """Apparent sensitivity now (mmHg/(ml/h)): the fast MAP rise of one more ml/h."""
+        ce, tol = self.ce_ng_ml, self.tol_ng_ml
+        return self.effect_mmhg(ce + self._fast_dc_ng_ml, tol) - self.effect_mmhg(ce, tol)
+
+    @property
+    def T_s(self) -> float:
+        """Apparent lag (s): 60·V1/(CL + Q) + effect_lag_s."""
+        return self._t_app_s
+
+    @property
+    def tau_s(self) -> float:
+        """Transport delay (s), a whole number of internal steps."""
+        return self._tau_s
+
+    def coefficients(self) -> dict[str, float]:
+        """The constants the model acts on (:data:`PHARMACOLOGY`), JSON-ready."""
+        return {name: float(getattr(self.p, name)) for name in PHARMACOLOGY}
+
+    def max_delta_map_mmhg(self, max_rate_ml_h: float) -> float:
+        """Steady-state ΔMAP (mmHg) at ``max_rate_ml_h`` (ml/h): the steady state rises with the
+        rate, so the largest over [0, max]."""
+        return self.steady_state_map_mmhg(max_rate_ml_h) - self.p.baseline_mmhg
