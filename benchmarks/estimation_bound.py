@@ -56,8 +56,7 @@ from hil_sim.cohort import cohort_seeds  # noqa: E402
 from hil_sim.scenario import load_scenario  # noqa: E402
 from hil_sim.world import World  # noqa: E402
 from runtime.controller_loader import load_controller  # noqa: E402
-from runtime.estimation.fitted import FittedSchedule as EstimatedSchedule  # noqa: E402
-from runtime.estimation.schedule import OracleSchedule, Schedule  # noqa: E402
+from runtime.estimation.schedule import EstimatedSchedule, OracleSchedule, Schedule  # noqa: E402
 
 TS = 0.1  # s, the loop's sample period
 MOVED_MMHG = 0.5  # MAP change from the first sample that counts as "the MAP has moved"

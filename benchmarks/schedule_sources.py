@@ -5,19 +5,19 @@ Usage::
     python benchmarks/schedule_sources.py                          # both models, 10 patients
     python benchmarks/schedule_sources.py --model one-compartment --patients 20 --seed 7
 
-Each seeded patient of :mod:`benchmarks.independent_patient_model` (``--model two-compartment``:
+Each seeded patient of :mod:`hil_sim.pkpd` (``--model two-compartment``:
 the benchmark's own pharmacology with its haemorrhage and bolus, target 70 mmHg, 60 min;
 ``--model one-compartment``: one-compartment kinetics, a Hill effect, no tolerance, a wide
 spread, a +15 mmHg step over the patient's baseline, 30 min, no disturbance) runs through the
 runtime's own closed-loop core (:class:`runtime.core.ClosedLoopCore`: supervisor, scheduling
 source, controller), in process, without a link: a 0.3 mmHg Gaussian monitor at 10 Hz (seeded)
 and a pump that delivers the command within [0, 120] ml/h. Runs per patient: the LPV with the
-``nominal`` and the ``estimated`` schedule, the PI and the Smith predictor on ``estimated`` (the
-default of ``pressor run``).
+``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-in ``validated``
+schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
 arrival (%), SCHED_RATE / SCHED_OUT_OF_BOX ticks, HOLD or FAILSAFE ticks; then per model the
-figures of issue 25 (LPV/PI, LPV/Smith, estimated/nominal medians over reachable patients,
+figures of issue 25 (LPV/PI, LPV/Smith, validated/nominal medians over reachable patients,
 overshoot median and p90). ``pressor run`` over a pty (``benchmarks/independent_patients.py``) is
 the reference for the two-compartment model; this harness is for sweeps (about 3 s per run).
 """
@@ -34,18 +34,21 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.independent_patient_model import (  # noqa: E402
+from contracts.metrics import run_metrics  # noqa: E402
+from hil_sim.pkpd import (  # noqa: E402
     BOLUS_AT_S,
     HEMORRHAGE_AT_S,
     IndependentPatient,
     draw_patient,
 )
-from contracts.metrics import run_metrics  # noqa: E402
 from link import PumpStatus, TickInputs  # noqa: E402
 from runtime.controller_loader import load_controller  # noqa: E402
 from runtime.core import CLEAN_LINK, ClosedLoopCore  # noqa: E402
-from runtime.estimation.fitted import FittedSchedule  # noqa: E402
-from runtime.estimation.schedule import EstimatedSchedule, make_schedule  # noqa: E402
+from runtime.estimation.schedule import (  # noqa: E402
+    EstimatedSchedule,
+    ValidatedSchedule,
+    make_schedule,
+)
 from runtime.estimation.validation import ModelBank  # noqa: E402
 from runtime.supervisor import Supervisor  # noqa: E402
 from runtime.supervisor_config import Fault, State, supervisor_config_for  # noqa: E402
@@ -57,27 +60,28 @@ NOISE_MMHG = 0.3
 #: label -> (controller spec, schedule source)
 RUNS = {
     "lpv-nominal": ("lpv", "nominal"),
+    "lpv-validated": ("lpv", "validated"),
     "lpv-estimated": ("lpv", "estimated"),
-    "lpv-fitted": ("lpv", "fitted"),
     "lpv-fit-hold": ("lpv", "fit-hold"),
     "lpv-fit-slew": ("lpv", "fit-slew"),
     "pi": ("pi", "nominal"),
     "smith": ("smith", "estimated"),
+    "smith-validated": ("smith", "validated"),
 }
 
 
-#: keyword arguments of the ``estimated`` source and of its bank (``--sched``, ``--bank``)
+#: keyword arguments of the ``validated`` source and of its bank (``--sched``, ``--bank``)
 VARIANT: dict[str, dict[str, Any]] = {"sched": {}, "bank": {}}
 
 
 class LimitedFit:
-    """Experiment: the fitted source's schedule, box-clamped; one jump at the first learned
+    """Experiment: the ``estimated`` source's schedule, box-clamped; one jump at the first learned
     estimate, then slewed at 0.9x the certified rates (``hold``: frozen after the jump)."""
 
     source = "estimated"
 
     def __init__(self, hold: bool) -> None:
-        self.fit = FittedSchedule(sample_period_s=TS_S)
+        self.fit = EstimatedSchedule(sample_period_s=TS_S)
         self.hold, self.jumped, self.rho = hold, False, None
         self.box = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
         self.step_ = tuple(0.9 * r * TS_S for r in (2e-4, 0.06, 0.1))
@@ -100,20 +104,19 @@ class LimitedFit:
 
 
 def make_source(source: str) -> Any:
-    """The scheduling source ``source``; ``fitted`` is the previous estimated source."""
+    """The scheduling source ``source`` (a name of ``make_schedule``, ``fixed:K/T/tau`` or an
+    experiment: ``fit-hold``, ``fit-slew``)."""
     if source.startswith("fixed:"):
         from runtime.estimation.schedule import NominalSchedule
 
         return NominalSchedule(*(float(v) for v in source[6:].split("/")))
     if source in ("fit-hold", "fit-slew"):
         return LimitedFit(source == "fit-hold")
-    if source == "fitted":
-        return FittedSchedule(sample_period_s=TS_S)
-    if source == "estimated" and (VARIANT["sched"] or VARIANT["bank"]):
+    if source == "validated" and (VARIANT["sched"] or VARIANT["bank"]):
         kw = dict(VARIANT["sched"])
         start = kw.get("start", (0.55, 150.0, 40.0))
         bank = ModelBank(2.0, round(2.0 / TS_S), start, **VARIANT["bank"])
-        return EstimatedSchedule(sample_period_s=TS_S, bank=bank, **kw)
+        return ValidatedSchedule(sample_period_s=TS_S, bank=bank, **kw)
     return make_schedule(source, TS_S)
 
 
@@ -219,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--patients", type=int, default=10)
     p.add_argument("--seed", type=int, default=2026)
     p.add_argument("--runs", default=",".join(RUNS), help="comma-separated of " + ", ".join(RUNS))
-    p.add_argument("--sched", default="", help="EstimatedSchedule kwargs: key=value;...")
+    p.add_argument("--sched", default="", help="ValidatedSchedule kwargs: key=value;...")
     p.add_argument("--bank", default="", help="ModelBank kwargs: key=value;...")
     args = p.parse_args(argv)
     VARIANT["sched"], VARIANT["bank"] = _kwargs(args.sched), _kwargs(args.bank)
@@ -279,7 +282,8 @@ def main(argv: list[str] | None = None) -> int:
                 f" {min(band):5.1f}); SCHED_RATE total {sum(r['SCHED_RATE'] for r in res[lab])};"
                 f" HOLD/FAILSAFE total {sum(r['HOLD/FAILSAFE'] for r in res[lab])}"
             )
-        for a, b in (("lpv-estimated", "pi"), ("lpv-nominal", "pi"), ("lpv-estimated", "smith"),
+        for a, b in (("lpv-validated", "pi"), ("lpv-nominal", "pi"), ("lpv-estimated", "pi"),
+                     ("lpv-validated", "smith-validated"), ("lpv-validated", "lpv-nominal"),
                      ("lpv-estimated", "lpv-nominal")):  # fmt: skip
             if a in res and b in res:
                 r = ratio(a, b)

@@ -203,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--schedule",
         default="oracle",
-        help="comma-separated scheduling sources for the lockstep runs: oracle, estimated, nominal",
+        help="comma-separated scheduling sources for the lockstep runs: oracle, estimated, nominal, validated",
     )
     p.add_argument("--sim-hours", type=float, default=None)
     p.add_argument("--realtime-s", type=float, default=None)

@@ -1,6 +1,6 @@
 """``pressor scenarios`` and ``pressor trial``: the named scenarios and the in-silico cohort trial.
 
-``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal] [--patient-model NAME|MODULE:CLASS] [--jobs J | --scheduler ADDRESS] --out DIR``
+``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal|validated] [--patient-model NAME|MODULE:CLASS] [--jobs J | --scheduler ADDRESS] --out DIR``
 prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
 (reachable patients; unreachable ones counted and listed apart) and of each disturbance event's
 peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,

@@ -208,7 +208,8 @@ def run_trial(
         Address of a Dask scheduler (``tcp://HOST:PORT``) to run the patients on instead of local
         processes (:mod:`contracts.parallel`); does not change the results.
     schedule
-        The scheduling source (``oracle``, ``estimated``, ``nominal``; :func:`run_patient`).
+        The scheduling source (``oracle``, ``estimated``, ``nominal``, ``validated``;
+        :func:`run_patient`).
     patient_model
         The patient model, a registry name or ``MODULE:CLASS`` (:mod:`hil_sim.patient_model`);
         every worker must be able to import it.

@@ -29,7 +29,9 @@ SCHEDULE_HELP = (
     " simulator's truth; research comparisons, needs a device that sends them), estimated ="
     " the runtime's online estimator from MAP and the delivered rate (falls back to the nominal"
     " patient until it has learned or when its health check rejects an estimate), nominal ="
-    " the nominal patient's constants (a fixed-gain controller)"
+    " the nominal patient's constants (a fixed-gain controller), validated = opt-in: the nominal"
+    " patient's K with T and tau slewed, inside the design box at 0.9x the certified rates,"
+    " toward a model that predicts the MAP better than the nominal one (docs/ESTIMATION.md)"
 )
 #: why ``pressor sil`` and ``pressor trial`` still default to the oracle
 ORACLE_DEFAULT_WHY = (
@@ -74,7 +76,7 @@ class RunConfig:
     ticks
         Ticks to run (0: until the device ends).
     schedule
-        The scheduling source (``oracle``, ``estimated``, ``nominal``;
+        The scheduling source (``oracle``, ``estimated``, ``nominal``, ``validated``;
         :mod:`runtime.estimation.schedule`).
     clinician
         ``pressor run``'s target and syringe options (:mod:`runtime.clinician`); ``None``

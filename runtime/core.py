@@ -3,7 +3,7 @@
 Per tick the caller hands over what arrived for the tick (:class:`link.TickInputs`: MAP sample,
 target and whatever scheduling parameters the device sent), the pump status of the tick
 (:class:`link.PumpStatus`, if one arrived) and the link's health; :meth:`ClosedLoopCore.step`
-feeds the scheduling source (:mod:`runtime.estimation.schedule`: oracle, estimated or nominal)
+feeds the scheduling source (:mod:`runtime.estimation.schedule`: oracle, estimated, nominal or validated)
 the MAP sample, its quality bits and the pump's latest delivered rate (0 ml/h before any status),
 assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source returned -
 steps the controller with those K, T, τ if the supervisor allows it, finalizes the command and
@@ -124,7 +124,7 @@ class ClosedLoopCore:
         self.controller = controller
         self.supervisor = supervisor
         self.schedule = schedule if schedule is not None else OracleSchedule()
-        self._estimated = self.schedule.source == "estimated"
+        self._estimated = self.schedule.source in ("estimated", "validated")
         self._latest_delivered_ml_h = 0.0  # the pump's latest delivered rate; 0 before any status
         self._fresh_s = -math.inf  # when the last sample without QUALITY_HELD was received (s)
         self._age_limit_s = supervisor.config.stale_after_s

@@ -50,7 +50,7 @@ class SupervisorInput(NamedTuple):
     pump_delivered_ml_h, pump_alarms
         This tick's pump status (delivered ml/h, alarm bits); NaN and 0: no fresh status.
     estimated
-        Whether K, T, τ come from the online estimator (``--schedule estimated``).
+        Whether the online estimator runs (``--schedule estimated`` or ``validated``).
     estimate_healthy
         False when the estimator rejected its estimate and reports the prior instead.
     """

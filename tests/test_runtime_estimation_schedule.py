@@ -11,7 +11,6 @@ import pytest
 from contracts.faults import QUALITY_INVALID, QUALITY_WAVEFORM
 from runtime.estimation.estimate import Estimate
 from runtime.estimation.estimator import NOMINAL_PLANT, DelayBankEstimator
-from runtime.estimation.fitted import FittedSchedule
 from runtime.estimation.gate import SampleGate
 from runtime.estimation.schedule import (
     SOURCES,
@@ -104,19 +103,11 @@ def test_nominal_rejects_bad_constants(args, match):
         NominalSchedule(*args)
 
 
-def test_estimated_starts_on_the_nominal_patient_and_ignores_the_device():
+def test_estimated_starts_on_the_low_gain_side_of_the_prior_and_ignores_the_device():
     src = EstimatedSchedule(sample_period_s=0.1)
     s = src.update(60.0, 0, 0.0, 0.9, 180.0, 12.0, True)
     e = s.estimate
     assert e is not None and (e.K, e.T_s, e.tau_s) == NOMINAL_PLANT and e.confidence == 0.0
-    assert (s.K, s.T_s, s.tau_s) == NOMINAL_PLANT
-    assert s.source == "estimated" and s.valid and s.healthy and s.from_prior
-    assert s.reason == "prior"
-
-
-def test_fitted_starts_on_the_low_gain_side_of_the_prior_and_ignores_the_device():
-    src = FittedSchedule(sample_period_s=0.1)
-    s = src.update(60.0, 0, 0.0, 0.9, 180.0, 12.0, True)
     # K 0.75 σ above the prior's 0.55, T 0.75 σ below 150 s but not below the box's 100 s
     assert s.K == pytest.approx(0.55 + 0.75 * 0.6 * 0.55) and s.T_s == 100.0
     assert s.tau_s == NOMINAL_PLANT[2]
@@ -139,8 +130,8 @@ def _estimate(K: float, K_std: float, T_s: float, T_std_s: float) -> Estimate:
     ],
 )
 def test_cautious_shift_is_on_the_low_gain_side_and_shrinks_with_the_uncertainty(est, K, T_s):
-    assert FittedSchedule().cautious(est) == pytest.approx((K, T_s))
-    assert FittedSchedule(caution_sigma=0.0).cautious(est) == (est.K, est.T_s)
+    assert EstimatedSchedule().cautious(est) == pytest.approx((K, T_s))
+    assert EstimatedSchedule(caution_sigma=0.0).cautious(est) == (est.K, est.T_s)
 
 
 @pytest.mark.parametrize(
@@ -154,18 +145,18 @@ def test_cautious_shift_is_on_the_low_gain_side_and_shrinks_with_the_uncertainty
     ],
 )
 def test_keep_slope_moves_a_lag_below_the_box_onto_its_edge_at_the_same_K_over_T(K, T_s, expected):
-    assert FittedSchedule().keep_slope(K, T_s) == pytest.approx(expected)
-    assert FittedSchedule(keep_slope=False).keep_slope(K, T_s) == (K, T_s)
+    assert EstimatedSchedule().keep_slope(K, T_s) == pytest.approx(expected)
+    assert EstimatedSchedule(keep_slope=False).keep_slope(K, T_s) == (K, T_s)
 
 
 def test_a_prior_lag_below_the_box_is_scheduled_on_the_box_edge_with_the_sensitivity_raised():
     # prior T 60 s is below the design box (100-200 s): caution leaves it there, keep_slope moves it
     est = DelayBankEstimator(0.1, prior=(0.3, 60.0, 20.0))
-    s = FittedSchedule(est).update(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
+    s = EstimatedSchedule(est).update(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
     cautious_K = 0.3 + 0.75 * 0.6 * 0.3
     assert s.from_prior and s.T_s == 100.0
     assert s.K == pytest.approx(cautious_K * 100.0 / 60.0)
-    off = FittedSchedule(DelayBankEstimator(0.1, prior=(0.3, 60.0, 20.0)), keep_slope=False)
+    off = EstimatedSchedule(DelayBankEstimator(0.1, prior=(0.3, 60.0, 20.0)), keep_slope=False)
     s_off = off.update(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
     assert s_off.T_s == 60.0 and s_off.K == pytest.approx(cautious_K)
 
@@ -174,14 +165,14 @@ def test_a_prior_lag_below_the_box_is_scheduled_on_the_box_edge_with_the_sensiti
     ("kwargs", "match"),
     [({"caution_sigma": -1.0}, "caution_sigma"), ({"caution_rel_std": math.nan}, "caution_rel")],
 )
-def test_fitted_rejects_bad_caution_settings(kwargs, match):
+def test_estimated_rejects_bad_caution_settings(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        FittedSchedule(**kwargs)
+        EstimatedSchedule(**kwargs)
 
 
-def test_fitted_schedules_on_the_estimate_once_learned():
+def test_estimated_schedules_on_the_estimate_once_learned():
     est = DelayBankEstimator(0.1)
-    src = FittedSchedule(est)
+    src = EstimatedSchedule(est)
     # a first-order lag, K 0.5, T 120 s, τ 20 s, driven by rate steps every 200 s
     x, d, rates = 0.0, math.exp(-0.1 / 120.0), []
     s = None
@@ -198,7 +189,7 @@ def test_fitted_schedules_on_the_estimate_once_learned():
 
 
 def test_make_schedule_builds_each_named_source():
-    assert SOURCES == ("oracle", "estimated", "nominal")
+    assert SOURCES == ("oracle", "estimated", "nominal", "validated")
     assert [make_schedule(name).source for name in SOURCES] == list(SOURCES)
     with pytest.raises(ValueError, match="not one of"):
         make_schedule("truth")

@@ -164,22 +164,16 @@ def test_lockstep_sil_and_trial_agree_tick_for_tick_on_the_estimator(estimated_s
     n = ref.t_s.size
     K_hat = np.array([cols["/schedule/estimated/K"][k] for k in range(n)])
     np.testing.assert_array_equal(K_hat, ref.sched_K)
-    # the estimated source holds K at the nominal patient's (a slowly moving K is a ramp the
-    # feedforward injects: docs/ESTIMATION.md) and moves T and τ only inside the design box, at
-    # most at the certified rates (0.06 s/s, 0.1 s/s) per 0.1 s tick
-    assert np.all(K_hat == ref.sched_K) and np.all(ref.sched_K == NOMINAL_PLANT[0])
-    T_hat = np.array([cols["/schedule/estimated/T_s"][k] for k in range(n)], dtype=float)
-    tau_hat = np.array([cols["/schedule/estimated/tau_s"][k] for k in range(n)], dtype=float)
-    (_, _), (T_lo, T_hi), (d_lo, d_hi) = DESIGN_BOX
-    assert np.all((T_lo <= T_hat) & (T_hat <= T_hi) & (d_lo <= tau_hat) & (tau_hat <= d_hi))
-    assert np.max(np.abs(np.diff(ref.sched_T_s))) <= 0.06 * TS + 1e-9
-    assert np.max(np.abs(np.diff(ref.sched_tau_s))) <= 0.1 * TS + 1e-9
-    # the estimator's own report is still recorded: its band holds its estimate
-    lo, hi = (
-        np.array([cols[f"/schedule/estimated/{nm}"][k] for k in range(n)])
-        for nm in ("K_lo", "K_hi")
+    assert np.any(K_hat != NOMINAL_PLANT[0])  # the estimator left its prior
+    lo, hi, T_lo, T_hi = (
+        np.array([cols[f"/schedule/estimated/{name}"][k] for k in range(n)])
+        for name in ("K_lo", "K_hi", "T_lo_s", "T_hi_s")
     )
-    assert np.all(lo <= hi) and np.any(lo != hi)
+    # the scheduled K sits on the low-gain side of the estimate, inside its band, except where the
+    # estimate's T fell below the design box: then it moved along K/T onto the box's T edge
+    below_box = (T_lo + T_hi) / 2.0 < DESIGN_BOX[1][0]
+    assert np.all(lo < K_hat) and np.all(K_hat[~below_box] < hi[~below_box])
+    assert np.all(ref.sched_T_s[below_box] == DESIGN_BOX[1][0])
     # the device's truth is still recorded beside the estimate
     K_dev = np.array([cols["/schedule/K"][k] for k in range(n)])
     np.testing.assert_array_equal(K_dev, ref.K.astype(np.float32))
@@ -211,7 +205,7 @@ def test_schedule_option_defaults_estimated_for_run_and_oracle_for_sil_and_trial
     assert sil_parser().parse_args([]).schedule == "oracle"
     for cmd in ("run", "sil", "trial"):
         out = " ".join(pressor(cmd, "--help", cwd=tmp_path).stdout.split())  # unwrapped
-        assert "--schedule {oracle,estimated,nominal}" in out
+        assert "--schedule {oracle,estimated,nominal,validated}" in out
         assert ("default estimated" if cmd == "run" else "default oracle") in out
     bad = pressor("trial", "--schedule", "guess", "--out", str(tmp_path), cwd=tmp_path)
     assert bad.returncode == 2 and "--schedule" in bad.stderr

@@ -16,19 +16,6 @@ import math
 from dataclasses import dataclass
 
 
-def check_positive(**values: float) -> None:
-    """Raise ValueError naming each value that is not a finite number > 0."""
-    for name, value in values.items():
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-            raise ValueError(f"{name}={value!r} must be a finite number > 0")
-
-
-def check_range(name: str, lo: float, hi: float) -> None:
-    """Raise ValueError unless (``lo``, ``hi``) is finite with 0 < lo < hi."""
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
-        raise ValueError(f"{name}=({lo!r}, {hi!r}) must be finite with 0 < low < high")
-
-
 @dataclass(frozen=True, slots=True)
 class FilterSettings:
     """Settings shared by the bank's models (all per window of ``window_s``).

@@ -57,8 +57,8 @@ Why this method (evidence: ``benchmarks/estimator.py`` and ``tests/test_runtime_
 
 Start-up and health: until the K and T relative standard deviations have fallen below
 ``learn_rel_std`` (≈ 40–80 s after the first rate step has reached the MAP) the prior (the nominal
-patient, :data:`NOMINAL_PLANT`) is reported with reason ``"learning"`` (the previous scheduling
-source scheduled cautiously around it: :class:`runtime.estimation.fitted.FittedSchedule`). Every
+patient, :data:`NOMINAL_PLANT`) is reported with reason ``"learning"``; the scheduling source
+schedules cautiously around it (:class:`runtime.estimation.schedule.EstimatedSchedule`). Every
 estimate is checked (finite parameters and covariance, 0 < a < 1, K and T in the plausible ranges)
 before it is reported; when the bank's best model fails, the prior is reported with the reason
 (``"diverged"``, ``"K implausible"``, ``"T implausible"``) and ``healthy=False``; once an estimate
@@ -77,7 +77,7 @@ from __future__ import annotations
 import math
 
 from baselines.smith import INITIAL_SCHEDULE
-from runtime.estimation.bank import DelayModel, FilterSettings, check_positive, check_range
+from runtime.estimation.bank import DelayModel, FilterSettings
 from runtime.estimation.estimate import Estimate
 from runtime.estimation.gate import SampleGate
 from runtime.estimation.noise import WindowNoise
@@ -89,6 +89,17 @@ DESIGN_BOX: tuple[tuple[float, float], ...] = ((0.25, 1.0), (100.0, 200.0), (10.
 #: the T-drift prior: T rises this many s per (ml/h)·s of infusion (the literature patient model's
 #: b_T, middle of its [1e-4, 3e-4] range; hil_sim/patient.py)
 T_DRIFT_PER_ML_H = 2e-4
+
+
+def _check_positive(**values: float) -> None:
+    for name, value in values.items():
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name}={value!r} must be a finite number > 0")
+
+
+def _check_range(name: str, lo: float, hi: float) -> None:
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
+        raise ValueError(f"{name}=({lo!r}, {hi!r}) must be finite with 0 < low < high")
 
 
 class DelayBankEstimator:
@@ -161,7 +172,7 @@ class DelayBankEstimator:
         gate: SampleGate | None = None,
         T_drift_per_ml_h: float = T_DRIFT_PER_ML_H,
     ) -> None:
-        check_positive(
+        _check_positive(
             sample_period_s=sample_period_s, window_s=window_s, prior_rel_std=prior_rel_std,
             q_a=q_a, q_b=q_b, q_c=q_c, r_mmhg=r_mmhg, jump_sigma=jump_sigma,
             baseline_std_mmhg=baseline_std_mmhg, reseed_nll=reseed_nll, learn_rel_std=learn_rel_std,
@@ -178,19 +189,19 @@ class DelayBankEstimator:
             )
         if not (math.isfinite(memory_s) and memory_s > window_s):
             raise ValueError(f"memory_s={memory_s!r} must be finite and > window_s={window_s!r}")
-        check_range("tau_range_s", *tau_range_s)
+        _check_range("tau_range_s", *tau_range_s)
         if len(tau_prior_s) != 2:
             raise ValueError(f"tau_prior_s={tau_prior_s!r} must be (mode s, std s)")
-        check_positive(tau_prior_mode_s=tau_prior_s[0], tau_prior_std_s=tau_prior_s[1])
-        check_range("K_plausible", *K_plausible)
-        check_range("T_plausible_s", *T_plausible_s)
+        _check_positive(tau_prior_mode_s=tau_prior_s[0], tau_prior_std_s=tau_prior_s[1])
+        _check_range("K_plausible", *K_plausible)
+        _check_range("T_plausible_s", *T_plausible_s)
         if len(prior) != 3:
             raise ValueError(f"prior={prior!r} must be (K, T_s, tau_s)")
-        check_positive(prior_K=prior[0], prior_T_s=prior[1], prior_tau_s=prior[2])
+        _check_positive(prior_K=prior[0], prior_T_s=prior[1], prior_tau_s=prior[2])
         if len(box) != 3:
             raise ValueError(f"box={box!r} must be ((K lo, hi), (T lo, hi), (tau lo, hi))")
         for name, (lo, hi) in zip(("box K", "box T_s", "box tau_s"), box, strict=True):
-            check_range(name, lo, hi)
+            _check_range(name, lo, hi)
         self.window_s = float(window_s)
         self._n_win = n_win
         d_lo = max(1, math.ceil(tau_range_s[0] / window_s - 1e-9))
