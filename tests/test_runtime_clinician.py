@@ -152,6 +152,9 @@ def test_run_target_mmhg_wins_over_the_device_target_in_summary_and_recording(tm
     }
     assert summary["ticks"] == 30
     assert summary["syringe"] == {**syringe, "pump_max_ml_h": 200.0}  # as the device announced
+    # the drug library's limits for phenylephrine at 100 ug/ml, doses beside ml/h
+    assert summary["dose"]["unit"] == "ug/min" and summary["dose"]["hard_max_ml_h"] == 120.0
+    assert summary["dose"]["max_command_ug_min"] == summary["dose"]["max_command_ml_h"] * 100 / 60
     recorded = rrd_columns(rrd)["/controller/target_mmhg"]
     assert sorted(recorded) == list(range(30)) and set(recorded.values()) == {70.0}
     assert any(
