@@ -157,6 +157,7 @@ def run_runtime(
                 peer.sensor_noise_mmhg,
                 sched_action=config.sched_faults,
                 stale_after_s=config.sample_age_limit_s,
+                dose_limits=clinician.dose_limits,  # pressor run: the drug library's
             )
         )
         if config.rrd is not None:
@@ -166,7 +167,9 @@ def run_runtime(
                 f"{identity['controller']}|{peer.name}|seed{peer.patient_seed}|{config.rate_hz}Hz"
                 f"|{config.mode}"
             )
-            recorder = Recorder(config.rrd, run_label=label)
+            recorder = Recorder(
+                config.rrd, run_label=label, dose_view=clinician.dose_limits is not None
+            )
             recorder.plan_markers(
                 [(t, "disturbance", f"disturbance: {kind} at {t:g} s") for kind, t in events or ()]
                 + [
@@ -197,6 +200,10 @@ def run_runtime(
         if recorder is not None:
             if before_close is not None:
                 before_close(recorder)
+            if clinician.dose_limits is not None:
+                from runtime.dosing import log_dose_series
+
+                log_dose_series(recorder, result.trajectory, clinician)
             recorder.close()
             recorder = None
         report = None
@@ -226,6 +233,12 @@ def run_runtime(
                 "concentration_ug_ml": clinician.concentration_ug_ml,
                 "pump_max_ml_h": float(peer.pump_max_ml_h),
             }
+            if clinician.dose_limits is not None:
+                from runtime.dosing import dose_summary
+
+                summary["dose"] = dose_summary(
+                    result.trajectory["command_ml_h"], period_s, clinician, sup.detections
+                )
         ok = True
         return summary, result
     finally:
