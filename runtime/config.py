@@ -49,7 +49,8 @@ class RunConfig:
     Attributes
     ----------
     controller
-        The ``--controller`` spec (``lpv``, ``pi``, ``smith[:LAMBDA_S]`` or a generated module).
+        The ``--controller`` spec (``lpv``, ``pi``, ``smith[:LAMBDA_S]``, a generated module or a
+        plugin, :mod:`runtime.controller_plugin`).
     rate_hz
         Loop rate (Hz).
     realtime
@@ -151,7 +152,9 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
         "--controller",
         default="lpv",
         help="lpv (default: the shipped LPV module), pi, smith[:LAMBDA_S] (Smith predictor,"
-        " closed-loop time constant LAMBDA_S in s, default 30 s), or a generated .py",
+        " closed-loop time constant LAMBDA_S in s, default 30 s), a generated .py, or your own"
+        " class: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed 'pressor.controllers'"
+        " entry point NAME[:ARGS] (ARGS: key=value,...; runtime.controller_plugin)",
     )
     p.add_argument(
         "--schedule",

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 from contracts.usage import USAGE_EXIT, run_command
 from runtime.clinician import ClinicianInput, check_device_hello, check_link_hello
 from runtime.config import RunConfig, load_controller
+from runtime.controller_loader import controller_name
 from runtime.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
 from runtime.placement import Pinned
 from runtime.summary import build_summary
@@ -112,8 +112,7 @@ def run_runtime(
     recorder = None
     try:
         mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
-        spec = config.controller
-        name = Path(spec).stem if spec not in ("pi", "lpv") else spec
+        name = controller_name(config.controller)
         hello = Hello(
             name[:32],
             sample_period_s=period_s,
@@ -252,13 +251,14 @@ def run_runtime(
 def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequence[str]) -> int:
     """Run a runtime command with its exit codes.
 
-    0 success; 1 the run completed but a check failed, or the device stalled or the link failed
-    (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`), or the
+    0 success; 1 the run completed but a check failed, or the device stalled or the link failed,
+    or the controller raised (:class:`runtime.core.ControllerError`) (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`), or the
     device's hello refused (:class:`link.Refusal`: one line, the device was told); 130 / 143
     stopped by SIGINT / SIGTERM (:mod:`runtime.interrupt`: the run stops at a tick boundary,
     commands the safe rate, and keeps its outputs).
     """
     from link import LinkError, Refusal
+    from runtime.core import ControllerError
     from runtime.loop import DeviceStalled
 
     def guarded(args: Sequence[str]) -> int:
@@ -268,7 +268,7 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
             except Refusal as exc:  # a hello refused, by either end: the other was told why
                 print(f"{prog}: {exc}", file=sys.stderr)
                 return USAGE_EXIT
-            except (DeviceStalled, LinkError) as exc:
+            except (DeviceStalled, LinkError, ControllerError) as exc:
                 print(f"{prog}: {exc}", file=sys.stderr)
                 return 1
             except Interrupted as exc:

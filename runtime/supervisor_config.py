@@ -135,8 +135,9 @@ FAULT_BITS: dict[str, int] = {f.name: int(f) for f in Fault}
 DEFAULT_SAMPLE_AGE_LIMIT_S = 3.0
 #: quality bits that count as bad by default: all but QUALITY_HELD (unknown bits too)
 QUALITY_MASK = 0xFFFFFFFF & ~QUALITY_HELD
-#: the faults that raise the alarm (plain int, for the per-tick path)
-ALARM_FAULTS = ~int(Fault.COMMAND_CLAMPED)
+#: the faults that raise the alarm (plain int, for the per-tick path): every one, a clamped command
+#: too (the shipped controllers clamp themselves and never trip it; a plugin that does is alarmed)
+ALARM_FAULTS = sum(FAULT_BITS.values())
 
 
 def fault_names(faults: int) -> list[str]:
