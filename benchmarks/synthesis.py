@@ -17,10 +17,15 @@ The cases follow the controller family of the config (synth) and of the artifact
   :func:`synthesis.verify.verify_artifact` with the analysis LMI on a working set (the default) vs
   every dense point in one solve (``all_points_at_once``).
 
+Every case runs with one KKT backend forced (:mod:`synthesis.kkt`), once per backend of ``--kkt``
+(default: each of them), so the table gives the time per backend; the straightforward cases run
+on the first backend only.
+
 ::
 
     python benchmarks/synthesis.py [--config FILE.toml] [--grid 3,3,3] [--rate-terms vertices]
                                    [--artifact FILE.npz] [--only synth|verify] [--skip-naive]
+                                   [--kkt faer,qdldl]
 
 ``--rate-terms vertices`` benchmarks the paper's 2³-vertex Theorem-3 synthesis (8 LMIs per node)
 instead of the design's setting; ``--skip-naive`` leaves out both straightforward cases (they are
@@ -44,6 +49,14 @@ def _child(kind: str, args: argparse.Namespace) -> None:
     here = os.path.dirname(os.path.abspath(__file__))
     sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != here]
     sys.modules.pop("synthesis", None)
+    from synthesis.kkt import kkt_chain
+
+    with kkt_chain([args.kkt]):
+        row = _case(kind, args)
+    print(json.dumps({"kind": f"{kind}[{args.kkt}]", **row}))
+
+
+def _case(kind: str, args: argparse.Namespace) -> dict[str, Any]:
     t0 = time.perf_counter()
     if kind.startswith("verify"):
         from synthesis.artifact import default_artifact_path, load_artifact
@@ -67,7 +80,7 @@ def _child(kind: str, args: argparse.Namespace) -> None:
         )
     row["wall_s"] = time.perf_counter() - t0
     row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-    print(json.dumps({"kind": kind, **row}))
+    return row
 
 
 def _smith_synth(cfg: Any, kind: str) -> dict[str, str]:
@@ -102,14 +115,17 @@ def _theorem3_synth(cfg: Any, kind: str, args: argparse.Namespace) -> dict[str, 
     }
 
 
-def _run(kind: str, argv: list[str]) -> dict:
-    cmd = [sys.executable, __file__, "--child", kind, *argv]
+def _run(kind: str, argv: list[str], method: str) -> dict:
+    cmd = [sys.executable, __file__, "--child", kind, f"--kkt={method}", *argv]
     # one BLAS thread, as pressor synth / verify set it (synthesis.blas_threads), for every case
     env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False, env=env)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if proc.returncode != 0 or not lines:
-        return {"kind": kind, "error": proc.stderr.strip().splitlines()[-1:] or ["?"]}
+        return {
+            "kind": f"{kind}[{method}]",
+            "error": proc.stderr.strip().splitlines()[-1:] or ["?"],
+        }
     return json.loads(lines[-1])
 
 
@@ -123,6 +139,11 @@ def main() -> int:
     ap.add_argument("--artifact", help="artifact for the verify cases (default: the shipped one)")
     ap.add_argument("--only", choices=["synth", "verify"])
     ap.add_argument("--skip-naive", action="store_true")
+    ap.add_argument(
+        "--kkt",
+        default="faer,qdldl",
+        help="KKT backends to time, comma-separated (default: faer,qdldl; each case per backend)",
+    )
     ap.add_argument(
         "--child", choices=["synth", "naive", "verify", "verify-all"], help=argparse.SUPPRESS
     )
@@ -139,19 +160,23 @@ def main() -> int:
     pairs = [("synth", "naive"), ("verify", "verify-all")]
     if args.only:
         pairs = [p for p in pairs if p[0] == args.only]
-    print(f"{'case':<12}{'wall s':>9}{'peak MB':>9}  outcome / detail")
+    methods = args.kkt.split(",")
+    print(f"{'case':<20}{'wall s':>9}{'peak MB':>9}  outcome / detail")
     for used, straight in pairs:
-        rows = [_run(used, argv)] + ([] if args.skip_naive else [_run(straight, argv)])
+        first = methods[0]
+        rows = [_run(used, argv, first)]
+        rows += [] if args.skip_naive else [_run(straight, argv, first)]
+        rows += [_run(used, argv, m) for m in methods[1:]]
         for r in rows:
             if "error" in r:
-                print(f"{r['kind']:<12} failed: {r['error']}")
+                print(f"{r['kind']:<20} failed: {r['error']}")
                 continue
             print(
-                f"{r['kind']:<12}{r['wall_s']:>9.1f}{r['peak_rss_mb']:>9.0f}  {r['outcome']}; "
+                f"{r['kind']:<20}{r['wall_s']:>9.1f}{r['peak_rss_mb']:>9.0f}  {r['outcome']}; "
                 f"{r['detail']}"
             )
-        if len(rows) == 2 and all("error" not in r for r in rows):
-            u, s = rows
+        if not args.skip_naive and all("error" not in r for r in rows[:2]):
+            u, s = rows[:2]
             print(
                 f"{s['kind']} / {u['kind']}: wall {s['wall_s'] / u['wall_s']:.2f}x, "
                 f"peak memory {s['peak_rss_mb'] / u['peak_rss_mb']:.2f}x"

@@ -83,6 +83,11 @@ def emit_c(
     h.append(f"#define {PU}NBUF {c['NBUF']}  /* ceil(tau_max / Ts) + 1 */")
     h.append(f"#define {PU}SAMPLE_PERIOD_S {c_double(spec.sample_period_s)}")
     h.append(f"#define {PU}MAX_RATE_ML_H {c_double(spec.max_rate_ml_h)}")
+    h.append(f'#define {PU}DRUG "{spec.drug.name}"')
+    h.append(
+        f"#define {PU}DRUG_CONCENTRATION_UG_ML {c_double(spec.drug.concentration_ug_ml)}"
+        "  /* ug/ml: the syringe whose ml/h the gains count */"
+    )
     h.append(f'#define {PU}ARTIFACT_SHA256 "{spec.artifact_sha256}"')
     h.append(f"#define {PU}FIXED_POINT {0 if float_mode else 1}\n")
     h.append(

@@ -82,6 +82,10 @@ from a ring buffer of NBUF samples with linear interpolation, anti-windup by con
 integration at the pump limits [0, {spec.max_rate_ml_h}] ml/h. Non-finite input holds the last
 command.
 
+Drug (DRUG, DRUG_CONCENTRATION_UG_ML): {spec.drug.name} at {spec.drug.concentration_ug_ml!r} ug/ml.
+The gains (K in mmHg/(ml/h)) count ml/h of this syringe: pressor run refuses another drug or
+concentration (docs/DRUGS.md).
+
 {_reference_doc(spec)}Scaling (power of two, common to all nodes): {scales}; e: {plan.e_scale:g} mmHg (clamp).
 Q-formats ({plan.fmt}): states, e and x_d Q0.31 int32 (saturating); grid coordinates Q11.20;
 weights Q{31 - plan.weight_bits}.{plan.weight_bits}; coefficients |q| <= 2^{plan.coef_bits}-1 with
@@ -129,6 +133,11 @@ def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
     add(f"GENERATION_COMMAND = {spec.command!r}")
     add(f"SAMPLE_PERIOD_S = {py_float(spec.sample_period_s)}")
     add(f"MAX_RATE_ML_H = {py_float(spec.max_rate_ml_h)}")
+    add(f"DRUG = {spec.drug.name!r}  # the drug the gains are for")
+    add(
+        f"DRUG_CONCENTRATION_UG_ML = {py_float(spec.drug.concentration_ug_ml)}"
+        "  # ug/ml: the syringe whose ml/h the gains count"
+    )
     add(f"GRID_LO = ({', '.join(py_float(x) for x in spec.lo)})  # K mmHg/(ml/h), T s, tau s")
     add(f"GRID_HI = ({', '.join(py_float(x) for x in spec.hi)})")
     add(f"GRID_COUNTS = {tuple(int(x) for x in spec.counts)!r}")

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from codegen.fixed_point import FixedPointPlan
+from contracts.drug import DEFAULT_BINDING, DrugBinding
 
 __all__ = ["EmitSpec", "corner_offsets", "derived_constants", "nonzero_entries", "py_float"]
 
@@ -40,6 +41,8 @@ class EmitSpec:
     reference
         (lambda_s, pump_fraction, k_min) of the two-degree-of-freedom prefilter
         (:mod:`synthesis.reference`), or None: the controller then sees the target directly.
+    drug
+        The drug and syringe concentration (µg/ml) the gains are for.
     """
 
     nodes: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
@@ -52,6 +55,7 @@ class EmitSpec:
     command: str
     budgets: dict[str, tuple[float, str]]
     reference: tuple[float, float, float] | None = None
+    drug: DrugBinding = DEFAULT_BINDING
 
     @property
     def lo(self) -> tuple[float, float, float]:

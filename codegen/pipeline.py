@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from codegen.discretise import ContinuousController
 from codegen.fixed_point import FixedPointPlan, make_plan
 from codegen.tables import TabulationProof, choose_grid
+from contracts.drug import DEFAULT_BINDING, DrugBinding
 from contracts.files import write_atomic
 
 __all__ = [
@@ -96,6 +97,10 @@ class LoadedDesign:
     reference
         (lambda_s, pump_fraction, k_min) of the design's two-degree-of-freedom prefilter
         (``synthesis.reference``), or None when the artifact has none or it is disabled.
+    drug
+        The drug and syringe concentration the gains are for (the artifact's ``design.drug``,
+        phenylephrine at 100 µg/ml when it names none); emitted as ``DRUG`` and
+        ``DRUG_CONCENTRATION_UG_ML``.
     """
 
     sha256: str
@@ -108,6 +113,7 @@ class LoadedDesign:
     max_rate_ml_h: float
     synthesis_counts: tuple[int, int, int]
     reference: tuple[float, float, float] | None = None
+    drug: DrugBinding = DEFAULT_BINDING
 
 
 @dataclass(frozen=True)
@@ -185,6 +191,7 @@ def load_design(path: str | Path) -> LoadedDesign:
         reference=(ref.lambda_s, ref.pump_fraction, ref.k_min)
         if (ref := art.reference).enabled
         else None,
+        drug=art.drug,
     )
 
 
@@ -254,6 +261,7 @@ def emit(
         command=command_line(design.display_path, target, plan.fmt),
         budgets=BUDGETS,
         reference=design.reference,
+        drug=design.drug,
     )
     thash = array_hash(plan.q_tables, plan.scaled_tables)
     if target == "python":

@@ -15,14 +15,16 @@ from __future__ import annotations
 
 from typing import Protocol, runtime_checkable
 
+from contracts.drug import DEFAULT_BINDING
+
 #: The drug the shipped designs are for (the paper's vasopressor).
-DESIGN_DRUG = "phenylephrine"
+DESIGN_DRUG = DEFAULT_BINDING.name
 #: The syringe concentration (µg/ml) the shipped designs' gain units assume. K is in mmHg/(ml/h),
 #: so a design holds only at the concentration its K was identified at. The paper does not state
 #: it; 100 µg/ml is the usual phenylephrine infusion dilution (10 mg in 100 ml), assumed here.
-#: The shipped controllers carry no drug or concentration: the runtime's ``--drug`` and
-#: ``--concentration-ug-ml`` stand for them (docs/PROTOCOL.md, "Clinician's input").
-DESIGN_CONCENTRATION_UG_ML = 100.0
+#: A generated module declares its own (``DRUG``, ``DRUG_CONCENTRATION_UG_ML``; read by
+#: :func:`contracts.drug.binding_of`); the baselines declare none and assume these.
+DESIGN_CONCENTRATION_UG_ML = DEFAULT_BINDING.concentration_ug_ml
 
 
 @runtime_checkable

@@ -1,11 +1,14 @@
 """``pressor scenarios`` and ``pressor trial``: the named scenarios and the in-silico cohort trial.
 
-``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal|validated] [--patient-model NAME|MODULE:CLASS] [--jobs J | --scheduler ADDRESS] --out DIR``
+``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH|MODULE:CLASS[:ARGS] --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal|validated] [--patient-model NAME|MODULE:CLASS] [--jobs J | --scheduler ADDRESS] --out DIR``
 prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
 (reachable patients; unreachable ones counted and listed apart) and of each disturbance event's
 peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
 ``DIR/patients.csv`` and ``DIR/summary.json`` atomically. Same arguments → identical files, whatever
-``--jobs``. Exit 0 on completion, 2 on bad usage or input (one line naming field, value and range).
+``--jobs``. Exit 0 on completion, 1 when a controller raised (one line naming it, the patient and
+the tick: :class:`runtime.core.ControllerError`), 2 on bad usage or input (one line naming field,
+value and range). A plugin controller (:mod:`runtime.controller_plugin`) is named by
+``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]`` or an installed entry point's name.
 """
 
 from __future__ import annotations
@@ -113,8 +116,10 @@ def _trial(argv: Sequence[str]) -> int:
         "--controller",
         default="pi",
         help="pi | smith[:LAMBDA_S] (Smith predictor, lambda 30 s) | lpv | PATH to a generated "
-        "module; several, comma-separated (lpv,pi,smith), run the same cohort under each and "
-        "compare them per patient (default: %(default)s)",
+        "module | a plugin class MODULE:CLASS[:ARGS] or FILE.py:CLASS[:ARGS] or an installed "
+        "'pressor.controllers' entry point NAME[:ARGS] (ARGS: key=value,...); several, "
+        "comma-separated (lpv,pi,smith), run the same cohort under each and compare them per "
+        "patient (default: %(default)s)",
     )
     p.add_argument(
         "--report",
@@ -156,14 +161,10 @@ def _trial(argv: Sequence[str]) -> int:
     from hil_sim.patient_model import PatientModelError, check_model_for_scenario
     from hil_sim.report import write_report
     from hil_sim.scenario import ScenarioError, load_scenario
-    from hil_sim.trial import (
-        controller_dir_name,
-        run_trial,
-        run_trial_traced,
-        summarize,
-        write_outputs,
-    )
+    from hil_sim.trial import controller_dir_name, run_cohort, write_outputs
     from runtime.controller_loader import ControllerSpecError, load_controller
+    from runtime.controller_plugin import split_controller_list
+    from runtime.core import ControllerError
 
     period = 1.0 / args.rate
     try:
@@ -171,7 +172,7 @@ def _trial(argv: Sequence[str]) -> int:
         check_model_for_scenario(args.patient_model, scenario.name, scenario.frozen is not None)
     except (ScenarioError, PatientModelError) as exc:
         raise UsageError(str(exc)) from None
-    specs = [c.strip() for c in args.controller.split(",")]
+    specs = split_controller_list(args.controller)
     if "" in specs or len(set(specs)) != len(specs):
         raise UsageError(
             f"field '--controller' = {args.controller!r}: name each controller once, comma-separated"
@@ -185,28 +186,27 @@ def _trial(argv: Sequence[str]) -> int:
     trajectories: dict[str, dict[str, Any]] = {}
     for spec in specs:
         out = args.out if len(specs) == 1 else args.out / controller_dir_name(spec)
-        run = run_trial_traced if args.report else run_trial
         try:
-            result = run(
+            records[spec], summary, trajectory = run_cohort(
                 scenario,
                 spec,
                 args.seed,
                 args.patients,
-                args.jobs,
-                period,
-                _progress_bar,
+                traced=args.report,
+                jobs=args.jobs,
+                sample_period_s=period,
+                progress=_progress_bar,
                 scheduler=args.scheduler,
                 schedule=args.schedule,
                 patient_model=args.patient_model,
             )
+        except ControllerError as exc:  # a plugin that raised: one line, exit 1
+            print(f"pressor trial: {exc}", file=sys.stderr)
+            return 1
         except (ValueError, BackendError) as exc:  # e.g. a rate the patient step does not divide
             raise UsageError(str(exc)) from None
-        records[spec], trajectory = result if args.report else (result, None)
         if trajectory is not None:
             trajectories[spec] = trajectory
-        summary = summarize(
-            records[spec], scenario, spec, args.seed, args.schedule, args.patient_model
-        )
         write_outputs(out, records[spec], summary)
         print(format_table(summary))
         print(f"wrote {out / 'patients.json'}, {out / 'patients.csv'}, {out / 'summary.json'}")

@@ -55,6 +55,7 @@ from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, load_patient_model
 from hil_sim.scenario import Scenario
 from hil_sim.world import World
 from runtime.controller_loader import load_controller
+from runtime.core import ControllerError
 from runtime.estimation.schedule import make_schedule
 
 
@@ -118,7 +119,12 @@ def _simulate_patient(
 ) -> tuple[dict[str, Any], Trajectory]:
     world = World(scenario, patient_seed, sample_period_s, patient_model=patient_model)
     controller = load_controller(controller_spec, sample_period_s)
-    traj = simulate(world, controller, schedule=make_schedule(schedule, sample_period_s))
+    try:
+        traj = simulate(world, controller, schedule=make_schedule(schedule, sample_period_s))
+    except ControllerError as exc:  # name the patient too (the message crosses processes)
+        raise ControllerError(
+            f"--controller {controller_spec!r}, patient seed {patient_seed}: {exc}"
+        ) from None
     has_step = scenario.step_mmhg != 0.0
     metrics = run_metrics(
         traj.t_s,
@@ -268,6 +274,35 @@ def run_trial_traced(
     arrays["t_s"] = runs[0][1]["t_s"]
     arrays["patient_seed"] = np.array([r["patient_seed"] for r in records], dtype=np.int64)
     return records, arrays
+
+
+def run_cohort(
+    scenario: Scenario,
+    controller_spec: str,
+    cohort_seed: int,
+    n_patients: int,
+    *,
+    traced: bool = False,
+    **options: Any,
+) -> tuple[list[dict[str, Any]], dict[str, Any], dict[str, np.ndarray] | None]:
+    """What ``pressor trial`` and :func:`pressor.api.trial` run for one controller.
+
+    ``options`` are :func:`run_trial`'s (``jobs``, ``sample_period_s``, ``progress``,
+    ``scheduler``, ``schedule``, ``patient_model``). Returns the records, the summary
+    (:func:`summarize`) and, when ``traced``, the trajectories of :func:`run_trial_traced`.
+    """
+    run = run_trial_traced if traced else run_trial
+    result = run(scenario, controller_spec, cohort_seed, n_patients, **options)
+    records, trajectories = result if traced else (result, None)
+    summary = summarize(
+        records,
+        scenario,
+        controller_spec,
+        cohort_seed,
+        options.get("schedule", "oracle"),
+        options.get("patient_model", DEFAULT_PATIENT_MODEL),
+    )
+    return records, summary, trajectories
 
 
 def summarize(

@@ -146,7 +146,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
     args = sil_parser().parse_args(argv)
     if args.rrd is None:
         args.rrd = Path(
-            f"pressor_sil_{Path(args.controller).stem}_{Path(args.scenario).stem}"
+            f"pressor_sil_{_file_label(args.controller)}_{Path(args.scenario).stem}"
             f"_seed{args.patient_seed}.rrd"
         )
     run = run_config(args)
@@ -175,6 +175,13 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         noisy=scenario.noisy,
         patient_model=args.patient_model,
     )
+
+
+def _file_label(spec: str) -> str:
+    """The controller's part of the default ``.rrd`` name (a plugin: its class name)."""
+    from runtime.controller_plugin import is_plugin_spec, plugin_label
+
+    return plugin_label(spec) if is_plugin_spec(spec) else Path(spec).stem
 
 
 def device_command(
@@ -227,6 +234,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     """
     from link import PtyPair
     from runtime.config import load_signing
+    from runtime.core import ControllerError
     from runtime.interrupt import Interrupted
     from runtime.placement import lockstep_cpus
     from runtime.progress import TerminalProgress
@@ -279,6 +287,9 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
             )
         except Interrupted:
             _stop(proc)  # before the device connected: nothing to keep, one line
+            raise
+        except ControllerError:
+            _stop(proc)  # the runtime's own fault: the device only saw the link close
             raise
         except Exception:
             _stop(proc)

@@ -98,8 +98,28 @@ def _sched_view(index: int) -> rrb.TimeSeriesView:
     return _plot(f"{name} ({unit})", [device, used, *estimated, *BOX_ENTITIES[index]])
 
 
-def default_blueprint() -> rrb.Blueprint:
-    """The layout the viewer opens on: MAP, infusion, volume, scheduling, timing and safety."""
+#: the dose channels of a ``pressor run`` recording (:func:`runtime.dosing.log_dose_series`)
+DOSE_ENTITIES = (
+    "/dose/command_ug_min",
+    "/dose/command_ug_kg_min",
+    "/dose/hard_max",
+    "/dose/soft_max",
+)
+
+
+def default_blueprint(dose: bool = False) -> rrb.Blueprint:
+    """The layout the viewer opens on: MAP, infusion, volume, scheduling, timing and safety; with
+    ``dose`` (``pressor run``) the commanded dose (µg/min, µg/kg/min) and the drug library's hard
+    and soft maxima beside the infusion in ml/h."""
+    infusion = [
+        _plot(
+            "Infusion (ml/h)",
+            ["/controller/command_ml_h", "/pump/command_ml_h", "/pump/rate_ml_h"],
+        )
+    ]
+    if dose:
+        infusion.append(_plot("Dose (ug/min, ug/kg/min; library maxima)", list(DOSE_ENTITIES)))
+    infusion.append(_plot("Volume infused (ml)", ["/pump/volume_ml"]))
     return rrb.Blueprint(
         rrb.Vertical(
             _plot(
@@ -112,14 +132,7 @@ def default_blueprint() -> rrb.Blueprint:
                     FAULT_MARKERS,
                 ],
             ),
-            rrb.Horizontal(
-                _plot(
-                    "Infusion (ml/h)",
-                    ["/controller/command_ml_h", "/pump/command_ml_h", "/pump/rate_ml_h"],
-                ),
-                _plot("Volume infused (ml)", ["/pump/volume_ml"]),
-                column_shares=[3, 1],
-            ),
+            rrb.Horizontal(*infusion, column_shares=[3, 2, 1] if dose else [3, 1]),
             rrb.Horizontal(*(_sched_view(i) for i in range(len(SCHED_VARS)))),
             rrb.Horizontal(
                 _plot("Loop timing (us)", ["/loop/exec_us", "/loop/lateness_us"]),

@@ -42,6 +42,7 @@ from runtime.config import (
     positive,
     run_config,
 )
+from runtime.dosing import add_dosing_options
 
 
 def _run_parser() -> UsageParser:
@@ -57,6 +58,7 @@ def _run_parser() -> UsageParser:
         help="stop after N ticks, one per sample period (default 0: when the device ends)",
     )
     add_clinician_options(p)
+    add_dosing_options(p)
     return p
 
 

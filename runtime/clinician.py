@@ -5,8 +5,9 @@
 no longer required for a tick. ``--target-file`` and ``--target-stdin`` change it while the loop
 runs (:mod:`runtime.target_source`), and carry the clinician's acknowledgement (a line ``ack``:
 HOLD or FAILSAFE resume once the fault cleared, :mod:`runtime.supervisor_io`). ``--drug`` and ``--concentration-ug-ml`` state the drug and
-concentration the loaded controller's gain units assume (the shipped controllers carry neither:
-:data:`contracts.controller.DESIGN_DRUG`, :data:`~contracts.controller.DESIGN_CONCENTRATION_UG_ML`);
+concentration in the syringe; they must match the loaded design's (:mod:`contracts.drug`: a
+generated module's ``DRUG`` and ``DRUG_CONCENTRATION_UG_ML``, else phenylephrine at 100 µg/ml) and
+default to them (:mod:`runtime.dosing` checks them, the drug library and ``--weight-kg``);
 :func:`check_device_hello` refuses a device whose hello announces another drug, another
 concentration or a pump that cannot reach the controller's maximum rate (docs/PROTOCOL.md,
 "Clinician's input"), :func:`check_link_hello` one whose sample period, link mode or announced
@@ -23,15 +24,12 @@ from pathlib import Path
 from typing import Any
 
 from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
+from contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS
 from contracts.usage import UsageError
 
 #: MAP targets the runtime accepts (mmHg), from any source
 TARGET_MIN_MMHG = 50.0
 TARGET_MAX_MMHG = 120.0
-#: largest concentration accepted (µg/ml)
-MAX_CONCENTRATION_UG_ML = 100000.0
-#: longest drug name (the hello's ``drug`` is char[16])
-MAX_DRUG_CHARS = 16
 #: the line that acknowledges an alarm and asks to resume (stdin, the target file)
 ACK_WORD = "ack"
 
@@ -49,9 +47,18 @@ class ClinicianInput:
     target_stdin
         Read a new target from each stdin line while running.
     drug
-        Drug the controller was designed for (lower case).
+        Drug in the syringe (lower case); the loaded design's once checked (:mod:`runtime.dosing`).
     concentration_ug_ml
-        Concentration (µg/ml) the controller's gain units assume.
+        Syringe concentration (µg/ml); the loaded design's once checked.
+    drug_given, concentration_given
+        Whether ``--drug`` / ``--concentration-ug-ml`` were given (else the design's are taken).
+    weight_kg
+        The patient's weight (kg, ``--weight-kg``), or ``None``.
+    dose_limits
+        The drug library's limits for this drug, syringe and weight
+        (:class:`runtime.drug_library.DoseLimits`), set by :func:`runtime.dosing.bind_syringe`.
+    dose_unit
+        The unit of the library's limits for this drug (``ug/min`` or ``ug/kg/min``).
     """
 
     target_mmhg: float | None = None
@@ -59,6 +66,11 @@ class ClinicianInput:
     target_stdin: bool = False
     drug: str = DESIGN_DRUG
     concentration_ug_ml: float = DESIGN_CONCENTRATION_UG_ML
+    drug_given: bool = False
+    concentration_given: bool = False
+    weight_kg: float | None = None
+    dose_limits: Any = None
+    dose_unit: str = "ug/min"
 
     @property
     def target_source(self) -> str:
@@ -160,18 +172,18 @@ def add_clinician_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--drug",
         type=argtype("--drug", parse_drug),
-        default=DESIGN_DRUG,
-        help="drug the controller was designed for; the device's hello must announce the same"
-        f" (default: {DESIGN_DRUG})",
+        default=None,
+        help="drug in the syringe: must be the loaded design's, and the device's hello must"
+        f" announce the same (default: the design's; the shipped one's is {DESIGN_DRUG})",
     )
     p.add_argument(
         "--concentration-ug-ml",
         type=argtype("--concentration-ug-ml", parse_concentration),
-        default=DESIGN_CONCENTRATION_UG_ML,
+        default=None,
         metavar="UG_ML",
-        help="syringe concentration the controller's gain K (mmHg per ml/h) assumes (ug/ml,"
-        f" default {DESIGN_CONCENTRATION_UG_ML:g}: the shipped designs'); the device's hello must"
-        " announce the same",
+        help="syringe concentration (ug/ml): must be the one whose ml/h the design's gain K"
+        " (mmHg per ml/h) counts, and the device's hello must announce the same (default: the"
+        f" design's; the shipped one's is {DESIGN_CONCENTRATION_UG_ML:g})",
     )
 
 
@@ -200,8 +212,15 @@ def clinician_input(args: argparse.Namespace) -> ClinicianInput:
         target_mmhg=target,
         target_file=args.target_file,
         target_stdin=args.target_stdin,
-        drug=args.drug,
-        concentration_ug_ml=args.concentration_ug_ml,
+        drug=DESIGN_DRUG if args.drug is None else args.drug,
+        concentration_ug_ml=(
+            DESIGN_CONCENTRATION_UG_ML
+            if args.concentration_ug_ml is None
+            else args.concentration_ug_ml
+        ),
+        drug_given=args.drug is not None,
+        concentration_given=args.concentration_ug_ml is not None,
+        weight_kg=getattr(args, "weight_kg", None),
     )
 
 
@@ -263,7 +282,8 @@ def check_device_hello(peer: Any, max_rate_ml_h: float, clinician: ClinicianInpu
     max_rate_ml_h
         The controller's largest command (ml/h).
     clinician
-        The drug and concentration the controller assumes.
+        The drug and concentration the loaded design is for (checked against the design by
+        :func:`runtime.dosing.bind_syringe`).
 
     Raises
     ------
@@ -280,15 +300,14 @@ def check_device_hello(peer: Any, max_rate_ml_h: float, clinician: ClinicianInpu
     if drug != clinician.drug:
         raise HelloRefused(
             REFUSAL_DRUG,
-            f"device drug {drug or '(none announced)'} differs from the controller's"
-            f" {clinician.drug} (--drug)",
+            f"device drug {drug or '(none announced)'} differs from the loaded design's"
+            f" {clinician.drug}",
         )
     conc, want = float(peer.concentration_ug_ml), clinician.concentration_ug_ml
     if not math.isclose(conc, want, rel_tol=1e-6):
         raise HelloRefused(
             REFUSAL_CONCENTRATION,
-            f"device concentration {conc:g} ug/ml differs from the controller's {want:g} ug/ml"
-            " (--concentration-ug-ml)",
+            f"device concentration {conc:g} ug/ml differs from the loaded design's {want:g} ug/ml",
         )
     pump_max = float(peer.pump_max_ml_h)
     if not pump_max >= max_rate_ml_h * (1.0 - 1e-6):  # NaN refused too

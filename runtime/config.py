@@ -51,7 +51,8 @@ class RunConfig:
     Attributes
     ----------
     controller
-        The ``--controller`` spec (``lpv``, ``pi``, ``smith[:LAMBDA_S]`` or a generated module).
+        The ``--controller`` spec (``lpv``, ``pi``, ``smith[:LAMBDA_S]``, a generated module or a
+        plugin, :mod:`runtime.controller_plugin`).
     rate_hz
         Loop rate (Hz).
     realtime
@@ -153,7 +154,9 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
         "--controller",
         default="lpv",
         help="lpv (default: the shipped LPV module), pi, smith[:LAMBDA_S] (Smith predictor,"
-        " closed-loop time constant LAMBDA_S in s, default 30 s), or a generated .py",
+        " closed-loop time constant LAMBDA_S in s, default 30 s), a generated .py, or your own"
+        " class: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed 'pressor.controllers'"
+        " entry point NAME[:ARGS] (ARGS: key=value,...; runtime.controller_plugin)",
     )
     p.add_argument(
         "--schedule",
@@ -246,7 +249,8 @@ def run_config(
     ticks
         ``pressor run --ticks`` (0: until the device ends).
     clinician
-        ``pressor run``'s checked target and syringe options (:func:`runtime.clinician.clinician_input`).
+        ``pressor run``'s checked target and syringe options (:func:`runtime.clinician.clinician_input`);
+        checked against the loaded design and the drug library (:func:`runtime.dosing.bind_syringe`).
 
     Raises
     ------
@@ -267,7 +271,16 @@ def run_config(
             f"--sample-age-limit-s {args.sample_age_limit_s:g}: allowed [1/--rate ="
             f" {1.0 / args.rate:g}, 60] s"
         )
-    load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device starts
+    controller = load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device
+    if clinician is not None:  # pressor run: the syringe and patient against design and library
+        from contracts.drug import binding_of
+        from runtime.dosing import bind_syringe
+
+        try:
+            design = binding_of(controller)
+        except ValueError as exc:
+            raise UsageError(f"--controller {args.controller}: {exc}") from None
+        clinician = bind_syringe(clinician, design, args.controller, args.drug_library)
     try:
         specs = tuple(parse_faults(args.fault))
     except FaultSpecError as exc:

@@ -1,4 +1,8 @@
-"""Resolve a ``--controller`` spec (``pi``, ``smith[:λ]``, ``lpv`` or a path) to a :class:`Controller`.
+"""Resolve a ``--controller`` spec (``pi``, ``smith[:λ]``, ``lpv``, a path or a plugin) to a :class:`Controller`.
+
+A plugin (``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]``, an installed ``pressor.controllers``
+entry point) is any class satisfying the protocol, loaded and checked by
+:mod:`runtime.controller_plugin`; the integrity check below is for generated modules only.
 
 ``smith`` is the scheduled Smith predictor of :mod:`baselines.smith` with its default
 closed-loop time constant (30 s); ``smith:45`` sets λ = 45 s (allowed range in that module).
@@ -130,8 +134,9 @@ def load_controller(
     ----------
     spec
         ``"pi"`` (the paper's PI baseline), ``"smith"`` / ``"smith:LAMBDA_S"`` (the scheduled Smith
-        predictor, λ in s), ``"lpv"`` (the shipped generated LPV module) or a path to a generated
-        ``.py`` module.
+        predictor, λ in s), ``"lpv"`` (the shipped generated LPV module), a path to a generated
+        ``.py`` module, or a plugin (:mod:`runtime.controller_plugin`: ``MODULE:CLASS[:ARGS]``,
+        ``FILE.py:CLASS[:ARGS]`` or an installed ``pressor.controllers`` entry point name).
     sample_period_s
         Loop period (s). A generated module is discretised for one period; a mismatch is an error.
     artifact_sha256
@@ -147,10 +152,16 @@ def load_controller(
         return PIController(sample_period_s=sample_period_s)
     if spec == SMITH_PREFIX or spec.startswith(SMITH_PREFIX + ":"):
         return _smith(spec, sample_period_s)
+    from runtime.controller_plugin import is_plugin_spec, load_plugin_controller
+
+    if is_plugin_spec(spec):
+        return load_plugin_controller(spec, sample_period_s)
     path = DEFAULT_LPV_MODULE if spec == "lpv" else Path(spec)
     if spec != "lpv" and path.suffix != ".py":
         raise ControllerSpecError(
-            f"--controller {spec!r}: expected 'pi', 'smith[:LAMBDA_S]', 'lpv' or a path to a generated .py module"
+            f"--controller {spec!r}: expected 'pi', 'smith[:LAMBDA_S]', 'lpv', a path to a generated"
+            " .py module, or a plugin: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed"
+            " 'pressor.controllers' entry point (runtime.controller_plugin)"
         )
     module = load_generated_module(path, artifact_sha256)
     controller = module.Controller()
@@ -161,3 +172,13 @@ def load_controller(
             " regenerate with pressor codegen for this rate"
         )
     return controller
+
+
+def controller_name(spec: str) -> str:
+    """A short name for ``spec`` (the link's hello, file names): ``pi``, ``lpv``, ``smith:45`` as
+    given, a generated module's file stem, a plugin's class name."""
+    from runtime.controller_plugin import is_plugin_spec, plugin_label
+
+    if spec in ("pi", "lpv") or spec == SMITH_PREFIX or spec.startswith(SMITH_PREFIX + ":"):
+        return spec
+    return plugin_label(spec) if is_plugin_spec(spec) else Path(spec).stem

@@ -35,6 +35,7 @@ the same supervisor states, tick for tick.
 from __future__ import annotations
 
 import math
+import sys
 from typing import NamedTuple
 
 from contracts.controller import Controller
@@ -61,6 +62,24 @@ class LinkHealth(NamedTuple):
     sample_age_s: float
     link_silence_s: float
     link_errors: int
+
+
+class ControllerError(RuntimeError):
+    """The controller raised, or returned something that is not a number, at a tick: the run ends
+    with this error (its message names the controller's class and module, the tick and the cause)
+    instead of a traceback or a hang; the callers turn it into exit 1 (``pressor sil``/``run``)
+    or raise it (``pressor trial``, :mod:`pressor.api`)."""
+
+
+def _controller_failed(controller: Controller, tick: int, now_s: float, exc: BaseException) -> str:
+    cls = type(controller)
+    module = cls.__module__
+    if module.startswith("_pressor_"):  # imported from a file: name the file
+        module = getattr(sys.modules.get(module), "__file__", None) or module
+    return (
+        f"controller {cls.__qualname__!r} (module {module!r}) failed at tick {tick}"
+        f" (t = {now_s:g} s): {exc!r}"
+    )
 
 
 #: a link that delivers every tick on time and loses nothing (the in-process trial)
@@ -192,6 +211,15 @@ class ClosedLoopCore:
                 sched.healthy,
             )
         )
-        raw = self.controller.step(inp.map_mmhg, inp.target_mmhg, K, T_s, tau_s) if run else None
+        raw = None
+        if run:
+            try:
+                raw = self.controller.step(inp.map_mmhg, inp.target_mmhg, K, T_s, tau_s)
+                if raw.__class__ is not float:  # numpy scalars, ints; a str or None is an error
+                    raw = float(raw)
+            except Exception as exc:
+                raise ControllerError(
+                    _controller_failed(self.controller, inp.tick, now_s, exc)
+                ) from exc
         out = sup.finalize(raw)
         return TickRecord(inp, math.nan if raw is None else raw, delivered, out, sched)

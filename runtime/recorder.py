@@ -102,9 +102,14 @@ class Recorder:
         from it (UUID v5) so identical runs get identical ids.
     chunk_ticks
         Rows buffered before a flush, in [16, 1_000_000].
+    dose_view
+        Open the viewer with the dose plot (``pressor run``: :func:`runtime.dosing.log_dose_series`
+        adds its series).
     """
 
-    def __init__(self, path: str | Path, run_label: str, chunk_ticks: int = 4096) -> None:
+    def __init__(
+        self, path: str | Path, run_label: str, chunk_ticks: int = 4096, dose_view: bool = False
+    ) -> None:
         if not 16 <= chunk_ticks <= 1_000_000:
             raise ValueError(f"chunk_ticks={chunk_ticks!r} outside [16, 1000000]")
         self.path = Path(path)
@@ -115,7 +120,7 @@ class Recorder:
         self._rec = rr.RecordingStream("pressor", recording_id=rid, send_properties=False)
         self._rec.set_log_time_enabled(False)
         self._rec.set_log_tick_enabled(False)
-        self._rec.save(str(self._target.tmp), default_blueprint=default_blueprint())
+        self._rec.save(str(self._target.tmp), default_blueprint=default_blueprint(dose_view))
         self._rec.send_recording_name(run_label)
         for entity, label in CHANNELS:
             self._rec.log(

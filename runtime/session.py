@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 from contracts.usage import USAGE_EXIT, run_command
 from runtime.clinician import ClinicianInput, check_device_hello, check_link_hello
 from runtime.config import RunConfig, load_controller
+from runtime.controller_loader import controller_name
 from runtime.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
 from runtime.placement import Pinned
 from runtime.summary import build_summary
@@ -112,8 +112,7 @@ def run_runtime(
     recorder = None
     try:
         mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
-        spec = config.controller
-        name = Path(spec).stem if spec not in ("pi", "lpv") else spec
+        name = controller_name(config.controller)
         hello = Hello(
             name[:32],
             sample_period_s=period_s,
@@ -157,6 +156,7 @@ def run_runtime(
                 peer.sensor_noise_mmhg,
                 sched_action=config.sched_faults,
                 stale_after_s=config.sample_age_limit_s,
+                dose_limits=clinician.dose_limits,  # pressor run: the drug library's
             )
         )
         if config.rrd is not None:
@@ -166,7 +166,9 @@ def run_runtime(
                 f"{identity['controller']}|{peer.name}|seed{peer.patient_seed}|{config.rate_hz}Hz"
                 f"|{config.mode}"
             )
-            recorder = Recorder(config.rrd, run_label=label)
+            recorder = Recorder(
+                config.rrd, run_label=label, dose_view=clinician.dose_limits is not None
+            )
             recorder.plan_markers(
                 [(t, "disturbance", f"disturbance: {kind} at {t:g} s") for kind, t in events or ()]
                 + [
@@ -197,6 +199,10 @@ def run_runtime(
         if recorder is not None:
             if before_close is not None:
                 before_close(recorder)
+            if clinician.dose_limits is not None:
+                from runtime.dosing import log_dose_series
+
+                log_dose_series(recorder, result.trajectory, clinician)
             recorder.close()
             recorder = None
         report = None
@@ -226,6 +232,12 @@ def run_runtime(
                 "concentration_ug_ml": clinician.concentration_ug_ml,
                 "pump_max_ml_h": float(peer.pump_max_ml_h),
             }
+            if clinician.dose_limits is not None:
+                from runtime.dosing import dose_summary
+
+                summary["dose"] = dose_summary(
+                    result.trajectory["command_ml_h"], period_s, clinician, sup.detections
+                )
         ok = True
         return summary, result
     finally:
@@ -239,13 +251,14 @@ def run_runtime(
 def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequence[str]) -> int:
     """Run a runtime command with its exit codes.
 
-    0 success; 1 the run completed but a check failed, or the device stalled or the link failed
-    (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`), or the
+    0 success; 1 the run completed but a check failed, or the device stalled or the link failed,
+    or the controller raised (:class:`runtime.core.ControllerError`) (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`), or the
     device's hello refused (:class:`link.Refusal`: one line, the device was told); 130 / 143
     stopped by SIGINT / SIGTERM (:mod:`runtime.interrupt`: the run stops at a tick boundary,
     commands the safe rate, and keeps its outputs).
     """
     from link import LinkError, Refusal
+    from runtime.core import ControllerError
     from runtime.loop import DeviceStalled
 
     def guarded(args: Sequence[str]) -> int:
@@ -255,7 +268,7 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
             except Refusal as exc:  # a hello refused, by either end: the other was told why
                 print(f"{prog}: {exc}", file=sys.stderr)
                 return USAGE_EXIT
-            except (DeviceStalled, LinkError) as exc:
+            except (DeviceStalled, LinkError, ControllerError) as exc:
                 print(f"{prog}: {exc}", file=sys.stderr)
                 return 1
             except Interrupted as exc:

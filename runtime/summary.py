@@ -187,6 +187,17 @@ def print_summary(summary: dict[str, Any], timing: dict[str, Any], out: Any = No
     )
     if "target" in summary:  # pressor run
         print(describe_target(summary["target"]), file=out)
+    if "dose" in summary:  # pressor run: the drug library
+        d, syr = summary["dose"], summary["syringe"]
+        per_kg = d["max_command_ug_kg_min"]
+        print(
+            f"dose: {syr['drug']} {syr['concentration_ug_ml']:g} ug/ml; peak command"
+            f" {d['max_command_ml_h']:.2f} ml/h = {d['max_command_ug_min']:.2f} ug/min"
+            + ("" if per_kg is None else f" = {per_kg:.4f} ug/kg/min at {d['weight_kg']:g} kg")
+            + f"; limits ({d['unit']}) hard {d['hard_max']:g}, soft {d['soft_max']:g}"
+            + (f"; {d['detections']}" if d["detections"] else ""),
+            file=out,
+        )
     print("metrics (defined in docs/METRICS.md):", file=out)
     metrics = summary["metrics"]
     for k, v in metrics.items():

@@ -8,6 +8,9 @@ same input sequence gives the same output sequence, byte for byte. The closed-lo
     raw = controller.step(...) if run_controller else None
     out = sup.finalize(raw)       # SupervisorOutput; out.command_ml_h finite, in [0, max_rate_ml_h]
 
+With ``config.dose_limits`` (``pressor run``: the drug library) the last step of every tick cuts
+the command to the hard and hourly dose maxima and flags the soft one (:mod:`runtime.dose_guard`).
+
 States
 ------
 STARTUP
@@ -44,6 +47,7 @@ from __future__ import annotations
 import math
 
 from contracts.faults import PUMP_ALARM_WATCHDOG
+from runtime.dose_guard import DoseGuard
 from runtime.flatline import FlatlineRules
 from runtime.supervisor_config import (
     ADVISORY,
@@ -130,6 +134,9 @@ class Supervisor:
         self._out_of_box_since_s: float | None = None
         self._ack_requested = False
         self.last_ack: AckOutcome | None = None
+        limits = cfg.dose_limits
+        #: the drug library's limits on the final command (None: no library)
+        self.dose_guard = None if limits is None else DoseGuard(limits, cfg.sample_period_s)
 
     @property
     def alarm(self) -> bool:
@@ -327,6 +334,9 @@ class Supervisor:
         else:  # HOLD
             command = previous
         command = _clamp(command, high)
+        if self.dose_guard is not None:  # the last word: the drug library's dose limits
+            command, dose_faults = self.dose_guard.limit(command)
+            self.faults |= dose_faults
         self.command_ml_h = command
         self.state = state
         faults = self.faults

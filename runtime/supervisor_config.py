@@ -47,7 +47,10 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
   logged; same tick;
 - ``ESTIMATE_OUT_OF_BOX`` (``--schedule estimated`` only) the estimate the controller is scheduled
   on has been outside ``sched_box`` for ``estimate_box_s`` (default 60 s) without a break;
-  advisory alarm (the controller clamps ρ to its box, as it does with any scheduling value).
+  advisory alarm (the controller clamps ρ to its box, as it does with any scheduling value);
+- ``DOSE_HARD_LIMIT``, ``DOSE_SOFT_LIMIT``, ``DOSE_HOUR_LIMIT`` (``pressor run``, with
+  ``dose_limits`` from the drug library) the final command is cut to the hard or the hourly dose
+  maximum, or lies above the soft one (:mod:`runtime.dose_guard`); advisory, alarm raised.
 
 The pump checks need a pump status of this tick (``pump_delivered_ml_h`` not NaN); a missing one is
 not a fault (the link watchdogs cover silence).
@@ -67,6 +70,8 @@ from contracts.faults import (
     PUMP_ALARM_WATCHDOG,
     QUALITY_HELD,
 )
+from runtime.dose_guard import DOSE_HARD_LIMIT, DOSE_HOUR_LIMIT, DOSE_SOFT_LIMIT
+from runtime.drug_library import DoseLimits
 from runtime.flatline import stuck_samples
 
 
@@ -102,11 +107,22 @@ class Fault(IntFlag):
     PUMP_MISMATCH = 1 << 15
     ESTIMATOR_FALLBACK = 1 << 16
     ESTIMATE_OUT_OF_BOX = 1 << 17
+    DOSE_HARD_LIMIT = DOSE_HARD_LIMIT
+    DOSE_SOFT_LIMIT = DOSE_SOFT_LIMIT
+    DOSE_HOUR_LIMIT = DOSE_HOUR_LIMIT
+
+
+#: the drug library's faults (advisory: the command is cut, the state unchanged)
+DOSE_FAULTS = Fault.DOSE_HARD_LIMIT | Fault.DOSE_SOFT_LIMIT | Fault.DOSE_HOUR_LIMIT
 
 
 #: faults that never change the state (the command is clamped and the event logged)
 ADVISORY = (
-    Fault.COMMAND_CLAMPED | Fault.LINK_ERRORS | Fault.ESTIMATOR_FALLBACK | Fault.ESTIMATE_OUT_OF_BOX
+    Fault.COMMAND_CLAMPED
+    | Fault.LINK_ERRORS
+    | Fault.ESTIMATOR_FALLBACK
+    | Fault.ESTIMATE_OUT_OF_BOX
+    | DOSE_FAULTS
 )
 #: pump alarm bits that count as a pump fault
 PUMP_ALARM_MASK = PUMP_ALARM_OCCLUSION | PUMP_ALARM_RESERVOIR_EMPTY | PUMP_ALARM_WATCHDOG
@@ -119,8 +135,9 @@ FAULT_BITS: dict[str, int] = {f.name: int(f) for f in Fault}
 DEFAULT_SAMPLE_AGE_LIMIT_S = 3.0
 #: quality bits that count as bad by default: all but QUALITY_HELD (unknown bits too)
 QUALITY_MASK = 0xFFFFFFFF & ~QUALITY_HELD
-#: the faults that raise the alarm (plain int, for the per-tick path)
-ALARM_FAULTS = ~int(Fault.COMMAND_CLAMPED)
+#: the faults that raise the alarm (plain int, for the per-tick path): every one, a clamped command
+#: too (the shipped controllers clamp themselves and never trip it; a plugin that does is alarmed)
+ALARM_FAULTS = sum(FAULT_BITS.values())
 
 
 def fault_names(faults: int) -> list[str]:
@@ -166,6 +183,7 @@ class SupervisorConfig:
     pump_mismatch_abs_ml_h: float = 1.0
     pump_mismatch_rel: float = 0.05
     estimate_box_s: float = 60.0
+    dose_limits: DoseLimits | None = None
 
     def __post_init__(self) -> None:
         def need(name: str, ok: bool, allowed: str) -> None:
@@ -297,6 +315,11 @@ def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
             "--schedule estimated: the estimate outside the design box for"
             f" {cfg.estimate_box_s:g} s; advisory alarm (the controller clamps)"
             + ("" if cfg.sched_box is not None else "; not checked (controller not scheduled)"),
+        ),
+        (
+            "DOSE_*",
+            "pressor run, drug library (docs/DRUGS.md): final command cut to the hard (HARD) or"
+            " hourly (HOUR) dose maximum, or above the soft one (SOFT); advisory alarm; same tick",
         ),
         (
             "reaction",

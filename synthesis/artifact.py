@@ -12,7 +12,9 @@ Layout (``numpy.savez``, no pickled objects):
   optionally ``controller`` (``structure``, ``loop_gain``: the family of :mod:`synthesis.family`;
   absent in older artifacts and in every "theorem3" artifact, read as "theorem3"; for "smith"
   ``lambda2``/``lambda3`` are null and ``gamma`` is the Wirtinger analysis' bound on the design
-  grid).
+  grid), and optionally ``design.drug`` (``name``, ``concentration_ug_ml``: the drug and syringe the
+  gains are for, :class:`contracts.drug.DrugBinding`; absent in artifacts made before designs named
+  their drug, read as :data:`contracts.drug.DEFAULT_BINDING`, phenylephrine at 100 µg/ml).
 * ``coef_<name>`` — "theorem3": decision-variable basis coefficients (scaled coordinates; see
   :mod:`synthesis.lmi`): P, Q, R, X, Y, Ah, Adh, Bh, Ch, Cdh, Dk. "smith": the certificate of the
   Wirtinger analysis, P, S, R and its state ``transform``
@@ -39,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from contracts.drug import DEFAULT_BINDING, DrugBinding
 from contracts.files import AtomicFile
 from synthesis.config import ModelConfig
 from synthesis.family import SMITH_ORDER, ControllerFamily, smith_coef_shapes
@@ -180,9 +183,22 @@ class ControllerArtifact:
         return ControllerFamily.from_metadata(self.metadata)
 
     @property
+    def drug(self) -> DrugBinding:
+        """The drug and syringe concentration the gains are for (``design.drug``); phenylephrine at
+        100 µg/ml (:data:`contracts.drug.DEFAULT_BINDING`) when the artifact names none."""
+        return drug_of(self.metadata)
+
+    @property
     def model_config(self) -> ModelConfig:
         """The design's :class:`~synthesis.config.ModelConfig`."""
         return ModelConfig.from_dict(self.metadata["model"])
+
+
+def drug_of(metadata: dict[str, Any]) -> DrugBinding:
+    """The drug binding of artifact ``metadata`` (``design.drug``, else the default binding)."""
+    design = metadata.get("design")
+    d = design.get("drug") if isinstance(design, dict) else None
+    return DEFAULT_BINDING if d is None else DrugBinding.from_dict(d)
 
 
 def _canonical_json(meta: dict[str, Any]) -> bytes:
@@ -290,6 +306,10 @@ def _validate(
             ReferenceConfig.from_dict(ref)
         except (TypeError, ValueError) as exc:
             raise _err(path, "metadata.reference", str(exc)) from None
+    try:
+        drug_of(meta)
+    except ValueError as exc:
+        raise _err(path, "metadata.design.drug", str(exc)) from None
     if box.shape != (3, 2) or not np.all(np.isfinite(box)) or not np.all(box[:, 0] < box[:, 1]):
         raise _err(path, "metadata.box", "must be a finite 3x2 array with lower < upper")
     if rates.shape != (3,) or not np.all(np.isfinite(rates)) or np.any(rates < 0):

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from contracts.drug import DEFAULT_BINDING, DrugBinding
 from synthesis.family import ControllerFamily
 from synthesis.reference import ReferenceConfig
 
@@ -221,8 +222,9 @@ class SolverConfig:
 
 @dataclass(frozen=True)
 class DesignConfig:
-    """A full design: model, grid, solver settings, line-search candidates, the prefilter and the
-    controller family (:mod:`synthesis.family`; for "smith" the solver settings are unused)."""
+    """A full design: model, grid, solver settings, line-search candidates, the prefilter, the
+    controller family (:mod:`synthesis.family`; for "smith" the solver settings are unused) and the
+    drug and syringe concentration its gains are for (:class:`contracts.drug.DrugBinding`)."""
 
     model: ModelConfig
     grid_points: tuple[int, int, int]
@@ -231,6 +233,7 @@ class DesignConfig:
     controller: ControllerFamily = field(default_factory=ControllerFamily)
     lambda2_candidates: tuple[float, ...] = (0.5, 1.0, 2.0)
     lambda3_candidates: tuple[float, ...] = (0.25, 0.5, 1.0)
+    drug: DrugBinding = DEFAULT_BINDING
     source: str = "<default>"
     raw: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
 
@@ -252,7 +255,7 @@ class DesignConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict of the full design (stored in the artifact; ``controller`` only for a
-        family other than "theorem3", so theorem3 artifacts keep their bytes)."""
+        family other than "theorem3", so theorem3 artifacts keep their bytes; ``drug`` always)."""
         out = {
             "model": self.model.to_dict(),
             "grid_points": list(self.grid_points),
@@ -262,6 +265,7 @@ class DesignConfig:
                 "lambda3": list(self.lambda3_candidates),
             },
             "reference": self.reference.to_dict(),
+            "drug": self.drug.to_dict(),
         }
         if self.controller.is_smith:
             out["controller"] = self.controller.to_dict()

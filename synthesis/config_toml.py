@@ -24,6 +24,11 @@ A design is described by a TOML file with the sections below (all physical units
                  (or no ``structure``) means "theorem3", so a design file written before the
                  section existed keeps its meaning. For "smith" the [solver] and [line_search]
                  keys are unused (no synthesis LMI; they are still validated if present)
+    [drug]       name (lower case, 1-16 ASCII characters), concentration_ug_ml (µg/ml, in (0, 1e5]):
+                 the drug and the syringe concentration whose ml/h the design's gains count
+                 (:class:`contracts.drug.DrugBinding`); carried into the artifact
+                 (``design.drug``) and the generated module (``DRUG``,
+                 ``DRUG_CONCENTRATION_UG_ML``); ``pressor run`` refuses any other (docs/DRUGS.md)
     [reference]  enabled (bool), lambda_s (s, in [1, 1000]), pump_fraction (in [0.1, 1]),
                  k_min (mmHg/(ml/h), in [0.001, box K upper])
                  the two-degree-of-freedom prefilter of :mod:`synthesis.reference` (outside the
@@ -43,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS, DrugBinding
 from synthesis.config import (
     ConfigError,
     DesignConfig,
@@ -244,9 +250,32 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         controller=_parse_controller(table, source),
         lambda2_candidates=cands[0],
         lambda3_candidates=cands[1],
+        drug=_parse_drug(table, source, default),
         source=source,
         raw=table,
     )
+
+
+def _parse_drug(table: dict[str, Any], source: str, default: dict[str, Any]) -> DrugBinding:
+    """The [drug] section (missing keys: the shipped default's)."""
+    name = _get(table, "drug", "name", default)
+    if not (
+        isinstance(name, str)
+        and name
+        and name.isascii()
+        and name == name.strip().lower()
+        and len(name) <= MAX_DRUG_CHARS
+    ):
+        raise field_error(
+            source, "drug.name", name, f"1 to {MAX_DRUG_CHARS} lower-case ASCII characters"
+        )
+    conc = check_pos(
+        source,
+        "drug.concentration_ug_ml",
+        _get(table, "drug", "concentration_ug_ml", default),
+        MAX_CONCENTRATION_UG_ML,
+    )
+    return DrugBinding(name, conc)
 
 
 def _parse_controller(table: dict[str, Any], source: str) -> ControllerFamily:

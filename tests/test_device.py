@@ -167,7 +167,7 @@ def test_a_device_the_runtime_refuses_exits_2_with_the_runtime_s_reason():
     ep = RuntimeSession(pair.leader_port())
     proc = spawn_device(pair, "--scenario", "paper-tracking", "--drug", "norepinephrine")
     peer = ep.handshake(Hello("pi"), timeout_s=30.0)
-    line = f"device drug {peer.drug} differs from the controller's phenylephrine (--drug)"
+    line = f"device drug {peer.drug} differs from the loaded design's phenylephrine"
     ep.refuse(HelloRefused(REFUSAL_DRUG, line))
     assert proc.wait(timeout=30) == 2
     pair.close_follower()

@@ -201,13 +201,12 @@ REFUSALS = {
     "drug": (
         {"drug": "norepinephrine"},
         "DRUG",
-        "device drug norepinephrine differs from the controller's phenylephrine (--drug)",
+        "device drug norepinephrine differs from the loaded design's phenylephrine",
     ),
     "concentration": (
         {"concentration_ug_ml": 40.0},
         "CONCENTRATION",
-        "device concentration 40 ug/ml differs from the controller's 100 ug/ml"
-        " (--concentration-ug-ml)",
+        "device concentration 40 ug/ml differs from the loaded design's 100 ug/ml",
     ),
     "pump-maximum": (
         {"pump_max_ml_h": 100.0},

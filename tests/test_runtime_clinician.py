@@ -21,6 +21,7 @@ from rerun.chunk import RrdReader
 from link import (
     LINK_LOCKSTEP,
     REFUSAL_CONCENTRATION,
+    REFUSAL_DRUG,
     STATE_FINISHED,
     DeviceSession,
     Hello,
@@ -151,6 +152,9 @@ def test_run_target_mmhg_wins_over_the_device_target_in_summary_and_recording(tm
     }
     assert summary["ticks"] == 30
     assert summary["syringe"] == {**syringe, "pump_max_ml_h": 200.0}  # as the device announced
+    # the drug library's limits for phenylephrine at 100 ug/ml, doses beside ml/h
+    assert summary["dose"]["unit"] == "ug/min" and summary["dose"]["hard_max_ml_h"] == 120.0
+    assert summary["dose"]["max_command_ug_min"] == summary["dose"]["max_command_ml_h"] * 100 / 60
     recorded = rrd_columns(rrd)["/controller/target_mmhg"]
     assert sorted(recorded) == list(range(30)) and set(recorded.values()) == {70.0}
     assert any(
@@ -238,20 +242,35 @@ def test_a_stdin_line_changes_the_target_at_the_next_tick(tmp_path):
     assert [recorded[k] for k in range(15)] == [70.0] * 7 + [65.0] * 8
 
 
-def test_the_runtime_refuses_another_concentration_than_its_option_says(tmp_path):
-    # the device announces the shipped designs' 100 ug/ml; the runtime was told 50. Every
-    # refusal kind against a device written from the document: tests/test_protocol_device.py
+@pytest.mark.parametrize(
+    ("syringe", "reason", "line"),
+    [
+        (
+            {"drug": "norepinephrine", "concentration_ug_ml": 16.0},
+            REFUSAL_DRUG,
+            "device drug norepinephrine differs from the loaded design's phenylephrine",
+        ),
+        (
+            {"concentration_ug_ml": 50.0},
+            REFUSAL_CONCENTRATION,
+            "device concentration 50 ug/ml differs from the loaded design's 100 ug/ml",
+        ),
+    ],
+)
+def test_a_phenylephrine_design_refuses_another_drug_or_syringe_telling_the_device(
+    tmp_path, syringe, reason, line
+):
+    # the shipped LPV module is bound to phenylephrine at 100 ug/ml (its DRUG constants); the
+    # device is told why. Every refusal kind against a device written from the document:
+    # tests/test_protocol_device.py
     key = _key(tmp_path)
-    line = (
-        "device concentration 100 ug/ml differs from the controller's 50 ug/ml"
-        " (--concentration-ug-ml)"
-    )
     with bridged_ttys() as (device_port, runtime_port):
-        run = _start_run(runtime_port, key, tmp_path, "--concentration-ug-ml", "50")
+        run = _start_run(runtime_port, key, tmp_path, "--controller", "lpv")
         try:
             ep = DeviceSession(open_port(device_port), signing=Signing.from_file(key))
+            hello = Hello("scripted", 0, TS, 0.0, 10, LINK_LOCKSTEP, **{**SYRINGE, **syringe})
             with pytest.raises(PeerRefused) as refused:  # in the handshake or right after it
-                ep.handshake(Hello("scripted", 0, TS, 0.0, 10, LINK_LOCKSTEP, **SYRINGE), 60.0)
+                ep.handshake(hello, 60.0)
                 ep.wait_for_command(0, 60.0)
             _, err = run.communicate(timeout=60)
             ep.close()
@@ -259,7 +278,7 @@ def test_the_runtime_refuses_another_concentration_than_its_option_says(tmp_path
             run.kill()
     assert run.returncode == 2
     assert err.strip() == f"pressor run: {line}"
-    assert (refused.value.reason, refused.value.text) == (REFUSAL_CONCENTRATION, line)
+    assert (refused.value.reason, refused.value.text) == (reason, line)
 
 
 @pytest.mark.parametrize(
@@ -270,6 +289,18 @@ def test_the_runtime_refuses_another_concentration_than_its_option_says(tmp_path
         (["--target-stdin"], "--target-stdin: needs a starting target"),
         (["--concentration-ug-ml", "0"], "--concentration-ug-ml '0': allowed (0, 100000] ug/ml"),
         (["--target-mmhg", "70", "--target-file", "t"], "--target-mmhg and --target-file"),
+        (
+            ["--drug", "norepinephrine"],
+            "--drug norepinephrine: the loaded design (--controller lpv) is for phenylephrine at"
+            " 100 ug/ml",
+        ),
+        (
+            ["--concentration-ug-ml", "200"],
+            "--concentration-ug-ml 200: the loaded design (--controller lpv) is for phenylephrine"
+            " at 100 ug/ml; its gains count ml/h of that syringe",
+        ),
+        (["--weight-kg", "29"], "--weight-kg '29': allowed [30, 250] kg"),
+        (["--weight-kg", "inf"], "--weight-kg 'inf': allowed [30, 250] kg"),
     ],
 )
 def test_bad_clinician_options_exit_2_with_one_line_naming_the_range(tmp_path, args, message):
@@ -293,7 +324,8 @@ def test_help_shows_the_clinician_options_with_defaults_and_units(tmp_path):
     assert "--target-mmhg MMHG" in run and "(mmHg, allowed [50, 120])" in run
     assert "default: the device's MAP_TARGET" in run
     assert "--target-file FILE" in run and "--target-stdin" in run
-    assert "(default: phenylephrine)" in run and "(ug/ml, default 100" in run
+    assert "the shipped one's is phenylephrine" in run and "the shipped one's is 100" in run
+    assert "--weight-kg KG" in run and "(kg, allowed [30, 250])" in run
     device = " ".join(pressor("device", "--help", cwd=tmp_path).stdout.split())
     assert "--pump-max-ml-h ML_H" in device and "(ml/h, (0, 10000])" in device
     assert "120 ml/h in every shipped scenario" in device

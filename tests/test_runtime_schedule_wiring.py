@@ -280,8 +280,8 @@ def test_the_summarys_settling_band_is_the_callers_not_the_devices_noise_announc
 
 
 def test_a_device_announcing_an_impossible_noise_is_refused_with_one_line():
-    from contracts.usage import UsageError
     from link import LINK_LOCKSTEP, Hello, LinkError
+    from link.counters import HelloRefused
 
     pair = PtyPair.open()
     device = DeviceSession(open_port(pair.follower_path), clock=ManualClock())
@@ -294,11 +294,12 @@ def test_a_device_announcing_an_impossible_noise_is_refused_with_one_line():
     thread = threading.Thread(target=announce, daemon=True)
     thread.start()
     try:
-        with pytest.raises(UsageError, match="sensor_noise_mmhg nan: allowed") as info:
+        with pytest.raises(HelloRefused, match="sensor_noise_mmhg nan: allowed") as info:
             run_runtime(
                 pair.leader_port(), lockstep_run_config("pi", "oracle"), {"controller": "pi"}, None
             )
         assert "\n" not in str(info.value)
+        assert info.value.reason == 6  # PRESSOR_REFUSAL_REASON sensor noise (docs/PROTOCOL.md)
     finally:
         thread.join(15)
         device.close()

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  c0702f97728526e59cbfd9ff0acb655a3db1f39e961a8083cf283a793553ab15
-Content hash:     d1170b58ad0e740fa38b18063d40b7b58fd611d5c14d4135d2ef55dc69f184d6
+Content hash:     9805341c69540b90597c55526a0a87f0d7e85f56a2cc3bab536c5947c6557671
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -24,6 +24,10 @@ M = [Phi - I, Gamma] the exact ZOH discretisation at each node (increment / delt
 from a ring buffer of NBUF samples with linear interpolation, anti-windup by conditional
 integration at the pump limits [0, 120.0] ml/h. Non-finite input holds the last
 command.
+
+Drug (DRUG, DRUG_CONCENTRATION_UG_ML): phenylephrine at 100.0 ug/ml.
+The gains (K in mmHg/(ml/h)) count ml/h of this syringe: pressor run refuses another drug or
+concentration (docs/DRUGS.md).
 
 Two degrees of freedom (synthesis.reference; lambda 10.0 s, pump fraction 0.9,
 K floor 0.05 mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
@@ -47,13 +51,15 @@ Error budgets (asserted by tests/test_codegen_*.py):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '09f9538ecc65937c7938f01be531a6e78f5cbbf9f7071ec20a7a518e4cdebe69'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '9afde6a16a137b985353b88b00034c962bb1add12ccacfda169d394631166ac1'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'c0702f97728526e59cbfd9ff0acb655a3db1f39e961a8083cf283a793553ab15'
-CONTENT_HASH = 'd1170b58ad0e740fa38b18063d40b7b58fd611d5c14d4135d2ef55dc69f184d6'
+CONTENT_HASH = '9805341c69540b90597c55526a0a87f0d7e85f56a2cc3bab536c5947c6557671'
 TABLES_SHA256 = 'e736ddebfe5179dfdbc6981025cbb0e5ef7298da5c7e699a452a7017523f1499'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
 MAX_RATE_ML_H = 120.0
+DRUG = 'phenylephrine'  # the drug the gains are for
+DRUG_CONCENTRATION_UG_ML = 100.0  # ug/ml: the syringe whose ml/h the gains count
 GRID_LO = (0.25, 100.0, 10.0)  # K mmHg/(ml/h), T s, tau s
 GRID_HI = (1.0, 200.0, 45.0)
 GRID_COUNTS = (17, 9, 2)

@@ -1,0 +1,373 @@
+"""The Python API: run what ``pressor trial`` runs (and one patient of it) from Python.
+
+Two functions, two typed results::
+
+    from pressor import api
+
+    run = api.simulate("lpv", "paper-tracking", patient_seed=3, duration_s=600.0)
+    run.record["iae_mmhg_s"], run.to_pandas()          # one row per 0.1 s tick
+
+    result = api.trial("pi", "paper-disturbance", n_patients=20, seed=1, jobs=2)
+    result.summary["metrics"], result.to_pandas()      # one row per patient (patients.csv)
+    result.write("out/")                               # patients.json, patients.csv, summary.json
+
+Both run the code the command runs: :func:`trial` calls :func:`hil_sim.trial.run_cohort`, as
+``pressor trial`` does (same seed, same records, same bytes, whatever ``jobs``), and
+:func:`simulate` runs one patient exactly as a trial does (:func:`hil_sim.trial.run_patient`'s
+path: the world, the controller, the runtime's closed-loop core and supervisor, the metrics), which
+is tick for tick what a lockstep ``pressor sil`` of that seed gives. ``controller`` is any
+``--controller`` spec (``pi``, ``lpv``, ``smith:45``, a generated module, a plugin
+``MODULE:CLASS[:ARGS]`` - :mod:`runtime.controller_plugin`) or a controller class itself (see
+:func:`controller_spec`). ``to_pandas`` needs pandas (``pip install -e ".[pandas]"``).
+
+Errors: a bad argument raises :class:`ValueError` (a subclass naming the argument, the value and
+the allowed range: :class:`runtime.controller_loader.ControllerSpecError`,
+:class:`hil_sim.scenario.ScenarioError`, :class:`hil_sim.patient_model.PatientModelError`); a
+controller that raises mid-run raises :class:`runtime.core.ControllerError` naming it, the patient
+and the tick.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from hil_sim.closed_loop import Trajectory
+from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
+from hil_sim.scenario import Scenario, load_scenario
+from hil_sim.trial import _csv_text, _simulate_patient, run_cohort, write_outputs
+from runtime.controller_loader import load_controller
+from runtime.estimation.schedule import SOURCES
+from runtime.supervisor_config import ALARM_FAULTS, State
+
+if TYPE_CHECKING:  # pragma: no cover
+    import pandas
+
+__all__ = ["SimulationResult", "TrialResult", "controller_spec", "simulate", "trial"]
+
+#: the per-tick columns of :meth:`SimulationResult.to_pandas` (name -> Trajectory field)
+TICK_COLUMNS = {
+    "t_s": "t_s",
+    "map_mmhg": "map_mmhg",
+    "map_true_mmhg": "map_true_mmhg",
+    "target_mmhg": "target_mmhg",
+    "command_ml_h": "command_ml_h",
+    "rate_ml_h": "rate_ml_h",
+    "delivered_ml_h": "delivered_ml_h",
+    "K_mmhg_per_ml_h": "K",
+    "T_s": "T_s",
+    "tau_s": "tau_s",
+    "sched_K_mmhg_per_ml_h": "sched_K",
+    "sched_T_s": "sched_T_s",
+    "sched_tau_s": "sched_tau_s",
+    "quality": "quality",
+    "pump_alarms": "alarms",
+    "faults": "faults",
+}
+
+
+def _pandas() -> Any:
+    try:
+        import pandas
+    except ImportError:
+        raise ImportError(
+            "to_pandas() needs pandas: pip install -e '.[pandas]' (or pip install pandas)"
+        ) from None
+    return pandas
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """One simulated patient (:func:`simulate`).
+
+    Attributes
+    ----------
+    controller
+        The controller spec the run used.
+    scenario
+        The scenario's name.
+    patient_seed
+        The patient's seed.
+    record
+        The patient's record, as ``pressor trial`` writes it in ``patients.json`` (seed,
+        coefficients, schedule range, §3 metrics, disturbance events; docs/METRICS.md).
+    trajectory
+        Every tick (:class:`hil_sim.closed_loop.Trajectory`: MAP in mmHg, rates in ml/h, K in
+        mmHg/(ml/h), T and τ in s, supervisor state and fault bits).
+    """
+
+    controller: str
+    scenario: str
+    patient_seed: int
+    record: dict[str, Any]
+    trajectory: Trajectory
+
+    @property
+    def alarm(self) -> np.ndarray:
+        """Per tick, whether the supervisor raised the alarm (HOLD, FAILSAFE or any fault bit)."""
+        state = self.trajectory.state
+        return (
+            (state == int(State.HOLD))
+            | (state == int(State.FAILSAFE))
+            | ((self.trajectory.faults & ALARM_FAULTS) != 0)
+        )
+
+    def to_pandas(self) -> pandas.DataFrame:
+        """One row per tick: :data:`TICK_COLUMNS`, ``state`` (the supervisor state's name) and
+        ``alarm`` (bool)."""
+        pd = _pandas()
+        tr = self.trajectory
+        frame = pd.DataFrame({col: getattr(tr, field) for col, field in TICK_COLUMNS.items()})
+        frame["state"] = [State(int(s)).name for s in tr.state]
+        frame["alarm"] = self.alarm
+        return frame
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    """A cohort trial (:func:`trial`): what ``pressor trial`` prints and writes.
+
+    Attributes
+    ----------
+    controller, scenario, cohort_seed, n_patients
+        The trial's identity.
+    records
+        One record per patient, in cohort order (``patients.json``).
+    summary
+        The ``summary.json`` document (aggregated metrics, unreachable and unstable seeds).
+    trajectories
+        With ``trajectories=True``: the 1 Hz trajectories (``t_s`` (ticks,), ``map_true_mmhg``,
+        ``target_mmhg`` in mmHg and ``rate_ml_h`` in ml/h (patients x ticks), ``patient_seed``);
+        else ``None``.
+    """
+
+    controller: str
+    scenario: str
+    cohort_seed: int
+    n_patients: int
+    records: list[dict[str, Any]]
+    summary: dict[str, Any]
+    trajectories: dict[str, np.ndarray] | None = None
+
+    def to_pandas(self, trajectories: bool = False) -> pandas.DataFrame:
+        """The per-patient table, with the columns of ``patients.csv`` (units in the names).
+
+        Parameters
+        ----------
+        trajectories
+            Instead, the trajectories in long form: one row per patient and second, columns
+            ``patient_seed``, ``t_s``, ``map_true_mmhg``, ``target_mmhg``, ``rate_ml_h``
+            (needs ``trial(..., trajectories=True)``).
+        """
+        pd = _pandas()
+        if not trajectories:
+            text = _csv_text(self.records, self.summary["coefficient_units"])
+            return pd.read_csv(io.StringIO(text))
+        tr = self.trajectories
+        if tr is None:
+            raise ValueError("to_pandas(trajectories=True): run trial(..., trajectories=True)")
+        n, ticks = tr["map_true_mmhg"].shape
+        return pd.DataFrame(
+            {
+                "patient_seed": np.repeat(tr["patient_seed"], ticks),
+                "t_s": np.tile(tr["t_s"], n),
+                **{k: tr[k].ravel() for k in ("map_true_mmhg", "target_mmhg", "rate_ml_h")},
+            }
+        )
+
+    def write(self, out_dir: str | Path) -> Path:
+        """Write ``patients.json``, ``patients.csv`` and ``summary.json`` (the bytes ``pressor
+        trial`` writes for the same arguments) into ``out_dir``; returns it."""
+        out = Path(out_dir)
+        write_outputs(out, self.records, self.summary)
+        return out
+
+
+def controller_spec(controller: str | type, args: Mapping[str, Any] | None = None) -> str:
+    """The ``--controller`` spec of ``controller``.
+
+    Parameters
+    ----------
+    controller
+        A spec (returned as is), or a class satisfying :class:`contracts.controller.Controller`:
+        ``module:Class``, or ``FILE.py:Class`` for a class of the script being run (``__main__``),
+        so that worker processes import it again from its file.
+    args
+        Constructor keyword arguments of a class (Python literals: numbers, bools, strings
+        without commas), appended as ``:key=value,...``.
+
+    Raises
+    ------
+    ValueError
+        ``args`` with a string spec, or a value that does not survive the spec's text.
+    """
+    if isinstance(controller, str):
+        if args:
+            raise ValueError("controller_args: give them in the spec (MODULE:CLASS:key=value,...)")
+        return controller
+    module = controller.__module__
+    if module == "__main__":
+        module = str(Path(sys.modules["__main__"].__file__ or "").resolve())
+    spec = f"{module}:{controller.__qualname__}"
+    if args:
+        items = [f"{k}={v!r}" for k, v in args.items()]
+        if any("," in item for item in items):
+            raise ValueError(f"controller_args {dict(args)!r}: values must not contain ','")
+        spec += ":" + ",".join(items)
+    return spec
+
+
+def _scenario(scenario: str | Path | Scenario, duration_s: float | None) -> Scenario:
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    if duration_s is not None:
+        if not 1.0 <= duration_s <= 7 * 86400.0:
+            raise ValueError(f"duration_s = {duration_s!r}: allowed [1, 604800] s")
+        sc = dataclasses.replace(sc, duration_s=float(duration_s))
+    return sc
+
+
+def _checked(
+    controller: str | type,
+    controller_args: Mapping[str, Any] | None,
+    scenario: str | Path | Scenario,
+    duration_s: float | None,
+    rate_hz: float,
+    schedule: str,
+    patient_model: str,
+) -> tuple[str, Scenario, float]:
+    """(spec, scenario, period s) after the checks ``pressor trial`` makes before it runs."""
+    if not 0.1 <= rate_hz <= 1000.0:
+        raise ValueError(f"rate_hz = {rate_hz!r}: allowed [0.1, 1000] Hz")
+    if schedule not in SOURCES:
+        raise ValueError(f"schedule = {schedule!r}: allowed {', '.join(SOURCES)}")
+    spec = controller_spec(controller, controller_args)
+    sc = _scenario(scenario, duration_s)
+    check_model_for_scenario(patient_model, sc.name, sc.frozen is not None)
+    period_s = 1.0 / rate_hz
+    load_controller(spec, period_s)  # fail fast, naming the spec
+    return spec, sc, period_s
+
+
+def simulate(
+    controller: str | type = "lpv",
+    scenario: str | Path | Scenario = "paper-tracking",
+    patient_seed: int = 1,
+    *,
+    controller_args: Mapping[str, Any] | None = None,
+    duration_s: float | None = None,
+    rate_hz: float = 10.0,
+    schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
+) -> SimulationResult:
+    """Simulate one patient in process, as one patient of ``pressor trial``.
+
+    Parameters
+    ----------
+    controller
+        A ``--controller`` spec or a controller class (:func:`controller_spec`).
+    scenario
+        A scenario name (``pressor scenarios``), a ``.toml`` path or a :class:`Scenario`.
+    patient_seed
+        The patient's seed, [0, 2**63).
+    controller_args
+        Keyword arguments of a controller class.
+    duration_s
+        Simulated time (s), [1, 604800]; default the scenario's ``duration_s``.
+    rate_hz
+        Loop rate (Hz), [0.1, 1000].
+    schedule
+        Where K, T, τ come from: ``oracle``, ``estimated``, ``nominal`` or ``validated``.
+    patient_model
+        A patient model name or ``MODULE:CLASS`` (:mod:`hil_sim.patient_model`).
+
+    Returns
+    -------
+    SimulationResult
+    """
+    if not 0 <= patient_seed < 2**63:
+        raise ValueError(f"patient_seed = {patient_seed!r}: allowed [0, 2**63)")
+    spec, sc, period_s = _checked(
+        controller, controller_args, scenario, duration_s, rate_hz, schedule, patient_model
+    )
+    record, traj = _simulate_patient(sc, spec, patient_seed, period_s, schedule, patient_model)
+    return SimulationResult(spec, sc.name, int(patient_seed), record, traj)
+
+
+def trial(
+    controller: str | type = "pi",
+    scenario: str | Path | Scenario = "paper-disturbance",
+    n_patients: int = 20,
+    seed: int = 1,
+    *,
+    controller_args: Mapping[str, Any] | None = None,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    duration_s: float | None = None,
+    rate_hz: float = 10.0,
+    schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
+    trajectories: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> TrialResult:
+    """Run a cohort trial, as ``pressor trial`` does (same records for the same arguments).
+
+    Parameters
+    ----------
+    controller
+        A ``--controller`` spec or a controller class (:func:`controller_spec`).
+    scenario
+        A scenario name, a ``.toml`` path or a :class:`Scenario`.
+    n_patients
+        Cohort size, [1, 100000].
+    seed
+        Cohort seed, [0, 9e12].
+    controller_args
+        Keyword arguments of a controller class.
+    jobs
+        Local worker processes, [1, 64]; does not change the results.
+    scheduler
+        A Dask scheduler address (``tcp://HOST:PORT``) instead of local processes.
+    duration_s
+        Simulated time per patient (s); default the scenario's.
+    rate_hz, schedule, patient_model
+        As :func:`simulate`.
+    trajectories
+        Also keep every patient's trajectory at 1 Hz (:attr:`TrialResult.trajectories`).
+    progress
+        Called with ``(done, total)`` after each patient.
+
+    Returns
+    -------
+    TrialResult
+    """
+    for name, value, lo, hi in (
+        ("n_patients", n_patients, 1, 100000),
+        ("seed", seed, 0, 9_000_000_000_000),
+        ("jobs", jobs, 1, 64),
+    ):
+        if not lo <= value <= hi:
+            raise ValueError(f"{name} = {value!r}: allowed [{lo}, {hi}]")
+    spec, sc, period_s = _checked(
+        controller, controller_args, scenario, duration_s, rate_hz, schedule, patient_model
+    )
+    records, summary, traj = run_cohort(
+        sc,
+        spec,
+        seed,
+        n_patients,
+        traced=trajectories,
+        jobs=jobs,
+        sample_period_s=period_s,
+        progress=progress,
+        scheduler=scheduler,
+        schedule=schedule,
+        patient_model=patient_model,
+    )
+    return TrialResult(spec, sc.name, int(seed), n_patients, records, summary, traj)
