@@ -154,33 +154,20 @@ def analyse_wirtinger(
         ``R`` (divided by gamma), ``transform`` and ``time_scale_s``.
     """
     t_start = time.perf_counter()
-    rho_hat, rate, dtau, tau_max, taus = checked_inputs(
+    data, rho_hat = _prepared(
         systems,
         rho_hat,
         rate_hat_per_s,
         dtau_drho_hat_s,
         tau_max_s,
         p_dependence,
-        zero_delay_ok=False,
-    )
-    m, s = rho_hat.shape
-    params = tuple(range(s)) if p_params is None else tuple(int(i) for i in p_params)
-    if any(not 0 <= i < s for i in params) or len(set(params)) != len(params):
-        raise ValueError(f"p_params={p_params!r}: distinct indices in 0..{s - 1} needed")
-    points = first_points(rho_hat, working_set)
-    data = prepare(
-        systems,
-        rho_hat,
-        rate,
-        dtau,
-        tau_max,
-        taus,
-        p_dependence,
-        params,
-        float(time_scale_s) if time_scale_s is not None else tau_max,
+        p_params,
+        time_scale_s,
         state_transform,
         k_scaling,
     )
+    m = rho_hat.shape[0]
+    points = first_points(rho_hat, working_set)
     verts = vertices_of(data)
     nv, kk = len(verts), m * len(verts)
     n, n2, ns, ns2, nvar = data.n, 2 * data.n, data.ns, data.ns2, data.nvar
@@ -334,25 +321,15 @@ def recheck_certificate(
         Whether every LMI is negative definite (beyond round-off) and P(rho_k), S, R positive;
         the smallest margin ``-lambda_max`` at each point (scaled units).
     """
-    rho_hat, rate, dtau, tau_max, taus = checked_inputs(
+    data, _ = _prepared(
         systems,
         rho_hat,
         rate_hat_per_s,
         dtau_drho_hat_s,
         tau_max_s,
         p_dependence,
-        zero_delay_ok=False,
-    )
-    data = prepare(
-        systems,
-        rho_hat,
-        rate,
-        dtau,
-        tau_max,
-        taus,
-        p_dependence,
-        tuple(range(rho_hat.shape[1])),
-        float(certificate["time_scale_s"]),
+        None,
+        certificate["time_scale_s"],
         np.asarray(certificate["transform"]),
         k_scaling,
     )
@@ -375,3 +352,46 @@ def recheck_certificate(
     )
     certified, margins, _, _ = _recheck(data, xv)
     return certified, margins
+
+
+def _prepared(
+    systems: Sequence[DelaySystem],
+    rho_hat: Array,
+    rate_hat_per_s: Array,
+    dtau_drho_hat_s: Array,
+    tau_max_s: float,
+    p_dependence: str,
+    p_params: Sequence[int] | None,
+    time_scale_s: float | None,
+    state_transform: Array | None,
+    k_scaling: KScaling | None,
+) -> tuple[WirtingerData, Array]:
+    """The inputs checked (:func:`checked_inputs`, ``p_params``) and the scaled data; and ρ̂."""
+    rho_hat, rate, dtau, tau_max, taus = checked_inputs(
+        systems,
+        rho_hat,
+        rate_hat_per_s,
+        dtau_drho_hat_s,
+        tau_max_s,
+        p_dependence,
+        zero_delay_ok=False,
+    )
+    s = rho_hat.shape[1]
+    params = tuple(range(s)) if p_params is None else tuple(int(i) for i in p_params)
+    if any(not 0 <= i < s for i in params) or len(set(params)) != len(params):
+        raise ValueError(f"p_params={p_params!r}: distinct indices in 0..{s - 1} needed")
+    ts = float(time_scale_s) if time_scale_s is not None else tau_max
+    data = prepare(
+        systems,
+        rho_hat,
+        rate,
+        dtau,
+        tau_max,
+        taus,
+        p_dependence,
+        params,
+        ts,
+        state_transform,
+        k_scaling,
+    )
+    return data, rho_hat
