@@ -16,6 +16,9 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SCRIPTS = {
     "custom_controller.py": ["--patients", "2", "--duration-s", "300"],
     "trial_to_pandas.py": ["--patients", "3", "--duration-s", "300", "--out", "cohort.png"],
+    "gym_random_policy.py": ["--episodes", "2", "--duration-s", "120"],
+    # one tick per action: the script checks the episode against pressor trial's and fails if not
+    "gym_pi_policy.py": ["--episodes", "1", "--duration-s", "120", "--ticks-per-action", "1"],
 }
 
 
@@ -32,6 +35,8 @@ def test_example_script_runs(script, tmp_path):
     assert proc.returncode == 0, proc.stderr
     if script == "trial_to_pandas.py":
         assert (tmp_path / "cohort.png").stat().st_size > 1000
+    if script == "gym_pi_policy.py":
+        assert "commands identical to pressor trial's: True" in proc.stdout
 
 
 def test_example_scenario_and_controller_run_in_pressor_trial(tmp_path):
