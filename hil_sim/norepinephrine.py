@@ -125,7 +125,7 @@ class NorepinephrineParams:
 
     @property
     def clearance_l_min(self) -> float:
-        """Clearance (l/min): log-linear in SAPS II through Beloeil's 3 l/min (20), 0.9 l/min (60)."""
+        """Clearance (l/min), log-linear in SAPS II: Beloeil's 3 l/min (20) and 0.9 l/min (60)."""
         frac = (self.saps2 - SAPS_MILD) / (SAPS_SEVERE - SAPS_MILD)
         return CL_MILD_L_MIN * (CL_SEVERE_L_MIN / CL_MILD_L_MIN) ** frac
 
@@ -302,5 +302,5 @@ class Norepinephrine1C:
         return (1.0 - p.counter_gain) * self.effect_mmhg(css)
 
     def max_delta_map_mmhg(self, max_rate_ml_h: float) -> float:
-        """Largest steady-state ΔMAP (mmHg) over [0, ``max_rate_ml_h``] ml/h (rises with the rate)."""
+        """Largest steady-state ΔMAP (mmHg) over [0, ``max_rate_ml_h``] ml/h (rises with rate)."""
         return self.steady_state_delta_mmhg(max_rate_ml_h)

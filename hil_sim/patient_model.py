@@ -20,7 +20,8 @@ Named models (:data:`PATIENT_MODELS`; docs/PATIENTS.md lists equations, ranges a
     counter-regulation (:class:`hil_sim.phenylephrine.Phenylephrine2C`).
 ``norepinephrine``
     Norepinephrine at 16 µg/ml: one-compartment kinetics with severity-dependent clearance, effect
-    lag and site, Hill curve, turnover counter-regulation (:class:`hil_sim.norepinephrine.Norepinephrine1C`).
+    lag and site, Hill curve, turnover counter-regulation
+    (:class:`hil_sim.norepinephrine.Norepinephrine1C`).
 
 Every model draws its patient from ``patient_seed`` alone (same seed, same patient, same bytes);
 the draw must not depend on the process, the worker or the order patients run in.

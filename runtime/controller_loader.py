@@ -165,8 +165,9 @@ def load_controller(
     ----------
     spec
         ``"pi"`` (the paper's PI baseline), ``"smith"`` / ``"smith:LAMBDA_S"`` (the scheduled Smith
-        predictor, λ in s), ``"lpv"`` / ``"lpv:DRUG"`` (a shipped generated LPV module), a path to a generated
-        ``.py`` module, or a plugin (:mod:`runtime.controller_plugin`: ``MODULE:CLASS[:ARGS]``,
+        predictor, λ in s), ``"lpv"`` / ``"lpv:DRUG"`` (a shipped generated LPV module), a path
+        to a generated ``.py`` module, or a plugin (:mod:`runtime.controller_plugin`:
+        ``MODULE:CLASS[:ARGS]``,
         ``FILE.py:CLASS[:ARGS]`` or an installed ``pressor.controllers`` entry point name).
     sample_period_s
         Loop period (s). A generated module is discretised for one period; a mismatch is an error.

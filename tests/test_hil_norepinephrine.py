@@ -81,9 +81,7 @@ def test_step_response_follows_the_one_compartment_and_effect_site_closed_form()
     for j in (400, 1200, 6000, 12000):
         t = j * 0.1 - 35.0
         c = u / (k * 8.8) * (1.0 - math.exp(-k * t))
-        ce = u / (k * 8.8) * (
-            1.0 - (ke0 * math.exp(-k * t) - k * math.exp(-ke0 * t)) / (ke0 - k)
-        )
+        ce = u / (k * 8.8) * (1.0 - (ke0 * math.exp(-k * t) - k * math.exp(-ke0 * t)) / (ke0 - k))
         assert seen[j][0] == pytest.approx(c, rel=1e-9)
         assert seen[j][1] == pytest.approx(hill(ce, 30.0, 2.5, 1.5), rel=1e-9)
     # apparent schedule: T = 60·V/CL + 1/ke0, τ = line + lag, K the settled rise of one more ml/h
