@@ -18,6 +18,10 @@ Named models (:data:`PATIENT_MODELS`; docs/PATIENTS.md lists equations, ranges a
 ``phenylephrine-2c``
     Phenylephrine's label two-compartment kinetics, effect site, Emax and a baroreflex-like
     counter-regulation (:class:`hil_sim.phenylephrine.Phenylephrine2C`).
+``norepinephrine``
+    Norepinephrine at 16 µg/ml: one-compartment kinetics with severity-dependent clearance, effect
+    lag and site, Hill curve, turnover counter-regulation
+    (:class:`hil_sim.norepinephrine.Norepinephrine1C`).
 
 Every model draws its patient from ``patient_seed`` alone (same seed, same patient, same bytes);
 the draw must not depend on the process, the worker or the order patients run in.
@@ -40,6 +44,7 @@ PATIENT_MODELS: dict[str, str] = {
     "paper": "hil_sim.patient:Patient",
     "pkpd": "hil_sim.pkpd:PkpdPatient",
     "phenylephrine-2c": "hil_sim.phenylephrine:Phenylephrine2C",
+    "norepinephrine": "hil_sim.norepinephrine:Norepinephrine1C",
 }
 
 #: members a model class must have (methods, except the mapping ``coefficient_units``)

@@ -39,6 +39,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from contracts.drug import DEFAULT_BINDING, DrugBinding
 from contracts.usage import USAGE_EXIT, UsageError, UsageParser
 from hil_sim.patient_model import add_patient_model_option
 from runtime.config import ORACLE_DEFAULT_WHY, RunConfig, add_run_options, positive, run_config
@@ -77,6 +78,9 @@ class SilConfig:
     patient_model
         The device's patient model (a :data:`hil_sim.patient_model.PATIENT_MODELS` name or
         ``MODULE:CLASS``).
+    drug
+        The loaded design's drug and syringe (:func:`contracts.drug.binding_of`): the device is
+        told to announce them (``--drug``, ``--concentration-ug-ml``).
     """
 
     run: RunConfig
@@ -89,6 +93,7 @@ class SilConfig:
     events: tuple[tuple[str, float], ...]
     noisy: bool
     patient_model: str = "paper"
+    drug: DrugBinding = DEFAULT_BINDING
 
 
 def _seed(text: str) -> int:
@@ -139,9 +144,11 @@ def sil_parser() -> UsageParser:
 def sil_config(argv: Sequence[str]) -> SilConfig:
     """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
     disturbance events (raises :class:`contracts.usage.UsageError`)."""
+    from contracts.drug import binding_of
     from hil_sim.patient_model import PatientModelError, check_model_for_scenario
     from hil_sim.scenario import ScenarioError, is_scenario_path, load_scenario
     from hil_sim.trial import scenario_events
+    from runtime.config import load_controller
 
     args = sil_parser().parse_args(argv)
     if args.rrd is None:
@@ -150,6 +157,10 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
             f"_seed{args.patient_seed}.rrd"
         )
     run = run_config(args)
+    try:
+        drug = binding_of(load_controller(args.controller, 1.0 / args.rate))
+    except ValueError as exc:
+        raise UsageError(f"--controller {args.controller}: {exc}") from None
     try:
         scenario = load_scenario(args.scenario)
         check_model_for_scenario(args.patient_model, scenario.name, scenario.frozen is not None)
@@ -174,6 +185,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         events=tuple(scenario_events(scenario)),
         noisy=scenario.noisy,
         patient_model=args.patient_model,
+        drug=drug,
     )
 
 
@@ -181,6 +193,8 @@ def _file_label(spec: str) -> str:
     """The controller's part of the default ``.rrd`` name (a plugin: its class name)."""
     from runtime.controller_plugin import is_plugin_spec, plugin_label
 
+    if spec.partition(":")[0] == "lpv":  # lpv:DRUG, a shipped design
+        return spec.replace(":", "_")
     return plugin_label(spec) if is_plugin_spec(spec) else Path(spec).stem
 
 
@@ -222,6 +236,9 @@ def device_command(
         cmd += ["--truth-out", str(truth_out)]
     if config.patient_model != "paper":  # the default's command line is unchanged
         cmd += ["--patient-model", config.patient_model]
+    if config.drug != DEFAULT_BINDING:  # the default's command line is unchanged
+        cmd += ["--drug", config.drug.name]
+        cmd += ["--concentration-ug-ml", repr(config.drug.concentration_ug_ml)]
     return cmd
 
 

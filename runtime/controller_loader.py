@@ -8,7 +8,9 @@ entry point) is any class satisfying the protocol, loaded and checked by
 closed-loop time constant (30 s); ``smith:45`` sets λ = 45 s (allowed range in that module).
 
 ``lpv`` is the generated module for the shipped default design, committed at
-``runtime/generated/lpv_map_controller.py``; a path names any module written by ``pressor codegen``
+``runtime/generated/lpv_map_controller.py``; ``lpv:DRUG`` names a drug's shipped design
+(:data:`LPV_DESIGNS`: ``lpv:phenylephrine`` is ``lpv``, ``lpv:norepinephrine`` the module
+``runtime/generated/lpv_norepinephrine.py`` of ``synthesis/data/norepinephrine_design.npz``); a path names any module written by ``pressor codegen``
 (``--target python``). Loading a generated module imports it from its file: it must be the standard
 library-only module codegen writes, exposing a ``Controller`` class.
 
@@ -31,7 +33,15 @@ from baselines.smith import LAMBDA_MAX_S, LAMBDA_MIN_S, SmithController
 from contracts.controller import Controller
 from contracts.module_hash import ARTIFACT_SHA_LINE, MODULE_SHA_LINE, module_text_sha256
 
-DEFAULT_LPV_MODULE = Path(__file__).resolve().parent / "generated" / "lpv_map_controller.py"
+GENERATED_DIR = Path(__file__).resolve().parent / "generated"
+DEFAULT_LPV_MODULE = GENERATED_DIR / "lpv_map_controller.py"
+#: ``lpv:DRUG`` -> the committed generated module of that drug's shipped design (``lpv`` alone is
+#: the default design, phenylephrine at 100 µg/ml; docs/DRUGS.md)
+LPV_DESIGNS: dict[str, Path] = {
+    "phenylephrine": DEFAULT_LPV_MODULE,
+    "norepinephrine": GENERATED_DIR / "lpv_norepinephrine.py",
+}
+LPV_PREFIX = "lpv"
 
 
 class ControllerSpecError(ValueError):
@@ -56,6 +66,27 @@ def _smith(spec: str, sample_period_s: float) -> SmithController:
             f"[{LAMBDA_MIN_S:g}, {LAMBDA_MAX_S:g}] s (e.g. smith:45)"
         )
     return SmithController(sample_period_s=sample_period_s, lambda_s=lambda_s)
+
+
+def lpv_design_module(spec: str) -> Path | None:
+    """The committed module ``lpv`` or ``lpv:DRUG`` names, ``None`` for any other spec.
+
+    Raises
+    ------
+    ControllerSpecError
+        ``lpv:DRUG`` with a drug that has no shipped design (naming the ones that do).
+    """
+    if spec == LPV_PREFIX:
+        return DEFAULT_LPV_MODULE
+    head, sep, drug = spec.partition(":")
+    if head != LPV_PREFIX or not sep:
+        return None
+    if drug not in LPV_DESIGNS:
+        raise ControllerSpecError(
+            f"--controller {spec!r}: no shipped design for drug {drug!r}; one of"
+            f" {', '.join(f'lpv:{d}' for d in LPV_DESIGNS)}"
+        )
+    return LPV_DESIGNS[drug]
 
 
 def verify_module_file(path: Path, artifact_sha256: str | None = None) -> str:
@@ -134,8 +165,9 @@ def load_controller(
     ----------
     spec
         ``"pi"`` (the paper's PI baseline), ``"smith"`` / ``"smith:LAMBDA_S"`` (the scheduled Smith
-        predictor, λ in s), ``"lpv"`` (the shipped generated LPV module), a path to a generated
-        ``.py`` module, or a plugin (:mod:`runtime.controller_plugin`: ``MODULE:CLASS[:ARGS]``,
+        predictor, λ in s), ``"lpv"`` / ``"lpv:DRUG"`` (a shipped generated LPV module), a path
+        to a generated ``.py`` module, or a plugin (:mod:`runtime.controller_plugin`:
+        ``MODULE:CLASS[:ARGS]``,
         ``FILE.py:CLASS[:ARGS]`` or an installed ``pressor.controllers`` entry point name).
     sample_period_s
         Loop period (s). A generated module is discretised for one period; a mismatch is an error.
@@ -154,10 +186,11 @@ def load_controller(
         return _smith(spec, sample_period_s)
     from runtime.controller_plugin import is_plugin_spec, load_plugin_controller
 
-    if is_plugin_spec(spec):
+    named = lpv_design_module(spec)
+    if named is None and is_plugin_spec(spec):
         return load_plugin_controller(spec, sample_period_s)
-    path = DEFAULT_LPV_MODULE if spec == "lpv" else Path(spec)
-    if spec != "lpv" and path.suffix != ".py":
+    path = named if named is not None else Path(spec)
+    if named is None and path.suffix != ".py":
         raise ControllerSpecError(
             f"--controller {spec!r}: expected 'pi', 'smith[:LAMBDA_S]', 'lpv', a path to a generated"
             " .py module, or a plugin: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed"
@@ -180,5 +213,7 @@ def controller_name(spec: str) -> str:
     from runtime.controller_plugin import is_plugin_spec, plugin_label
 
     if spec in ("pi", "lpv") or spec == SMITH_PREFIX or spec.startswith(SMITH_PREFIX + ":"):
+        return spec
+    if spec.startswith(LPV_PREFIX + ":") and spec.partition(":")[2] in LPV_DESIGNS:
         return spec
     return plugin_label(spec) if is_plugin_spec(spec) else Path(spec).stem

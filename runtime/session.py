@@ -97,7 +97,13 @@ def run_runtime(
 
     period_s = config.period_s
     controller = load_controller(config.controller, period_s)
-    clinician = config.clinician or ClinicianInput()
+    if config.clinician is not None:
+        clinician = config.clinician
+    else:  # pressor sil: the loaded design's syringe (a device announcing another is refused)
+        from contracts.drug import binding_of
+
+        design = binding_of(controller)
+        clinician = ClinicianInput(drug=design.name, concentration_ug_ml=design.concentration_ug_ml)
     tlog = TlogWriter(config.tlog) if config.tlog is not None else None
     ok = False
     # only the oracle schedules on the device's SCHEDULING_PARAMS: otherwise a device may send
