@@ -40,7 +40,9 @@ DEFAULT_OUT = "design.npz"
 def _parser() -> UsageParser:
     p = UsageParser(
         prog="pressor synth",
-        description="Delay-dependent LPV output-feedback synthesis (Theorem 3, cvxpy + Clarabel).",
+        description="Design stage: certify the config's controller family (the shipped smith "
+        "family: a Wirtinger analysis LMI of its closed-form law; theorem3: the paper's synthesis "
+        "LMIs), verify it and write the artifact (cvxpy + Clarabel).",
     )
     p.add_argument("--config", help="design TOML (default: the shipped default design)")
     p.add_argument(

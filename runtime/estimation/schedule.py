@@ -31,7 +31,7 @@ T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
     (``docs/ESTIMATION.md``; the held-out figures are in the README, "Scheduling sources").
 :class:`ValidatedSchedule`
     Opt-in (``--schedule validated``), not the default: adaptation that cannot leave the
-    certificate (issue 25). Starts on the nominal patient and moves T and τ (K stays nominal by
+    certificate. Starts on the nominal patient and moves T and τ (K stays nominal by
     default) toward the model of a bank of fixed FOPDT models
     (:class:`runtime.estimation.validation.ModelBank`) only while that model predicts the measured
     MAP's 60 s changes better than the nominal model by a relative and a statistical margin, at
