@@ -9,13 +9,14 @@ that switched from ``problem.solve`` keep their status logic.
 No single KKT solver decides. Clarabel factorises its KKT system with a backend chosen by
 ``direct_solve_method``; the default (faer, supernodal and multithreaded) dispatches to SIMD
 kernels by CPU feature, so the same data can meet different rounding on different CPUs. A solve
-that ends in a numerical failure (``NumericalError``, ``InsufficientProgress``) is repeated with the
-next backend of the chain (:data:`synthesis.kkt.DEFAULT_KKT_CHAIN`: faer, then qdldl, a simplicial LDL' with its
-own ordering and no SIMD dispatch), and each retry is reported through ``progress`` and recorded
-in :attr:`ConicSolution.fallbacks`. :func:`synthesis.kkt.kkt_chain` sets the chain for a block of code (the
-``--kkt`` option of ``pressor synth`` and ``pressor verify``, the tests that force one backend).
-An infeasible, unbounded or iteration-limited end is an answer, not a numerical failure: it is
-not retried. Whatever backend solved, the callers' floating-point re-check is the verdict.
+that ends in a numerical failure (``NumericalError``, ``InsufficientProgress``) is repeated with
+the next backend of the chain (:data:`synthesis.kkt.DEFAULT_KKT_CHAIN`: faer, then qdldl, a
+simplicial LDL' with its own ordering and no SIMD dispatch), and each retry is reported through
+``progress`` and recorded in :attr:`ConicSolution.fallbacks`. :func:`synthesis.kkt.kkt_chain`
+sets the chain for a block of code (the ``--kkt`` option of ``pressor synth`` and ``pressor
+verify``, the tests that force one backend). An infeasible, unbounded or iteration-limited end is
+an answer, not a numerical failure: it is not retried. Whatever backend solved, the callers'
+floating-point re-check is the verdict.
 
 PSD blocks use Clarabel's ``PSDTriangleConeT`` convention: the upper triangle by columns (for a
 symmetric matrix the same entries as the lower triangle by rows) with the off-diagonal entries
@@ -157,8 +158,8 @@ def solve_conic(
 ) -> ConicSolution:
     """Solve ``min 1/2 x'Px + q'x  s.t.  a x + s = b, s in cones`` with Clarabel.
 
-    The KKT backends of :func:`synthesis.kkt.current_kkt_chain` are tried in order while a solve ends in a
-    numerical failure (module docstring); each retry is reported through ``progress``.
+    The KKT backends of :func:`synthesis.kkt.current_kkt_chain` are tried in order while a solve
+    ends in a numerical failure (module docstring); each retry is reported through ``progress``.
 
     Parameters
     ----------

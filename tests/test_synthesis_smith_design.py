@@ -1,4 +1,5 @@
-"""certify_smith options (real Wirtinger solves); the shipped law reproduced, its certificate re-checked."""
+"""certify_smith options (real Wirtinger solves); the shipped law reproduced, its certificate
+re-checked without a solve."""
 
 from __future__ import annotations
 
