@@ -44,11 +44,8 @@ from hil_sim.pkpd import (  # noqa: E402
 from link import PumpStatus, TickInputs  # noqa: E402
 from runtime.controller_loader import load_controller  # noqa: E402
 from runtime.core import CLEAN_LINK, ClosedLoopCore  # noqa: E402
-from runtime.estimation.schedule import (  # noqa: E402
-    EstimatedSchedule,
-    ValidatedSchedule,
-    make_schedule,
-)
+from runtime.estimation.schedule import EstimatedSchedule, make_schedule  # noqa: E402
+from runtime.estimation.validated import ValidatedSchedule  # noqa: E402
 from runtime.estimation.validation import ModelBank  # noqa: E402
 from runtime.supervisor import Supervisor  # noqa: E402
 from runtime.supervisor_config import Fault, State, supervisor_config_for  # noqa: E402

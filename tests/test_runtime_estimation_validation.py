@@ -16,13 +16,8 @@ from link import PumpStatus, TickInputs
 from runtime.controller_loader import load_controller
 from runtime.core import CLEAN_LINK, ClosedLoopCore
 from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT
-from runtime.estimation.schedule import (
-    DESIGN_RATES,
-    SOURCES,
-    NominalSchedule,
-    ValidatedSchedule,
-    make_schedule,
-)
+from runtime.estimation.schedule import SOURCES, NominalSchedule, make_schedule
+from runtime.estimation.validated import DESIGN_RATES, ValidatedSchedule
 from runtime.estimation.validation import ModelBank
 from runtime.supervisor import Supervisor
 from runtime.supervisor_config import Fault, supervisor_config_for

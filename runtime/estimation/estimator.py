@@ -78,6 +78,7 @@ import math
 
 from baselines.smith import INITIAL_SCHEDULE
 from runtime.estimation.bank import DelayModel, FilterSettings
+from runtime.estimation.checks import check_positive, check_range
 from runtime.estimation.estimate import Estimate
 from runtime.estimation.gate import SampleGate
 from runtime.estimation.noise import WindowNoise
@@ -89,17 +90,6 @@ DESIGN_BOX: tuple[tuple[float, float], ...] = ((0.25, 1.0), (100.0, 200.0), (10.
 #: the T-drift prior: T rises this many s per (ml/h)·s of infusion (the literature patient model's
 #: b_T, middle of its [1e-4, 3e-4] range; hil_sim/patient.py)
 T_DRIFT_PER_ML_H = 2e-4
-
-
-def _check_positive(**values: float) -> None:
-    for name, value in values.items():
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-            raise ValueError(f"{name}={value!r} must be a finite number > 0")
-
-
-def _check_range(name: str, lo: float, hi: float) -> None:
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo < hi):
-        raise ValueError(f"{name}=({lo!r}, {hi!r}) must be finite with 0 < low < high")
 
 
 class DelayBankEstimator:
@@ -172,7 +162,7 @@ class DelayBankEstimator:
         gate: SampleGate | None = None,
         T_drift_per_ml_h: float = T_DRIFT_PER_ML_H,
     ) -> None:
-        _check_positive(
+        check_positive(
             sample_period_s=sample_period_s, window_s=window_s, prior_rel_std=prior_rel_std,
             q_a=q_a, q_b=q_b, q_c=q_c, r_mmhg=r_mmhg, jump_sigma=jump_sigma,
             baseline_std_mmhg=baseline_std_mmhg, reseed_nll=reseed_nll, learn_rel_std=learn_rel_std,
@@ -189,19 +179,19 @@ class DelayBankEstimator:
             )
         if not (math.isfinite(memory_s) and memory_s > window_s):
             raise ValueError(f"memory_s={memory_s!r} must be finite and > window_s={window_s!r}")
-        _check_range("tau_range_s", *tau_range_s)
+        check_range("tau_range_s", *tau_range_s)
         if len(tau_prior_s) != 2:
             raise ValueError(f"tau_prior_s={tau_prior_s!r} must be (mode s, std s)")
-        _check_positive(tau_prior_mode_s=tau_prior_s[0], tau_prior_std_s=tau_prior_s[1])
-        _check_range("K_plausible", *K_plausible)
-        _check_range("T_plausible_s", *T_plausible_s)
+        check_positive(tau_prior_mode_s=tau_prior_s[0], tau_prior_std_s=tau_prior_s[1])
+        check_range("K_plausible", *K_plausible)
+        check_range("T_plausible_s", *T_plausible_s)
         if len(prior) != 3:
             raise ValueError(f"prior={prior!r} must be (K, T_s, tau_s)")
-        _check_positive(prior_K=prior[0], prior_T_s=prior[1], prior_tau_s=prior[2])
+        check_positive(prior_K=prior[0], prior_T_s=prior[1], prior_tau_s=prior[2])
         if len(box) != 3:
             raise ValueError(f"box={box!r} must be ((K lo, hi), (T lo, hi), (tau lo, hi))")
         for name, (lo, hi) in zip(("box K", "box T_s", "box tau_s"), box, strict=True):
-            _check_range(name, lo, hi)
+            check_range(name, lo, hi)
         self.window_s = float(window_s)
         self._n_win = n_win
         d_lo = max(1, math.ceil(tau_range_s[0] / window_s - 1e-9))
@@ -309,12 +299,11 @@ class DelayBankEstimator:
 
     @property
     def windows_closed(self) -> int:
-        """How many windows have closed (the index of the newest is this minus 1)."""
+        """How many windows have closed (the newest one's index plus 1)."""
         return self._j + 1
 
     def last_window(self) -> tuple[float, float, float]:
-        """The newest closed window: (mean accepted MAP − reference MAP, mmHg, NaN when too few
-        samples; mean delivered rate, ml/h, NaN if unknown; noise variance of a window mean, mmHg²)."""
+        """Newest window: (MAP mean − reference mmHg, rate mean ml/h, NaN if unknown; var mmHg²)."""
         if self._j < 0:
             return math.nan, math.nan, self._noise.variance
         return self._y_dev, self._uring[self._j % len(self._uring)], self._noise.variance

@@ -29,27 +29,10 @@ T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
     at most 0.06 σ_K and 0.13 σ_T. A T below the design box is then projected onto the box's low
     edge at the same K/T (:meth:`EstimatedSchedule.keep_slope`). Tuned on cohort seed 11
     (``docs/ESTIMATION.md``; the held-out figures are in the README, "Scheduling sources").
-:class:`ValidatedSchedule`
-    Opt-in (``--schedule validated``), not the default: adaptation that cannot leave the
-    certificate. Starts on the nominal patient and moves T and τ (K stays nominal by
-    default) toward the model of a bank of fixed FOPDT models
-    (:class:`runtime.estimation.validation.ModelBank`) only while that model predicts the measured
-    MAP's 60 s changes better than the nominal model by a relative and a statistical margin, at
-    0.9x the certified rates and inside the design box: the source itself never raises
-    ``SCHED_RATE`` or ``SCHED_OUT_OF_BOX``. The online FOPDT fit still runs and is reported
-    (``Schedule.estimate``, ``healthy``), but does not set the schedule.
-
-    Why it exists (``docs/ESTIMATION.md``, "Adaptation that cannot make things worse"; tuned on
-    cohort seed 11 and the independent models' seed 2026): scheduling on the fit itself
-    (:class:`EstimatedSchedule`) was 1.24-1.58x the nominal schedule's IAE on patients outside the
-    FOPDT class, chasing their higher-order dynamics with K, T, τ. A slew-limited K is a ramp the
-    2-DOF feedforward (u_ff ∝ 1/K) injects into a settled loop, which the slow certified integral
-    follows with a steady error: moving K at the certified 2e-4 /s was 1.16x nominal on the
-    project's own cohort; a one-time jump to the bank's first choice was far worse (overshoot
-    80-110 %). T and τ leave a settled loop's feedforward unchanged, so adapting only them was
-    below nominal on every independent model (0.94-0.97x median). Why it is not the default: on
-    the project's own cohort (paper-tracking) its median step overshoot is 33 %, where
-    :class:`EstimatedSchedule`'s is 5 %.
+:class:`runtime.estimation.validated.ValidatedSchedule`
+    Opt-in (``--schedule validated``): the nominal patient, with T and τ slewed inside the
+    certified rates toward a model validated on held-out windows; why it exists and why it is not
+    the default are in its docstring.
 """
 
 from __future__ import annotations
@@ -59,17 +42,13 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from runtime.estimation.estimate import Estimate
-from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT, DelayBankEstimator
-from runtime.estimation.validation import ModelBank
+from runtime.estimation.estimator import NOMINAL_PLANT, DelayBankEstimator
 
 SOURCES = ("oracle", "estimated", "nominal", "validated")
 #: the cautious rule's full shift (standard deviations) and the relative standard deviation from
 #: which it applies in full (below, the shift shrinks in proportion): tuned on cohort seed 11
 CAUTION_SIGMA = 0.75
 CAUTION_REL_STD = 0.6
-#: the default design's certified rates (synthesis/data/default_design.toml; the generated
-#: module's RATE_BOUNDS): K mmHg/(ml/h) per s, T s per s, τ s per s
-DESIGN_RATES: tuple[float, float, float] = (2e-4, 0.06, 0.1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -280,124 +259,7 @@ class EstimatedSchedule:
         return self._schedule
 
 
-class ValidatedSchedule:
-    """Schedule on a validated model, slew-limited inside the design box and its certified rates.
-
-    Opt-in (``--schedule validated``; the default ``estimated`` is :class:`EstimatedSchedule`).
-    Starts on ``start`` (default the nominal patient) and moves toward the model the
-    :class:`~runtime.estimation.validation.ModelBank` has adopted (the nominal one until another
-    predicts the measured MAP changes better by its margins), each of K, T, τ by at most
-    ``rate_fraction`` of the certified rate per tick, and never outside the design box: the
-    source itself can raise neither ``SCHED_RATE`` nor ``SCHED_OUT_OF_BOX``. The device's values
-    are ignored. The online FOPDT fit (:class:`DelayBankEstimator`) still runs: its report is
-    ``Schedule.estimate`` (what the recorder and the trials' error summaries show) and its health
-    is ``healthy``; it does not set the schedule. Why (evidence in ``docs/ESTIMATION.md``,
-    "Adaptation that cannot make things worse"): on patients outside the FOPDT class the fit chased
-    the unmodelled dynamics with K, T, τ, and scheduling on it (:class:`EstimatedSchedule`) was
-    worse than the nominal schedule; this source is below nominal there. Why it is not the
-    default: on the project's own cohort (paper-tracking, seed 11) its step overshoot is 33 %,
-    :class:`EstimatedSchedule`'s 5 % (its start-up jump of K to the estimate, which no source
-    within the certified rates can make).
-
-    Parameters
-    ----------
-    estimator
-        The FOPDT fit to run and report (default: :class:`DelayBankEstimator` at
-        ``sample_period_s``); its windows feed the bank.
-    sample_period_s
-        Tick period (s), > 0.
-    bank
-        The validating model bank (default: :class:`ModelBank` with the nominal patient first).
-    start
-        (K mmHg/(ml/h), T s, τ s) of the first tick, inside ``box``; default the nominal patient.
-    box
-        The design box ((K lo, hi), (T lo, hi) s, (τ lo, hi) s) the schedule stays in.
-    rate_bounds
-        The certified rates (K mmHg/(ml/h) per s, T s per s, τ s per s), each > 0.
-    rate_fraction
-        Fraction of the certified rates the schedule moves at, in (0, 1].
-    adapt_K
-        Also move K toward the adopted model's (default False: K stays at ``start``'s; a moving K
-        is a ramp the feedforward injects into a settled loop).
-    """
-
-    source = "validated"
-
-    def __init__(
-        self,
-        estimator: DelayBankEstimator | None = None,
-        sample_period_s: float = 0.1,
-        bank: ModelBank | None = None,
-        start: tuple[float, float, float] = NOMINAL_PLANT,
-        box: tuple[tuple[float, float], ...] = DESIGN_BOX,
-        rate_bounds: tuple[float, float, float] = DESIGN_RATES,
-        rate_fraction: float = 0.9,
-        adapt_K: bool = False,
-    ) -> None:
-        if not (math.isfinite(sample_period_s) and sample_period_s > 0.0):
-            raise ValueError(f"sample_period_s={sample_period_s!r} s must be finite and > 0")
-        if not (math.isfinite(rate_fraction) and 0.0 < rate_fraction <= 1.0):
-            raise ValueError(f"rate_fraction={rate_fraction!r} must be in (0, 1]")
-        if len(rate_bounds) != 3 or not all(math.isfinite(r) and r > 0.0 for r in rate_bounds):
-            raise ValueError(f"rate_bounds={rate_bounds!r} must be 3 finite values > 0 (per s)")
-        if len(box) != 3 or not all(math.isfinite(lo) and lo < hi for lo, hi in box):
-            raise ValueError(f"box={box!r} must be ((K lo, hi), (T lo, hi), (tau lo, hi))")
-        if len(start) != 3 or not all(
-            lo <= v <= hi for v, (lo, hi) in zip(start, box, strict=True)
-        ):
-            raise ValueError(f"start={start!r} must be (K, T_s, tau_s) inside box={box!r}")
-        self.estimator = estimator if estimator is not None else DelayBankEstimator(sample_period_s)
-        n_win = round(self.estimator.window_s / sample_period_s)
-        self.bank = bank if bank is not None else ModelBank(self.estimator.window_s, n_win, start)
-        self._box = tuple((float(lo), float(hi)) for lo, hi in box)
-        self._step = tuple(rate_fraction * r * sample_period_s for r in rate_bounds)
-        self._rho = [float(v) for v in start]
-        self._windows = 0
-        self._adapt_K = bool(adapt_K)
-        self._last: Estimate | None = None
-        self._schedule: Schedule | None = None
-
-    def update(
-        self,
-        map_mmhg: float,
-        quality: int,
-        delivered_ml_h: float,
-        device_K: float,
-        device_T_s: float,
-        device_tau_s: float,
-        device_valid: bool,
-    ) -> Schedule:
-        """Feed the estimator and the bank one tick; move the schedule one slew step."""
-        est = self.estimator.update(map_mmhg, quality, delivered_ml_h)
-        bank = self.bank
-        closed = self.estimator.windows_closed
-        if closed != self._windows:
-            self._windows = closed
-            bank.close_window(*self.estimator.last_window())
-        bank.step()
-        target = bank.target
-        rho, moved = self._rho, False
-        if not self._adapt_K:
-            target = (rho[0], target[1], target[2])
-        for i in range(3):
-            lo, hi = self._box[i]
-            goal = min(max(target[i], lo), hi)
-            now = rho[i]
-            if goal != now:
-                s = self._step[i]
-                rho[i] = goal if abs(goal - now) <= s else (now + s if goal > now else now - s)
-                moved = True
-        if moved or est is not self._last or self._schedule is None:
-            self._last = est
-            adopted = bank.adopted != 0
-            self._schedule = Schedule(rho[0], rho[1], rho[2], "validated", True, est.healthy,
-                                      not adopted, "ok" if adopted else "prior", est)  # fmt: skip
-        return self._schedule
-
-
-def make_schedule(
-    source: str, sample_period_s: float = 0.1
-) -> OracleSchedule | NominalSchedule | EstimatedSchedule | ValidatedSchedule:
+def make_schedule(source: str, sample_period_s: float = 0.1) -> ScheduleSource:
     """The scheduling source named ``source`` (one of :data:`SOURCES`) at ``sample_period_s`` (s)."""
     if source == "oracle":
         return OracleSchedule()
@@ -406,5 +268,8 @@ def make_schedule(
     if source == "estimated":
         return EstimatedSchedule(sample_period_s=sample_period_s)
     if source == "validated":
+        # imported here: validated.py builds on this module's Schedule
+        from runtime.estimation.validated import ValidatedSchedule
+
         return ValidatedSchedule(sample_period_s=sample_period_s)
     raise ValueError(f"schedule source {source!r} not one of {SOURCES}")
