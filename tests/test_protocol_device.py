@@ -323,3 +323,24 @@ def test_realtime_1hz_quantized_monitor_sends_samples_on_updates_and_stays_in_au
     assert run.log.outcome == "finished"
     assert_commands_auto_and_in_range(run.log)  # no STALE_SAMPLE between monitor updates
     assert run.log.commands_received >= cfg.n_ticks // 2  # commands keep flowing
+
+
+def test_the_norepinephrine_design_runs_against_a_norepinephrine_device(
+    dialect: ModuleType, tmp_path: Path
+) -> None:
+    """The drug binding admits the matching pair: a device announcing norepinephrine at 16 µg/ml
+    (the design's syringe) runs under ``--controller lpv:norepinephrine`` (the library doses it
+    per kg: ``--weight-kg`` is required) and reaches its target
+    on a patient inside that design's box (K 0.1-3.2 mmHg/(ml/h), T 150-750 s, τ 20-55 s)."""
+    key = write_key(tmp_path / "signing.key")
+    cfg = DeviceConfig(
+        n_ticks=9000,
+        target_mmhg=TARGET_MMHG,
+        patient=(0.8, 300.0, 30.0, 55.0),
+        drug="norepinephrine",
+        concentration_ug_ml=16.0,
+        key=read_key(key),
+    )
+    args = ("--controller", "lpv:norepinephrine", "--schedule", "oracle", "--weight-kg", "70")
+    run = drive(dialect, tmp_path, cfg, key, *args)
+    assert_lockstep_reaches_target(run, cfg.n_ticks)
