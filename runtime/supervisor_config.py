@@ -28,6 +28,11 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
   rate itself (docs/INTERFACES.md), so that leaving the design envelope is reported, not fought;
 - ``TARGET_INVALID`` the MAP target is non-finite or outside the plausible MAP range;
 - ``COMMAND_INVALID`` the controller returned a non-finite command (held, → HOLD);
+- ``CONTROLLER_FAULT`` (``controller_faults="latch"``, ``pressor run``) the controller raised in
+  ``step`` or returned something ``float()`` refuses (held, → HOLD); with ``"stop"`` (``pressor
+  sil``, ``trial``) the core ends the run instead (:class:`runtime.core.ControllerError`). Under
+  ``"latch"`` this and ``COMMAND_INVALID`` hold until the clinician's acknowledgement
+  (:mod:`runtime.supervisor_io`);
 - ``COMMAND_CLAMPED`` the controller returned a command outside [0, max] (clamped; an alarm, not a
   state change);
 - ``LINK_ERRORS`` the link layer discarded something since the last tick (bad CRC, junk bytes,
@@ -109,11 +114,19 @@ class Fault(IntFlag):
     DOSE_HARD_LIMIT = DOSE_HARD_LIMIT
     DOSE_SOFT_LIMIT = DOSE_SOFT_LIMIT
     DOSE_HOUR_LIMIT = DOSE_HOUR_LIMIT
+    CONTROLLER_FAULT = 1 << 21
 
 
 #: the drug library's faults (advisory: the command is cut, the state unchanged)
 DOSE_FAULTS = Fault.DOSE_HARD_LIMIT | Fault.DOSE_SOFT_LIMIT | Fault.DOSE_HOUR_LIMIT
 
+
+#: the controller's own faults: what ``controller_faults="latch"`` keeps until acknowledged
+CONTROLLER_FAULTS = Fault.CONTROLLER_FAULT | Fault.COMMAND_INVALID
+#: what the supervisor does with a controller fault: "stop" (the core ends the run on an
+#: exception; a non-finite command holds until inputs are good for recover_after_s) or "latch"
+#: (``pressor run``: both hold until the clinician acknowledges)
+CONTROLLER_FAULT_ACTIONS = ("stop", "latch")
 
 #: faults that never change the state (the command is clamped and the event logged)
 ADVISORY = (
@@ -183,6 +196,7 @@ class SupervisorConfig:
     pump_mismatch_rel: float = 0.05
     estimate_box_s: float = 60.0
     dose_limits: DoseLimits | None = None
+    controller_faults: str = "stop"
 
     def __post_init__(self) -> None:
         def need(name: str, ok: bool, allowed: str) -> None:
@@ -222,6 +236,11 @@ class SupervisorConfig:
         need("pump_mismatch_abs_ml_h", self.pump_mismatch_abs_ml_h > 0.0, "> 0 ml/h")
         need("pump_mismatch_rel", 0.0 <= self.pump_mismatch_rel <= 1.0, "[0, 1]")
         need("estimate_box_s", self.estimate_box_s >= 0.0, ">= 0 s")
+        need(
+            "controller_faults",
+            self.controller_faults in CONTROLLER_FAULT_ACTIONS,
+            " or ".join(repr(a) for a in CONTROLLER_FAULT_ACTIONS),
+        )
         if self.sched_box is not None:
             need(
                 "sched_box",
