@@ -58,6 +58,12 @@ def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
         ),
         ("TARGET_INVALID", "target non-finite or outside the MAP range; same tick"),
         ("COMMAND_INVALID", "controller returned a non-finite command; same tick, held"),
+        (
+            "CONTROLLER_FAULT",
+            "pressor run: the controller raised or returned a non-number; same tick, held"
+            " (sil, trial: the run ends, exit 1); under pressor run it and COMMAND_INVALID hold"
+            " until the clinician's ack",
+        ),
         ("COMMAND_CLAMPED", f"controller command outside [0, {cfg.max_rate_ml_h}] ml/h; clamped"),
         (
             "LINK_ERRORS",
