@@ -29,6 +29,9 @@ class EventLog:
         Program name in front of each line written to ``err``.
     err
         Where controller faults are reported (default ``sys.stderr``).
+    ack_input
+        Whether the clinician can acknowledge (``--target-stdin``, ``--target-file``): the
+        controller-fault line says the hold lasts until the ``ack``, else for the rest of the run.
 
     Attributes
     ----------
@@ -41,10 +44,23 @@ class EventLog:
         and ``command_ml_h`` (the held command).
     """
 
-    def __init__(self, recorder: Any = None, prog: str = "pressor", err: TextIO | None = None):
+    def __init__(
+        self,
+        recorder: Any = None,
+        prog: str = "pressor",
+        err: TextIO | None = None,
+        *,
+        ack_input: bool = False,
+    ) -> None:
         self.recorder = recorder
         self.prog = prog
         self.err = err
+        self.until = (
+            "until the clinician acknowledges (ack)"
+            if ack_input
+            else "for the rest of the run (no acknowledgement input: --target-stdin or"
+            " --target-file gives one)"
+        )
         self.transitions: list[dict[str, Any]] = []
         self.controller_faults: list[dict[str, Any]] = []
 
@@ -94,7 +110,7 @@ class EventLog:
         )
         line = (
             f"{kind}: {rec.controller_error}; {out.state.name} at {out.command_ml_h:g} ml/h"
-            " until the clinician acknowledges (ack)"
+            f" {self.until}"
         )
         print(f"{self.prog}: {line}", file=self.err or sys.stderr, flush=True)
         if self.recorder is not None:

@@ -92,6 +92,9 @@ class Loop:
         (:func:`runtime.estimation.schedule.make_schedule`); default the oracle.
     prog
         Program name in front of the controller-fault lines on stderr (:mod:`runtime.events`).
+    ack_input
+        Whether the clinician can acknowledge (``pressor run --target-stdin`` or
+        ``--target-file``): what those lines say ends a controller fault's hold.
     """
 
     def __init__(
@@ -105,6 +108,7 @@ class Loop:
         on_tick: Any = None,
         schedule: ScheduleSource | None = None,
         prog: str = "pressor",
+        ack_input: bool = False,
     ) -> None:
         self.core = ClosedLoopCore(controller, supervisor, schedule)
         self.sup = supervisor
@@ -120,7 +124,7 @@ class Loop:
         self.on_tick = on_tick
         self.heartbeat_every = max(1, int(heartbeat_every))
         self.ticks_in_state = [0] * len(State)
-        self.events = EventLog(recorder, prog)
+        self.events = EventLog(recorder, prog, ack_input=ack_input)
         self.out_of_range = 0
         self._count = 0
         self._wall0 = perf_counter_s()

@@ -191,6 +191,7 @@ def run_runtime(
             "on_tick": on_tick,
             "schedule": make_schedule(config.schedule, period_s),
             "prog": "pressor run" if config.clinician is not None else "pressor sil",
+            "ack_input": clinician.target_stdin or clinician.target_file is not None,
         }
         target = None
         if clinician.target_mmhg is None:

@@ -93,7 +93,10 @@ def test_run_holds_on_a_failing_plugin_and_the_device_sees_the_held_rate_in_safe
     lines = [ln for ln in proc.stderr.splitlines() if fault in ln or "failed" in ln]
     assert len(lines) == 2, proc.stderr  # once when it failed, once at the end
     assert lines[0].startswith(f"pressor run: {fault}: {failure['error']}; HOLD at ")
-    assert lines[0].endswith(" ml/h until the clinician acknowledges (ack)")
+    assert lines[0].endswith(
+        " ml/h for the rest of the run (no acknowledgement input:"
+        " --target-stdin or --target-file gives one)"
+    )
     assert lines[1].startswith("pressor run: the controller failed 1 time(s), first at tick 49")
     events = _events(rrd)
     assert (FAULT_TICK, lines[0].removeprefix("pressor run: ")) in events
@@ -123,6 +126,8 @@ def test_run_resumes_a_failed_plugin_on_the_clinicians_ack_through_recovering(tm
     moves = [(t["tick"], t["from"], t["to"]) for t in summary["supervisor"]["transitions"]]
     assert moves[1:3] == [(FAULT_TICK, "AUTO", "HOLD"), (60, "HOLD", "RECOVERING")]
     assert moves[3][1:] == ("RECOVERING", "AUTO")
+    [line] = [ln for ln in output.splitlines() if "CONTROLLER_FAULT: controller" in ln]
+    assert line.endswith(" ml/h until the clinician acknowledges (ack)")
     commands = rrd_columns(rrd)["/pump/command_ml_h"]
     held = commands[FAULT_TICK - 1]
     assert [commands[k] for k in range(FAULT_TICK, 60)] == [held] * (60 - FAULT_TICK)
