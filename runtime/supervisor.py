@@ -52,7 +52,7 @@ acknowledgement is the clinician's decision to try it again: accepted (when no o
 fault persists) it clears the latch, moves to RECOVERING and the controller is stepped again as
 it is (not reset: its integrator carries the dose the patient is on), its command reached by the
 bumpless slew; a further failure latches again. Without an acknowledgement input (``pressor
-run`` on the device's target) the latch lasts for the rest of the run.
+run`` without ``--target-stdin`` or ``--target-file``) the latch lasts for the rest of the run.
 
 The fault kinds, their detection bounds and the configuration are in
 :mod:`runtime.supervisor_config`.
@@ -334,7 +334,7 @@ class Supervisor:
                 bit = Fault.CONTROLLER_FAULT if failed else Fault.COMMAND_INVALID
                 self.faults |= bit
                 if self._latch:
-                    self._latched |= bit
+                    self._latched |= int(bit)  # a plain int: it joins every tick's faults
                 self._good_since_s = None
                 self._fault_since_s = self._now_s
                 state = State.HOLD
