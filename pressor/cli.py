@@ -23,8 +23,8 @@ from contracts.usage import USAGE_EXIT, usage_exit
 COMMANDS: dict[str, tuple[str, str]] = {
     "synth": ("synthesis.cli", "synthesize, verify and write a controller artifact"),
     "verify": (
-        "synthesis.verify_cli",
-        "independent checks of an artifact (default: the shipped design)",
+        "pressor.verify",
+        "independent checks of an artifact (default: the shipped design) or a plugin's step",
     ),
     "codegen": (
         "codegen.cli",

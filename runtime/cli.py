@@ -118,11 +118,8 @@ def _main_keygen(argv: Sequence[str]) -> int:
 
 def _main_faults(argv: Sequence[str]) -> int:
     from contracts.faults import catalogue_rows
-    from runtime.supervisor_config import (
-        DEFAULT_SAMPLE_AGE_LIMIT_S,
-        SupervisorConfig,
-        detection_bounds,
-    )
+    from runtime.supervisor_bounds import detection_bounds
+    from runtime.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S, SupervisorConfig
 
     p = UsageParser(prog="pressor faults", description="fault kinds the supervisor detects")
     p.add_argument(

@@ -5,7 +5,10 @@ controllers run (``pressor sil``, ``pressor run``, ``pressor trial``, :mod:`pres
 the same supervisor, clamps and rate limits: the runtime's core (:mod:`runtime.core`) steps it and
 the supervisor turns what it returns into the pump command (non-finite: ``COMMAND_INVALID``, HOLD;
 outside [0, ``max_rate_ml_h``]: clamped, ``COMMAND_CLAMPED``, alarm). A controller that raises
-ends the run with :class:`runtime.core.ControllerError` naming it.
+ends ``pressor sil`` and ``trial`` with :class:`runtime.core.ControllerError` naming it; under
+``pressor run`` the supervisor holds the last command until the clinician acknowledges
+(``CONTROLLER_FAULT``, :mod:`runtime.supervisor`). The whole contract: docs/INTERFACES.md,
+"Controller".
 
 Spec forms (the first that applies):
 

@@ -30,6 +30,15 @@ Two callers drive the same core, so they cannot drift apart:
 
 A lockstep SIL run and an in-process run of the same seed therefore give the same commands and
 the same supervisor states, tick for tick.
+
+A controller that fails. The controller is the algorithm; the core is part of the shell that
+handles its faults (PX4's rule). When ``step`` raises, or returns something ``float()`` refuses,
+the supervisor's ``controller_faults`` decides: ``"stop"`` (``pressor sil``, ``trial``, the API)
+raises :class:`ControllerError` - the run ends and the researcher sees the bug; ``"latch"``
+(``pressor run``) hands the failure to the supervisor (``CONTROLLER_FAULT``: HOLD at the held rate,
+alarm, until the clinician acknowledges; :mod:`runtime.supervisor`) and the tick's record carries
+the error's text (``TickRecord.controller_error``; also for a non-finite command, the supervisor's
+``COMMAND_INVALID``) for the shell to log; the loop goes on.
 """
 
 from __future__ import annotations
@@ -65,20 +74,23 @@ class LinkHealth(NamedTuple):
 
 
 class ControllerError(RuntimeError):
-    """The controller raised, or returned something that is not a number, at a tick: the run ends
-    with this error (its message names the controller's class and module, the tick and the cause)
-    instead of a traceback or a hang; the callers turn it into exit 1 (``pressor sil``/``run``)
-    or raise it (``pressor trial``, :mod:`pressor.api`)."""
+    """The controller raised, or returned something that is not a number, at a tick, and the
+    supervisor's ``controller_faults`` is ``"stop"``: the run ends with this error (its message
+    names the controller's class and module, the tick and the cause) instead of a traceback or a
+    hang; the callers turn it into exit 1 (``pressor sil``) or raise it (``pressor trial``,
+    :mod:`pressor.api`). ``pressor run`` latches a ``CONTROLLER_FAULT`` instead."""
 
 
-def _controller_failed(controller: Controller, tick: int, now_s: float, exc: BaseException) -> str:
+def _controller_failed(controller: Controller, tick: int, now_s: float, cause: str) -> str:
+    """One line naming the controller's class and module (or file), the tick, its time (s) and
+    ``cause`` (the exception's repr, or what it returned)."""
     cls = type(controller)
     module = cls.__module__
     if module.startswith("_pressor_"):  # imported from a file: name the file
         module = getattr(sys.modules.get(module), "__file__", None) or module
     return (
         f"controller {cls.__qualname__!r} (module {module!r}) failed at tick {tick}"
-        f" (t = {now_s:g} s): {exc!r}"
+        f" (t = {now_s:g} s): {cause}"
     )
 
 
@@ -101,6 +113,9 @@ class TickRecord(NamedTuple):
         The supervisor's decision; ``supervisor.command_ml_h`` is the command for the pump.
     schedule
         The scheduling source's report of the tick: the K, T, τ the controller was given.
+    controller_error
+        When the controller failed at this tick under ``controller_faults="latch"``: one line
+        naming it, the tick and the cause (:class:`ControllerError`'s text); else ``None``.
     """
 
     inputs: TickInputs
@@ -108,6 +123,7 @@ class TickRecord(NamedTuple):
     pump_delivered_ml_h: float
     supervisor: SupervisorOutput
     schedule: Schedule
+    controller_error: str | None = None
 
     @property
     def command_ml_h(self) -> float:
@@ -147,6 +163,7 @@ class ClosedLoopCore:
         self._latest_delivered_ml_h = 0.0  # the pump's latest delivered rate; 0 before any status
         self._fresh_s = -math.inf  # when the last sample without QUALITY_HELD was received (s)
         self._age_limit_s = supervisor.config.stale_after_s
+        self._stop_on_error = supervisor.config.controller_faults == "stop"
 
     def sample_age_s(self, quality: int, now_s: float, link_age_s: float) -> float:
         """The age (s) of this tick's sample: since its receipt, or for a ``QUALITY_HELD`` one since
@@ -218,8 +235,15 @@ class ClosedLoopCore:
                 if raw.__class__ is not float:  # numpy scalars, ints; a str or None is an error
                     raw = float(raw)
             except Exception as exc:
-                raise ControllerError(
-                    _controller_failed(self.controller, inp.tick, now_s, exc)
-                ) from exc
+                error = _controller_failed(self.controller, inp.tick, now_s, repr(exc))
+                if self._stop_on_error:
+                    raise ControllerError(error) from exc
+                out = sup.finalize(None, failed=True)
+                return TickRecord(inp, math.nan, delivered, out, sched, error)
         out = sup.finalize(raw)
-        return TickRecord(inp, math.nan if raw is None else raw, delivered, out, sched)
+        if raw is None:
+            return TickRecord(inp, math.nan, delivered, out, sched)
+        if not self._stop_on_error and not -math.inf < raw < math.inf:  # nan fails it too
+            error = _controller_failed(self.controller, inp.tick, now_s, f"returned {raw!r}")
+            return TickRecord(inp, raw, delivered, out, sched, error)
+        return TickRecord(inp, raw, delivered, out, sched)

@@ -49,12 +49,13 @@ from link import (
     TickInputs,
 )
 from runtime.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
-from runtime.core import ClosedLoopCore, LinkHealth, TickRecord
+from runtime.core import ClosedLoopCore, LinkHealth
 from runtime.estimation.schedule import ScheduleSource
+from runtime.events import EventLog
 from runtime.interrupt import signal_name, stop_requested
 from runtime.recorder import Recorder
 from runtime.supervisor import Supervisor
-from runtime.supervisor_config import State, fault_names
+from runtime.supervisor_config import State
 from runtime.timing import TimingStats
 from runtime.trajectory import LoopResult, Trajectory
 
@@ -89,6 +90,11 @@ class Loop:
     schedule
         The scheduling source the core steps the controller on
         (:func:`runtime.estimation.schedule.make_schedule`); default the oracle.
+    prog
+        Program name in front of the controller-fault lines on stderr (:mod:`runtime.events`).
+    ack_input
+        Whether the clinician can acknowledge (``pressor run --target-stdin`` or
+        ``--target-file``): what those lines say ends a controller fault's hold.
     """
 
     def __init__(
@@ -101,6 +107,8 @@ class Loop:
         history_ticks: int | None = None,
         on_tick: Any = None,
         schedule: ScheduleSource | None = None,
+        prog: str = "pressor",
+        ack_input: bool = False,
     ) -> None:
         self.core = ClosedLoopCore(controller, supervisor, schedule)
         self.sup = supervisor
@@ -116,7 +124,7 @@ class Loop:
         self.on_tick = on_tick
         self.heartbeat_every = max(1, int(heartbeat_every))
         self.ticks_in_state = [0] * len(State)
-        self.transitions: list[dict[str, Any]] = []
+        self.events = EventLog(recorder, prog, ack_input=ack_input)
         self.out_of_range = 0
         self._count = 0
         self._wall0 = perf_counter_s()
@@ -164,7 +172,7 @@ class Loop:
         self.ticks_in_state[state] += 1
         map_rec = inp.map_mmhg if send else _NAN
         self.trajectory.append(rec, map_rec)
-        self._log_events(rec)
+        self.events.log(rec)
         if self.recorder is not None:
             c = ep.counters
             bad = c.bad_crc + c.refused_unsigned + c.refused_bad_signature + c.resyncs
@@ -172,35 +180,6 @@ class Loop:
         if self.on_tick is not None:
             self.on_tick(inp.tick, int(state), int(out.faults), command)
         return command
-
-    def _log_events(self, rec: TickRecord) -> None:
-        """Keep state transitions; log them and rising advisory faults to the recording."""
-        inp, out = rec.inputs, rec.supervisor
-        if out.transition is not None:
-            old, new, faults = out.transition
-            event = {
-                "tick": inp.tick,
-                "sim_time_s": inp.sim_time_s,
-                "from": old.name,
-                "to": new.name,
-                "faults": fault_names(faults),
-            }
-            self.transitions.append(event)
-            if self.recorder is not None:
-                self.recorder.event(
-                    inp.tick,
-                    inp.sim_time_s,
-                    f"{old.name} -> {new.name}: {', '.join(event['faults']) or 'inputs good'}",
-                    warn=new in (State.HOLD, State.FAILSAFE),
-                    state=int(new),
-                )
-        elif out.new_faults and self.recorder is not None:  # advisory faults: no transition
-            self.recorder.event(
-                inp.tick,
-                inp.sim_time_s,
-                f"{out.state.name}: advisory {', '.join(fault_names(out.new_faults))}",
-                warn=False,
-            )
 
     def _link_errors(self) -> int:
         """Frames the link layer discarded since the previous tick."""
@@ -383,7 +362,8 @@ class Loop:
             link=self.ep.counters.as_dict(),
             detections=dict(self.sup.detections),
             ticks_in_state={s.name: self.ticks_in_state[s] for s in State},
-            transitions=list(self.transitions),
+            transitions=list(self.events.transitions),
+            controller_faults=list(self.events.controller_faults),
             commands_out_of_range=self.out_of_range,
             ended=ended,
             wall_s=perf_counter_s() - self._wall0,

@@ -163,6 +163,9 @@ def run_runtime(
                 sched_action=config.sched_faults,
                 stale_after_s=config.sample_age_limit_s,
                 dose_limits=clinician.dose_limits,  # pressor run: the drug library's
+                # pressor run (a patient on the line) holds on a controller fault until the
+                # clinician acknowledges; pressor sil stops with exit 1 (runtime.supervisor)
+                controller_faults="latch" if config.clinician is not None else "stop",
             )
         )
         if config.rrd is not None:
@@ -187,6 +190,8 @@ def run_runtime(
             "heartbeat_every": round(config.rate_hz),
             "on_tick": on_tick,
             "schedule": make_schedule(config.schedule, period_s),
+            "prog": "pressor run" if config.clinician is not None else "pressor sil",
+            "ack_input": clinician.target_stdin or clinician.target_file is not None,
         }
         target = None
         if clinician.target_mmhg is None:
@@ -258,7 +263,9 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
     """Run a runtime command with its exit codes.
 
     0 success; 1 the run completed but a check failed, or the device stalled or the link failed,
-    or the controller raised (:class:`runtime.core.ControllerError`) (one line on stderr); 2 bad usage or input (:func:`contracts.usage.run_command`), or the
+    or the controller raised under ``pressor sil`` (:class:`runtime.core.ControllerError`; ``pressor
+    run`` holds instead, :mod:`runtime.supervisor`) (one line on stderr); 2 bad usage or input
+    (:func:`contracts.usage.run_command`), or the
     device's hello refused (:class:`link.Refusal`: one line, the device was told); 130 / 143
     stopped by SIGINT / SIGTERM (:mod:`runtime.interrupt`: the run stops at a tick boundary,
     commands the safe rate, and keeps its outputs).

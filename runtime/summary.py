@@ -126,6 +126,9 @@ def build_summary(
         extra["faults"] = faults
     if result.stop_signal is not None:
         extra["interrupted"] = True
+    # controller failures the supervisor held on (pressor run), only when there were some: the
+    # summaries of other runs keep their bytes
+    held = {"controller_faults": result.controller_faults} if result.controller_faults else {}
     return {
         **extra,
         "commands_out_of_range": result.commands_out_of_range,
@@ -137,6 +140,7 @@ def build_summary(
             "detections": result.detections,
             "ticks_in_state": result.ticks_in_state,
             "transitions": result.transitions[:100],
+            **held,
         },
         "link_errors": {
             k: link[k]
@@ -266,7 +270,9 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
     -------
     int
         128 + the signal number when a signal stopped the run (one line on stderr,
-        :mod:`runtime.interrupt`); else 1 if a command left [0, max] (a check failed), else 0.
+        :mod:`runtime.interrupt`); else 1 if a command left [0, max] or the controller failed
+        (``pressor run``: the supervisor held on it, ``supervisor.controller_faults``; a check
+        failed), else 0.
     """
     print_summary(summary, result.timing)
     if result.host:
@@ -295,4 +301,11 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
             file=sys.stderr,
         )
         return exit_code(result.stop_signal)
-    return 1 if summary["metrics"].get("commands_out_of_range") else 0
+    failed = summary["supervisor"].get("controller_faults")
+    if failed:
+        print(
+            f"{prog}: the controller failed {len(failed)} time(s), first at tick"
+            f" {failed[0]['tick']}: {failed[0]['error']}",
+            file=sys.stderr,
+        )
+    return 1 if summary["metrics"].get("commands_out_of_range") or failed else 0

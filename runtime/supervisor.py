@@ -7,6 +7,7 @@ same input sequence gives the same output sequence, byte for byte. The closed-lo
     run_controller = sup.assess(SupervisorInput(now_s, map_mmhg, ...))   # every field given
     raw = controller.step(...) if run_controller else None
     out = sup.finalize(raw)       # SupervisorOutput; out.command_ml_h finite, in [0, max_rate_ml_h]
+    out = sup.finalize(None, failed=True)   # instead, when the step raised (controller_faults="latch")
 
 With ``config.dose_limits`` (``pressor run``: the drug library) the last step of every tick cuts
 the command to the hard and hourly dose maxima and flags the soft one (:mod:`runtime.dose_guard`).
@@ -32,9 +33,26 @@ RECOVERING
     ``reentry_step_ml_h`` per tick (bumpless transfer); when the two meet the state is AUTO. A new
     fault → HOLD.
 
-Nothing latches: a HOLD or FAILSAFE lasts exactly as long as a fault persists, plus
+Input faults do not latch: a HOLD or FAILSAFE lasts exactly as long as a fault persists, plus
 ``recover_after_s`` (or until the acknowledgement). What clears each fault, and so ends the state:
 docs/PROTOCOL.md, "Alarms"; the acknowledgement rule: :mod:`runtime.supervisor_io`.
+
+Controller faults (``config.controller_faults``). With ``"stop"`` (``pressor sil``, ``trial``, the
+API and the Gymnasium environment) a controller that raises ends the run (the core raises
+:class:`runtime.core.ControllerError`: a researcher sees the bug) and a non-finite command is
+``COMMAND_INVALID``: HOLD, re-entry once the inputs have been good for ``recover_after_s``. With
+``"latch"`` (``pressor run``: a patient on the line) a step that raises or returns a non-number
+(``CONTROLLER_FAULT``, via ``finalize(None, failed=True)``) and a non-finite command
+(``COMMAND_INVALID``) both HOLD the last command, raise the alarm and *stay* (HOLD, then FAILSAFE
+after ``hold_max_s`` like any lasting fault) until the clinician acknowledges. Why: an input
+fault ends when the input is good again, which the supervisor can see; nothing the supervisor
+sees tells that a controller which crashed or produced garbage is sound again (its internal state
+is unknown), and stepping it to find out would put its next output on the pump unattended. The
+acknowledgement is the clinician's decision to try it again: accepted (when no other holding
+fault persists) it clears the latch, moves to RECOVERING and the controller is stepped again as
+it is (not reset: its integrator carries the dose the patient is on), its command reached by the
+bumpless slew; a further failure latches again. Without an acknowledgement input (``pressor
+run`` without ``--target-stdin`` or ``--target-file``) the latch lasts for the rest of the run.
 
 The fault kinds, their detection bounds and the configuration are in
 :mod:`runtime.supervisor_config`.
@@ -134,6 +152,8 @@ class Supervisor:
         self._out_of_box_since_s: float | None = None
         self._ack_requested = False
         self.last_ack: AckOutcome | None = None
+        self._latched = 0  # controller faults kept until acknowledged (controller_faults="latch")
+        self._latch = cfg.controller_faults == "latch"
         limits = cfg.dose_limits
         #: the drug library's limits on the final command (None: no library)
         self.dose_guard = None if limits is None else DoseGuard(limits, cfg.sample_period_s)
@@ -260,6 +280,7 @@ class Supervisor:
         faults |= self._check_pump(now_s, inp.pump_delivered_ml_h, inp.pump_alarms)
         if inp.estimated:
             faults |= self._check_estimate(now_s, inp)
+        faults |= self._latched
         self.faults = faults
         state = self.state
         if faults & self._holding_faults:
@@ -286,26 +307,34 @@ class Supervisor:
         self.last_ack = None
         if self._ack_requested:
             self._ack_requested = False
-            self.last_ack = judge_ack(state, faults & self._holding_faults)
+            latched = self._latched
+            self.last_ack = judge_ack(state, faults & self._holding_faults & ~latched, latched)
             if self.last_ack.accepted:
                 state = State.RECOVERING
+                self._latched = 0
+                self.faults = faults & ~latched
         self.state = state
         self._run_controller = state in (State.AUTO, State.RECOVERING)
         return self._run_controller
 
-    def finalize(self, raw_command_ml_h: float | None) -> SupervisorOutput:
+    def finalize(self, raw_command_ml_h: float | None, failed: bool = False) -> SupervisorOutput:
         """Turn the controller's command (``None`` if it did not run) into the pump command.
 
-        The output's ``command_ml_h`` is finite and in [0, max_rate_ml_h] on every path.
+        ``failed``: the controller was stepped and raised, or returned something that is not a
+        number (``CONTROLLER_FAULT``; see the module docstring). The output's ``command_ml_h`` is
+        finite and in [0, max_rate_ml_h] on every path.
         """
         cfg = self.config
         high = cfg.max_rate_ml_h
         previous = self.command_ml_h
         state = self.state
         if self._run_controller:
-            raw = math.nan if raw_command_ml_h is None else raw_command_ml_h
+            raw = math.nan if raw_command_ml_h is None or failed else raw_command_ml_h
             if not math.isfinite(raw):
-                self.faults |= Fault.COMMAND_INVALID
+                bit = Fault.CONTROLLER_FAULT if failed else Fault.COMMAND_INVALID
+                self.faults |= bit
+                if self._latch:
+                    self._latched |= int(bit)  # a plain int: it joins every tick's faults
                 self._good_since_s = None
                 self._fault_since_s = self._now_s
                 state = State.HOLD

@@ -1,7 +1,7 @@
 """What the safety supervisor checks and with which limits: states, fault kinds, configuration.
 
 The state machine itself is :mod:`runtime.supervisor`; this module holds what it is configured
-with and what ``pressor faults`` prints.
+with; what ``pressor faults`` prints of it is :mod:`runtime.supervisor_bounds`.
 
 Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults):
 
@@ -28,6 +28,11 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
   rate itself (docs/INTERFACES.md), so that leaving the design envelope is reported, not fought;
 - ``TARGET_INVALID`` the MAP target is non-finite or outside the plausible MAP range;
 - ``COMMAND_INVALID`` the controller returned a non-finite command (held, → HOLD);
+- ``CONTROLLER_FAULT`` (``controller_faults="latch"``, ``pressor run``) the controller raised in
+  ``step`` or returned something ``float()`` refuses (held, → HOLD); with ``"stop"`` (``pressor
+  sil``, ``trial``) the core ends the run instead (:class:`runtime.core.ControllerError`). Under
+  ``"latch"`` this and ``COMMAND_INVALID`` hold until the clinician's acknowledgement
+  (:mod:`runtime.supervisor_io`);
 - ``COMMAND_CLAMPED`` the controller returned a command outside [0, max] (clamped; an alarm, not a
   state change);
 - ``LINK_ERRORS`` the link layer discarded something since the last tick (bad CRC, junk bytes,
@@ -72,7 +77,6 @@ from contracts.faults import (
 )
 from runtime.dose_guard import DOSE_HARD_LIMIT, DOSE_HOUR_LIMIT, DOSE_SOFT_LIMIT
 from runtime.drug_library import DoseLimits
-from runtime.flatline import stuck_samples
 
 
 class State(IntEnum):
@@ -110,11 +114,19 @@ class Fault(IntFlag):
     DOSE_HARD_LIMIT = DOSE_HARD_LIMIT
     DOSE_SOFT_LIMIT = DOSE_SOFT_LIMIT
     DOSE_HOUR_LIMIT = DOSE_HOUR_LIMIT
+    CONTROLLER_FAULT = 1 << 21
 
 
 #: the drug library's faults (advisory: the command is cut, the state unchanged)
 DOSE_FAULTS = Fault.DOSE_HARD_LIMIT | Fault.DOSE_SOFT_LIMIT | Fault.DOSE_HOUR_LIMIT
 
+
+#: the controller's own faults: what ``controller_faults="latch"`` keeps until acknowledged
+CONTROLLER_FAULTS = Fault.CONTROLLER_FAULT | Fault.COMMAND_INVALID
+#: what the supervisor does with a controller fault: "stop" (the core ends the run on an
+#: exception; a non-finite command holds until inputs are good for recover_after_s) or "latch"
+#: (``pressor run``: both hold until the clinician acknowledges)
+CONTROLLER_FAULT_ACTIONS = ("stop", "latch")
 
 #: faults that never change the state (the command is clamped and the event logged)
 ADVISORY = (
@@ -184,6 +196,7 @@ class SupervisorConfig:
     pump_mismatch_rel: float = 0.05
     estimate_box_s: float = 60.0
     dose_limits: DoseLimits | None = None
+    controller_faults: str = "stop"
 
     def __post_init__(self) -> None:
         def need(name: str, ok: bool, allowed: str) -> None:
@@ -223,6 +236,11 @@ class SupervisorConfig:
         need("pump_mismatch_abs_ml_h", self.pump_mismatch_abs_ml_h > 0.0, "> 0 ml/h")
         need("pump_mismatch_rel", 0.0 <= self.pump_mismatch_rel <= 1.0, "[0, 1]")
         need("estimate_box_s", self.estimate_box_s >= 0.0, ">= 0 s")
+        need(
+            "controller_faults",
+            self.controller_faults in CONTROLLER_FAULT_ACTIONS,
+            " or ".join(repr(a) for a in CONTROLLER_FAULT_ACTIONS),
+        )
         if self.sched_box is not None:
             need(
                 "sched_box",
@@ -235,104 +253,6 @@ class SupervisorConfig:
                 len(self.sched_rate_bounds) == 3 and all(b > 0 for b in self.sched_rate_bounds),
                 "three positive rates for K (1/s·mmHg/(ml/h)), T (s/s), tau (s/s)",
             )
-
-
-def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
-    """Each detectable fault kind with its detection rule and bound under ``cfg`` (for ``pressor faults``)."""
-    ts = cfg.sample_period_s
-    box = (
-        "not checked (controller not scheduled)"
-        if cfg.sched_box is None
-        else f"K, T, tau outside {cfg.sched_box}; same tick"
-    )
-    rates = (
-        "not checked"
-        if cfg.sched_rate_bounds is None
-        else f"|drho/dt| > {cfg.sched_rate_tolerance} x {cfg.sched_rate_bounds}; same tick"
-    )
-    return [
-        ("MAP_NAN", f"non-finite MAP sample; same tick ({ts} s)"),
-        (
-            "MAP_RANGE",
-            f"MAP outside [{cfg.map_min_mmhg}, {cfg.map_max_mmhg}] mmHg (line disconnect, flush);"
-            " same tick",
-        ),
-        ("MAP_SPIKE", f"|MAP step| > {cfg.spike_mmhg} mmHg between samples; same tick"),
-        (
-            "MAP_FLATLINE",
-            "new samples stuck within +/-max("
-            f"{cfg.flatline_eps_mmhg} mmHg, quantum/2) for n samples and {cfg.flatline_s} s at"
-            " least (n sized for a 1e-9 false alarm: "
-            f"{stuck_samples(1.0, 1.0, cfg.flatline_eps_mmhg):.0f} at noise 1 mmHg, quantum 1"
-            " mmHg), or their mean squared step below"
-            f" 2 x ({cfg.flatline_ratio} x noise)^2 over {cfg.flatline_window} samples and"
-            f" {cfg.flatline_s} s (noise >= quantum); only when the device announces noise > 0",
-        ),
-        ("SENSOR_QUALITY", "monitor flags the sample (quality bits but HELD); same tick"),
-        (
-            "STALE_SAMPLE",
-            f"sample older than {cfg.stale_after_s} s (a HELD repeat ages from the last new one)",
-        ),
-        ("LINK_LOSS", f"no frame for {cfg.link_loss_after_s} s -> FAILSAFE at once"),
-        ("SCHED_INVALID", "scheduling marked invalid or non-finite; same tick"),
-        ("SCHED_OUT_OF_BOX", box),
-        ("SCHED_RATE", rates),
-        (
-            "sched action",
-            "SCHED_OUT_OF_BOX / SCHED_RATE "
-            + (
-                "advisory: flagged and logged, the controller clamps/rate-limits itself"
-                if cfg.sched_action == "advise"
-                else "hold like any other fault"
-            ),
-        ),
-        ("TARGET_INVALID", "target non-finite or outside the MAP range; same tick"),
-        ("COMMAND_INVALID", "controller returned a non-finite command; same tick, held"),
-        ("COMMAND_CLAMPED", f"controller command outside [0, {cfg.max_rate_ml_h}] ml/h; clamped"),
-        (
-            "LINK_ERRORS",
-            "bad CRC / junk / sequence gap / incomplete tick / refused signature since the last"
-            " tick; same tick; advisory (bad frames are discarded, lost ticks resent)",
-        ),
-        (
-            "PUMP_ALARM",
-            "pump status reports occlusion, empty reservoir or pump watchdog; the tick the status"
-            " arrives (1 tick after the cause)",
-        ),
-        (
-            "PUMP_MISMATCH",
-            f"|delivered - command| > max({cfg.pump_mismatch_abs_ml_h} ml/h,"
-            f" {cfg.pump_mismatch_rel:g} x command) for {cfg.pump_mismatch_s} s",
-        ),
-        (
-            "ESTIMATOR_FALLBACK",
-            "--schedule estimated: the estimator's health check rejected its estimate (diverged,"
-            " non-finite, K or T implausible); scheduling falls back to the prior (nominal"
-            " patient), the loop keeps running; advisory, alarm; same tick",
-        ),
-        (
-            "ESTIMATE_OUT_OF_BOX",
-            "--schedule estimated: the estimate outside the design box for"
-            f" {cfg.estimate_box_s:g} s; advisory alarm (the controller clamps)"
-            + ("" if cfg.sched_box is not None else "; not checked (controller not scheduled)"),
-        ),
-        (
-            "DOSE_*",
-            "pressor run, drug library (docs/DRUGS.md): final command cut to the hard (HARD) or"
-            " hourly (HOUR) dose maximum, or above the soft one (SOFT); advisory alarm; same tick",
-        ),
-        (
-            "reaction",
-            f"HOLD last command (alarm); FAILSAFE after {cfg.hold_max_s} s, ramping"
-            f" {cfg.failsafe_ramp_ml_h_per_s} ml/h/s to "
-            + ("the held rate" if cfg.safe_rate_ml_h is None else f"{cfg.safe_rate_ml_h} ml/h"),
-        ),
-        (
-            "re-entry",
-            f"inputs good for {cfg.recover_after_s} s -> RECOVERING, command slews"
-            f" <= {cfg.reentry_step_ml_h} ml/h per tick to the controller's, then AUTO",
-        ),
-    ]
 
 
 def sched_limits_of(controller: Controller) -> tuple[Any, Any]:

@@ -13,7 +13,11 @@ it is accepted only when that tick has no fault that holds the loop (advisory fa
 count), and then moves HOLD or FAILSAFE to RECOVERING at once, so the command slews back to the
 controller's (bumpless) and the state reaches AUTO; while a fault persists it is refused naming the
 faults, and the state is unchanged. In STARTUP, AUTO and RECOVERING there is nothing to
-acknowledge. :func:`judge_ack` is the rule; :class:`AckOutcome` what the loop logs.
+acknowledge. A latched controller fault (``controller_faults="latch"``, ``pressor run``:
+``CONTROLLER_FAULT``, ``COMMAND_INVALID``) is the one fault the acknowledgement itself clears: the
+clinician, not an input turning good, decides that the controller may run again
+(:mod:`runtime.supervisor`, "Controller faults"); it is accepted when no *other* holding fault
+persists. :func:`judge_ack` is the rule; :class:`AckOutcome` what the loop logs.
 """
 
 from __future__ import annotations
@@ -125,9 +129,11 @@ class AckOutcome(NamedTuple):
     text: str
 
 
-def judge_ack(state: State, holding_faults: int) -> AckOutcome:
+def judge_ack(state: State, holding_faults: int, latched: int = 0) -> AckOutcome:
     """Judge an acknowledgement taken at a tick whose state is ``state`` (after the tick's own
-    transitions) and whose holding fault bits are ``holding_faults`` (see the module docstring).
+    transitions) and whose holding fault bits are ``holding_faults`` (the latched controller
+    faults ``latched`` left out: an accepted acknowledgement clears them; see the module
+    docstring).
     """
     if state not in (State.HOLD, State.FAILSAFE):
         return AckOutcome(False, state, 0, f"ignored: nothing to acknowledge in {state.name}")
@@ -136,4 +142,7 @@ def judge_ack(state: State, holding_faults: int) -> AckOutcome:
         return AckOutcome(
             False, state, holding_faults, f"refused: {state.name}, fault persists: {persists}"
         )
-    return AckOutcome(True, state, 0, f"{state.name} -> RECOVERING, resuming automatic control")
+    text = f"{state.name} -> RECOVERING, resuming automatic control"
+    if latched:
+        text += f" ({', '.join(fault_names(latched))} acknowledged)"
+    return AckOutcome(True, state, 0, text)

@@ -122,3 +122,5 @@ class LoopResult:
     host: dict[str, Any] = field(default_factory=dict)
     #: the signal that stopped the run early (:mod:`runtime.interrupt`), else None
     stop_signal: int | None = None
+    #: controller failures the supervisor held on (``pressor run``; :mod:`runtime.events`)
+    controller_faults: list[dict[str, Any]] = field(default_factory=list)

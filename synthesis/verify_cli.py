@@ -1,4 +1,4 @@
-"""``pressor verify [ARTIFACT] [--json FILE] [--density N] [--p-dependence affine|constant]``.
+"""``pressor verify [ARTIFACT | --controller SPEC] [--json FILE] [--density N] [--p-dependence ...]``.
 
 Runs :func:`synthesis.verify.verify_artifact` on ARTIFACT (default: the shipped
 ``synthesis/data/default_design.npz``), prints progress on stderr (one line per stage and per
@@ -8,6 +8,13 @@ metric names of docs/METRICS.md; ``smith`` is the scheduled Smith predictor, lam
 ``artifact.controller`` the artifact's family, :mod:`synthesis.family`). Exit codes:
 0 every check passed, 1 a check failed, 2 bad input (a missing, unreadable or corrupt artifact, a
 bad option value) with one line naming it.
+
+``--controller SPEC`` checks a plugin controller instead of an artifact
+(:mod:`synthesis.verify_plugin`): its nominal step beside the PI and the Smith predictor, and the
+line ``certificate: not applicable (plugin controller)...``; exit 0 when the step is stable and
+settles, 1 when it does not (or the plugin raised, or returned a non-finite command), 2 when the
+spec names no loadable plugin. ``synthesis`` does not import the runtime's loader: the ``pressor``
+front door (:mod:`pressor.verify`) passes it in as ``load_plugin``.
 """
 
 from __future__ import annotations
@@ -15,13 +22,16 @@ from __future__ import annotations
 import json
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from contracts.usage import UsageError, UsageParser, run_command
 from synthesis.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 DEFAULT_ARTIFACT = Path(__file__).resolve().parent / "data" / "default_design.npz"
+#: the loop period (s) a plugin is loaded at: the runtime's default 10 Hz
+PLUGIN_PERIOD_S = 0.1
 
 
 def _parser(command: str) -> UsageParser:
@@ -31,7 +41,19 @@ def _parser(command: str) -> UsageParser:
         "synthesis grid: analysis LMI, frozen delay-system stability, nominal step vs PI and "
         "Smith predictor.",
     )
-    p.add_argument("artifact", nargs="?", default=str(DEFAULT_ARTIFACT), help="artifact .npz")
+    p.add_argument(
+        "artifact",
+        nargs="?",
+        default=None,
+        help=f"artifact .npz (default: the shipped design, {DEFAULT_ARTIFACT.name})",
+    )
+    p.add_argument(
+        "--controller",
+        metavar="SPEC",
+        help="check a plugin controller (MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS], an entry"
+        " point NAME[:ARGS]) instead of an artifact: its nominal step only, no certificate"
+        " (default: none, the artifact's checks)",
+    )
     p.add_argument(
         "--json", metavar="FILE", help="write the full report as JSON to FILE (default: none)"
     )
@@ -65,16 +87,25 @@ def _fmt(value: object, unit: str = "") -> str:
     return f"{value}{unit}"
 
 
-def main(command: str, argv: list[str]) -> int:
-    """Entry point used by the ``pressor`` dispatcher; returns the exit code."""
-    return run_command(f"pressor {command}", lambda args: _verify(command, args), argv)
+#: resolves a plugin spec at a loop period (s) to a controller; raises ValueError naming the spec
+PluginLoader = Callable[[str, float], Any]
 
 
-def _verify(command: str, argv: Sequence[str]) -> int:
+def main(command: str, argv: list[str], load_plugin: PluginLoader | None = None) -> int:
+    """Entry point (the ``pressor`` front door, :mod:`pressor.verify`, gives ``load_plugin``);
+    returns the exit code."""
+    return run_command(f"pressor {command}", lambda args: _verify(command, args, load_plugin), argv)
+
+
+def _verify(command: str, argv: Sequence[str], load_plugin: PluginLoader | None) -> int:
     from synthesis.blas_threads import single_blas_thread
 
     single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
     args = _parser(command).parse_args(argv)
+    if args.controller is not None:
+        return _verify_plugin(args, load_plugin)
+    if args.artifact is None:
+        args.artifact = str(DEFAULT_ARTIFACT)
     if args.density < 2 or args.density > 16:
         raise UsageError(f"--density {args.density} outside the allowed range 2..16")
     try:
@@ -84,10 +115,7 @@ def _verify(command: str, argv: Sequence[str]) -> int:
     path = Path(args.artifact)
     if not path.is_file():
         raise UsageError(f"artifact {path}: file not found")
-    if args.json:
-        out_dir = Path(args.json).resolve().parent
-        if not out_dir.is_dir():
-            raise UsageError(f"--json {args.json}: directory {out_dir} does not exist")
+    _check_json_dir(args.json)
 
     from synthesis.artifact import ArtifactError, load_artifact
     from synthesis.verify import verify_artifact
@@ -145,9 +173,67 @@ def _verify(command: str, argv: Sequence[str]) -> int:
         f"{'yes' if claim.get('settles_before_smith') else 'no'}"
     )
     print(f"verification {ok[report.passed]}")
-    if args.json:
-        try:
-            Path(args.json).write_text(json.dumps(d, indent=2) + "\n")
-        except OSError as exc:
-            raise UsageError(f"--json {args.json}: cannot write ({exc})") from None
+    _write_json(args.json, d)
     return 0 if report.passed else 1
+
+
+def _verify_plugin(args: Any, load_plugin: PluginLoader | None) -> int:
+    """``--controller SPEC``: the plugin's nominal step (:mod:`synthesis.verify_plugin`)."""
+    if args.artifact is not None:
+        raise UsageError(
+            f"--controller {args.controller!r} and artifact {args.artifact}: give one (a plugin"
+            " has no artifact)"
+        )
+    if load_plugin is None:
+        raise UsageError("--controller needs the runtime's plugin loader: run it as pressor verify")
+    _check_json_dir(args.json)
+    from synthesis.step_response import NOMINAL_STEP_MMHG
+    from synthesis.verify_plugin import verify_plugin_step
+
+    try:
+        controller = load_plugin(args.controller, PLUGIN_PERIOD_S)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    d = verify_plugin_step(controller, args.controller)
+    ctl, step = d["controller"], d["nominal_step"]
+    print(
+        f"verifying plugin controller {ctl['spec']} (class {ctl['class']}, Ts"
+        f" {ctl['sample_period_s']:g} s, max rate {ctl['max_rate_ml_h']:g} ml/h)",
+        flush=True,
+    )
+    print(f"certificate: {d['certificate']['text']}")
+    rho = step["rho"]
+    print(
+        f"(c) nominal step: +{NOMINAL_STEP_MMHG:g} mmHg from {step['baseline_mmhg']:g} mmHg,"
+        f" K {rho[0]:g}, T {rho[1]:g} s, tau {rho[2]:g} s, horizon {step['horizon_s']:g} s"
+    )
+    for name in ("plugin", "pi", "smith"):
+        m = step[name]
+        if "error" in m:
+            print(f"(c) nominal step {name.upper():6s} FAIL: {m['error']}")
+            continue
+        clamped = f", clamped {m['commands_clamped']} ticks" if name == "plugin" else ""
+        print(
+            f"(c) nominal step {name.upper():6s} overshoot {_fmt(m['overshoot_pct'], ' %')}, "
+            f"rise {_fmt(m['rise_time_s'], ' s')}, settling {_fmt(m['settling_time_s'], ' s')}, "
+            f"max rate {_fmt(m['max_rate_ml_h'], ' ml/h')}{clamped}"
+        )
+    ok = {True: "PASS", False: "FAIL"}
+    print(f"verification {ok[d['passed']]} (nominal step only; no certificate)")
+    _write_json(args.json, d)
+    return 0 if d["passed"] else 1
+
+
+def _check_json_dir(path: str | None) -> None:
+    if path:
+        out_dir = Path(path).resolve().parent
+        if not out_dir.is_dir():
+            raise UsageError(f"--json {path}: directory {out_dir} does not exist")
+
+
+def _write_json(path: str | None, d: dict[str, Any]) -> None:
+    if path:
+        try:
+            Path(path).write_text(json.dumps(d, indent=2) + "\n")
+        except OSError as exc:
+            raise UsageError(f"--json {path}: cannot write ({exc})") from None

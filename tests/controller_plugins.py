@@ -86,3 +86,23 @@ class TwoArgStep(PlainPI):
 class HugeMax(PlainPI):
     def __init__(self, sample_period_s: float = 0.1) -> None:
         super().__init__(sample_period_s, max_rate_ml_h=1e9)
+
+
+class FailsAt(PlainPI):
+    """The plain PI until its ``at``-th step, which raises (``how="raise"``), returns NaN
+    (``"nan"``) or returns ``None`` (``"none"``, a value ``float()`` refuses); every later step
+    fails too unless ``once``."""
+
+    def __init__(
+        self, sample_period_s: float = 0.1, at: int = 50, how: str = "raise", once: bool = False
+    ) -> None:
+        super().__init__(sample_period_s, kp=2.0, ki=0.02)
+        self.at, self.how, self.once, self.n = at, how, once, 0
+
+    def step(self, map_mmhg: float, target_mmhg: float, K: float, T: float, tau: float) -> float:
+        self.n += 1
+        if self.n < self.at or (self.once and self.n > self.at):
+            return super().step(map_mmhg, target_mmhg, K, T, tau)
+        if self.how == "raise":
+            raise ZeroDivisionError("plugin bug")
+        return float("nan") if self.how == "nan" else None  # type: ignore[return-value]
