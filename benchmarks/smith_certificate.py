@@ -3,9 +3,10 @@
 Builds the scheduled Smith predictor (:class:`synthesis.smith_lpv.SmithLPV`) at every point of a
 grid over the shipped design's box, closes it with the shipped plant model and weights (so γ
 compares with the shipped design's, :func:`synthesis.smith_design.smith_loops`), and runs the
-design's own certificate, :func:`synthesis.smith_design.certify_smith` (the Wirtinger analysis LMI
-conditioned by the nominal point's frozen certificate), with all rate vertices or one LMI per
-point. Prints the certificate verdict, γ, the smallest re-checked margin, wall and CPU time and
+design's own certificate (the Wirtinger analysis LMI conditioned by the nominal point's frozen
+certificate) through the research entry :func:`synthesis.research.certify_smith_form`, which takes
+the formulation options the shipped :func:`synthesis.smith_design.certify_smith` does not: all rate
+vertices or one LMI per point, working set, coupling, parameters of P, coordinates. Prints the certificate verdict, γ, the smallest re-checked margin, wall and CPU time and
 peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
 
     python benchmarks/smith_certificate.py --loop-gain 2 --grid 3,3,3 [--p-dependence quadratic]
@@ -14,7 +15,7 @@ peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
 ``--working-set K`` imposes the LMI at K spread points and re-checks every point and rate vertex
 (the verdict covers the whole grid either way); ``--gamma-cap G`` solves the feasibility form (γ ≤ G,
 largest common margin), whose solution is off the boundary of the points left out; it uses the
-Clarabel settings of ``certify_smith``'s feasibility solve (``FEASIBILITY_SOLVER_OPTIONS``: looser
+Clarabel settings of the shipped feasibility solve (``FEASIBILITY_SOLVER_OPTIONS``: looser
 gap tolerances, no iterative refinement), so its margin t and timings can differ slightly from
 capped figures measured before that (the verdict is the floating-point re-check either way).
 ``--rate-form bound`` is the cheap form (one LMI per point with rate slacks; ``--epsilon 5e-5``
@@ -64,7 +65,8 @@ def main() -> None:
     sys.modules.pop("synthesis", None)
     from synthesis.artifact import default_artifact_path, load_artifact
     from synthesis.reconstruct import scaling_of
-    from synthesis.smith_design import certify_smith, nominal_centre, smith_loops
+    from synthesis.research import certify_smith_form
+    from synthesis.smith_design import nominal_centre, smith_loops
     from synthesis.smith_lpv import SmithLPV
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -142,7 +144,7 @@ def main() -> None:
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     law = SmithLPV(args.loop_gain, model.omega, model.lambda_)
     t0, cpu0 = time.perf_counter(), time.process_time()
-    res = certify_smith(
+    res = certify_smith_form(
         smith_loops(law, model, pts),
         pts,
         nominal_centre(law, model),

@@ -4,18 +4,18 @@ Each case runs in its own subprocess (so peak memory is its own ``ru_maxrss``), 
 run so machine load is comparable. Prints wall time, peak RSS and the outcome of each case, and the
 ratio of the straightforward formulation to the one ``pressor synth`` / ``pressor verify`` use.
 The cases follow the controller family of the config (synth) and of the artifact (verify),
-:mod:`synthesis.family`:
+:mod:`synthesis.family`, and come from the research entry :mod:`synthesis.research`:
 
-* "smith" (the shipped default): synth is :func:`synthesis.smith_design.design_smith`, the
-  Wirtinger analysis on the design grid in the rate-bound form (one LMI per point, one solve at
-  the strictness ``DESIGN_EPSILON``), vs the same analysis with every rate / delay-ratio vertex as
-  its own LMI (``rate_form="vertex"``); verify is :func:`synthesis.verify.verify_artifact` (one
-  capped solve over the dense grid, rate-bound form) vs the same with every vertex as its own LMI
-  (``all_points_at_once``);
-* "theorem3": synth is the batched sparse formulation (:func:`synthesis.lmi_solve.solve`) vs the
-  naive per-point cvxpy formulation (:mod:`synthesis.lmi_naive`), on the design's grid; verify is
-  :func:`synthesis.verify.verify_artifact` with the analysis LMI on a working set (the default) vs
-  every dense point in one solve (``all_points_at_once``).
+* synth: :func:`synthesis.research.synth_case` — what ``pressor synth`` solves (the shipped family:
+  the Wirtinger analysis on the design grid in the rate-bound form, one LMI per point, one solve
+  at the strictness ``DESIGN_EPSILON``; the Theorem-3 family: the batched sparse formulation,
+  :func:`synthesis.lmi_solve.solve`) vs the straightforward formulation of the same design (every
+  rate / delay-ratio vertex as its own LMI; the naive per-point cvxpy formulation,
+  :mod:`synthesis.lmi_naive`);
+* verify: :func:`synthesis.verify.verify_artifact` (check (a) as ``pressor verify`` runs it: one
+  capped rate-bound solve over the dense grid; the Theorem-3 family: a working set) vs
+  :func:`synthesis.research.verify_all_points_at_once` (every dense point and rate vertex as its
+  own LMI in one solve).
 
 Every case runs with one KKT backend forced (:mod:`synthesis.kkt`), once per backend of ``--kkt``
 (default: each of them), so the table gives the time per backend; the straightforward cases run
@@ -60,59 +60,32 @@ def _case(kind: str, args: argparse.Namespace) -> dict[str, Any]:
     t0 = time.perf_counter()
     if kind.startswith("verify"):
         from synthesis.artifact import default_artifact_path, load_artifact
+        from synthesis.research import verify_all_points_at_once
         from synthesis.verify import verify_artifact
 
         art = load_artifact(args.artifact or default_artifact_path())
-        rep = verify_artifact(art, all_points_at_once=kind == "verify-all").to_dict()
+        verify = verify_all_points_at_once if kind == "verify-all" else verify_artifact
+        rep = verify(art).to_dict()
         lmi = rep["analysis_lmi"]
         row = {
             "outcome": f"passed={rep['passed']} certified={lmi['certified']}",
             "detail": f"{lmi['n_lmis']} LMIs re-checked, analysis {lmi['solve_time_s']:.1f} s",
         }
     else:
+        from dataclasses import replace
+
         from synthesis.config_toml import load_config
+        from synthesis.research import synth_case
 
         cfg = load_config(args.config)
         if args.grid:
             cfg = cfg.with_grid(tuple(int(v) for v in args.grid.split(",")))
-        row = (
-            _smith_synth(cfg, kind) if cfg.controller.is_smith else _theorem3_synth(cfg, kind, args)
-        )
+        if args.rate_terms:  # a [solver] setting: only a family with a synthesis LMI reads it
+            cfg = replace(cfg, solver=replace(cfg.solver, rate_terms=args.rate_terms))
+        row = synth_case(cfg, straightforward=kind == "naive")
     row["wall_s"] = time.perf_counter() - t0
     row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return row
-
-
-def _smith_synth(cfg: Any, kind: str) -> dict[str, str]:
-    from synthesis.smith_design import design_smith
-
-    art = design_smith(cfg, rate_form="vertex" if kind == "naive" else "bound")
-    sol = art.metadata["solver"]
-    return {
-        "outcome": f"gamma={art.gamma:.4f} {sol['status']}",
-        "detail": f"smith, {sol['n_lmi']} vertex LMIs re-checked, {sol['analysis']}",
-    }
-
-
-def _theorem3_synth(cfg: Any, kind: str, args: argparse.Namespace) -> dict[str, str]:
-    from synthesis import lmi, lmi_solve
-
-    if args.rate_terms:
-        from dataclasses import replace
-
-        cfg = replace(cfg, solver=replace(cfg.solver, rate_terms=args.rate_terms))
-    prob = lmi.make_problem(cfg)
-    if kind == "synth":
-        res = lmi_solve.solve(prob)
-    else:
-        from synthesis.lmi_naive import solve_naive
-
-        res = solve_naive(prob)
-    return {
-        "outcome": f"gamma={res.gamma:.4f} {res.status}",
-        "detail": f"{res.n_lmi} LMIs of {res.lmi_size}, build {res.build_time_s:.2f} s, "
-        f"{res.iterations} iterations",
-    }
 
 
 def _run(kind: str, argv: list[str], method: str) -> dict:

@@ -10,18 +10,18 @@ Layout (``numpy.savez``, no pickled objects):
   and optionally ``reference`` (``enabled``, ``lambda_s``, ``pump_fraction``, ``k_min``: the 2-DOF
   prefilter of :mod:`synthesis.reference`; absent in older artifacts, read as disabled), and
   optionally ``controller`` (``structure``, ``loop_gain``: the family of :mod:`synthesis.family`;
-  absent in older artifacts and in every "theorem3" artifact, read as "theorem3"; for "smith"
-  ``lambda2``/``lambda3`` are null and ``gamma`` is the Wirtinger analysis' bound on the design
-  grid), and optionally ``design.drug`` (``name``, ``concentration_ug_ml``: the drug and syringe the
-  gains are for, :class:`contracts.drug.DrugBinding`; absent in artifacts made before designs named
-  their drug, read as :data:`contracts.drug.DEFAULT_BINDING`, phenylephrine at 100 µg/ml).
-* ``coef_<name>`` — "theorem3": decision-variable basis coefficients (scaled coordinates; see
-  :mod:`synthesis.lmi`): P, Q, R, X, Y, Ah, Adh, Bh, Ch, Cdh, Dk. "smith": the certificate of the
-  Wirtinger analysis, P, S, R and its state ``transform``
-  (:func:`synthesis.family.smith_coef_shapes`).
+  absent in older artifacts and in every artifact of the default family; a family without a
+  synthesis LMI stores null ``lambda2``/``lambda3`` and its analysis' bound on the design grid as
+  ``gamma``), and optionally ``design.drug`` (``name``, ``concentration_ug_ml``: the drug and
+  syringe the gains are for, :class:`contracts.drug.DrugBinding`; absent in artifacts made before
+  designs named their drug, read as :data:`contracts.drug.DEFAULT_BINDING`, phenylephrine at
+  100 µg/ml).
+* ``coef_<name>`` — the family's coefficients
+  (:meth:`synthesis.family.Family.coefficient_shapes`): the decision variables of a synthesised
+  family (scaled coordinates), the certificate of an analysed one.
 * ``node_<name>`` — the controller at the grid nodes, physical units (time in s), shape
-  ``(nK, nT, ntau, rows, cols)`` for Ak, Adk, Bk, Ck, Cdk, Dk (controller order n for
-  "theorem3", 2 for "smith").
+  ``(nK, nT, ntau, rows, cols)`` for Ak, Adk, Bk, Ck, Cdk, Dk (controller order:
+  :meth:`synthesis.family.Family.controller_order`).
 * ``sha256`` — uint8 bytes of the hex digest of everything above (canonical order).
 
 Loading checks the format version, every expected field's presence, dtype, shape and finiteness and
@@ -44,41 +44,17 @@ import numpy as np
 from contracts.drug import DEFAULT_BINDING, DrugBinding
 from contracts.files import AtomicFile
 from synthesis.config import ModelConfig
-from synthesis.family import SMITH_ORDER, ControllerFamily, smith_coef_shapes
+from synthesis.family import ControllerFamily
 from synthesis.model import dims
 from synthesis.reference import ReferenceConfig
 
 FORMAT_VERSION = 1
 
-#: decision coefficients (leading axis = number of basis terms, 1 or 7); shapes: :func:`coef_shapes`
-COEF_NAMES = ("P", "Q", "R", "X", "Y", "Ah", "Adh", "Bh", "Ch", "Cdh", "Dk")
-
-
-def coef_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
-    """Decision coefficients: name -> (rows, cols) for a generalised plant of order ``n``.
-
-    n = 3 for the shipped design; frequency weights add states (:func:`synthesis.model.dims`).
-    """
-    n2 = 2 * n
-    return {
-        "P": (n2, n2),
-        "Q": (n2, n2),
-        "R": (n2, n2),
-        "X": (n, n),
-        "Y": (n, n),
-        "Ah": (n, n),
-        "Adh": (n, n),
-        "Bh": (n, ny),
-        "Ch": (1, n),
-        "Cdh": (1, n),
-        "Dk": (1, ny),
-    }
-
 
 def node_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
     """Controller of order ``n`` at the grid nodes: name -> (rows, cols).
 
-    A "theorem3" controller has the plant's order; a "smith" one has order 2.
+    The order is the family's (:meth:`synthesis.family.Family.controller_order`).
     """
     return {
         "Ak": (n, n),
@@ -119,7 +95,8 @@ class ControllerArtifact:
     metadata
         The JSON metadata (see module docstring).
     coefficients
-        Decision-variable basis coefficients, name -> (nb, rows, cols) (scaled coordinates).
+        The family's coefficients, name -> array
+        (:meth:`synthesis.family.Family.coefficient_shapes`).
     nodes
         Reconstructed controller at the grid nodes, name -> (nK, nT, ntau, rows, cols) (physical).
     """
@@ -179,7 +156,8 @@ class ControllerArtifact:
 
     @property
     def family(self) -> ControllerFamily:
-        """The controller family (:mod:`synthesis.family`); "theorem3" when the artifact has none."""
+        """The controller family (:mod:`synthesis.family`); the default one when the artifact has
+        none."""
         return ControllerFamily.from_metadata(self.metadata)
 
     @property
@@ -325,25 +303,23 @@ def _validate(
         family = ControllerFamily.from_metadata(meta)
     except (TypeError, ValueError) as exc:
         raise _err(path, "metadata.controller", str(exc)) from None
-    if family.is_smith:
-        shapes = smith_coef_shapes(pd.n)
-        extra = sorted(set(coefs) - set(shapes))
-        if extra:
-            raise _err(path, f"coef_{extra[0]}", "not a coefficient of a 'smith' artifact")
-        for name, shape in shapes.items():
-            if name not in coefs:
-                raise _err(path, f"coef_{name}", "missing")
-            _check_array(path, f"coef_{name}", coefs[name], shape)
-    for name, (r, c) in ({} if family.is_smith else coef_shapes(pd.n, pd.ny)).items():
+    impl = family.impl
+    shapes = impl.coefficient_shapes(pd.n, pd.ny)
+    extra = sorted(set(coefs) - set(shapes))
+    if extra:
+        raise _err(
+            path, f"coef_{extra[0]}", f"not a coefficient of a {family.structure!r} artifact"
+        )
+    for name, allowed in shapes.items():
         if name not in coefs:
             raise _err(path, f"coef_{name}", "missing")
-        nb = coefs[name].shape[0] if coefs[name].ndim == 3 else -1
-        if nb not in (1, 7):
-            raise _err(path, f"coef_{name}", f"shape {coefs[name].shape}, expected (1|7, {r}, {c})")
-        _check_array(path, f"coef_{name}", coefs[name], (nb, r, c))
+        shape = coefs[name].shape
+        if shape not in allowed:
+            want = " or ".join(str(a) for a in allowed)
+            raise _err(path, f"coef_{name}", f"shape {shape}, expected {want}")
+        _check_array(path, f"coef_{name}", coefs[name], shape)
     gshape = tuple(g.size for g in grid)
-    order = SMITH_ORDER if family.is_smith else pd.n
-    for name, (r, c) in node_shapes(order, pd.ny).items():
+    for name, (r, c) in node_shapes(impl.controller_order(pd.n), pd.ny).items():
         if name not in nodes:
             raise _err(path, f"node_{name}", "missing")
         _check_array(path, f"node_{name}", nodes[name], (*gshape, r, c))

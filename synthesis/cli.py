@@ -12,11 +12,12 @@ verification verdict (from :func:`synthesis.verify.verify_artifact`; the result 
 verification failed, 2 bad usage or a bad config value (one line naming file, field, value and
 allowed range).
 
-A design whose ``[controller] structure = "smith"`` (:mod:`synthesis.family`) has no synthesis LMI:
-the design stage is the Wirtinger analysis of its closed-form law on the design grid
-(:func:`synthesis.smith_design.design_smith`, progress on stderr); if it does not certify, the
-command says so, writes nothing and exits 1. ``--lambda-search``, ``--lambda2``, ``--lambda3`` and
-``--backoff`` are Theorem-3 options and a usage error (exit 2) for that family.
+The design stage is the config's controller family's (:meth:`synthesis.family.Family.design`):
+the shipped family certifies its closed-form law with the Wirtinger analysis on the design grid,
+the Theorem-3 family synthesises; if the design does not certify, the command says so, writes
+nothing and exits 1. ``--lambda-search``, ``--lambda2``, ``--lambda3`` and ``--backoff`` are
+options of the families that list them (:attr:`synthesis.family.Family.synth_options`) and a usage
+error (exit 2) for the others.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from contracts.usage import UsageError, UsageParser, run_command
+from synthesis.family import SynthRequest, family_named, structures
 from synthesis.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 if TYPE_CHECKING:
@@ -40,9 +42,10 @@ DEFAULT_OUT = "design.npz"
 def _parser() -> UsageParser:
     p = UsageParser(
         prog="pressor synth",
-        description="Design stage: certify the config's controller family (the shipped smith "
-        "family: a Wirtinger analysis LMI of its closed-form law; theorem3: the paper's synthesis "
-        "LMIs), verify it and write the artifact (cvxpy + Clarabel).",
+        description="Design stage: certify the config's controller family (one of "
+        f"{', '.join(structures())}; the shipped design's: a Wirtinger analysis LMI of its "
+        "closed-form Smith law; the alternative: the paper's Theorem-3 synthesis LMIs), verify it "
+        "and write the artifact (cvxpy + Clarabel).",
     )
     p.add_argument("--config", help="design TOML (default: the shipped default design)")
     p.add_argument(
@@ -142,7 +145,6 @@ def _synth_with(args: argparse.Namespace) -> int:
 
     from synthesis.config import ConfigError
     from synthesis.config_toml import load_config
-    from synthesis.synthesize import SynthesisError, synthesize
 
     def say(msg: str) -> None:
         if not args.quiet:
@@ -175,61 +177,34 @@ def _synth_with(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     say(f"config {cfg.source}; grid {cfg.grid_points}; box {cfg.model.box.tolist()}")
-    if cfg.controller.is_smith:
-        theorem3_only = {
-            "--lambda-search": args.lambda_search,
-            "--lambda2": args.lambda2 is not None,
-            "--lambda3": args.lambda3 is not None,
-            "--backoff": args.backoff is not None,
-        }
-        for option, given in theorem3_only.items():
-            if given:
-                raise UsageError(f"{option}: a Theorem-3 option, unused by structure 'smith'")
-        from synthesis.smith_design import SmithDesignError, design_smith
-
-        try:
-            art = design_smith(cfg, progress=say)
-        except SmithDesignError as exc:
-            print(f"pressor synth: not certified: {exc}", file=sys.stderr)
-            return 1
-        for note in art.metadata["solver"]["notes"]:
-            if note.startswith("KKT fallback"):  # said even with --quiet: the result depends on it
-                print(f"pressor synth: {note}", file=sys.stderr)
-        print(f"controller       smith, loop gain {cfg.controller.loop_gain:g}")
-        print(f"gamma            {art.gamma:.6g} (Wirtinger analysis, design grid)")
-        print(f"solver status    {art.metadata['solver']['status']}")
-        return _verify_and_save(art, out, args.no_verify, say, t0)
-    extra: dict = {}
-    if args.lambda_search:
-        from contracts.parallel import BackendError
-        from synthesis.line_search import search
-
-        try:
-            best, pts = search(cfg, progress=say, jobs=args.jobs, scheduler=args.scheduler)
-        except BackendError as exc:
-            raise UsageError(str(exc)) from None
-        extra["line_search"] = [
-            {"lambda2": p.lambda2, "lambda3": p.lambda3, "status": p.status, "gamma": p.gamma}
-            for p in pts
-        ]
-        if best is None:
-            print(
-                "pressor synth: no (lambda2, lambda3) candidate reached 'optimal'", file=sys.stderr
+    family = cfg.controller.impl
+    given = {
+        "--lambda-search": args.lambda_search,
+        "--lambda2": args.lambda2 is not None,
+        "--lambda3": args.lambda3 is not None,
+        "--backoff": args.backoff is not None,
+    }
+    for option, was_given in given.items():
+        if was_given and option not in family.synth_options:
+            users = [s for s in structures() if option in family_named(s).synth_options]
+            raise UsageError(
+                f"{option}: an option of {', '.join(users)}, unused by structure {family.name!r}"
             )
-            return 1
-        say(f"lambda search: best lambda2={best[0]:g}, lambda3={best[1]:g}")
-        cfg = cfg.with_lambdas(*best)
-    try:
-        res = synthesize(cfg, progress=say, extra_meta=extra or None)
-    except SynthesisError as exc:
-        print(f"pressor synth: synthesis failed: {exc}", file=sys.stderr)
+    request = SynthRequest(
+        frozenset(o for o, g in given.items() if g),
+        args.lambda_search,
+        args.jobs,
+        args.scheduler,
+    )
+    designed = family.design(cfg, request, say)
+    for note in designed.notes:  # said even with --quiet: the result depends on them
+        print(f"pressor synth: {note}", file=sys.stderr)
+    if designed.artifact is None:
+        print(f"pressor synth: {designed.failure}", file=sys.stderr)
         return 1
-    art = res.artifact
-    assert art is not None
-    print(f"gamma            {res.result.gamma:.6g}")
-    print(f"solver status    {res.result.status} ({res.result.iterations} iterations)")
-    print(f"build / solve    {res.result.build_time_s:.2f} s / {res.result.solve_time_s:.1f} s")
-    return _verify_and_save(art, out, args.no_verify, say, t0)
+    for line in designed.summary:
+        print(line)
+    return _verify_and_save(designed.artifact, out, args.no_verify, say, t0)
 
 
 def _verify_and_save(

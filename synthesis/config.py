@@ -223,7 +223,8 @@ class SolverConfig:
 @dataclass(frozen=True)
 class DesignConfig:
     """A full design: model, grid, solver settings, line-search candidates, the prefilter, the
-    controller family (:mod:`synthesis.family`; for "smith" the solver settings are unused) and the
+    controller family (:mod:`synthesis.family`; a family without a synthesis LMI leaves the solver
+    settings but ``time_scale_s`` unused) and the
     drug and syringe concentration its gains are for (:class:`contracts.drug.DrugBinding`)."""
 
     model: ModelConfig
@@ -255,7 +256,8 @@ class DesignConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict of the full design (stored in the artifact; ``controller`` only for a
-        family other than "theorem3", so theorem3 artifacts keep their bytes; ``drug`` always)."""
+        family other than the default one, so artifacts of that family keep their bytes; ``drug``
+        always)."""
         out = {
             "model": self.model.to_dict(),
             "grid_points": list(self.grid_points),
@@ -267,6 +269,6 @@ class DesignConfig:
             "reference": self.reference.to_dict(),
             "drug": self.drug.to_dict(),
         }
-        if self.controller.is_smith:
+        if not self.controller.is_default:
             out["controller"] = self.controller.to_dict()
         return out

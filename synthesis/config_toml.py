@@ -18,12 +18,14 @@ A design is described by a TOML file with the sections below (all physical units
                  ("vertices" | "bound"), mean_gamma_weight
     [line_search] lambda2 = [...], lambda3 = [...]   candidate values for ``--lambda-search``
     [pump]       max_rate_ml_h
-    [controller] structure ("theorem3" | "smith"), loop_gain (dimensionless, in (0, 10], only and
-                 required for "smith"): the controller family of :mod:`synthesis.family`. Unlike
-                 the other sections it never takes the shipped default: no [controller] section
-                 (or no ``structure``) means "theorem3", so a design file written before the
-                 section existed keeps its meaning. For "smith" the [solver] and [line_search]
-                 keys are unused (no synthesis LMI; they are still validated if present)
+    [controller] structure (a family of :func:`synthesis.family.structures`), loop_gain
+                 (dimensionless, in (0, 10], only and required for a family that takes it): the
+                 controller family of :mod:`synthesis.family`. Unlike the other sections it never
+                 takes the shipped default: no [controller] section (or no ``structure``) means
+                 :data:`synthesis.family.DEFAULT_STRUCTURE`, so a design file written before the
+                 section existed keeps its meaning. For a family without a synthesis LMI the
+                 [solver] (but ``time_scale_s``) and [line_search] keys are unused (they are still
+                 validated if present)
     [drug]       name (lower case, 1-16 ASCII characters), concentration_ug_ml (µg/ml, in (0, 1e5]):
                  the drug and the syringe concentration whose ml/h the design's gains count
                  (:class:`contracts.drug.DrugBinding`); carried into the artifact
@@ -60,7 +62,13 @@ from synthesis.config import (
     check_range,
     field_error,
 )
-from synthesis.family import LOOP_GAIN_RANGE, ControllerFamily
+from synthesis.family import (
+    DEFAULT_STRUCTURE,
+    LOOP_GAIN_RANGE,
+    ControllerFamily,
+    family_named,
+    structures,
+)
 from synthesis.reference import K_MIN_RANGE, LAMBDA_RANGE_S, PUMP_FRACTION_RANGE, ReferenceConfig
 
 __all__ = ["SHAPING_DEFAULTS", "default_config_path", "load_config", "parse_config"]
@@ -279,24 +287,30 @@ def _parse_drug(table: dict[str, Any], source: str, default: dict[str, Any]) -> 
 
 
 def _parse_controller(table: dict[str, Any], source: str) -> ControllerFamily:
-    """The [controller] section, read from ``table`` only (absent: "theorem3", see module doc)."""
+    """The [controller] section, read from ``table`` only (absent: the default family, see
+    module doc)."""
     sec = table.get("controller", {})
-    structure = sec.get("structure", "theorem3")
-    if structure not in ("theorem3", "smith"):
-        raise field_error(source, "controller.structure", structure, "one of 'theorem3', 'smith'")
+    structure = sec.get("structure", DEFAULT_STRUCTURE)
+    names = structures()
+    if structure not in names:
+        allowed = ", ".join(repr(n) for n in names)
+        raise field_error(source, "controller.structure", structure, f"one of {allowed}")
     lo, hi = LOOP_GAIN_RANGE
-    if structure == "theorem3":
+    if not family_named(structure).takes_loop_gain:
         if "loop_gain" in sec:
             raise field_error(
-                source, "controller.loop_gain", sec["loop_gain"], "absent for structure 'theorem3'"
+                source,
+                "controller.loop_gain",
+                sec["loop_gain"],
+                f"absent for structure {structure!r}",
             )
-        return ControllerFamily()
+        return ControllerFamily(structure)
     if "loop_gain" not in sec:
         raise field_error(
-            source, "controller.loop_gain", None, f"given for 'smith', in ({lo:g}, {hi:g}]"
+            source, "controller.loop_gain", None, f"given for {structure!r}, in ({lo:g}, {hi:g}]"
         )
     return ControllerFamily(
-        "smith", check_pos(source, "controller.loop_gain", sec["loop_gain"], hi)
+        structure, check_pos(source, "controller.loop_gain", sec["loop_gain"], hi)
     )
 
 

@@ -1,73 +1,193 @@
-"""The controller family of a design: which law the artifact carries and how it is certified.
+"""The controller families: one registry, each family one object registered by name.
 
-Two families (design TOML ``[controller]``, artifact metadata ``controller``):
+A design names its family (design TOML ``[controller]``, artifact metadata ``controller``) as a
+:class:`ControllerFamily`: the ``structure`` (a registered name) and its one optional parameter,
+``loop_gain``. Everything that differs between families — coefficient shapes, controller order,
+the design stage, check (a) of ``pressor verify``, the controller at a frozen ρ — is a method of the
+family's :class:`Family` object, defined in the family's own module and looked up here by name
+(:func:`family_named`, or ``ControllerFamily.impl``). Callers never test the name.
 
-* ``"theorem3"`` — the full-order controller of the paper's Theorem 3, synthesised by the LMIs of
-  :mod:`synthesis.lmi` (Jensen functional); the artifact's coefficients are the decision variables
-  and the controller is reconstructed from them (:mod:`synthesis.reconstruct`). A design file or
-  an artifact without a ``controller`` entry is this family (every artifact written before the
-  field existed).
-* ``"smith"`` — the scheduled Smith predictor + PI of :class:`synthesis.smith_lpv.SmithLPV` with
-  one parameter, ``loop_gain`` = K·Kc = T/λ (dimensionless, in (0, 10]); the law is fixed in
-  closed form, so there is no synthesis LMI: the design stage is the Wirtinger-based analysis of
-  :mod:`synthesis.analysis_wirtinger` in K-scaled coordinates (:mod:`synthesis.k_scaling`) on the
-  design grid, and the artifact stores its certificate (``P``, ``S``, ``R`` and the state
-  ``transform`` it lives in, all in those coordinates, see :func:`smith_coef_shapes`).
+Registered families:
 
-This module is a leaf of the synthesis package (numpy only): the config reader, the artifact
-loader and the reconstruction share its names, ranges and shapes.
+* ``"smith"`` (:mod:`synthesis.smith_family`, the shipped one): the scheduled Smith predictor + PI
+  in closed form, certified by the Wirtinger analysis LMI in K-scaled coordinates.
+* ``"theorem3"`` (:mod:`synthesis.theorem3`, the alternative): the full-order controller
+  synthesised by the paper's Theorem-3 LMIs. A design file or an artifact without a
+  ``controller`` entry is this family (:data:`DEFAULT_STRUCTURE`), so it is never stored.
+
+This module imports no family module at import time (the registry loads them on first lookup), so
+the config reader and the artifact loader can import it without a cycle.
 """
 
 from __future__ import annotations
 
+import importlib
 import math
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from synthesis.analysis_interface import AnalysisResult
+    from synthesis.artifact import ControllerArtifact
+    from synthesis.closed_loop import DelaySystem
+    from synthesis.config import DesignConfig
+    from synthesis.reconstruct import DelayedController
 
 __all__ = [
+    "DEFAULT_STRUCTURE",
     "LOOP_GAIN_RANGE",
-    "SMITH_ORDER",
-    "STRUCTURES",
     "ControllerFamily",
-    "smith_coef_shapes",
+    "Designed",
+    "Family",
+    "SynthRequest",
+    "family_named",
+    "structures",
 ]
 
-STRUCTURES = ("theorem3", "smith")
-#: allowed loop gain K·Kc of the "smith" family (dimensionless): lower bound excluded
+#: the family of a design or artifact that names none (never stored, see module doc)
+DEFAULT_STRUCTURE = "theorem3"
+#: registered name -> the module whose ``FAMILY`` attribute is the family object
+_MODULES: dict[str, str] = {"theorem3": "synthesis.theorem3", "smith": "synthesis.smith_family"}
+#: allowed ``loop_gain`` (dimensionless) of a family that takes one: lower bound excluded
 LOOP_GAIN_RANGE = (0.0, 10.0)
-#: controller states of the "smith" family: û (ml/h, the model's filter state) and ŷ (mmHg)
-SMITH_ORDER = 2
-#: basis terms of the certificate's P(ρ) (quadratic in ρ̂: 1, ρ̂_i, ρ̂_i²/2)
-SMITH_P_TERMS = 7
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class SynthRequest:
+    """What ``pressor synth`` asks of a family's design stage besides the config.
+
+    Attributes
+    ----------
+    given
+        The family-specific options the user gave (``--lambda-search``, …); the CLI has already
+        checked they are among the family's :attr:`Family.synth_options`.
+    lambda_search
+        Run the (λ2, λ3) line search first.
+    jobs
+        Local worker processes of that search.
+    scheduler
+        Dask scheduler address of that search (None: local).
+    """
+
+    given: frozenset[str] = frozenset()
+    lambda_search: bool = False
+    jobs: int = 1
+    scheduler: str | None = None
+
+
+@dataclass
+class Designed:
+    """A design stage's outcome: the artifact (None: not certified / failed) and what to print.
+
+    Attributes
+    ----------
+    artifact
+        The certified artifact, or None.
+    summary
+        Lines for stdout (γ, status, …), in order.
+    notes
+        Lines for stderr printed even with ``--quiet`` (the result depends on them).
+    failure
+        One line for stderr when ``artifact`` is None.
+    """
+
+    artifact: ControllerArtifact | None
+    summary: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    failure: str | None = None
+
+
+class Family(Protocol):
+    """What every controller family provides (one object per family, registered by ``name``)."""
+
+    #: the registered name, stored in designs and artifacts
+    name: str
+    #: whether the family takes the ``loop_gain`` parameter (required then, absent otherwise)
+    takes_loop_gain: bool
+    #: the ``pressor synth`` options only this family uses (a usage error for the others)
+    synth_options: frozenset[str]
+
+    def controller_order(self, n_plant: int) -> int:
+        """States of the controller for a generalised plant of ``n_plant`` states."""
+        ...
+
+    def coefficient_shapes(self, n_plant: int, ny: int) -> dict[str, tuple[tuple[int, ...], ...]]:
+        """The artifact's ``coef_<name>`` arrays: name -> every allowed shape."""
+        ...
+
+    def design(self, cfg: DesignConfig, request: SynthRequest, progress: Progress) -> Designed:
+        """The design stage of ``pressor synth`` (certify / synthesise, package the artifact)."""
+        ...
+
+    def controller_at(self, artifact: ControllerArtifact, rho: np.ndarray) -> DelayedController:
+        """The controller at ρ (physical, inside the box: the caller has checked and clipped)."""
+        ...
+
+    def analysis(
+        self,
+        artifact: ControllerArtifact,
+        systems: list[DelaySystem],
+        mesh: np.ndarray,
+        centre: tuple[DelaySystem, np.ndarray],
+        p_dependence: str,
+        progress: Progress,
+    ) -> AnalysisResult:
+        """Check (a) of ``pressor verify``: the family's analysis LMI over the dense ``mesh``.
+
+        ``systems`` are the frozen closed loops at the rows of ``mesh``; ``centre`` the loop at the
+        nominal ρ (clipped to the box) and that ρ.
+        """
+        ...
+
+
+def structures() -> tuple[str, ...]:
+    """The registered family names (the allowed ``[controller] structure`` values)."""
+    return tuple(_MODULES)
+
+
+def family_named(name: str) -> Family:
+    """The registered family ``name``.
+
+    Raises
+    ------
+    ValueError
+        If no family of that name is registered.
+    """
+    if name not in _MODULES:
+        raise ValueError(f"controller.structure = {name!r}: must be one of {structures()}")
+    fam: Family = importlib.import_module(_MODULES[name]).FAMILY
+    return fam
 
 
 @dataclass(frozen=True)
 class ControllerFamily:
-    """Which controller a design carries.
+    """Which controller a design carries (the stored form: a name and its parameter).
 
     Attributes
     ----------
     structure
-        "theorem3" (synthesised, the default) or "smith" (closed-form, certified by analysis).
+        A registered family name (:func:`structures`); default :data:`DEFAULT_STRUCTURE`.
     loop_gain
-        For "smith" only: K·Kc = T/λ, dimensionless, in (0, 10]; None for "theorem3".
+        K·Kc = T/λ (dimensionless, in (0, 10]) for a family that takes it; None otherwise.
     """
 
-    structure: str = "theorem3"
+    structure: str = DEFAULT_STRUCTURE
     loop_gain: float | None = None
 
     def __post_init__(self) -> None:
-        if self.structure not in STRUCTURES:
-            raise ValueError(
-                f"controller.structure = {self.structure!r}: must be one of {STRUCTURES}"
-            )
-        if self.structure == "theorem3":
-            if self.loop_gain is not None:
+        impl = family_named(self.structure)
+        lg = self.loop_gain
+        if not impl.takes_loop_gain:
+            if lg is not None:
                 raise ValueError(
-                    f"controller.loop_gain = {self.loop_gain!r}: only for structure 'smith'"
+                    f"controller.loop_gain = {lg!r}: not taken by structure {self.structure!r}"
                 )
             return
-        lg = self.loop_gain
         lo, hi = LOOP_GAIN_RANGE
         if (
             isinstance(lg, bool)
@@ -75,21 +195,27 @@ class ControllerFamily:
             or not (math.isfinite(lg) and lo < lg <= hi)
         ):
             raise ValueError(
-                f"controller.loop_gain = {lg!r}: must be a number in ({lo:g}, {hi:g}] for 'smith'"
+                f"controller.loop_gain = {lg!r}: must be a number in ({lo:g}, {hi:g}] "
+                f"for {self.structure!r}"
             )
 
     @property
-    def is_smith(self) -> bool:
-        """True for the closed-form Smith family."""
-        return self.structure == "smith"
+    def impl(self) -> Family:
+        """The registered family object of :attr:`structure`."""
+        return family_named(self.structure)
+
+    @property
+    def is_default(self) -> bool:
+        """True for the family a design or artifact without a ``controller`` entry means."""
+        return self.structure == DEFAULT_STRUCTURE
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the artifact's ``controller`` metadata entry)."""
         return {"structure": self.structure, "loop_gain": self.loop_gain}
 
     @classmethod
-    def from_metadata(cls, meta: dict[str, Any]) -> ControllerFamily:
-        """The family of an artifact's metadata (no ``controller`` entry: "theorem3").
+    def from_metadata(cls, meta: Mapping[str, Any]) -> ControllerFamily:
+        """The family of an artifact's metadata (no ``controller`` entry: the default family).
 
         Raises
         ------
@@ -103,15 +229,3 @@ class ControllerFamily:
             raise ValueError("controller must have exactly the keys ['loop_gain', 'structure']")
         lg = entry["loop_gain"]
         return cls(str(entry["structure"]), None if lg is None else lg)
-
-
-def smith_coef_shapes(n_plant: int) -> dict[str, tuple[int, ...]]:
-    """The "smith" artifact's coefficients: the Wirtinger certificate, name -> shape.
-
-    The closed loop has ``n = n_plant + SMITH_ORDER`` states; ``P`` (7, 2n, 2n) are the basis terms
-    of P(ρ) on ξ = [x; ∫x], ``S``, ``R`` (n, n) the integral terms, all divided by γ, and
-    ``transform`` (n, n) the state coordinates they live in (scaled time, see
-    :func:`synthesis.analysis_wirtinger.analyse_wirtinger`).
-    """
-    n = n_plant + SMITH_ORDER
-    return {"P": (SMITH_P_TERMS, 2 * n, 2 * n), "S": (n, n), "R": (n, n), "transform": (n, n)}

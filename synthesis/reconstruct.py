@@ -17,9 +17,10 @@ Inverting the paper's change of variables with M = I (scaled coordinates)::
 
 then :func:`synthesis.scaling.unscale_controller` maps to physical units (time in s).
 
-:func:`controller_at` dispatches on the artifact's family (:mod:`synthesis.family`): a "smith"
-artifact carries no decision variables, its law is ``SmithLPV(loop_gain, Ω, Λ).at(ρ)`` exactly, so
-codegen, ``pressor verify`` and the closed-loop tools all see the same law.
+:func:`controller_at` checks ρ against the box and asks the artifact's family for its controller
+there (:meth:`synthesis.family.Family.controller_at`: this reconstruction for the Theorem-3 family,
+a closed-form law for the shipped one), so codegen, ``pressor verify`` and the closed-loop tools
+all see the same law.
 """
 
 from __future__ import annotations
@@ -32,7 +33,6 @@ from synthesis import basis
 from synthesis.artifact import ControllerArtifact
 from synthesis.model import plant_batch
 from synthesis.scaling import Scaling, unscale_controller
-from synthesis.smith_lpv import SmithLPV
 
 
 @dataclass(frozen=True)
@@ -120,8 +120,7 @@ def controller_at(
 ) -> DelayedController:
     """The delayed controller at ρ = (K [mmHg/(ml/h)], T [s], τ [s]) inside the artifact's box.
 
-    "theorem3": reconstructed from the decision variables; "smith": the closed-form
-    :class:`~synthesis.smith_lpv.SmithLPV` law of the artifact's loop gain and input filter.
+    The artifact's family gives the controller (:meth:`synthesis.family.Family.controller_at`).
 
     Raises
     ------
@@ -134,24 +133,4 @@ def controller_at(
     tol = 1e-9 * np.maximum(1.0, np.abs(box).max(axis=1))
     if not np.all(np.isfinite(r)) or np.any(r < box[:, 0] - tol) or np.any(r > box[:, 1] + tol):
         raise ValueError(f"rho={r.tolist()!r} outside the design box {box.tolist()!r}")
-    r = np.clip(r, box[:, 0], box[:, 1])
-    family = artifact.family
-    if family.is_smith:
-        assert family.loop_gain is not None
-        s = SmithLPV(family.loop_gain, artifact.omega, artifact.lambda_).at(r)
-        return DelayedController(
-            Ak=s.Ak, Adk=s.Adk, Bk=s.Bk, Ck=s.Ck, Cdk=s.Cdk, Dk=s.Dk, rho=r, tau_s=float(r[2])
-        )
-    k = controllers_at(
-        artifact.coefficients, r[None, :], scaling_of(artifact), artifact.model_config
-    )
-    return DelayedController(
-        Ak=k["Ak"][0],
-        Adk=k["Adk"][0],
-        Bk=k["Bk"][0],
-        Ck=k["Ck"][0],
-        Cdk=k["Cdk"][0],
-        Dk=k["Dk"][0],
-        rho=r,
-        tau_s=float(r[2]),
-    )
+    return artifact.family.impl.controller_at(artifact, np.clip(r, box[:, 0], box[:, 1]))

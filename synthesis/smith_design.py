@@ -1,28 +1,31 @@
-"""The "smith" design family: certify the closed-form Smith law and package it as an artifact.
+"""The shipped family's design stage: certify the closed-form Smith law, package the artifact.
 
-There is no synthesis LMI for this family (:mod:`synthesis.family`): the law is
+There is no synthesis LMI for this family (:mod:`synthesis.smith_family`): the law is
 ``SmithLPV(loop_gain, Ω, Λ).at(ρ)`` (:mod:`synthesis.smith_lpv`) and the design stage is the
 Wirtinger-based analysis LMI (:func:`synthesis.analysis_wirtinger.analyse_wirtinger`, one LMI per
-point with rate slacks, ``rate_form="bound"``, P(ρ) quadratic in ρ̂, S and R constant) written in
-K-scaled coordinates (:mod:`synthesis.k_scaling`: the ml/h states u and û times K, so S and R are
-K(t)-dependent in the original state; docs/CERTIFICATE-STRUCTURE.md, section 2c) over the closed
-loops at the grid nodes. The law's gains scale like 1/K; in the original coordinates the same
-functional certifies loop gains up to ~2.6 only, in K-scaled ones loop gain 3 at γ ≈ 7.4.
-:func:`certify_smith` is that analysis on any set of points; the design (:func:`design_smith`, the
-design grid, minimum γ at the strictness :data:`DESIGN_EPSILON`, one solve; a back-off solve only
-if that optimum fails the re-check) and the verification (``pressor verify``, a denser grid, γ
-capped, one solve) both call it.
+point with rate slacks, P(ρ) quadratic in ρ̂, S and R constant) written in K-scaled coordinates
+(:mod:`synthesis.k_scaling`: the ml/h states u and û times K, so S and R are K(t)-dependent in the
+original state; docs/CERTIFICATE-STRUCTURE.md, section 2c) over the closed loops at the grid
+nodes. The law's gains scale like 1/K, which is why the functional is written in K-scaled
+coordinates. :func:`certify_smith` is that analysis on any set of points; the design
+(:func:`design_smith`, the design grid, minimum γ at the strictness :data:`DESIGN_EPSILON`, one
+solve; a back-off solve only if that optimum fails the re-check) and the verification (``pressor
+verify``, a denser grid, γ capped, one solve) both call it.
 
 Conditioning: the K-scaled state is whitened by the nominal point's own frozen certificate and
 balanced (a constant congruence: feasibility and γ unchanged); time is scaled by the design's
-``solver.time_scale_s`` (the only [solver] key this family uses). ``benchmarks/smith_certificate.py``
-calls :func:`certify_smith` too, with the options the design leaves at their defaults (working set,
-coupling, parameters of P, plain coordinates).
+``solver.time_scale_s`` (the only [solver] key this family uses).
+
+Other formulations of the same analysis (:class:`WirtingerForm`: vertex form, working set,
+coupling, parameters of P, plain coordinates) are reached through :func:`certify_in_form` and
+:func:`design_in_form`, the builders :mod:`synthesis.research` calls; the shipped functions take
+none of those options.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -36,14 +39,19 @@ from synthesis.k_scaling import KScaling, k_scaled_system
 from synthesis.model import I_U, dims, plant_at
 from synthesis.reconstruct import scaling_of
 from synthesis.scaling import Scaling
+from synthesis.smith_family import NAME
 from synthesis.smith_lpv import SmithLPV
 from synthesis.state_transform import conditioning_transform
 from synthesis.wirtinger_conic import COUPLINGS, RATE_FORMS
 
 __all__ = [
     "COORDINATES",
+    "SHIPPED_FORM",
     "SmithDesignError",
+    "WirtingerForm",
+    "certify_in_form",
     "certify_smith",
+    "design_in_form",
     "design_smith",
     "nominal_centre",
     "recheck_smith_artifact",
@@ -68,8 +76,7 @@ FEASIBILITY_SOLVER_OPTIONS: dict[str, Any] = {
 }
 
 
-#: coordinates of the functional: "k_scaled" (u and û times K, what ``pressor`` runs) or "plain"
-#: (the loop's own states; certifies loop gains up to ~2.6 only)
+#: coordinates of the functional: "k_scaled" (u and û times K, shipped) or "plain" (own states)
 COORDINATES = ("k_scaled", "plain")
 
 
@@ -88,6 +95,53 @@ def nominal_centre(law: SmithLPV, model: ModelConfig) -> tuple[DelaySystem, np.n
     return smith_loops(law, model, nominal[None, :])[0], nominal
 
 
+@dataclass(frozen=True)
+class WirtingerForm:
+    """How the analysis LMI is written; the defaults (:data:`SHIPPED_FORM`) are what ships.
+
+    Attributes
+    ----------
+    rate_form
+        "bound" (one LMI per point with rate slacks) or "vertex" (every rate vertex as its own
+        LMI: the straightforward form).
+    working_set
+        None (the LMI imposed at every point) or k >= 1: imposed at k spread points, every point
+        and rate vertex re-checked (the verdict covers all the points either way).
+    coupling
+        "dense" (the LMIs written in the P basis terms) or "per_point" (a copy of P(ρ_k) per
+        imposed point, tied by equalities: the same feasible set, a sparser solve).
+    p_params
+        Indices into (K, T, τ) of the parameters P depends on (None: all three).
+    coordinates
+        "k_scaled" (the ml/h states u and û times K, :mod:`synthesis.k_scaling`) or "plain" (the
+        functional in the loops' own states).
+
+    Raises
+    ------
+    ValueError
+        ``coordinates``, ``coupling`` or ``rate_form`` outside its allowed set.
+    """
+
+    rate_form: str = "bound"
+    working_set: int | None = None
+    coupling: str = "dense"
+    p_params: Sequence[int] | None = None
+    coordinates: str = "k_scaled"
+
+    def __post_init__(self) -> None:
+        for name, value, allowed in (
+            ("coordinates", self.coordinates, COORDINATES),
+            ("coupling", self.coupling, COUPLINGS),
+            ("rate_form", self.rate_form, RATE_FORMS),
+        ):
+            if value not in allowed:
+                raise ValueError(f"WirtingerForm: {name}={value!r} must be one of {allowed}")
+
+
+#: the formulation the design and ``pressor verify`` run
+SHIPPED_FORM = WirtingerForm()
+
+
 def certify_smith(
     systems: list[DelaySystem],
     points: np.ndarray,
@@ -97,12 +151,7 @@ def certify_smith(
     gamma_cap: float | None = None,
     progress: Progress | None = None,
     p_dependence: str = P_DEPENDENCE,
-    rate_form: str = "bound",
     epsilon: float = 1e-6,
-    working_set: int | None = None,
-    coupling: str = "dense",
-    p_params: Sequence[int] | None = None,
-    coordinates: str = "k_scaled",
 ) -> AnalysisResult:
     """The Wirtinger analysis (rate-bound form) of the frozen Smith loops ``systems`` at ``points``.
 
@@ -125,41 +174,46 @@ def certify_smith(
         One line per stage and per solver iteration.
     p_dependence
         P(ρ) basis: "quadratic" (default, 7 terms), "affine" or "constant".
-    rate_form
-        "bound" (one LMI per point with rate slacks, what ``pressor`` runs) or "vertex" (every
-        rate vertex as its own LMI: the straightforward form ``benchmarks/synthesis.py`` compares).
     epsilon
         Strictness of the solve (scaled units; :data:`DESIGN_EPSILON` for the design).
-    working_set
-        None (default: the LMI imposed at every point) or k >= 1: imposed at k spread points, every
-        point and rate vertex re-checked (the verdict covers all of ``points`` either way).
-    coupling
-        "dense" (default: the LMIs written in the P basis terms) or "per_point" (a copy of P(ρ_k)
-        per imposed point, tied by equalities: the same feasible set, a sparser solve).
-    p_params
-        Indices into (K, T, τ) of the parameters P depends on (default None: all three).
-    coordinates
-        "k_scaled" (default: the ml/h states u and û times K, :mod:`synthesis.k_scaling`) or
-        "plain" (the functional in the loops' own states, no K-scaling).
+    """
+    return certify_in_form(
+        SHIPPED_FORM,
+        systems,
+        points,
+        centre,
+        model,
+        scaling,
+        gamma_cap,
+        progress,
+        p_dependence,
+        epsilon,
+    )
+
+
+def certify_in_form(
+    form: WirtingerForm,
+    systems: list[DelaySystem],
+    points: np.ndarray,
+    centre: tuple[DelaySystem, np.ndarray],
+    model: ModelConfig,
+    scaling: Scaling,
+    gamma_cap: float | None = None,
+    progress: Progress | None = None,
+    p_dependence: str = P_DEPENDENCE,
+    epsilon: float = 1e-6,
+) -> AnalysisResult:
+    """:func:`certify_smith` written in ``form`` (the builder :mod:`synthesis.research` calls).
 
     Raises
     ------
     ValueError
-        ``coordinates``, ``coupling`` or ``rate_form`` outside its allowed set (before any solve);
-        ``working_set`` below 1 or ``p_params`` not distinct indices in 0..2 (from
-        :func:`synthesis.analysis_wirtinger.analyse_wirtinger`).
+        ``form.working_set`` below 1 or ``form.p_params`` not distinct indices in 0..2.
     """
-    for name, value, allowed in (
-        ("coordinates", coordinates, COORDINATES),
-        ("coupling", coupling, COUPLINGS),
-        ("rate_form", rate_form, RATE_FORMS),
-    ):
-        if value not in allowed:
-            raise ValueError(f"certify_smith: {name}={value!r} must be one of {allowed}")
     pts = np.atleast_2d(np.asarray(points, dtype=float))
     c_sys, c_rho = centre
     k_scaling = None
-    if coordinates == "k_scaled":
+    if form.coordinates == "k_scaled":
         k_scaling = _k_scaling(pts, model)
         c_sys = k_scaled_system(c_sys, float(c_rho[0]), k_scaling.states)
     zero = np.zeros(3)
@@ -185,11 +239,11 @@ def certify_smith(
         epsilon=epsilon,
         gamma_cap=gamma_cap,
         solver_options=None if gamma_cap is None else FEASIBILITY_SOLVER_OPTIONS,
-        working_set=working_set,
+        working_set=form.working_set,
         progress=progress,
-        rate_form=rate_form,
-        coupling=coupling,
-        p_params=p_params,
+        rate_form=form.rate_form,
+        coupling=form.coupling,
+        p_params=form.p_params,
         k_scaling=k_scaling,
     )
 
@@ -229,12 +283,12 @@ def recheck_smith_artifact(artifact: ControllerArtifact) -> tuple[bool, np.ndarr
     Raises
     ------
     ValueError
-        If the artifact is not of the "smith" family or its certificate does not fit the analysis.
+        If the artifact is not of this family or its certificate does not fit the analysis.
     """
     family, model = artifact.family, artifact.model_config
-    if not family.is_smith or family.loop_gain is None:
+    if family.structure != NAME or family.loop_gain is None:
         raise ValueError(
-            f"recheck_smith_artifact needs a 'smith' artifact, got {family.structure!r}"
+            f"recheck_smith_artifact needs a {NAME!r} artifact, got {family.structure!r}"
         )
     law = SmithLPV(family.loop_gain, model.omega, model.lambda_)
     flat = np.stack(np.meshgrid(*artifact.grid, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -250,21 +304,25 @@ def recheck_smith_artifact(artifact: ControllerArtifact) -> tuple[bool, np.ndarr
     )
 
 
-def design_smith(
-    cfg: DesignConfig, progress: Progress | None = None, rate_form: str = "bound"
-) -> ControllerArtifact:
+def design_smith(cfg: DesignConfig, progress: Progress | None = None) -> ControllerArtifact:
     """Certify the config's Smith law on its design grid and package the artifact.
-
-    ``rate_form`` is that of :func:`certify_smith` ("vertex": the benchmark's straightforward form).
 
     Raises
     ------
     SmithDesignError
         If the analysis does not certify the law on the grid (no artifact then).
     """
+    return design_in_form(cfg, SHIPPED_FORM, progress)
+
+
+def design_in_form(
+    cfg: DesignConfig, form: WirtingerForm, progress: Progress | None = None
+) -> ControllerArtifact:
+    """:func:`design_smith` with the analysis written in ``form`` (for :mod:`synthesis.research`;
+    raises as it does)."""
     family = cfg.controller
-    if not family.is_smith or family.loop_gain is None:
-        raise ValueError(f"design_smith needs a 'smith' design, got {family.structure!r}")
+    if family.structure != NAME or family.loop_gain is None:
+        raise ValueError(f"design_smith needs a {NAME!r} design, got {family.structure!r}")
     model = cfg.model
     law = SmithLPV(family.loop_gain, model.omega, model.lambda_)
     pd = dims(model)
@@ -277,14 +335,14 @@ def design_smith(
         f"smith loop gain {family.loop_gain:g}: Wirtinger analysis on the design grid "
         f"{cfg.grid_points} ({flat.shape[0]} points), P {P_DEPENDENCE}, rate-bound form"
     )
-    res = certify_smith(
+    res = certify_in_form(
+        form,
         smith_loops(law, model, flat),
         flat,
         nominal_centre(law, model),
         model,
         scaling,
         progress=progress,
-        rate_form=rate_form,
         epsilon=DESIGN_EPSILON,
     )
     if not res.certified or res.gamma is None or res.certificate is None:
@@ -327,7 +385,7 @@ def design_smith(
         "solver": {
             "name": "CLARABEL",
             "status": res.status,
-            "analysis": f"wirtinger, k_scaled, rate_form {rate_form}",
+            "analysis": f"wirtinger, {form.coordinates}, rate_form {form.rate_form}",
             "p_dependence": res.p_dependence,
             "n_lmi": res.n_lmis,
             "notes": list(res.notes),

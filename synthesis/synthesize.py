@@ -15,9 +15,10 @@ from typing import Any
 import numpy as np
 
 from synthesis import basis, lmi, lmi_solve
-from synthesis.artifact import COEF_NAMES, FORMAT_VERSION, ControllerArtifact, make_artifact
+from synthesis.artifact import FORMAT_VERSION, ControllerArtifact, make_artifact
 from synthesis.config import DesignConfig
 from synthesis.reconstruct import controllers_at
+from synthesis.theorem3 import COEF_NAMES
 
 Progress = Callable[[str], None]
 

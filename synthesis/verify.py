@@ -6,14 +6,12 @@ from the artifact (:func:`synthesis.reconstruct.controller_at`) and the plant mo
 each cell of the synthesis grid ``density`` times and always contains the cell midpoints (points
 the synthesis never saw), then:
 
-(a) ``analysis_lmi`` — a delay-dependent analysis LMI over the whole dense grid, by controller
-    family (:mod:`synthesis.verify_analysis`): for "theorem3" the Jensen analysis of
-    :mod:`synthesis.analysis_lmi` (Theorem 1, P quadratic in rho, all rate vertices, feasibility
-    form with the gain capped at 20 x the synthesis gamma, on a working set); for "smith" the
-    Wirtinger analysis the design ran (:mod:`synthesis.smith_design`), every dense point in one
-    feasibility solve with the gain capped at 2 x the artifact's gamma. Certified = every LMI at
-    every dense point and every rate vertex, and every P(rho_k), re-evaluated in floating point,
-    is definite;
+(a) ``analysis_lmi`` — the controller family's delay-dependent analysis LMI over the whole dense
+    grid (:meth:`synthesis.family.Family.analysis`, run by :mod:`synthesis.verify_analysis`): for
+    the shipped family the Wirtinger analysis the design ran, every dense point in one
+    feasibility solve with the gain capped; for the alternative the Jensen analysis of Theorem 1
+    on a working set, gain capped. Certified = every LMI at every dense point and every rate
+    vertex, and every P(rho_k), re-evaluated in floating point, is definite;
 (b) ``delay_stability`` — the rightmost characteristic roots of the frozen closed-loop delay system
     at every dense point (delays up to tau_max are on the grid), by the spectral method of
     :mod:`synthesis.delay_stability`;
@@ -29,8 +27,7 @@ the synthesis never saw), then:
     says which, and ``lpv_feedback_only`` keeps the certified loop's own step beside it.
 
 ``passed`` requires (a) certified, (b) every frozen point exponentially stable and (c) the LPV step
-settling inside the 2 % band; the paper's claim is reported beside it, not folded into it (the issue
-asks to report it plainly either way).
+settling inside the 2 % band; the paper's claim is reported beside it, not folded into it.
 """
 
 from __future__ import annotations
@@ -59,9 +56,9 @@ from synthesis.step_response import (
     simulate_prefiltered_step,
     simulate_step,
 )
-from synthesis.verify_analysis import analysis_check
+from synthesis.verify_analysis import Analysis, analysis_check
 
-__all__ = ["VerificationReport", "dense_axes", "verify_artifact"]
+__all__ = ["VerificationReport", "dense_axes", "verify_artifact", "verify_with"]
 
 PAPER_OVERSHOOT_PCT = 1.0
 PAPER_SETTLING_S = 200.0
@@ -182,7 +179,6 @@ def verify_artifact(
     density: int = 2,
     progress: Progress | None = None,
     p_dependence: str = "quadratic",
-    all_points_at_once: bool = False,
 ) -> VerificationReport:
     """Run the independent checks (a), (b), (c) on an artifact.
 
@@ -197,18 +193,24 @@ def verify_artifact(
     p_dependence
         Lyapunov matrix P of the analysis LMI: "quadratic" in rho (default, the synthesis basis
         P0 + sum rho_i P_i1 + 1/2 sum rho_i^2 P_i2), "affine" or "constant".
-    all_points_at_once
-        Impose the analysis LMI at every dense point and rate vertex in one solve (the
-        straightforward formulation, for comparison) instead of the fast path: the rate-bound
-        form on a working set (as many points as the synthesis grid has nodes, spread over the
-        dense grid, grown by the points whose re-check fails; the vertex form if that does not
-        certify; the "smith" family: every rate vertex as its own LMI instead of the rate-bound
-        form, see :mod:`synthesis.verify_analysis`). The certificate is the same either way: the
-        re-check at every point and rate vertex.
 
     Returns
     -------
     VerificationReport
+    """
+    return verify_with(artifact, artifact.family.impl.analysis, density, progress, p_dependence)
+
+
+def verify_with(
+    artifact: Any,
+    analysis: Analysis,
+    density: int = 2,
+    progress: Progress | None = None,
+    p_dependence: str = "quadratic",
+) -> VerificationReport:
+    """:func:`verify_artifact` with check (a) run by ``analysis`` instead of the family's own.
+
+    The builder :mod:`synthesis.research` compares other formulations of check (a) with.
     """
     say = progress or (lambda _msg: None)
     cfg, box, rates, grid = _artifact_parts(artifact)
@@ -259,9 +261,7 @@ def verify_artifact(
     in_box = bool(np.all((nominal >= box[:, 0]) & (nominal <= box[:, 1])))
     rho_step = nominal if in_box else np.clip(nominal, *box.T)
     lpv_cl = _closed_loop_at(artifact, cfg, rho_step)
-    lmi = analysis_check(
-        artifact, systems, mesh, (lpv_cl, rho_step), p_dependence, all_points_at_once, say
-    )
+    lmi = analysis_check(artifact, analysis, systems, mesh, (lpv_cl, rho_step), p_dependence, say)
 
     # (c) nominal step, LPV, PI and Smith
     max_rate = float(getattr(artifact, "max_rate_ml_h", 120.0))
@@ -325,6 +325,6 @@ def verify_artifact(
     step_ok = sett is not None and bool(lpv["stable"])
     passed = bool(lmi["certified"] and stability["stable"] and step_ok)
     meta = {"sha256": getattr(artifact, "sha256", None), "gamma": float(artifact.gamma)}
-    if artifact.family.is_smith:  # theorem3 reports (stored in artifacts) keep their bytes
+    if not artifact.family.is_default:  # reports of the default family keep their bytes
         meta["controller"] = artifact.family.to_dict()
     return VerificationReport(passed, lmi, stability, step, claim, grid_info, meta)

@@ -18,9 +18,10 @@ from synthesis.artifact import (
 )
 from synthesis.config import ConfigError
 from synthesis.config_toml import load_config, parse_config
-from synthesis.family import ControllerFamily, smith_coef_shapes
+from synthesis.family import ControllerFamily
 from synthesis.reconstruct import controller_at
 from synthesis.smith_design import SmithDesignError, design_smith
+from synthesis.smith_family import smith_coef_shapes
 from synthesis.smith_lpv import SmithLPV
 from synthesis.verify_cli import main as verify_main
 
