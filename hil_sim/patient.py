@@ -210,7 +210,12 @@ def _tau_filter(p: PatientParams, h: float) -> tuple[tuple[float, ...], tuple[fl
     m[:2, 2:] = b * hm
     e = expm(m)
     ad, bd = e[:2, :2], e[:2, 2]
-    return (ad[0, 0], ad[0, 1], ad[1, 0], ad[1, 1]), (bd[0], bd[1])
+    # Python floats, not numpy scalars: the same IEEE doubles, but numpy scalar arithmetic is several
+    # times slower and these would otherwise spread into τ, ΔMAP and every MAP reading each step.
+    return (
+        (float(ad[0, 0]), float(ad[0, 1]), float(ad[1, 0]), float(ad[1, 1])),
+        (float(bd[0]), float(bd[1])),
+    )
 
 
 class Patient:
