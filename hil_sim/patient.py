@@ -210,7 +210,12 @@ def _tau_filter(p: PatientParams, h: float) -> tuple[tuple[float, ...], tuple[fl
     m[:2, 2:] = b * hm
     e = expm(m)
     ad, bd = e[:2, :2], e[:2, 2]
-    return (ad[0, 0], ad[0, 1], ad[1, 0], ad[1, 1]), (bd[0], bd[1])
+    # Python floats, not numpy scalars: the same IEEE doubles, but numpy scalar arithmetic is several
+    # times slower and these would otherwise spread into τ, ΔMAP and every MAP reading each step.
+    return (
+        (float(ad[0, 0]), float(ad[0, 1]), float(ad[1, 0]), float(ad[1, 1])),
+        (float(bd[0]), float(bd[1])),
+    )
 
 
 class Patient:
@@ -263,10 +268,10 @@ class Patient:
 
     def step(self, rate_ml_h: float) -> None:
         """Advance one internal step with the pump delivering ``rate_ml_h`` (mean over the step)."""
-        buf = self._buffer
+        buf, h = self._buffer, self.h
         buf.push(rate_ml_h)
-        self.infused_ml_h_s += rate_ml_h * self.h
-        self.time_s = buf.n * self.h
+        self.infused_ml_h_s += rate_ml_h * h
+        self.time_s = buf.n * h
         if self.frozen:
             u = buf.delayed_mean(self.tau_s, self.tau_s)
             d = self._lag_decay
@@ -277,22 +282,25 @@ class Patient:
         # τ filter (input held over the step), then τ at the step's end.
         inp = rate_ml_h / TAU_RATE_REF_ML_H
         a00, a01, a10, a11 = self._ad
+        b0, b1 = self._bd
         x1, x2 = self._x1, self._x2
-        self._x1 = a00 * x1 + a01 * x2 + self._bd[0] * inp
-        self._x2 = a10 * x1 + a11 * x2 + self._bd[1] * inp
+        x1_new = a00 * x1 + a01 * x2 + b0 * inp
+        x2_new = a10 * x1 + a11 * x2 + b1 * inp
+        self._x1, self._x2 = x1_new, x2_new
         if rate_ml_h > 0.0:
             self._started = True
         if self._started:
-            y = self._x1 + p.b_tau1 * self._x2
+            y = x1_new + p.b_tau1 * x2_new
             tau1 = min(max(TAU_MIN_S + TAU_GAIN_S * y, TAU_MIN_S), TAU_MAX_S)
         else:
             tau1 = TAU_MIN_S
         u = buf.delayed_mean(tau0, tau1)
         # Lag with K, T held at their start-of-step values (exact for held parameters).
-        d = math.exp(-self.h / self.T_s)
-        self.delta_map_mmhg = d * self.delta_map_mmhg + (1.0 - d) * self.K * u
+        K = self.K
+        d = math.exp(-h / self.T_s)
+        self.delta_map_mmhg = d * self.delta_map_mmhg + (1.0 - d) * K * u
         kd = self._k_decay
-        self.K = kd * self.K + (1.0 - kd) * p.k0 * math.exp(-p.k1 * rate_ml_h)
+        self.K = kd * K + (1.0 - kd) * p.k0 * math.exp(-p.k1 * rate_ml_h)
         self.T_s = min(max(T_MIN_S + p.b_T * self.infused_ml_h_s, T_MIN_S), T_MAX_S)
         self.tau_s = tau1
 

@@ -159,6 +159,23 @@ class Pump:
             self._pending.clear()
             self.rate_ml_h = cfg.safe_rate_ml_h
             self.alarms |= ALARM_WATCHDOG
+        flow = self.rate_ml_h * self._inj_factor
+        if (
+            not self._pending
+            and cfg.occlusion_start_s is None
+            and not (self._inj_occluded or self._dry or self._inj_empty)
+            and t < t_end - 1e-12
+            and not (
+                flow > 0.0 and flow * (t_end - t) / 3600.0 >= cfg.reservoir_ml - self.volume_ml
+            )
+        ):
+            # The common case, one segment over the whole step at the set rate: what the general
+            # loop below computes for it, in the same operations, without its bookkeeping.
+            self.volume_ml += flow * (t_end - t) / 3600.0
+            self.time_s = t_end
+            self.alarms &= ~(ALARM_OCCLUSION | ALARM_RESERVOIR_EMPTY)
+            self.delivered_ml_h = flow
+            return flow
         volume_ml_h_s = 0.0
         n_segments = 0
         full_flow: float | None = None

@@ -108,7 +108,7 @@ class Sensor:
     def __init__(self, config: SensorConfig, rng: np.random.Generator | None = None) -> None:
         self.config = config
         self._rng = rng
-        self._noise = np.zeros(0)
+        self._noise: list[float] = []  # a block of draws, as Python floats (indexing numpy is slow)
         self._noise_i = 0
         self._next_sample_s = 0.0
         self._held = (math.nan, QUALITY_INVALID)
@@ -120,11 +120,12 @@ class Sensor:
             raise ValueError("a noisy sensor needs a seeded rng")
 
     def _next_noise(self) -> float:
-        if self._noise_i >= self._noise.size:
+        if self._noise_i >= len(self._noise):
             assert self._rng is not None
-            self._noise = self._rng.standard_normal(_NOISE_BLOCK) * self.config.noise_std_mmhg
+            block = self._rng.standard_normal(_NOISE_BLOCK) * self.config.noise_std_mmhg
+            self._noise = block.tolist()
             self._noise_i = 0
-        v = float(self._noise[self._noise_i])
+        v = self._noise[self._noise_i]
         self._noise_i += 1
         return v
 
@@ -133,8 +134,8 @@ class Sensor:
         updates the last reading with ``QUALITY_HELD`` added."""
         cfg = self.config
         # The damped line filters continuously, sampled or not.
-        if self._damped is None or self._last_t is None:
-            self._damped = true_map_mmhg
+        if self._damped is None or self._last_t is None or not self._artifacts:
+            self._damped = true_map_mmhg  # (no artifacts: no damping, and no generator per tick)
         else:
             tc = next(
                 (a.time_const_s for a in self._artifacts if a.kind == "damping" and a.active(t_s)),

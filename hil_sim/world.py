@@ -43,6 +43,10 @@ from hil_sim.sensor import Sensor
 from link.messages import PumpStatus, TickInputs
 
 _F32 = struct.Struct("<f")
+#: the six floats of an observation and the two of a pump status, rounded in one pack/unpack each
+#: (per tick: the same rounding as six or two calls of :func:`f32`, at a fraction of the calls)
+_F32x6 = struct.Struct("<6f")
+_F32x2 = struct.Struct("<2f")
 
 
 def f32(x: float, _pack=_F32.pack, _unpack=_F32.unpack) -> float:
@@ -149,25 +153,24 @@ class World:
         obs = self._obs
         if obs is not None and obs.tick == self.tick:
             return obs
-        t = self.sim_time_s
-        self._true_map = self.patient.map_mmhg + self.disturbance(t)
-        reading, quality = self.sensor.read(t, self._true_map)
+        tick = self.tick
+        t = tick * self.sample_period_s  # sim_time_s
         p = self.patient
+        self._true_map = true_map = p.map_mmhg + self.disturbance(t)
+        reading, quality = self.sensor.read(t, true_map)
         K, T_s, tau_s, valid = p.K, p.T_s, p.tau_s, True
         if self._sched_faults:
-            K, T_s, tau_s, valid = self.faults.scheduling(self.tick, K, T_s, tau_s, valid)
+            K, T_s, tau_s, valid = self.faults.scheduling(tick, K, T_s, tau_s, valid)
+        target = self.target_at(t)
+        try:
+            t32, reading32, target32, K32, T32, tau32 = _F32x6.unpack(
+                _F32x6.pack(t, reading, target, K, T_s, tau_s)
+            )
+        except OverflowError:  # one of them beyond float32: each on its own (±inf)
+            t32, reading32, target32 = f32(t), f32(reading), f32(target)
+            K32, T32, tau32 = f32(K), f32(T_s), f32(tau_s)
         obs = TickInputs(
-            self.tick,
-            f32(t),
-            f32(reading),
-            quality,
-            f32(self.target_at(t)),
-            f32(K),
-            f32(T_s),
-            f32(tau_s),
-            valid,
-            self.tick,
-            self.tick,
+            tick, t32, reading32, quality, target32, K32, T32, tau32, valid, tick, tick
         )
         self._obs = obs
         return obs
@@ -198,7 +201,12 @@ class World:
             total += mean
         self.last_mean_rate_ml_h = total / self._n_sub
         self.tick += 1
-        return PumpStatus(self.tick, f32(pump.delivered_ml_h), f32(pump.volume_ml), pump.alarms)
+        delivered, volume = pump.delivered_ml_h, pump.volume_ml
+        try:
+            delivered32, volume32 = _F32x2.unpack(_F32x2.pack(delivered, volume))
+        except OverflowError:
+            delivered32, volume32 = f32(delivered), f32(volume)
+        return PumpStatus(self.tick, delivered32, volume32, pump.alarms)
 
     def truth(self) -> dict[str, float | int]:
         """Ground truth now, for recording only (never for control)."""

@@ -80,6 +80,20 @@ from runtime.supervisor_io import AckOutcome, SupervisorInput, SupervisorOutput,
 
 __all__ = ["AckOutcome", "Supervisor", "SupervisorInput", "SupervisorOutput"]
 
+#: the fault bits as plain ints: ``faults |= Fault.X`` would turn ``faults`` into an IntFlag, whose
+#: arithmetic runs Python-level enum code at every later ``|`` and ``&`` of the tick
+_COMMAND_CLAMPED, _COMMAND_INVALID = int(Fault.COMMAND_CLAMPED), int(Fault.COMMAND_INVALID)
+_CONTROLLER_FAULT = int(Fault.CONTROLLER_FAULT)
+_ESTIMATE_OUT_OF_BOX = int(Fault.ESTIMATE_OUT_OF_BOX)
+_ESTIMATOR_FALLBACK, _LINK_ERRORS = int(Fault.ESTIMATOR_FALLBACK), int(Fault.LINK_ERRORS)
+_LINK_LOSS, _MAP_FLATLINE = int(Fault.LINK_LOSS), int(Fault.MAP_FLATLINE)
+_MAP_NAN, _MAP_RANGE = int(Fault.MAP_NAN), int(Fault.MAP_RANGE)
+_MAP_SPIKE, _PUMP_ALARM = int(Fault.MAP_SPIKE), int(Fault.PUMP_ALARM)
+_PUMP_MISMATCH, _SCHED_INVALID = int(Fault.PUMP_MISMATCH), int(Fault.SCHED_INVALID)
+_SCHED_OUT_OF_BOX, _SCHED_RATE = int(Fault.SCHED_OUT_OF_BOX), int(Fault.SCHED_RATE)
+_SENSOR_QUALITY, _STALE_SAMPLE = int(Fault.SENSOR_QUALITY), int(Fault.STALE_SAMPLE)
+_TARGET_INVALID = int(Fault.TARGET_INVALID)
+
 #: slack (s) on time comparisons so that k·Ts sums reach a bound that is a whole number of ticks
 _EPS_S = 1e-9
 
@@ -173,17 +187,17 @@ class Supervisor:
         cfg = self.config
         faults = 0
         if quality & cfg.quality_mask:
-            faults |= Fault.SENSOR_QUALITY
+            faults |= _SENSOR_QUALITY
         if not math.isfinite(map_mmhg):
-            return faults | Fault.MAP_NAN
+            return faults | _MAP_NAN
         if not cfg.map_min_mmhg <= map_mmhg <= cfg.map_max_mmhg:
-            return faults | Fault.MAP_RANGE
+            return faults | _MAP_RANGE
         if self._prev_map is not None and abs(map_mmhg - self._prev_map) > cfg.spike_mmhg:
-            faults |= Fault.MAP_SPIKE
+            faults |= _MAP_SPIKE
         self._prev_map = map_mmhg
         if self._flat is not None:
             if new:
-                self._flat_fault = Fault.MAP_FLATLINE if self._flat.update(now_s, map_mmhg) else 0
+                self._flat_fault = _MAP_FLATLINE if self._flat.update(now_s, map_mmhg) else 0
             faults |= self._flat_fault
         return faults
 
@@ -195,13 +209,13 @@ class Supervisor:
         isfinite = math.isfinite
         if not (valid and isfinite(K) and isfinite(T_s) and isfinite(tau_s)):
             self._prev_sched = None
-            return Fault.SCHED_INVALID
+            return _SCHED_INVALID
         faults = 0
         box = cfg.sched_box
         if box is not None:
             (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
             if not (k_lo <= K <= k_hi and t_lo <= T_s <= t_hi and d_lo <= tau_s <= d_hi):
-                faults |= Fault.SCHED_OUT_OF_BOX
+                faults |= _SCHED_OUT_OF_BOX
         prev = self._prev_sched
         if cfg.sched_rate_bounds is not None and prev is not None:
             dt = now_s - self._prev_sched_s
@@ -213,7 +227,7 @@ class Supervisor:
                     or abs(T_s - prev[1]) > tol * b_t * dt
                     or abs(tau_s - prev[2]) > tol * b_d * dt
                 ):
-                    faults |= Fault.SCHED_RATE
+                    faults |= _SCHED_RATE
         if prev is None or now_s > self._prev_sched_s:
             self._prev_sched = (K, T_s, tau_s)
             self._prev_sched_s = now_s
@@ -222,7 +236,7 @@ class Supervisor:
     def _check_estimate(self, now_s: float, inp: SupervisorInput) -> int:
         """``ESTIMATOR_FALLBACK`` and ``ESTIMATE_OUT_OF_BOX`` (the box held for estimate_box_s)."""
         cfg = self.config
-        faults = 0 if inp.estimate_healthy else Fault.ESTIMATOR_FALLBACK
+        faults = 0 if inp.estimate_healthy else _ESTIMATOR_FALLBACK
         box = cfg.sched_box
         if box is None:
             return faults
@@ -233,7 +247,7 @@ class Supervisor:
         if self._out_of_box_since_s is None:
             self._out_of_box_since_s = now_s
         if now_s - self._out_of_box_since_s >= cfg.estimate_box_s - _EPS_S:
-            faults |= Fault.ESTIMATE_OUT_OF_BOX
+            faults |= _ESTIMATE_OUT_OF_BOX
         return faults
 
     def _check_pump(self, now_s: float, delivered: float, alarms: int) -> int:
@@ -242,7 +256,7 @@ class Supervisor:
             return 0
         faults = 0
         if alarms & cfg.pump_alarm_mask:
-            faults |= Fault.PUMP_ALARM
+            faults |= _PUMP_ALARM
             if alarms & PUMP_ALARM_WATCHDOG:
                 # the pump fell back to its own safe rate: hold *that*, re-enter from it
                 self.command_ml_h = _clamp(delivered, cfg.max_rate_ml_h)
@@ -255,7 +269,7 @@ class Supervisor:
             if self._mismatch_since_s is None:
                 self._mismatch_since_s = now_s
             if now_s - self._mismatch_since_s >= cfg.pump_mismatch_s - _EPS_S:
-                faults |= Fault.PUMP_MISMATCH
+                faults |= _PUMP_MISMATCH
         return faults
 
     # -- the two phases of a tick -----------------------------------------------------------------
@@ -267,16 +281,16 @@ class Supervisor:
         self._entry_state = self.state
         faults = 0
         if inp.link_silence_s >= cfg.link_loss_after_s - _EPS_S:
-            faults |= Fault.LINK_LOSS
+            faults |= _LINK_LOSS
         if inp.sample_age_s > cfg.stale_after_s + _EPS_S:  # the limit itself is not stale
-            faults |= Fault.STALE_SAMPLE
+            faults |= _STALE_SAMPLE
         else:
             faults |= self._check_map(now_s, inp.map_mmhg, inp.quality, inp.sample_age_s == 0.0)
             faults |= self._check_sched(now_s, inp.K, inp.T_s, inp.tau_s, inp.sched_valid)
             if not cfg.map_min_mmhg <= inp.target_mmhg <= cfg.map_max_mmhg:  # False for NaN too
-                faults |= Fault.TARGET_INVALID
+                faults |= _TARGET_INVALID
         if inp.link_errors:
-            faults |= Fault.LINK_ERRORS
+            faults |= _LINK_ERRORS
         faults |= self._check_pump(now_s, inp.pump_delivered_ml_h, inp.pump_alarms)
         if inp.estimated:
             faults |= self._check_estimate(now_s, inp)
@@ -288,9 +302,9 @@ class Supervisor:
             if self._fault_since_s is None:
                 self._fault_since_s = now_s
             if state in (State.AUTO, State.RECOVERING):
-                state = State.FAILSAFE if faults & Fault.LINK_LOSS else State.HOLD
+                state = State.FAILSAFE if faults & _LINK_LOSS else State.HOLD
             elif state == State.HOLD and (
-                faults & Fault.LINK_LOSS or now_s - self._fault_since_s >= cfg.hold_max_s - _EPS_S
+                faults & _LINK_LOSS or now_s - self._fault_since_s >= cfg.hold_max_s - _EPS_S
             ):
                 state = State.FAILSAFE
         else:
@@ -331,17 +345,17 @@ class Supervisor:
         if self._run_controller:
             raw = math.nan if raw_command_ml_h is None or failed else raw_command_ml_h
             if not math.isfinite(raw):
-                bit = Fault.CONTROLLER_FAULT if failed else Fault.COMMAND_INVALID
+                bit = _CONTROLLER_FAULT if failed else _COMMAND_INVALID
                 self.faults |= bit
                 if self._latch:
-                    self._latched |= int(bit)  # a plain int: it joins every tick's faults
+                    self._latched |= bit  # a plain int: it joins every tick's faults
                 self._good_since_s = None
                 self._fault_since_s = self._now_s
                 state = State.HOLD
                 command = previous
             else:
                 if not 0.0 <= raw <= high:
-                    self.faults |= Fault.COMMAND_CLAMPED
+                    self.faults |= _COMMAND_CLAMPED
                 target = _clamp(raw, high)
                 if state == State.AUTO:
                     command = target

@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+_INF = math.inf
+
 
 @dataclass(frozen=True, slots=True)
 class FilterSettings:
@@ -171,7 +173,18 @@ class DelayModel:
     def verdict(self, K_range: tuple[float, float], T_range_s: tuple[float, float]) -> str:
         """The health check: ``"ok"``, ``"diverged"``, ``"K implausible"`` or ``"T implausible"``."""
         a, b, c = self.theta
-        if not (math.isfinite(a + b + c) and all(math.isfinite(x) and x < 1e300 for x in self.P)):
+        p0, p1, p2, p3, p4, p5 = self.P
+        # -inf < x < 1e300 is isfinite(x) and x < 1e300 (False for NaN), without a generator:
+        # this runs for every model at every window close, up to three times
+        if not (
+            math.isfinite(a + b + c)
+            and -_INF < p0 < 1e300
+            and -_INF < p1 < 1e300
+            and -_INF < p2 < 1e300
+            and -_INF < p3 < 1e300
+            and -_INF < p4 < 1e300
+            and -_INF < p5 < 1e300
+        ):
             return "diverged"
         if not 0.0 < a < 1.0:
             return "T implausible"
