@@ -17,16 +17,17 @@ its records are ``pressor trial``'s bytes. Every cohort runs through
 :func:`hil_sim.trial.run_cohort`, the code path of ``pressor trial`` (``--jobs`` local processes
 or ``--scheduler`` a Dask cluster; the results do not depend on either), with progress on stderr.
 
-Printed (stdout, a Markdown table, one row per level and controller as each level finishes):
+Printed (stdout, a Markdown table as each level finishes): per level and controller one row for
+the reachable patients and one for the unreachable ones (a group without a patient has no row):
 
-- ``patients``, ``reachable``: the cohort, and its patients whose target the pump's maximum rate
-  can hold at that level (the records' ``reachable``: required ΔMAP minus the metrics' band within
-  the model's ``max_delta_map_mmhg``); the figures below are over the reachable ones;
-- ``unstable``: patients (all of them) whose records' ``stable`` flag is false, the project's
-  criterion (docs/METRICS.md): non-finite true MAP, or in the final quarter of the run the error
-  swinging from beyond +band to beyond −band (or back) twice or more, i.e. a sustained oscillation;
-- ``MDPE``, ``MDAPE``, ``wobble``: medians over patients of the records' Varvel figures (%, over
-  the whole period after the target step; :mod:`contracts.metrics`);
+- ``patients``: how many patients the row covers, ``reachable`` (the records' ``reachable``: the
+  pump's maximum rate holds the target at that level to within the metrics' band, by the model's
+  ``max_delta_map_mmhg``) or ``unreachable`` (the target is beyond the pump's limit);
+- ``unstable``: how many of them have the records' ``stable`` flag false, the project's criterion
+  (docs/METRICS.md): non-finite true MAP, or in the final quarter of the run the error swinging
+  from beyond +band to beyond −band (or back) twice or more, i.e. a sustained oscillation;
+- ``MDPE``, ``MDAPE``, ``wobble``: medians over the row's patients of the records' Varvel figures
+  (%, over the whole period after the target step; :mod:`contracts.metrics`);
 - ``in ±5``: median % of time within ±5 mmHg of the target after first arriving there (a patient
   that never arrives counts 0 %);
 - ``overshoot``: median and 90th percentile of the step overshoot (% of the step, before the first
@@ -62,9 +63,9 @@ CONTROLLERS = ("lpv", "pi", "smith")
 #: summary.json fields that must match for a written (level, controller) to be reused
 IDENTITY = ("scenario", "controller", "patient_model", "cohort_seed", "n_patients", "schedule")
 HEADER = (
-    "| level | controller | patients | reachable | unstable | MDPE % | MDAPE % | wobble %"
-    " | in ±5 mmHg % | step overshoot % (median / p90) |\n"
-    "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+    "| level | controller | patients | unstable | MDPE % | MDAPE % | wobble % | in ±5 mmHg %"
+    " | step overshoot % (median / p90) |\n"
+    "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
 )
 
 
@@ -74,25 +75,23 @@ def level_dir(out: Path, level: float, controller: str) -> Path:
 
 
 def figures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """One table row's figures from a cohort's records (see the module docstring).
+    """One table row's figures over ``records`` (see the module docstring).
 
     Returns
     -------
     dict
-        ``patients``, ``reachable``, ``unstable`` (counts); ``mdpe_pct``, ``mdape_pct``,
-        ``wobble_pct``, ``time_in_band_pct``, ``overshoot_pct`` (medians over the reachable
-        patients, %, ``None`` without one) and ``overshoot_p90_pct``.
+        ``patients``, ``unstable`` (counts); ``mdpe_pct``, ``mdape_pct``, ``wobble_pct``,
+        ``time_in_band_pct``, ``overshoot_pct`` (medians over the patients, %, ``None`` without
+        one) and ``overshoot_p90_pct``.
     """
-    reach = [r for r in records if r["reachable"]]
 
     def median(key: str, none_as: float | None = None) -> float | None:
-        vals = [none_as if r[key] is None else r[key] for r in reach]
+        vals = [none_as if r[key] is None else r[key] for r in records]
         return percentile_summary(vals)["median"]  # type: ignore[return-value]
 
-    overshoot = percentile_summary(r["step_overshoot_pct"] for r in reach)
+    overshoot = percentile_summary(r["step_overshoot_pct"] for r in records)
     return {
         "patients": len(records),
-        "reachable": len(reach),
         "unstable": sum(not r["stable"] for r in records),
         "mdpe_pct": median("mdpe_pct"),
         "mdape_pct": median("mdape_pct"),
@@ -107,14 +106,25 @@ def _num(value: float | None, digits: int = 1) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
-def format_row(level: float, controller: str, fig: dict[str, Any]) -> str:
-    """The Markdown table row of one level and controller."""
+def format_row(level: float, controller: str, group: str, fig: dict[str, Any]) -> str:
+    """The Markdown table row of one level, controller and group of patients (:func:`figures`)."""
     return (
-        f"| {level:g}× | {controller} | {fig['patients']} | {fig['reachable']} | {fig['unstable']}"
+        f"| {level:g}× | {controller} | {fig['patients']} {group} | {fig['unstable']}"
         f" | {_num(fig['mdpe_pct'], 2)} | {_num(fig['mdape_pct'], 2)}"
         f" | {_num(fig['wobble_pct'], 2)} | {_num(fig['time_in_band_pct'])}"
         f" | {_num(fig['overshoot_pct'])} / {_num(fig['overshoot_p90_pct'])} |"
     )
+
+
+def level_rows(level: float, controller: str, records: Sequence[dict[str, Any]]) -> list[str]:
+    """The rows of one level and controller: its reachable patients, then its unreachable ones
+    (no row for a group without a patient)."""
+    rows = []
+    for group, reachable in (("reachable", True), ("unreachable", False)):
+        sub = [r for r in records if r["reachable"] is reachable]
+        if sub:
+            rows.append(format_row(level, controller, group, figures(sub)))
+    return rows
 
 
 def _reuse(path: Path, expected: dict[str, Any]) -> list[dict[str, Any]] | None:
@@ -236,7 +246,9 @@ def main(argv: list[str] | None = None) -> int:
     print(HEADER, flush=True)
     for level in args.levels:
         rows = [
-            format_row(level, c, figures(run_level(scenario, c, level, args))) for c in controllers
+            row
+            for c in controllers
+            for row in level_rows(level, c, run_level(scenario, c, level, args))
         ]
         print("\n".join(rows), flush=True)
     return 0

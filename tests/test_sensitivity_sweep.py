@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.sensitivity_sweep import figures, format_row, main
+from benchmarks.sensitivity_sweep import figures, level_rows, main
 from hil_sim.cli import main as pressor_main
 
 SHORT = """
@@ -42,22 +42,26 @@ def _record(reachable: bool, stable: bool, mdpe: float, in_band: float | None, o
     }
 
 
-def test_a_rows_figures_are_over_reachable_patients_with_never_in_band_as_zero():
+def test_a_level_has_a_row_for_its_reachable_and_one_for_its_unreachable_patients():
     records = [
         _record(True, True, -2.0, None, 0.0),
         _record(True, False, 4.0, 90.0, 10.0),
         _record(True, True, 10.0, 100.0, 20.0),
-        _record(False, False, 100.0, 0.0, 500.0),  # unreachable: counted, not in the medians
+        _record(False, False, -30.0, None, 0.0),
     ]
-    fig = figures(records)
-    assert (fig["patients"], fig["reachable"], fig["unstable"]) == (4, 3, 2)
+    fig = figures(records[:3])
+    assert (fig["patients"], fig["unstable"]) == (3, 1)
     assert fig["mdpe_pct"] == 4.0 and fig["mdape_pct"] == 4.0 and fig["wobble_pct"] == 1.0
-    assert fig["time_in_band_pct"] == 90.0  # 0 (never), 90, 100
+    assert fig["time_in_band_pct"] == 90.0  # 0 (never within 5 mmHg), 90, 100
     assert fig["overshoot_pct"] == 10.0
     assert fig["overshoot_p90_pct"] == pytest.approx(18.0)  # 10 + 0.8 × 10, linear
-    assert format_row(0.5, "pi", fig) == (
-        "| 0.5× | pi | 4 | 3 | 2 | 4.00 | 4.00 | 1.00 | 90.0 | 10.0 / 18.0 |"
-    )
+    assert level_rows(0.5, "pi", records) == [
+        "| 0.5× | pi | 3 reachable | 1 | 4.00 | 4.00 | 1.00 | 90.0 | 10.0 / 18.0 |",
+        "| 0.5× | pi | 1 unreachable | 1 | -30.00 | 30.00 | 1.00 | 0.0 | 0.0 / 0.0 |",
+    ]
+    assert level_rows(2.0, "lpv", records[:1]) == [
+        "| 2× | lpv | 1 reachable | 0 | -2.00 | 2.00 | 1.00 | 0.0 | 0.0 / 0.0 |"
+    ]
 
 
 def test_the_sweep_prints_each_level_scales_k_at_10x_and_reuses_what_it_wrote(
@@ -70,8 +74,16 @@ def test_the_sweep_prints_each_level_scales_k_at_10x_and_reuses_what_it_wrote(
     argv += ["--scenario", str(scenario), "--out", str(out)]
     assert main(argv) == 0
     first = capsys.readouterr()
-    rows = [line for line in first.out.splitlines() if line.startswith("| 1")]
-    assert [r.split(" | ")[:3] for r in rows] == [["| 1×", "pi", "2"], ["| 10×", "pi", "2"]]
+    rows = [line.split(" | ")[:3] for line in first.out.splitlines() if line.startswith("| 1")]
+    # Patient 1000000 (k0 0.288, k1 0.00472) holds at most k0/(k1·e) = 22.4 mmHg at any rate,
+    # short of the 20 + 10 mmHg (step, haemorrhage) asked, at every level; 1000001 (k0 0.978)
+    # holds 76.8 mmHg at 120 ml/h.
+    assert rows == [
+        ["| 1×", "pi", "1 reachable"],
+        ["| 1×", "pi", "1 unreachable"],
+        ["| 10×", "pi", "1 reachable"],
+        ["| 10×", "pi", "1 unreachable"],
+    ]
     assert "x10 pi: 2/2 patients" in first.err
 
     for r in json.loads((out / "x10" / "pi" / "patients.json").read_text()):
