@@ -1,6 +1,6 @@
 """``pressor scenarios`` and ``pressor trial``: the named scenarios and the in-silico cohort trial.
 
-``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH|MODULE:CLASS[:ARGS] --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal|validated] [--patient-model NAME|MODULE:CLASS] [--jobs J | --scheduler ADDRESS] --out DIR``
+``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH|MODULE:CLASS[:ARGS] --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal|validated] [--patient-model NAME|MODULE:CLASS] [--sensitivity F] [--jobs J | --scheduler ADDRESS] --out DIR``
 prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
 (reachable patients; unreachable ones counted and listed apart) and of each disturbance event's
 peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
@@ -144,6 +144,16 @@ def _trial(argv: Sequence[str]) -> int:
     )
     p.add_argument("--rate", type=float, default=10.0, help="loop rate in Hz (default 10)")
     add_patient_model_option(p)
+    p.add_argument(
+        "--sensitivity",
+        type=float,
+        default=1.0,
+        metavar="F",
+        help="scale every patient's drug sensitivity by F (dimensionless, 0.05..20): the patient"
+        " responds to each delivered ml/h as the model's responds to F ml/h, so its K is F times"
+        " the model's, T and tau unchanged (hil_sim/sensitivity.py); 1 runs the model as drawn"
+        " (default: %(default)g)",
+    )
     p.add_argument("--out", required=True, type=Path, help="output directory")
     args = p.parse_args(argv)
     if not 1 <= args.patients <= 100000:
@@ -154,6 +164,8 @@ def _trial(argv: Sequence[str]) -> int:
         p.error(f"field '--jobs' = {args.jobs} outside [1, 64]")
     if not 0.1 <= args.rate <= 1000.0:
         p.error(f"field '--rate' = {args.rate} outside [0.1, 1000] Hz")
+    if not 0.05 <= args.sensitivity <= 20.0:
+        p.error(f"field '--sensitivity' = {args.sensitivity} outside [0.05, 20] (dimensionless)")
 
     from contracts.files import write_atomic
     from contracts.parallel import BackendError
@@ -161,6 +173,7 @@ def _trial(argv: Sequence[str]) -> int:
     from hil_sim.patient_model import PatientModelError, check_model_for_scenario
     from hil_sim.report import write_report
     from hil_sim.scenario import ScenarioError, load_scenario
+    from hil_sim.sensitivity import with_sensitivity
     from hil_sim.trial import controller_dir_name, run_cohort, write_outputs
     from runtime.controller_loader import ControllerSpecError, load_controller
     from runtime.controller_plugin import split_controller_list
@@ -169,7 +182,8 @@ def _trial(argv: Sequence[str]) -> int:
     period = 1.0 / args.rate
     try:
         scenario = load_scenario(args.scenario)
-        check_model_for_scenario(args.patient_model, scenario.name, scenario.frozen is not None)
+        patient_model = with_sensitivity(args.patient_model, args.sensitivity)
+        check_model_for_scenario(patient_model, scenario.name, scenario.frozen is not None)
     except (ScenarioError, PatientModelError) as exc:
         raise UsageError(str(exc)) from None
     specs = split_controller_list(args.controller)
@@ -198,7 +212,7 @@ def _trial(argv: Sequence[str]) -> int:
                 progress=_progress_bar,
                 scheduler=args.scheduler,
                 schedule=args.schedule,
-                patient_model=args.patient_model,
+                patient_model=patient_model,
             )
         except ControllerError as exc:  # a plugin that raised: one line, exit 1
             print(f"pressor trial: {exc}", file=sys.stderr)

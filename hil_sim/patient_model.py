@@ -149,7 +149,17 @@ def load_patient_model(spec: str) -> type[PatientModel]:
     ------
     PatientModelError
         Naming the spec, the module, the class and what is missing or wrong.
+
+    Notes
+    -----
+    ``MODEL@sensitivity=F`` gives ``MODEL``'s patients at F × their drug sensitivity
+    (:mod:`hil_sim.sensitivity`; F in [0.05, 20]).
     """
+    from hil_sim.sensitivity import scaled_model, split_spec  # it imports this module
+
+    base, factor = split_spec(spec)
+    if factor is not None:
+        return scaled_model(load_patient_model(base), factor)  # type: ignore[return-value]
     module_name, cls_name = model_spec(spec)
     where = f"--patient-model {spec!r}"
     try:
@@ -199,11 +209,11 @@ def check_model_for_scenario(spec: str, scenario_name: str, frozen: bool) -> typ
         As :func:`load_patient_model`, or naming the scenario a model cannot play.
     """
     model = load_patient_model(spec)
-    if frozen and model_spec(spec) != model_spec(DEFAULT_PATIENT_MODEL):
+    if frozen and ("@" in spec or model_spec(spec) != model_spec(DEFAULT_PATIENT_MODEL)):
         raise PatientModelError(
             f"--patient-model {spec!r}: scenario {scenario_name!r} fixes a frozen first-order"
             f' patient (patient.mode = "frozen"); only --patient-model {DEFAULT_PATIENT_MODEL}'
-            " plays it"
+            " (without a sensitivity factor) plays it"
         )
     return model
 
@@ -216,7 +226,8 @@ def add_patient_model_option(parser: argparse.ArgumentParser) -> None:
         default=DEFAULT_PATIENT_MODEL,
         metavar="NAME|MODULE:CLASS",
         help=f"the simulated patient: {', '.join(PATIENT_MODELS)} (docs/PATIENTS.md), or a class"
-        " satisfying hil_sim.patient_model.PatientModel (default: %(default)s, the seed paper's)",
+        " satisfying hil_sim.patient_model.PatientModel; MODEL@sensitivity=F scales its drug"
+        " sensitivity by F in [0.05, 20] (default: %(default)s, the seed paper's)",
     )
 
 

@@ -42,6 +42,7 @@ import numpy as np
 from hil_sim.closed_loop import Trajectory
 from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
 from hil_sim.scenario import Scenario, load_scenario
+from hil_sim.sensitivity import with_sensitivity
 from hil_sim.trial import _csv_text, _simulate_patient, run_cohort, write_outputs
 from runtime.controller_loader import load_controller
 from runtime.estimation.schedule import SOURCES
@@ -265,6 +266,7 @@ def simulate(
     rate_hz: float = 10.0,
     schedule: str = "oracle",
     patient_model: str = DEFAULT_PATIENT_MODEL,
+    sensitivity: float = 1.0,
 ) -> SimulationResult:
     """Simulate one patient in process, as one patient of ``pressor trial``.
 
@@ -286,6 +288,9 @@ def simulate(
         Where K, T, τ come from: ``oracle``, ``estimated``, ``nominal`` or ``validated``.
     patient_model
         A patient model name or ``MODULE:CLASS`` (:mod:`hil_sim.patient_model`).
+    sensitivity
+        The patient's drug sensitivity × this factor (dimensionless, [0.05, 20];
+        :mod:`hil_sim.sensitivity`); 1 (default) runs the model as drawn, byte for byte.
 
     Returns
     -------
@@ -293,6 +298,7 @@ def simulate(
     """
     if not 0 <= patient_seed < 2**63:
         raise ValueError(f"patient_seed = {patient_seed!r}: allowed [0, 2**63)")
+    patient_model = with_sensitivity(patient_model, sensitivity)
     spec, sc, period_s = _checked(
         controller, controller_args, scenario, duration_s, rate_hz, schedule, patient_model
     )
@@ -313,6 +319,7 @@ def trial(
     rate_hz: float = 10.0,
     schedule: str = "oracle",
     patient_model: str = DEFAULT_PATIENT_MODEL,
+    sensitivity: float = 1.0,
     trajectories: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> TrialResult:
@@ -336,7 +343,7 @@ def trial(
         A Dask scheduler address (``tcp://HOST:PORT``) instead of local processes.
     duration_s
         Simulated time per patient (s); default the scenario's.
-    rate_hz, schedule, patient_model
+    rate_hz, schedule, patient_model, sensitivity
         As :func:`simulate`.
     trajectories
         Also keep every patient's trajectory at 1 Hz (:attr:`TrialResult.trajectories`).
@@ -354,6 +361,7 @@ def trial(
     ):
         if not lo <= value <= hi:
             raise ValueError(f"{name} = {value!r}: allowed [{lo}, {hi}]")
+    patient_model = with_sensitivity(patient_model, sensitivity)
     spec, sc, period_s = _checked(
         controller, controller_args, scenario, duration_s, rate_hz, schedule, patient_model
     )

@@ -89,6 +89,18 @@ def test_varvel_mdpe_mdape_wobble_on_known_errors():
     assert m["wobble_pct"] == pytest.approx(10.0)  # |PE - 0| median
 
 
+def test_varvel_figures_count_from_the_step_on_skip_invalid_samples_and_tell_wobble_from_mdape():
+    t = np.arange(0.0, 11.0, 1.0)
+    target = np.where(t < 3.0, 60.0, 80.0)
+    # before the step 50 % low (would pull the median to -5 %); after it PE = -20, -15, 5, 10,
+    # (NaN), 10, 15, 30 %
+    y = np.array([30.0, 30.0, 30.0, 64.0, 68.0, 84.0, 88.0, np.nan, 88.0, 92.0, 104.0])
+    m = run_metrics(t, y, target, np.zeros_like(t), 120.0, step_time_s=3.0, step_mmhg=20.0)
+    assert m["mdpe_pct"] == pytest.approx(10.0)  # median of the seven PE
+    assert m["mdape_pct"] == pytest.approx(15.0)  # |PE| = 20, 15, 5, 10, 10, 15, 30
+    assert m["wobble_pct"] == pytest.approx(5.0)  # |PE - 10| = 30, 25, 5, 0, 0, 5, 20
+
+
 def test_drug_total_max_rate_and_time_at_limit():
     t = np.arange(0.0, 3600.0, 1.0)
     rate = np.full_like(t, 60.0)

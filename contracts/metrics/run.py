@@ -80,7 +80,10 @@ def run_metrics(
     Returns
     -------
     dict
-        Keys :data:`RUN_METRICS` + ``reachable`` + ``stable`` + ``disturbances``.
+        Keys :data:`RUN_METRICS` + ``reachable`` + ``stable`` + ``disturbances``. The Varvel
+        figures (``mdpe_pct``, ``mdape_pct``, ``wobble_pct``; %) count the whole controlled period:
+        every valid sample from the target step on (from the first sample without a step), the
+        rise included, not only the time after the target is first reached.
     """
     t, y, r, u = as_arrays(t_s, map_mmhg, target_mmhg, rate_ml_h)
     ts = period(t)
