@@ -24,7 +24,11 @@ FAMILY_MODULES = {
     "synthesis/theorem3.py",
 }
 #: lines that name the Smith-predictor baseline's nominal step in the verify report, not a family
-BASELINE_LINES = {'"smith": smith,', 'for name in ("lpv", "pi", "smith"):'}
+BASELINE_LINES = {
+    '"smith": smith,',
+    'for name in ("lpv", "pi", "smith"):',
+    'for name in ("plugin", "pi", "smith"):',
+}
 #: a family name as a string literal, or a test of one
 NAMES = re.compile(
     r"""is_smith|["'](theorem3|smith)["']\s*[:,)\]=]|==\s*["'](theorem3|smith)["']"""
