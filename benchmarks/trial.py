@@ -3,7 +3,7 @@
 Runs the in-process closed loop (World + controller, 10 Hz) on one core for a few patients of a
 scenario and prints the figure. Usage::
 
-    python benchmarks/trial.py [--scenario paper-disturbance] [--controller pi] [--patients 5]
+    python -m benchmarks.trial [--scenario paper-disturbance] [--controller pi] [--patients 5]
 """
 
 from __future__ import annotations

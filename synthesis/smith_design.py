@@ -127,7 +127,8 @@ def certify_smith(
         P(ρ) basis: "quadratic" (default, 7 terms), "affine" or "constant".
     rate_form
         "bound" (one LMI per point with rate slacks, what ``pressor`` runs) or "vertex" (every
-        rate vertex as its own LMI: the straightforward form ``benchmarks/synthesis.py`` compares).
+        rate vertex as its own LMI: the straightforward form
+        ``benchmarks/synthesis_speed.py`` compares).
     epsilon
         Strictness of the solve (scaled units; :data:`DESIGN_EPSILON` for the design).
     working_set

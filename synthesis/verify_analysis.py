@@ -10,7 +10,7 @@
   the design stage ran, rate-bound form, one LMI per point) over every dense point in ONE
   feasibility solve with the L2 gain capped at ``SMITH_GAMMA_CAP_FACTOR`` x the artifact's γ (the
   design grid's minimum); ``all_points_at_once`` imposes every rate vertex as its own LMI instead
-  (the straightforward form, for ``benchmarks/synthesis.py``). The cap is loose on purpose: the dense grid adds points between the
+  (the straightforward form, for ``benchmarks/synthesis_speed.py``). The cap is loose on purpose: the dense grid adds points between the
   design nodes, whose γ is larger (measured, loop gain 2: 2x2x2 11.65, 3x3x3 13.86, 5x5x5 14.5),
   and a cap too tight would turn a stable, certified loop into a failed solve.
 

@@ -17,7 +17,7 @@ import pytest
 
 from codegen import pipeline as pl
 from codegen.tables import TabulationGrid, TabulationProof, build_tables, check_grid
-from tests.codegen_helpers import (
+from tests.support.codegen_helpers import (
     BOX,
     HAND_GRID_REL_TOL,
     TS,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from codegen.discretise import DelayedControllerMatrices, discretise_node
 from codegen.frozen_loop import frozen_loop_matrices, unstable_root_count
-from tests.codegen_helpers import TS, example_controller
+from tests.support.codegen_helpers import TS, example_controller
 
 
 def test_frozen_loop_check_tells_stable_from_unstable():

@@ -15,8 +15,8 @@ from runtime.controller_plugin import refresh_entry_points, split_controller_lis
 from runtime.core import ControllerError
 from runtime.supervisor_config import Fault, State
 
-HERE = Path(__file__).resolve().parent
-PLUGINS = str(HERE / "controller_plugins.py")
+SUPPORT = Path(__file__).resolve().parent / "support"
+PLUGINS = str(SUPPORT / "controller_plugins.py")
 SHORT = """
 name = "short-step"
 description = "2 min step for plugin tests"
@@ -38,7 +38,7 @@ def short(tmp_path: Path) -> Path:
 
 
 def test_a_plugin_loads_by_module_by_file_with_arguments_and_the_loop_period():
-    c = load_controller("tests.controller_plugins:PlainPI:kp=0.8,ki=0.02", 0.05)
+    c = load_controller("tests.support.controller_plugins:PlainPI:kp=0.8,ki=0.02", 0.05)
     assert (type(c).__name__, c.kp, c.ki, c.sample_period_s) == ("PlainPI", 0.8, 0.02, 0.05)
     c = load_controller(f"{PLUGINS}:PlainPI:0.1,kp=2", 0.1)  # positional period, then keyword
     assert (c.sample_period_s, c.kp) == (0.1, 2)
@@ -59,10 +59,10 @@ def test_a_plugin_loads_by_module_by_file_with_arguments_and_the_loop_period():
 )
 def test_a_bad_plugin_is_refused_naming_module_class_and_what_is_missing(cls, needles):
     with pytest.raises(ControllerSpecError) as info:
-        load_controller(f"tests.controller_plugins:{cls}", 0.1)
+        load_controller(f"tests.support.controller_plugins:{cls}", 0.1)
     for needle in needles:
         assert needle in str(info.value)
-    assert "tests.controller_plugins" in str(info.value)
+    assert "tests.support.controller_plugins" in str(info.value)
 
 
 def test_an_unimportable_module_or_missing_file_is_named():
@@ -76,7 +76,7 @@ def test_an_unimportable_module_or_missing_file_is_named():
 
 def test_generated_modules_keep_their_integrity_check(tmp_path):
     fake = tmp_path / "fake.py"
-    fake.write_text((HERE / "controller_plugins.py").read_text())
+    fake.write_text((SUPPORT / "controller_plugins.py").read_text())
     with pytest.raises(ControllerSpecError, match="MODULE_SHA256"):
         load_controller(str(fake), 0.1)  # a bare FILE.py is a generated module
     assert type(load_controller(f"{fake}:PlainPI", 0.1)).__name__ == "PlainPI"
@@ -87,7 +87,7 @@ def test_an_installed_entry_point_names_a_controller(tmp_path, monkeypatch):
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: myctl\nVersion: 1.0\n")
     (dist / "entry_points.txt").write_text(
-        "[pressor.controllers]\nmy-pi = tests.controller_plugins:PlainPI\n"
+        "[pressor.controllers]\nmy-pi = tests.support.controller_plugins:PlainPI\n"
     )
     monkeypatch.syspath_prepend(str(tmp_path))
     refresh_entry_points()
@@ -151,10 +151,10 @@ def test_plugin_trials_are_byte_identical_in_process_across_workers_and_the_comm
 
 
 def test_api_accepts_a_class_and_to_pandas_holds_records_and_trajectories(short):
-    from tests.controller_plugins import PlainPI
+    from tests.support.controller_plugins import PlainPI
 
     result = api.trial(PlainPI, short, n_patients=2, controller_args={"kp": 0.6}, trajectories=True)
-    assert result.controller == "tests.controller_plugins:PlainPI:kp=0.6"
+    assert result.controller == "tests.support.controller_plugins:PlainPI:kp=0.6"
     frame = result.to_pandas()
     assert list(frame["patient_seed"]) == [r["patient_seed"] for r in result.records]
     assert "iae_mmhg_s" in frame.columns

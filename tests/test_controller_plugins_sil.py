@@ -6,9 +6,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from sil_helpers import pressor
+from tests.support.sil_helpers import pressor
 
-PLUGINS = str(Path(__file__).resolve().parent / "controller_plugins.py")
+PLUGINS = str(Path(__file__).resolve().parent / "support" / "controller_plugins.py")
 
 
 def test_sil_clamps_and_alarms_a_runaway_plugin(tmp_path):

@@ -27,7 +27,7 @@ from link import (
     TlogWriter,
     read_tlog,
 )
-from tests.sil_helpers import poll_until_exit, spawn_device
+from tests.support.sil_helpers import poll_until_exit, spawn_device
 
 
 def _run_pi_runtime(ep: RuntimeSession, max_ticks: int = 10**9) -> tuple[list, list]:
@@ -255,7 +255,7 @@ def test_lockstep_over_a_corrupting_link_recovers_and_keeps_the_simulated_trajec
 
     from hil_sim.device import run_device
     from link import ManualClock
-    from tests.link_doubles import FaultyPort, loop_pair
+    from tests.support.link_doubles import FaultyPort, loop_pair
 
     seed, duration = 4, 30.0
     a, b = loop_pair()

@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from sil_helpers import pressor
+
+from tests.support.sil_helpers import pressor
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 #: script -> small-size arguments (every example must be listed: see the last test)

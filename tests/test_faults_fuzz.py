@@ -20,7 +20,7 @@ from link.dialect import pressor as mavlink
 from runtime.core import CLEAN_LINK, ClosedLoopCore
 from runtime.supervisor import Supervisor
 from runtime.supervisor_config import supervisor_config_for
-from tests.link_doubles import loop_pair
+from tests.support.link_doubles import loop_pair
 
 MAX = 120.0
 _f32 = st.one_of(

@@ -15,7 +15,7 @@ import pytest
 
 from link import DROP_CAUSES
 from runtime.supervisor_config import Fault, State, SupervisorConfig
-from tests.sil_helpers import rrd_columns
+from tests.support.sil_helpers import rrd_columns
 
 REENTRY_STEP = SupervisorConfig().reentry_step_ml_h
 LINK_SENSOR = [

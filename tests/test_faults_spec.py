@@ -17,7 +17,7 @@ from contracts.faults import (
 from hil_sim.device import main as device_main
 from hil_sim.scenario import ScenarioError, load_scenario_file
 from runtime.supervisor_config import Fault
-from tests.sil_helpers import pressor
+from tests.support.sil_helpers import pressor
 
 REQUIRED = (
     "link-flip link-drop link-stall link-disconnect link-garbage link-duplicate sensor-nan"

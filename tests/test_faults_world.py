@@ -14,7 +14,7 @@ from hil_sim.pump import ALARM_OCCLUSION, ALARM_RESERVOIR_EMPTY
 from hil_sim.sensor import QUALITY_WAVEFORM
 from hil_sim.world import World
 from link import DeviceSession, RuntimeSession
-from tests.link_doubles import loop_pair, tick_inputs
+from tests.support.link_doubles import loop_pair, tick_inputs
 
 TS = 0.1
 

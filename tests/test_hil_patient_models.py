@@ -19,7 +19,7 @@ from hil_sim.pkpd import PatientParams as PkpdParams
 from hil_sim.pkpd import PkpdPatient
 from hil_sim.world import World
 
-PLUGIN = "tests.patient_plugin:FirstOrderPatient"
+PLUGIN = "tests.support.patient_plugin:FirstOrderPatient"
 
 
 def run(model: PatientModel, rate_ml_h: float, seconds: float, step_s: float) -> None:
@@ -285,9 +285,15 @@ def test_a_plugin_model_runs_a_trial_whose_records_and_summary_name_it(tmp_path:
     [
         ("nope", ["'nope'", "unknown model", "paper, pkpd, phenylephrine-2c"]),
         ("tests.no_such_module:X", ["cannot import module 'tests.no_such_module'"]),
-        ("tests.patient_plugin:Missing", ["module 'tests.patient_plugin' has no class 'Missing'"]),
-        ("tests.patient_plugin:NoStep", ["class 'NoStep'", "'tests.patient_plugin'", "step"]),
-        ("tests.patient_plugin:NoDelay", ["class 'NoDelay'", "no numeric tau_s"]),
+        (
+            "tests.support.patient_plugin:Missing",
+            ["module 'tests.support.patient_plugin' has no class 'Missing'"],
+        ),
+        (
+            "tests.support.patient_plugin:NoStep",
+            ["class 'NoStep'", "'tests.support.patient_plugin'", "step"],
+        ),
+        ("tests.support.patient_plugin:NoDelay", ["class 'NoDelay'", "no numeric tau_s"]),
     ],
 )
 def test_a_bad_patient_model_is_one_line_naming_module_class_and_what_is_missing_exit_2(

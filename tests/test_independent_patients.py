@@ -25,7 +25,7 @@ from hil_sim.pkpd import (
     PatientParams,
     draw_patient,
 )
-from tests.protocol_device import build_dialect
+from tests.support.protocol_device import build_dialect
 
 ROOT = Path(__file__).resolve().parents[1]
 

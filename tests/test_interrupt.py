@@ -24,7 +24,7 @@ from link import (
     read_tlog,
 )
 from link.dialect import pressor as mavlink
-from tests.sil_helpers import ROOT, poll_until_exit, rrd_columns, spawn_device
+from tests.support.sil_helpers import ROOT, poll_until_exit, rrd_columns, spawn_device
 
 ENV = dict(os.environ, CI="1", PYTHONPATH=str(ROOT))
 

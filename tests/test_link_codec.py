@@ -14,7 +14,7 @@ from link import (
     Signing,
 )
 from link.dialect import pressor as mavlink
-from tests.link_doubles import FaultyPort, SinkPort, collect, drain, loop_pair, tick_inputs
+from tests.support.link_doubles import FaultyPort, SinkPort, collect, drain, loop_pair, tick_inputs
 
 
 def _pressor_heartbeat(tx: DeviceSession, tick: int, state: int) -> None:

@@ -13,7 +13,7 @@ import pytest
 
 from link import DeviceSession, RuntimeSession, Signing, generate, open_port
 from link.dialect import pressor as mavlink
-from tests.link_doubles import tick_inputs
+from tests.support.link_doubles import tick_inputs
 
 
 def test_committed_module_matches_what_mavgen_generates_from_the_xml(tmp_path):

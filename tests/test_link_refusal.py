@@ -16,7 +16,7 @@ from link import (
     PeerRefused,
     RuntimeSession,
 )
-from tests.link_doubles import collect, drain, loop_pair
+from tests.support.link_doubles import collect, drain, loop_pair
 
 
 @pytest.mark.parametrize(

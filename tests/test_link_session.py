@@ -24,7 +24,7 @@ from link import (
     register_dialect_with_mavutil,
 )
 from link.dialect import pressor as mavlink
-from tests.link_doubles import FaultyPort, collect, drain, loop_pair, tick_inputs
+from tests.support.link_doubles import FaultyPort, collect, drain, loop_pair, tick_inputs
 
 
 def test_a_stalled_peer_times_out_and_is_counted():

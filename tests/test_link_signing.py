@@ -13,7 +13,7 @@ from link import (
     Signing,
 )
 from link.dialect import pressor as mavlink
-from tests.link_doubles import SinkPort, collect, drain, loop_pair
+from tests.support.link_doubles import SinkPort, collect, drain, loop_pair
 
 
 def _signed_pump_and_runtime(runtime_signing):

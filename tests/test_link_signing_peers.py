@@ -10,8 +10,8 @@ import pytest
 import link.signing as signing
 from link import MODE_AUTO, DeviceSession, Hello, PtyPair, RuntimeSession, Signing, SigningMismatch
 from link.dialect import pressor as mavlink
-from tests.link_doubles import SinkPort, collect
-from tests.sil_helpers import spawn_device
+from tests.support.link_doubles import SinkPort, collect
+from tests.support.sil_helpers import spawn_device
 
 
 def _key(tmp_path, name: str, seed: int):

@@ -29,8 +29,8 @@ from link.dialect import pressor as mavlink
 from runtime.controller_loader import load_controller
 from runtime.estimation.schedule import make_schedule
 from runtime.session import run_runtime
-from tests.link_doubles import tick_inputs
-from tests.sil_helpers import lockstep_run_config
+from tests.support.link_doubles import tick_inputs
+from tests.support.sil_helpers import lockstep_run_config
 
 _IDS = {
     "sample": mavlink.MAVLINK_MSG_ID_MAP_SAMPLE,

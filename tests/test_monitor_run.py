@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.sil_helpers import ROOT, pressor
+from tests.support.sil_helpers import ROOT, pressor
 from tests.test_runtime_run import bridged_ports  # noqa: F401 (a fixture)
 
 DURATION_S = 600.0

@@ -1,14 +1,12 @@
-"""A device written from docs/PROTOCOL.md alone (tests/protocol_device.py and its bedside,
-tests/protocol_device_bedside.py) drives the real ``pressor run`` over a real pty, signed, in both
-link modes (issue 12)."""
+"""A device written from docs/PROTOCOL.md alone (tests/support/protocol_device.py and its
+bedside, tests/support/protocol_device_bedside.py) drives the real ``pressor run`` over a real pty,
+signed, in both link modes."""
 
 from __future__ import annotations
 
 import ast
 import math
 import os
-import secrets
-import select
 import subprocess
 import sys
 import time
@@ -19,7 +17,14 @@ from types import ModuleType
 
 import pytest
 
-from tests.protocol_device import DeviceConfig, DeviceLog, ProtocolDevice, build_dialect, read_key
+from tests.support.protocol_device import (
+    DeviceConfig,
+    DeviceLog,
+    ProtocolDevice,
+    build_dialect,
+    read_key,
+)
+from tests.support.protocol_harness import wait_for_port_open, write_key
 
 ROOT = Path(__file__).resolve().parents[1]
 TS_S = 0.1  # the device's sample period = 1 / pressor run's default --rate (s)
@@ -52,24 +57,6 @@ class Run:
 def dialect(tmp_path_factory: pytest.TempPathFactory) -> ModuleType:
     """The device's own bindings, generated from link/pressor.xml with pymavlink's mavgen."""
     return build_dialect(ROOT / "link" / "pressor.xml", tmp_path_factory.mktemp("dialect"))
-
-
-def write_key(path: Path) -> Path:
-    """A fresh signing key file as docs/PROTOCOL.md describes it: 64 hex characters, mode 0600."""
-    path.write_text(secrets.token_hex(32) + "\n")
-    path.chmod(0o600)
-    return path
-
-
-def wait_for_port_open(master: int, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
-    """Block until ``pressor run`` opened the pty's slave (the master stops reporting hang-up)."""
-    poller = select.poll()
-    poller.register(master, select.POLLIN)
-    deadline = time.monotonic() + timeout_s
-    while any(ev & select.POLLHUP for _, ev in poller.poll(0)):
-        assert proc.poll() is None, "pressor run exited before opening its port"
-        assert time.monotonic() < deadline, "pressor run did not open its port"
-        time.sleep(0.01)
 
 
 def drive(
@@ -126,7 +113,7 @@ def assert_lockstep_reaches_target(run: Run, n_ticks: int) -> None:
 
 
 def imported_modules(tree: ast.Module) -> set[str]:
-    """Every module an ``import`` or ``from ... import`` in ``tree`` names (a relative one: from tests)."""
+    """Every module an ``import`` or ``from ... import`` in ``tree`` names (a relative one: from tests.support)."""
     names = {
         alias.name
         for node in ast.walk(tree)
@@ -134,7 +121,7 @@ def imported_modules(tree: ast.Module) -> set[str]:
         for alias in node.names
     }
     return names | {
-        "tests." * bool(node.level) + (node.module or "")
+        "tests.support." * bool(node.level) + (node.module or "")
         for node in ast.walk(tree)
         if isinstance(node, ast.ImportFrom)
     }
@@ -143,9 +130,12 @@ def imported_modules(tree: ast.Module) -> set[str]:
 def test_protocol_device_modules_import_only_the_standard_library_pymavlink_and_each_other() -> (
     None
 ):
-    device_modules = {f"tests.{path.stem}" for path in (ROOT / "tests").glob("protocol_device*.py")}
+    device_modules = {
+        f"tests.support.{path.stem}"
+        for path in (ROOT / "tests" / "support").glob("protocol_device*.py")
+    }
     checked: set[str] = set()
-    to_check = ["tests.protocol_device"]
+    to_check = ["tests.support.protocol_device"]
     while to_check:
         module = to_check.pop()
         checked.add(module)

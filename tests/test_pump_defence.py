@@ -11,7 +11,7 @@ from pathlib import Path
 
 from contracts.faults import PUMP_ALARM_OUT_OF_RANGE, PUMP_ALARM_WATCHDOG
 from link import Hello, PtyPair, RuntimeSession
-from tests.sil_helpers import ROOT, poll_until_exit, spawn_device
+from tests.support.sil_helpers import ROOT, poll_until_exit, spawn_device
 
 MAX_RATE_ML_H = 120.0
 

@@ -20,7 +20,14 @@ from codegen import pipeline as pl
 from synthesis.config import ConfigError
 from synthesis.config_toml import parse_config
 from synthesis.reference import ReferenceConfig, frozen_step_reference
-from tests.codegen_helpers import BOX, TS, CController, emit_targets, load_module, random_inputs
+from tests.support.codegen_helpers import (
+    BOX,
+    TS,
+    CController,
+    emit_targets,
+    load_module,
+    random_inputs,
+)
 from tests.test_codegen_core import built  # noqa: F401
 
 LAMBDA_S, FRACTION, K_MIN = 10.0, 0.9, 0.05

@@ -13,7 +13,7 @@ from pathlib import Path
 from runtime.clinician import ClinicianInput, read_target_file, split_ack
 from runtime.supervisor_config import State, SupervisorConfig
 from runtime.target_source import TargetSource
-from tests.link_doubles import tick_inputs
+from tests.support.link_doubles import tick_inputs
 from tests.test_runtime_supervisor import TS, Rig
 
 

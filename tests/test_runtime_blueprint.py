@@ -18,7 +18,7 @@ from runtime.blueprint import (
     TIMELINE,
 )
 from runtime.generated import lpv_map_controller as lpv
-from tests.sil_helpers import pressor, rrd_columns
+from tests.support.sil_helpers import pressor, rrd_columns
 
 FAULT_AT_S = 30.0
 

@@ -33,8 +33,8 @@ from link import (
 )
 from link.dialect import pressor as mavlink
 from runtime.blueprint import EVENTS_ENTITY
-from tests.link_doubles import tick_inputs
-from tests.sil_helpers import ROOT, bridged_ttys, pressor, rrd_columns
+from tests.support.link_doubles import tick_inputs
+from tests.support.sil_helpers import ROOT, bridged_ttys, pressor, rrd_columns
 
 TS = 0.1
 DEVICE_TARGET = 80.0  # mmHg: what the scripted device's MAP_TARGET says

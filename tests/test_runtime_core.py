@@ -19,7 +19,7 @@ from runtime.loop import Loop
 from runtime.supervisor import Supervisor
 from runtime.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
 from runtime.trajectory import held_delivered_ml_h
-from tests.sil_helpers import spawn_device
+from tests.support.sil_helpers import spawn_device
 
 SCENARIO, SEED, DURATION_S, TS = "paper-tracking", 3, 120.0, 0.1
 #: a flushed line (MAP out of range: HOLD, then re-entry) and an occlusion long enough to escalate

@@ -12,7 +12,7 @@ import pytest
 from contracts.usage import UsageError, UsageParser
 from runtime.config import add_run_options
 from runtime.cpu_latency import QOS_DEVICE, CpuLatencyRequest
-from tests.sil_helpers import pressor
+from tests.support.sil_helpers import pressor
 
 
 def test_request_writes_native_int32_and_releases_on_exit(tmp_path):

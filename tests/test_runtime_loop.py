@@ -29,7 +29,7 @@ from link import (  # noqa: E402
 from runtime.loop import DeviceStalled, Loop  # noqa: E402
 from runtime.supervisor import Supervisor  # noqa: E402
 from runtime.supervisor_config import State, supervisor_config_for  # noqa: E402
-from tests.link_doubles import loop_pair, tick_inputs  # noqa: E402
+from tests.support.link_doubles import loop_pair, tick_inputs  # noqa: E402
 
 TS = 0.1
 

@@ -1,7 +1,7 @@
 """``pressor run``: the runtime alone on a serial port, against a device started by hand.
 
 The device and the runtime each open the follower of their own pty, bridged like a null-modem
-cable (:func:`tests.sil_helpers.bridged_ttys`), so both ends are real ttys.
+cable (:func:`tests.support.sil_helpers.bridged_ttys`), so both ends are real ttys.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.sil_helpers import ROOT, bridged_ttys, pressor
+from tests.support.sil_helpers import ROOT, bridged_ttys, pressor
 
 SEED = 4
 

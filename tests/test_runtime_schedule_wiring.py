@@ -27,7 +27,7 @@ from runtime.estimation.schedule import Schedule, make_schedule
 from runtime.session import run_runtime
 from runtime.supervisor import Supervisor
 from runtime.supervisor_config import Fault, State, supervisor_config_for
-from tests.sil_helpers import (
+from tests.support.sil_helpers import (
     assert_recording_equals_simulation,
     lockstep_run_config,
     pressor,

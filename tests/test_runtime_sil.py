@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from tests.sil_helpers import assert_recording_equals_simulation, pressor, rrd_columns
+from tests.support.sil_helpers import assert_recording_equals_simulation, pressor, rrd_columns
 
 DURATION_S = 300
 SEED = 3

@@ -10,7 +10,7 @@ import pytest
 
 from runtime.clinician import ClinicianInput
 from runtime.target_source import TargetSource
-from tests.link_doubles import tick_inputs
+from tests.support.link_doubles import tick_inputs
 
 
 class EventLog:

@@ -60,13 +60,16 @@ def test_trial_on_a_dask_cluster_writes_the_local_runs_bytes(tmp_path, scenario,
 def test_a_plugin_patient_model_on_a_dask_cluster_writes_the_in_process_bytes(
     tmp_path, scenario, cluster
 ):
-    plugin = ("--patient-model", "tests.patient_plugin:FirstOrderPatient")  # imported by workers
+    plugin = (
+        "--patient-model",
+        "tests.support.patient_plugin:FirstOrderPatient",
+    )  # imported by workers
     local = _trial(tmp_path / "local", scenario, *plugin)
     remote = _trial(tmp_path / "dask", scenario, *plugin, "--scheduler", cluster.scheduler_address)
     for name in FILES:
         assert (remote / name).read_bytes() == (local / name).read_bytes(), name
     assert (
-        b'"patient_model": "tests.patient_plugin:FirstOrderPatient"'
+        b'"patient_model": "tests.support.patient_plugin:FirstOrderPatient"'
         in (local / "summary.json").read_bytes()
     )
 

@@ -10,7 +10,7 @@ import pytest
 from baselines.smith import SmithController
 from hil_sim.cli import main as hil_main
 from runtime.controller_loader import ControllerSpecError, load_controller
-from tests.sil_helpers import assert_recording_equals_simulation, pressor
+from tests.support.sil_helpers import assert_recording_equals_simulation, pressor
 
 
 def test_smith_spec_gives_the_smith_predictor_with_lambda_30_s():

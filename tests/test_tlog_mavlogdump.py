@@ -20,7 +20,7 @@ from link import (
     Signing,
     TlogWriter,
 )
-from tests.link_doubles import drain, loop_pair, tick_inputs
+from tests.support.link_doubles import drain, loop_pair, tick_inputs
 
 ROOT = Path(__file__).resolve().parents[1]
 

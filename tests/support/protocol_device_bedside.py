@@ -1,6 +1,6 @@
 """The bedside the protocol device plays: its patient, syringe pump and monitor.
 
-Part of the independent device of ``tests/protocol_device.py`` (written from docs/PROTOCOL.md
+Part of the independent device of ``tests/support/protocol_device.py`` (written from docs/PROTOCOL.md
 alone) and under the same rule: it imports the standard library only, nothing of the project (a
 test scans its imports). :class:`Patient` is the device's own first order plus transport delay;
 :class:`PatientModel` is what a caller's patient must offer to replace it.

@@ -1,4 +1,4 @@
-"""Patient models defined outside :mod:`hil_sim`, loaded by ``--patient-model tests.patient_plugin:CLASS``.
+"""Patient models defined outside :mod:`hil_sim`, loaded by ``--patient-model tests.support.patient_plugin:CLASS``.
 
 :class:`FirstOrderPatient` satisfies :class:`hil_sim.patient_model.PatientModel`; the others each
 lack one thing, for the error messages.

@@ -23,7 +23,7 @@ on the first backend only.
 
 ::
 
-    python benchmarks/synthesis.py [--config FILE.toml] [--grid 3,3,3] [--rate-terms vertices]
+    python -m benchmarks.synthesis_speed [--config FILE.toml] [--grid 3,3,3] [--rate-terms vertices]
                                    [--artifact FILE.npz] [--only synth|verify] [--skip-naive]
                                    [--kkt faer,qdldl]
 
@@ -45,10 +45,6 @@ from typing import Any
 
 
 def _child(kind: str, args: argparse.Namespace) -> None:
-    # this script is itself called synthesis.py: keep its directory from shadowing the package
-    here = os.path.dirname(os.path.abspath(__file__))
-    sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != here]
-    sys.modules.pop("synthesis", None)
     from synthesis.kkt import kkt_chain
 
     with kkt_chain([args.kkt]):
@@ -116,7 +112,15 @@ def _theorem3_synth(cfg: Any, kind: str, args: argparse.Namespace) -> dict[str, 
 
 
 def _run(kind: str, argv: list[str], method: str) -> dict:
-    cmd = [sys.executable, __file__, "--child", kind, f"--kkt={method}", *argv]
+    cmd = [
+        sys.executable,
+        "-m",
+        "benchmarks.synthesis_speed",
+        "--child",
+        kind,
+        f"--kkt={method}",
+        *argv,
+    ]
     # one BLAS thread, as pressor synth / verify set it (synthesis.blas_threads), for every case
     env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False, env=env)

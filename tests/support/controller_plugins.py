@@ -1,5 +1,5 @@
 """Controllers defined outside the project, loaded by ``--controller FILE.py:CLASS[:ARGS]`` (or
-``tests.controller_plugins:CLASS``): a plain PI one, and broken ones the loader and the supervisor
+``tests.support.controller_plugins:CLASS``): a plain PI one, and broken ones the loader and the supervisor
 must catch."""
 
 from __future__ import annotations

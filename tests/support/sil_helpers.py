@@ -22,7 +22,7 @@ from rerun.chunk import RrdReader  # noqa: E402
 from link import LinkClosedError, PtyPair, RuntimeSession  # noqa: E402
 from runtime.config import RunConfig  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def lockstep_run_config(controller: str, schedule: str) -> RunConfig:

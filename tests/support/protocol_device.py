@@ -5,7 +5,7 @@ pymavlink's mavgen at test time, and it imports nothing of the project (a test s
 both its modules). This module is its link end: dialect, key, signing, hello and the tick loop in
 both link modes over a file descriptor (a pty master) while the real ``pressor run`` is the runtime
 end. Its own patient (first order + transport delay), pump and monitor are in
-``tests/protocol_device_bedside.py``.
+``tests/support/protocol_device_bedside.py``.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any
 
 from pymavlink.generator import mavgen
 
-from tests.protocol_device_bedside import Monitor, Patient, PatientModel, Pump
+from tests.support.protocol_device_bedside import Monitor, Patient, PatientModel, Pump
 
 #: MAVLink signing epoch (2015-01-01 00:00:00 UTC) in Unix seconds.
 SIGNING_EPOCH_S = 1420070400.0
