@@ -25,7 +25,6 @@ from hil_sim.pkpd import (
     PatientParams,
     draw_patient,
 )
-from tests.support.protocol_device import build_dialect
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -119,12 +118,6 @@ def test_controller_names_come_from_the_spec_or_the_module_folder() -> None:
         "/x/s30/lpv_map_controller.py",
     )
     assert controller_label("new=/x/y.py") == ("new", "/x/y.py")
-
-
-@pytest.fixture(scope="module")
-def dialect(tmp_path_factory: pytest.TempPathFactory) -> ModuleType:
-    """The protocol device's own bindings, generated from link/pressor.xml."""
-    return build_dialect(ROOT / "link" / "pressor.xml", tmp_path_factory.mktemp("dialect"))
 
 
 def test_pi_through_pressor_run_brings_an_independent_patient_to_target(

@@ -13,7 +13,6 @@ from pathlib import Path
 import pytest
 
 from tests.support.sil_helpers import ROOT, pressor
-from tests.test_runtime_run import bridged_ports  # noqa: F401 (a fixture)
 
 DURATION_S = 600.0
 
@@ -45,7 +44,7 @@ def _run(ports: tuple[str, str], tmp_path: Path, duration_s: float, *run_args: s
 @pytest.mark.parametrize("controller", ["lpv", "pi"])
 def test_a_1hz_quantized_monitor_keeps_the_loop_out_of_failsafe(
     controller: str,
-    bridged_ports,  # noqa: F811 (the imported fixture)
+    bridged_ports,
     tmp_path: Path,
     monkeypatch,
 ):
@@ -62,7 +61,7 @@ def test_a_1hz_quantized_monitor_keeps_the_loop_out_of_failsafe(
 
 
 def test_a_sample_age_limit_below_the_monitors_period_makes_its_held_samples_stale(
-    bridged_ports,  # noqa: F811 (the imported fixture)
+    bridged_ports,
     tmp_path: Path,
     monkeypatch,
 ):

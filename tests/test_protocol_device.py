@@ -21,7 +21,6 @@ from tests.support.protocol_device import (
     DeviceConfig,
     DeviceLog,
     ProtocolDevice,
-    build_dialect,
     read_key,
 )
 from tests.support.protocol_harness import wait_for_port_open, write_key
@@ -51,12 +50,6 @@ class Run:
     stderr: str
     log: DeviceLog
     after_port_open_s: float  # from the runtime opening its port to its exit (s)
-
-
-@pytest.fixture(scope="module")
-def dialect(tmp_path_factory: pytest.TempPathFactory) -> ModuleType:
-    """The device's own bindings, generated from link/pressor.xml with pymavlink's mavgen."""
-    return build_dialect(ROOT / "link" / "pressor.xml", tmp_path_factory.mktemp("dialect"))
 
 
 def drive(

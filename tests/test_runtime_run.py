@@ -10,21 +10,11 @@ import json
 import os
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
-import pytest
-
-from tests.support.sil_helpers import ROOT, bridged_ttys, pressor
+from tests.support.sil_helpers import ROOT, pressor
 
 SEED = 4
-
-
-@pytest.fixture
-def bridged_ports() -> Iterator[tuple[str, str]]:
-    """Two tty paths whose bytes cross over, like a null-modem cable."""
-    with bridged_ttys() as ports:
-        yield ports
 
 
 def test_run_against_a_hand_started_device_scores_its_faults_without_scenario_events(
