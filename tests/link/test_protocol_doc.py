@@ -16,7 +16,7 @@ import pytest
 from link import PROTOCOL_VERSION
 from link.generate import XML_PATH
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "PROTOCOL.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "PROTOCOL.md"
 #: what the unit column says for a field without a unit or an enum in the XML
 UNITLESS = {"-", "tick", "ticks", "ASCII", "0/1"}
 

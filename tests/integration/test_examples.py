@@ -12,7 +12,7 @@ import pytest
 
 from tests.support.sil_helpers import pressor
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 #: script -> small-size arguments (every example must be listed: see the last test)
 SCRIPTS = {
     "custom_controller.py": ["--patients", "2", "--duration-s", "300"],

@@ -111,7 +111,7 @@ def test_the_example_in_docs_scenarios_is_a_valid_scenario():
 
     from hil_sim.scenario import parse_scenario
 
-    doc = (Path(__file__).resolve().parents[1] / "docs" / "SCENARIOS.md").read_text()
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "SCENARIOS.md").read_text()
     example = re.search(r"```toml\n(.*?)```", doc, re.S)
     assert example is not None
     sc = parse_scenario(tomllib.loads(example.group(1)), "docs/SCENARIOS.md")

@@ -1,7 +1,7 @@
 """The clinician's acknowledgement: the supervisor resumes from HOLD or FAILSAFE only when the
 fault has cleared (runtime.supervisor_io), and the ``ack`` line on stdin or in the target file
 reaches it (runtime.target_source). The real ``pressor run`` paths are in
-tests/test_runtime_clinician.py."""
+tests/runtime/test_clinician.py."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from pathlib import Path
 from runtime.clinician import ClinicianInput, read_target_file, split_ack
 from runtime.supervisor_config import State, SupervisorConfig
 from runtime.target_source import TargetSource
+from tests.runtime.test_supervisor import TS, Rig
 from tests.support.link_doubles import tick_inputs
-from tests.test_runtime_supervisor import TS, Rig
 
 
 def _fail_over(rig: Rig) -> None:

@@ -1,5 +1,5 @@
 """The front door's SIL orchestration (pressor.sil): configuration from the simulator's scenario
-API and the device process's command line. End-to-end runs are in test_runtime_sil.py."""
+API and the device process's command line. End-to-end runs are in tests/integration/test_sil.py."""
 
 from __future__ import annotations
 

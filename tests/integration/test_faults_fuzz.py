@@ -2,7 +2,7 @@
 runtime or the device command outside [0, pump max].
 
 The fast variant runs a few thousand examples per target in CI; the ``slow`` one runs >= 10^5 in
-total (``pytest -m slow tests/test_faults_fuzz.py``).
+total (``pytest -m slow tests/integration/test_faults_fuzz.py``).
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ import pytest
 
 from runtime.blueprint import SERIES_COLORS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = Path("/usr/bin/chromium")
 
 pytestmark = [

@@ -22,7 +22,7 @@ from link import (
 )
 from tests.support.link_doubles import drain, loop_pair, tick_inputs
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _readme_command() -> list[str]:

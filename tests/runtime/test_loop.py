@@ -1,7 +1,7 @@
 """The loop over a real link: lockstep handshake and ticks over a pty, supervisor in the loop.
 
 The device side here is a small first-order plant driven by a ``DeviceSession`` in a
-thread (the real device process is exercised by tests/test_runtime_sil.py).
+thread (the real device process is exercised by tests/integration/test_sil.py).
 """
 
 from __future__ import annotations

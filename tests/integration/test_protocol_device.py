@@ -25,7 +25,7 @@ from tests.support.protocol_device import (
 )
 from tests.support.protocol_harness import wait_for_port_open, write_key
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TS_S = 0.1  # the device's sample period = 1 / pressor run's default --rate (s)
 TARGET_MMHG = 70.0
 MAX_RATE_ML_H = 120.0  # the controllers' default maximum (docs/PROTOCOL.md, INFUSION_COMMAND)

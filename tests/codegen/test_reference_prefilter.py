@@ -20,6 +20,7 @@ from codegen import pipeline as pl
 from synthesis.config import ConfigError
 from synthesis.config_toml import parse_config
 from synthesis.reference import ReferenceConfig, frozen_step_reference
+from tests.codegen.test_pipeline import built  # noqa: F401
 from tests.support.codegen_helpers import (
     BOX,
     TS,
@@ -28,7 +29,6 @@ from tests.support.codegen_helpers import (
     load_module,
     random_inputs,
 )
-from tests.test_codegen_core import built  # noqa: F401
 
 LAMBDA_S, FRACTION, K_MIN = 10.0, 0.9, 0.05
 COMMITTED = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"

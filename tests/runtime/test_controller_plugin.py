@@ -15,7 +15,7 @@ from runtime.controller_plugin import refresh_entry_points, split_controller_lis
 from runtime.core import ControllerError
 from runtime.supervisor_config import Fault, State
 
-SUPPORT = Path(__file__).resolve().parent / "support"
+SUPPORT = Path(__file__).resolve().parents[1] / "support"
 PLUGINS = str(SUPPORT / "controller_plugins.py")
 SHORT = """
 name = "short-step"

@@ -17,7 +17,7 @@ from hil_sim.closed_loop import simulate
 from hil_sim.world import World
 from runtime.controller_loader import load_controller
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 HORIZON_S = 1500.0
 
 

@@ -262,7 +262,7 @@ def test_a_phenylephrine_design_refuses_another_drug_or_syringe_telling_the_devi
 ):
     # the shipped LPV module is bound to phenylephrine at 100 ug/ml (its DRUG constants); the
     # device is told why. Every refusal kind against a device written from the document:
-    # tests/test_protocol_device.py
+    # tests/integration/test_protocol_device.py
     key = _key(tmp_path)
     with bridged_ttys() as (device_port, runtime_port):
         run = _start_run(runtime_port, key, tmp_path, "--controller", "lpv")

@@ -23,7 +23,7 @@ from runtime.core import CLEAN_LINK, ClosedLoopCore
 from runtime.flatline import FlatlineRules, grain_mmhg, stuck_samples
 from runtime.supervisor import Supervisor, SupervisorInput
 from runtime.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
-from tests.test_runtime_supervisor import good_inputs
+from tests.runtime.test_supervisor import good_inputs
 
 TS = 0.1
 HOUR_S = 3600.0

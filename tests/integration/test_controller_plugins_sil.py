@@ -8,7 +8,7 @@ from pathlib import Path
 
 from tests.support.sil_helpers import pressor
 
-PLUGINS = str(Path(__file__).resolve().parent / "support" / "controller_plugins.py")
+PLUGINS = str(Path(__file__).resolve().parents[1] / "support" / "controller_plugins.py")
 
 
 def test_sil_clamps_and_alarms_a_runaway_plugin(tmp_path):

@@ -26,7 +26,7 @@ from hil_sim.pkpd import (
     draw_patient,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 #: a hand-picked patient whose steady state is easy to compute by hand (see the test)
 HAND = PatientParams(

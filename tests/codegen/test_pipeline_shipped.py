@@ -175,7 +175,7 @@ def test_shipped_float_module_tracks_continuous_reference_on_replayed_closed_loo
     history), on inputs recorded from a closed loop with a delayed patient: target steps, sensor
     noise, and rho sweeping inside and outside the design box. With the design's prefilter the
     feedback controller's input is the module's reference r_m and its output the command minus the
-    feedforward (the prefilter itself is checked in tests/test_reference_prefilter.py)."""
+    feedforward (the prefilter itself is checked in tests/codegen/test_reference_prefilter.py)."""
     import random
 
     mod, design = shipped["mod"], shipped["design"]
