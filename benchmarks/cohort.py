@@ -5,8 +5,8 @@ figures the certified design is judged by (per-patient IAE ratios over reachable
 overshoot, stability, time in ±5 mmHg, and the per-disturbance peak deviation and recovery), each
 with the target it must meet::
 
-    python benchmarks/cohort.py                       # 100 patients, seed 2026, 2 jobs
-    python benchmarks/cohort.py --patients 40 --seed 11 --lpv out/lpv_map_controller.py
+    python -m benchmarks.cohort                       # 100 patients, seed 2026, 2 jobs
+    python -m benchmarks.cohort --patients 40 --seed 11 --lpv out/lpv_map_controller.py
 
 Every figure comes from :func:`hil_sim.trial.run_trial`, the code path of ``pressor trial``, so a
 line here can be reproduced with ``pressor trial --controller C --patients N --seed S
@@ -20,13 +20,10 @@ import statistics
 import sys
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from hil_sim.scenario import load_scenario  # noqa: E402
-from hil_sim.trial import run_trial  # noqa: E402
+from hil_sim.scenario import load_scenario
+from hil_sim.trial import run_trial
 
 TRACKING = "paper-tracking"
 DISTURBANCE = "paper-disturbance"

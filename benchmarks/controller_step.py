@@ -1,6 +1,6 @@
 """Step-time and allocation benchmark of the generated controller (Python float, Python integer, C).
 
-Usage: python benchmarks/controller_step.py [--steps N] [--alloc-steps N]
+Usage: python -m benchmarks.controller_step [--steps N] [--alloc-steps N]
 Prints median and p99 step time (µs) per implementation and the tracemalloc net growth over
 ``--alloc-steps`` steps (default 10^6) of the Python float module.
 """
@@ -13,18 +13,12 @@ import importlib.util
 import random
 import shutil
 import subprocess
-import sys
 import tempfile
 import time
 import tracemalloc
 from pathlib import Path
 
-# benchmarks/synthesis.py would shadow the synthesis package when run as a script: repo root first.
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-if sys.path[1:2] == [str(Path(__file__).resolve().parent)]:
-    del sys.path[1]
-
-from codegen import pipeline as pl  # noqa: E402
+from codegen import pipeline as pl
 
 MODULE = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
 

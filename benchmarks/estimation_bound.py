@@ -2,8 +2,8 @@
 
 Usage::
 
-    python benchmarks/estimation_bound.py                        # 40 patients, seed 11, 2 jobs
-    python benchmarks/estimation_bound.py --patients 100 --seed 2026 --switch-s 30,40,50,60
+    python -m benchmarks.estimation_bound                        # 40 patients, seed 11, 2 jobs
+    python -m benchmarks.estimation_bound --patients 100 --seed 2026 --switch-s 30,40,50,60
 
 Each patient of the seeded cohort runs the shipped LPV in ``--scenario`` (default
 ``paper-tracking``) under several scheduling sources, through the trial's own closed loop
@@ -41,22 +41,16 @@ import argparse
 import math
 import statistics
 import sys
-from pathlib import Path
 
-# benchmarks/synthesis.py would shadow the synthesis package when run as a script: repo root first.
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-if sys.path[1:2] == [str(Path(__file__).resolve().parent)]:
-    del sys.path[1]
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from contracts.parallel import run_ordered  # noqa: E402
-from hil_sim.closed_loop import simulate  # noqa: E402
-from hil_sim.cohort import cohort_seeds  # noqa: E402
-from hil_sim.scenario import load_scenario  # noqa: E402
-from hil_sim.world import World  # noqa: E402
-from runtime.controller_loader import load_controller  # noqa: E402
-from runtime.estimation.schedule import EstimatedSchedule, OracleSchedule, Schedule  # noqa: E402
+from contracts.parallel import run_ordered
+from hil_sim.closed_loop import simulate
+from hil_sim.cohort import cohort_seeds
+from hil_sim.scenario import load_scenario
+from hil_sim.world import World
+from runtime.controller_loader import load_controller
+from runtime.estimation.schedule import EstimatedSchedule, OracleSchedule, Schedule
 
 TS = 0.1  # s, the loop's sample period
 MOVED_MMHG = 0.5  # MAP change from the first sample that counts as "the MAP has moved"

@@ -2,8 +2,8 @@
 
 Usage::
 
-    python benchmarks/estimator.py                          # 100 patients, seed 2026, LPV, 2 jobs
-    python benchmarks/estimator.py --patients 20 --controller pi --jobs 1
+    python -m benchmarks.estimator                          # 100 patients, seed 2026, LPV, 2 jobs
+    python -m benchmarks.estimator --patients 20 --controller pi --jobs 1
 
 1. Per-tick cost: :meth:`EstimatedSchedule.update` timed tick by tick over ``--cost-ticks`` ticks of
    a seeded, excited first-order-plus-delay plant (median, p99, max in µs; pure Python).
@@ -27,19 +27,12 @@ import math
 import multiprocessing
 import random
 import statistics
-import sys
 import time
-from pathlib import Path
 
-# benchmarks/synthesis.py would shadow the synthesis package when run as a script: repo root first.
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-if sys.path[1:2] == [str(Path(__file__).resolve().parent)]:
-    del sys.path[1]
-
-from hil_sim.cohort import cohort_seeds  # noqa: E402
-from hil_sim.world import World  # noqa: E402
-from runtime.controller_loader import load_controller  # noqa: E402
-from runtime.estimation.schedule import EstimatedSchedule  # noqa: E402
+from hil_sim.cohort import cohort_seeds
+from hil_sim.world import World
+from runtime.controller_loader import load_controller
+from runtime.estimation.schedule import EstimatedSchedule
 
 SCENARIOS = ("paper-tracking", "paper-disturbance")
 TARGETS = {"K_rel_err_pct": 15.0, "T_rel_err_pct": 25.0, "tau_abs_err_s": 5.0}

@@ -1,6 +1,6 @@
 """Overhead of the Gymnasium environment (``pressor/MAP-v0``) over the simulator's own tick.
 
-Usage: python benchmarks/gym_step.py [--scenario NAME] [--duration-s S] [--episodes E]
+Usage: python -m benchmarks.gym_step [--scenario NAME] [--duration-s S] [--episodes E]
 
 In one process, on the same scenario, patient and constant action, in CPU time of the process (a
 busy host's preemptions do not count), prints µs per tick of :func:`hil_sim.closed_loop.simulate`
@@ -16,24 +16,17 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import time
-from pathlib import Path
 
-# benchmarks/synthesis.py would shadow the synthesis package when run as a script: repo root first.
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-if sys.path[1:2] == [str(Path(__file__).resolve().parent)]:
-    del sys.path[1]
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from hil_sim.closed_loop import simulate  # noqa: E402
-from hil_sim.world import World  # noqa: E402
-from pressor.api import _scenario  # noqa: E402
-from pressor.gym import AgentController, MapEnv  # noqa: E402
-from runtime.core import CLEAN_LINK, ClosedLoopCore  # noqa: E402
-from runtime.supervisor import Supervisor  # noqa: E402
-from runtime.supervisor_config import supervisor_config_for  # noqa: E402
+from hil_sim.closed_loop import simulate
+from hil_sim.world import World
+from pressor.api import _scenario
+from pressor.gym import AgentController, MapEnv
+from runtime.core import CLEAN_LINK, ClosedLoopCore
+from runtime.supervisor import Supervisor
+from runtime.supervisor_config import supervisor_config_for
 
 SEED = 3
 ACTION_ML_H = 12.0

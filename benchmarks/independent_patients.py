@@ -3,14 +3,14 @@
 Each seeded patient of :mod:`hil_sim.pkpd` (the ``pkpd`` patient model: two-compartment
 pharmacokinetics, an effect compartment, a sigmoid Emax on MAP, a transport delay, tachyphylaxis,
 a haemorrhage-like drop at 20 min and a fluid-bolus-like rise at 40 min) is played by the device
-of ``tests/protocol_device.py`` (written from docs/PROTOCOL.md alone) on a pty, signed, in
+of ``tests/support/protocol_device.py`` (written from docs/PROTOCOL.md alone) on a pty, signed, in
 lockstep, against a real ``pressor run --controller SPEC`` with its default estimated schedule (a
 real monitor sends no K, T, tau). The device announces phenylephrine at 100 µg/ml, the runtime's
 defaults. Of :mod:`hil_sim` only the patient model's module is used (its world, device and paper
 model are not)::
 
-    python benchmarks/independent_patients.py                  # 10 patients x lpv, pi, smith
-    python benchmarks/independent_patients.py --controller pi \\
+    python -m benchmarks.independent_patients                  # 10 patients x lpv, pi, smith
+    python -m benchmarks.independent_patients --controller pi \\
         --controller new=out/lpv_map_controller.py --patients 3
 
 Per patient and controller it prints the IAE over the whole run (mmHg·s, on the true MAP), the
@@ -39,18 +39,16 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from contracts.metrics import run_metrics  # noqa: E402
-from hil_sim.pkpd import (  # noqa: E402
+from contracts.metrics import run_metrics
+from hil_sim.pkpd import (
     BOLUS_AT_S,
     HEMORRHAGE_AT_S,
     IndependentPatient,
     PatientParams,
     draw_patient,
 )
-from tests.protocol_device import DeviceConfig, ProtocolDevice, build_dialect, read_key  # noqa: E402
-from tests.test_protocol_device import wait_for_port_open, write_key  # noqa: E402
+from tests.support.protocol_device import DeviceConfig, ProtocolDevice, build_dialect, read_key
+from tests.support.protocol_harness import wait_for_port_open, write_key
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_PERIOD_S = 0.1  # 1 / pressor run's default --rate (s)

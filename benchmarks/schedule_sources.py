@@ -2,8 +2,8 @@
 
 Usage::
 
-    python benchmarks/schedule_sources.py                          # both models, 10 patients
-    python benchmarks/schedule_sources.py --model one-compartment --patients 20 --seed 7
+    python -m benchmarks.schedule_sources                          # both models, 10 patients
+    python -m benchmarks.schedule_sources --model one-compartment --patients 20 --seed 7
 
 Each seeded patient of :mod:`hil_sim.pkpd` (``--model two-compartment``:
 the benchmark's own pharmacology with its haemorrhage and bolus, target 70 mmHg, 60 min;
@@ -29,26 +29,23 @@ import math
 import random
 import statistics
 import sys
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from contracts.metrics import run_metrics  # noqa: E402
-from hil_sim.pkpd import (  # noqa: E402
+from contracts.metrics import run_metrics
+from hil_sim.pkpd import (
     BOLUS_AT_S,
     HEMORRHAGE_AT_S,
     IndependentPatient,
     draw_patient,
 )
-from link import PumpStatus, TickInputs  # noqa: E402
-from runtime.controller_loader import load_controller  # noqa: E402
-from runtime.core import CLEAN_LINK, ClosedLoopCore  # noqa: E402
-from runtime.estimation.schedule import EstimatedSchedule, make_schedule  # noqa: E402
-from runtime.estimation.validated import ValidatedSchedule  # noqa: E402
-from runtime.estimation.validation import ModelBank  # noqa: E402
-from runtime.supervisor import Supervisor  # noqa: E402
-from runtime.supervisor_config import Fault, State, supervisor_config_for  # noqa: E402
+from link import PumpStatus, TickInputs
+from runtime.controller_loader import load_controller
+from runtime.core import CLEAN_LINK, ClosedLoopCore
+from runtime.estimation.schedule import EstimatedSchedule, make_schedule
+from runtime.estimation.validated import ValidatedSchedule
+from runtime.estimation.validation import ModelBank
+from runtime.supervisor import Supervisor
+from runtime.supervisor_config import Fault, State, supervisor_config_for
 
 TS_S = 0.1
 PUMP_MAX_ML_H = 120.0

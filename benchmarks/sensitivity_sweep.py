@@ -2,9 +2,9 @@
 
 Usage::
 
-    python benchmarks/sensitivity_sweep.py                        # 250 patients, 7 levels
-    python benchmarks/sensitivity_sweep.py --patients 20 --out sweep/ --jobs 2
-    python benchmarks/sensitivity_sweep.py --levels 0.1,10 --controllers lpv --seed 7
+    python -m benchmarks.sensitivity_sweep                        # 250 patients, 7 levels
+    python -m benchmarks.sensitivity_sweep --patients 20 --out sweep/ --jobs 2
+    python -m benchmarks.sensitivity_sweep --levels 0.1,10 --controllers lpv --seed 7
 
 Every patient of the cohort ``(--seed, --patients)`` runs the scenario (default
 ``paper-disturbance``) at each sensitivity level f (default 0.1, 0.2, 0.5, 1, 2, 5, 10 × the

@@ -18,7 +18,7 @@ prints, in this order:
    only — target p99 <= 1 ms. This machine shows 10-20 ms host stalls whatever the sleep method
    (docs/PLATFORM-NOTES.md): read the max with that in mind.
 
-Usage: ``python benchmarks/sil.py [--quick] [--controller lpv,pi] [--schedule oracle,estimated]
+Usage: ``python -m benchmarks.sil [--quick] [--controller lpv,pi] [--schedule oracle,estimated]
 [--sim-hours H] [--realtime-s S] [--cpu auto|none|N|N,M]``.
 """
 

@@ -9,8 +9,8 @@ the formulation options the shipped :func:`synthesis.smith_design.certify_smith`
 vertices or one LMI per point, working set, coupling, parameters of P, coordinates. Prints the certificate verdict, γ, the smallest re-checked margin, wall and CPU time and
 peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
 
-    python benchmarks/smith_certificate.py --loop-gain 2 --grid 3,3,3 [--p-dependence quadratic]
-    python benchmarks/smith_certificate.py --loop-gain 2 --grid 5,5,5 --working-set 27 --gamma-cap 15
+    python -m benchmarks.smith_certificate --loop-gain 2 --grid 3,3,3 [--p-dependence quadratic]
+    python -m benchmarks.smith_certificate --loop-gain 2 --grid 5,5,5 --working-set 27 --gamma-cap 15
 
 ``--working-set K`` imposes the LMI at K spread points and re-checks every point and rate vertex
 (the verdict covers the whole grid either way); ``--gamma-cap G`` solves the feasibility form (γ ≤ G,
@@ -25,20 +25,19 @@ those parameters only. ``--coordinates k_scaled`` uses the K-scaled functional
 (:mod:`synthesis.k_scaling`: u and û times K, the K rate and r = K(t)/K(t − τ) as rate
 coordinates), which certifies loop gain 3::
 
-    python benchmarks/smith_certificate.py --loop-gain 3 --grid 5,5,5 --rate-form bound \
+    python -m benchmarks.smith_certificate --loop-gain 3 --grid 5,5,5 --rate-form bound \
         --coordinates k_scaled --gamma-cap 8
 
 ``--compare`` first runs the current formulation (every rate vertex, dense coupling, P in every
 parameter, ε = 1e-6, plain coordinates, same grid and cap) in a child process and prints the
 ratios of wall time, CPU time and peak RSS::
 
-    python benchmarks/smith_certificate.py --grid 3,3,3 --rate-form bound --epsilon 5e-5 --compare
+    python -m benchmarks.smith_certificate --grid 3,3,3 --rate-form bound --epsilon 5e-5 --compare
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import resource
 import subprocess
 import sys
@@ -59,10 +58,6 @@ def _progress(t0: float) -> Callable[[str], None]:
 
 def main() -> None:
     """Parse the arguments, solve, print one line of figures."""
-    # benchmarks/synthesis.py would shadow the synthesis package: drop this directory from the path
-    here = os.path.dirname(os.path.abspath(__file__))
-    sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != here]
-    sys.modules.pop("synthesis", None)
     from synthesis.artifact import default_artifact_path, load_artifact
     from synthesis.reconstruct import scaling_of
     from synthesis.research import certify_smith_form
@@ -126,7 +121,7 @@ def main() -> None:
         argv += ["--epsilon", "1e-6", "--coordinates", "plain"]  # the last occurrence wins
         reference = _figures(
             subprocess.run(
-                [sys.executable, os.path.abspath(__file__), *argv],
+                [sys.executable, "-m", "benchmarks.smith_certificate", *argv],
                 check=True,
                 capture_output=True,
                 text=True,

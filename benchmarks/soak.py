@@ -9,8 +9,8 @@ real-time factor, and the fault table.
 
 Usage::
 
-    python benchmarks/soak.py                 # 24 h of patient time, PI controller
-    python benchmarks/soak.py --hours 2 --controller lpv --rrd soak.rrd
+    python -m benchmarks.soak                 # 24 h of patient time, PI controller
+    python -m benchmarks.soak --hours 2 --controller lpv --rrd soak.rrd
 
 Exit 1 if a command left [0, max] or the runtime's RSS grew by more than ``--max-growth-mb``.
 """
@@ -25,10 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-os.environ.setdefault("CI", "1")
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+os.environ.setdefault("CI", "1")  # before rerun is imported: no analytics files
 
 from contracts.faults import FAULT_KINDS, FaultScorer, parse_faults  # noqa: E402
 from link import Hello, PtyPair, RuntimeSession, Signing  # noqa: E402
@@ -41,6 +38,8 @@ from runtime.supervisor_config import (  # noqa: E402
     sched_limits_of,
     supervisor_config_for,
 )
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def rss_mb(pid: int | str = "self") -> float:

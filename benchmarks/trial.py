@@ -5,7 +5,7 @@ of a scenario and prints the figure, measured in CPU time so that other load on 
 count. The LPV runs on its estimated schedule by default (how it is meant to run); every other
 controller on the oracle, ``pressor trial``'s default. Usage::
 
-    python benchmarks/trial.py [--scenario paper-disturbance] [--controller pi] [--patients 5]
+    python -m benchmarks.trial [--scenario paper-disturbance] [--controller pi] [--patients 5]
         [--schedule oracle|estimated|nominal|validated] [--patient-model paper]
 """
 

@@ -5,7 +5,7 @@ service needed), runs the same cohort in this process, on 1 Dask worker and on 2
 three produce the same records, and prints wall time, patient-hours per wall minute, the same per
 worker, and each figure's ratio to the in-process run measured in this run. Usage::
 
-    python benchmarks/trial_scaleout.py [--scenario paper-tracking] [--controller pi] [--patients 16]
+    python -m benchmarks.trial_scaleout [--scenario paper-tracking] [--controller pi] [--patients 16]
 """
 
 from __future__ import annotations

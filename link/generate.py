@@ -2,7 +2,7 @@
 
 Run ``python -m link.generate`` after editing ``link/pressor.xml``; it rewrites
 ``link/dialect/pressor.py`` with pymavlink's mavgen (wire protocol 2.0, Python 3, XML
-validation on). ``tests/test_link_dialect.py`` regenerates into a temporary directory and fails
+validation on). ``tests/link/test_dialect.py`` regenerates into a temporary directory and fails
 when the committed module and the XML disagree.
 
 Why wire protocol 2.0 explicitly: mavgen's ``Opts`` defaults to 1.0 and then silently drops every

@@ -12,9 +12,9 @@ status line shows simulated time and the real-time factor (:mod:`runtime.progres
 itself never imports the simulator: the control path learns of the patient, and of any fault, only
 through what arrives on the link. ``--schedule`` picks where the controller's K, T, τ come from
 (:mod:`runtime.estimation.schedule`); the default here is still the oracle (the device's truth),
-because the online estimator's figures do not all hold yet (README). ``--patient-model`` picks the
-device's patient model (:mod:`hil_sim.patient_model`); a model other than ``paper`` is named in the
-summary as ``patient_model``.
+because the online estimator's figures do not all hold yet (docs/notes/cohort-evidence.md).
+``--patient-model`` picks the device's patient model (:mod:`hil_sim.patient_model`); a model other
+than ``paper`` is named in the summary as ``patient_model``.
 
 Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
 Faults the scenario declares (``[[faults]]``) are injected by the device too; both are scored

@@ -36,7 +36,7 @@ SCHEDULE_HELP = (
 #: why ``pressor sil`` and ``pressor trial`` still default to the oracle
 ORACLE_DEFAULT_WHY = (
     "; default oracle here, because with the target step at t = 0, before the drug has moved MAP,"
-    " the estimated LPV's median IAE is still ~1.46x the oracle's (README, 'Scheduling sources')"
+    " the estimated LPV's median IAE is still ~1.46x the oracle's (docs/notes/cohort-evidence.md)"
 )
 
 DEFAULT_RATE_HZ = 10.0

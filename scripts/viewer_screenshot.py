@@ -1,9 +1,10 @@
 """Take a screenshot of a recording in the real rerun web viewer, in headless Chromium.
 
-This is how ``docs/img/viewer.png`` (the README's viewer picture) is made::
+This is how ``docs/img/viewer.png`` (the README's viewer picture) is made, by
+``scripts/docs_images.sh``::
 
-    pressor sil --rrd sil.rrd --duration 1800
-    python scripts/viewer_screenshot.py sil.rrd docs/img/viewer.png
+    pressor sil --rrd sil.rrd
+    python scripts/viewer_screenshot.py sil.rrd docs/img/viewer.png --wait-s 200
 
 It starts ``rerun --serve-web`` on two free localhost ports (the web viewer over HTTP and the
 gRPC proxy that streams the recording), opens the viewer in headless Chromium driven by

@@ -12,7 +12,7 @@ the same analyses through their builders:
 * :func:`design_smith_form` — its design stage in another rate form;
 * :func:`verify_all_points_at_once` — ``pressor verify`` with check (a) imposed at every dense point
   and rate vertex in one solve (the straightforward formulation), for either family;
-* :func:`synth_case` — one synthesis case of ``benchmarks/synthesis.py``: what ``pressor synth``
+* :func:`synth_case` — one synthesis case of ``benchmarks/synthesis_speed.py``: what ``pressor synth``
   solves, or the straightforward formulation of the same design.
 
 It lives in the package (not in ``benchmarks/``) because it calls the families' internal builders

@@ -2,7 +2,7 @@
 
 The wire definition is the dialect's bitmask enums ``PRESSOR_PUMP_ALARM`` and
 ``PRESSOR_MAP_QUALITY`` in ``link/pressor.xml`` (docs/PROTOCOL.md); these are the same values
-for the packages that may not import ``link`` (``tests/test_link_dialect.py`` holds them equal).
+for the packages that may not import ``link`` (``tests/link/test_dialect.py`` holds them equal).
 The simulator's pump and monitor set them, the runtime's supervisor reads them.
 """
 

@@ -37,7 +37,7 @@ fitted window every model's T moves by b_T·ū·Δ at the same K (ū the window'
 and the data correct it whenever the rate moves (without it T̂ kept the start-up's ≈ 100 s while
 T rose 10–30 s an hour). 0 disables it, for a patient whose lag does not follow this law.
 
-Why this method (evidence: ``benchmarks/estimator.py`` and ``tests/test_runtime_estimation.py``):
+Why this method (evidence: ``benchmarks/estimator.py`` and ``tests/runtime/estimation/test_estimator.py``):
 
 * Output error, not equation error (ARX): an ARX fit ``ȳ_j = a ȳ_{j−1} + b ū_{j−d} + c`` carries the
   monitor noise in its regressor and the baseline's ramps in the coefficient of a constant; on the

@@ -28,7 +28,7 @@ T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
     step does not overshoot a sensitive patient; once learned (σ_K ≈ 2–5 %, σ_T ≈ 5–10 %) it is
     at most 0.06 σ_K and 0.13 σ_T. A T below the design box is then projected onto the box's low
     edge at the same K/T (:meth:`EstimatedSchedule.keep_slope`). Tuned on cohort seed 11
-    (``docs/ESTIMATION.md``; the held-out figures are in the README, "Scheduling sources").
+    (``docs/ESTIMATION.md``; the held-out figures are in ``docs/notes/cohort-evidence.md``).
 :class:`runtime.estimation.validated.ValidatedSchedule`
     Opt-in (``--schedule validated``): the nominal patient, with T and τ slewed inside the
     certified rates toward a model validated on held-out windows; why it exists and why it is not

@@ -1,0 +1,130 @@
+"""Cohort trials on a real Dask cluster on localhost give the local run's bytes (contracts.parallel)."""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+
+import pytest
+
+from contracts.parallel import BackendError, run_ordered
+from hil_sim.cli import main
+
+distributed = pytest.importorskip("distributed")
+
+SHORT = """
+name = "short-tracking"
+description = "4 min paper-tracking for the scale-out tests"
+duration_s = 240.0
+[patient]
+mode = "nonlinear"
+[target]
+step_mmhg = 20.0
+[sensor]
+noise_std_mmhg = 0.1
+"""
+
+FILES = ("patients.json", "patients.csv", "summary.json")
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """Two single-threaded worker processes and a scheduler on localhost (dashboard on a free port)."""
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
+    ) as c:
+        yield c
+
+
+@pytest.fixture()
+def scenario(tmp_path: Path) -> Path:
+    path = tmp_path / "short.toml"
+    path.write_text(SHORT)
+    return path
+
+
+def _trial(out: Path, scenario: Path, *extra: str) -> Path:
+    argv = ["--controller", "pi", "--patients", "6", "--seed", "3", "--scenario", str(scenario)]
+    assert main("trial", [*argv, *extra, "--out", str(out)]) == 0
+    return out
+
+
+def test_trial_on_a_dask_cluster_writes_the_local_runs_bytes(tmp_path, scenario, cluster):
+    local = _trial(tmp_path / "local", scenario)
+    remote = _trial(tmp_path / "dask", scenario, "--scheduler", cluster.scheduler_address)
+    for name in FILES:
+        assert (remote / name).read_bytes() == (local / name).read_bytes(), name
+
+
+def test_a_plugin_patient_model_on_a_dask_cluster_writes_the_in_process_bytes(
+    tmp_path, scenario, cluster
+):
+    plugin = (
+        "--patient-model",
+        "tests.support.patient_plugin:FirstOrderPatient",
+    )  # imported by workers
+    local = _trial(tmp_path / "local", scenario, *plugin)
+    remote = _trial(tmp_path / "dask", scenario, *plugin, "--scheduler", cluster.scheduler_address)
+    for name in FILES:
+        assert (remote / name).read_bytes() == (local / name).read_bytes(), name
+    assert (
+        b'"patient_model": "tests.support.patient_plugin:FirstOrderPatient"'
+        in (local / "summary.json").read_bytes()
+    )
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+def test_results_come_back_in_task_order_with_progress_to_the_total(cluster):
+    seen: list[tuple[int, int]] = []
+    out = run_ordered(
+        _square,
+        list(range(12)),
+        scheduler=cluster.scheduler_address,
+        progress=lambda d, n: seen.append((d, n)),
+    )
+    assert out == [x * x for x in range(12)]
+    assert [d for d, _ in seen] == list(range(1, 13)) and {n for _, n in seen} == {12}
+
+
+def test_a_worker_killed_mid_trial_costs_only_a_retry_not_the_records(tmp_path, scenario):
+    local = _trial(tmp_path / "local", scenario)
+    with (
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
+        ) as c,
+        distributed.Client(c) as client,
+    ):
+        pids = list(client.run(os.getpid).values())
+        killed: list[int] = []
+
+        def kill_one_worker(done: int, total: int) -> None:
+            if done == 1 and not killed:
+                os.kill(pids[0], signal.SIGKILL)
+                killed.append(pids[0])
+
+        from hil_sim.scenario import load_scenario
+        from hil_sim.trial import run_trial, summarize, write_outputs
+
+        sc = load_scenario(str(scenario))
+        records = run_trial(sc, "pi", 3, 6, progress=kill_one_worker, scheduler=c.scheduler_address)
+        write_outputs(tmp_path / "killed", records, summarize(records, sc, "pi", 3))
+    assert killed
+    for name in FILES:
+        assert (tmp_path / "killed" / name).read_bytes() == (local / name).read_bytes(), name
+
+
+def test_an_unreachable_scheduler_is_one_line_naming_the_address_and_exit_2(
+    tmp_path, scenario, capsys, monkeypatch
+):
+    monkeypatch.setattr("contracts.parallel.DASK_CONNECT_TIMEOUT_S", 1.0)  # nothing listens on :9
+    argv = ["--controller", "pi", "--patients", "2", "--scenario", str(scenario)]
+    rc = main("trial", [*argv, "--scheduler", "tcp://127.0.0.1:9", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
+    assert len(err) == 1 and "tcp://127.0.0.1:9" in err[0] and "dask scheduler" in err[0]
+    with pytest.raises(BackendError):
+        run_ordered(_square, [1], scheduler="tcp://127.0.0.1:9")

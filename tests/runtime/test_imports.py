@@ -1,0 +1,45 @@
+"""The runtime package never loads the solver stack or the simulated patient (docs/ARCHITECTURE.md)."""
+
+from __future__ import annotations
+
+import os
+import pkgutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+FORBIDDEN = ("synthesis", "cvxpy", "clarabel", "hil_sim")
+
+
+def runtime_modules() -> list[str]:
+    import runtime
+
+    names = ["runtime"]
+    for info in pkgutil.walk_packages(runtime.__path__, prefix="runtime."):
+        names.append(info.name)
+    return sorted(names)
+
+
+def test_runtime_module_list_covers_loop_cli_supervisor_and_recorder():
+    names = runtime_modules()
+    for expected in ("runtime.loop", "runtime.cli", "runtime.supervisor", "runtime.recorder"):
+        assert expected in names
+
+
+@pytest.mark.parametrize("module", runtime_modules())
+def test_importing_runtime_module_loads_no_solver_and_no_simulator(module):
+    code = (
+        "import importlib, sys\n"
+        f"importlib.import_module({module!r})\n"
+        f"bad = sorted(m for m in sys.modules if m.split('.')[0] in {FORBIDDEN!r})\n"
+        "print(','.join(bad))\n"
+    )
+    env = dict(os.environ, CI="1")
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "", f"{module} imported {proc.stdout.strip()}"
