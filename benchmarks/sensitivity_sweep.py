@@ -48,14 +48,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from contracts.metrics import percentile_summary  # noqa: E402
-from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, PatientModelError  # noqa: E402
-from hil_sim.scenario import Scenario, load_scenario  # noqa: E402
-from hil_sim.sensitivity import check_factor, with_sensitivity  # noqa: E402
-from hil_sim.trial import controller_dir_name, run_cohort, write_outputs  # noqa: E402
-from runtime.estimation.schedule import SOURCES  # noqa: E402
+from contracts.metrics import percentile_summary
+from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, PatientModelError
+from hil_sim.scenario import Scenario, load_scenario
+from hil_sim.sensitivity import check_factor, with_sensitivity
+from hil_sim.trial import controller_dir_name, run_cohort, write_outputs
+from runtime.estimation.schedule import SOURCES
 
 #: sensitivity levels (× the model's; dimensionless)
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)

@@ -92,7 +92,7 @@ weights Q{31 - plan.weight_bits}.{plan.weight_bits}; coefficients |q| <= 2^{plan
 per-row shifts {plan.row_shift.tolist()}; 64-bit accumulators; arithmetic right shifts; rounding
 only on the row increment.
 
-Error budgets (asserted by tests/test_codegen_*.py):
+Error budgets (asserted by tests/codegen/):
 {budgets}
 """
 '''

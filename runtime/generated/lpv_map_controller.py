@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  d60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b
-Content hash:     fde8ec5a2f98ff1437d958998ac32c18ea9c1f9feeca9b6541c39cb162c9d7b0
+Content hash:     cdccc0035530754b4a726e0c31d58c1b8af05d55c7cbae8ad37749814e056ada
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -45,15 +45,15 @@ weights Q1.30; coefficients |q| <= 2^27-1 with
 per-row shifts [30, 35, 30]; 64-bit accumulators; arithmetic right shifts; rounding
 only on the row increment.
 
-Error budgets (asserted by tests/test_codegen_*.py):
+Error budgets (asserted by tests/codegen/):
     FIXED_VS_FLOAT_BUDGET_ML_H = 0.1: max |u_fixed - u_float| (ml/h) over a 1 h closed-loop run (q31 and q15)
     FLOAT_VS_CONTINUOUS_TOL_ML_H = 0.05: max |u_float - u_continuous| (ml/h) on replayed unsaturated closed-loop inputs is at most this plus OFFGRID_REL_BOUND * max|u_continuous|; the continuous reference sees x_k(t - tau) vary inside a sample where the module holds it (O(Ts |dx_k/dt|)) and the exact controller where the module interpolates tables
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '1c09f2fa0486187dc17143156788fc33dcfc4b5b95c218eef3b75abf946d4c54'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '0486d3e7daab33be512ccad557acdb3a225a5101ddf1fc525988b9f5894cfe93'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'd60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b'
-CONTENT_HASH = 'fde8ec5a2f98ff1437d958998ac32c18ea9c1f9feeca9b6541c39cb162c9d7b0'
+CONTENT_HASH = 'cdccc0035530754b4a726e0c31d58c1b8af05d55c7cbae8ad37749814e056ada'
 TABLES_SHA256 = 'e736ddebfe5179dfdbc6981025cbb0e5ef7298da5c7e699a452a7017523f1499'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

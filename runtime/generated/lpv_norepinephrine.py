@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31
 Artifact sha256:  114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd
-Content hash:     93f9aaa6af4a4d64fa203a20211ed787808182865570a65cb3669c71a1de3f97
+Content hash:     6dca39406ecc028277f8c2b85203532354a1dcba04591cb20da7cdd2f4c74eb1
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -45,15 +45,15 @@ weights Q1.30; coefficients |q| <= 2^27-1 with
 per-row shifts [28, 34, 28]; 64-bit accumulators; arithmetic right shifts; rounding
 only on the row increment.
 
-Error budgets (asserted by tests/test_codegen_*.py):
+Error budgets (asserted by tests/codegen/):
     FIXED_VS_FLOAT_BUDGET_ML_H = 0.1: max |u_fixed - u_float| (ml/h) over a 1 h closed-loop run (q31 and q15)
     FLOAT_VS_CONTINUOUS_TOL_ML_H = 0.05: max |u_float - u_continuous| (ml/h) on replayed unsaturated closed-loop inputs is at most this plus OFFGRID_REL_BOUND * max|u_continuous|; the continuous reference sees x_k(t - tau) vary inside a sample where the module holds it (O(Ts |dx_k/dt|)) and the exact controller where the module interpolates tables
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '9f8eaad964bbdf16f219cfea23a768fd8fa9097ccc3eaa225421eb355c75dc27'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'd8d86f38d5817a609fdbedfdb10d91552c9d80f4da80e1a85c92f2e0146512a4'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = '114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd'
-CONTENT_HASH = '93f9aaa6af4a4d64fa203a20211ed787808182865570a65cb3669c71a1de3f97'
+CONTENT_HASH = '6dca39406ecc028277f8c2b85203532354a1dcba04591cb20da7cdd2f4c74eb1'
 TABLES_SHA256 = '0d1ccefeea03128a1d935e8d7cc8d5bfdac89085e3823c267c71c6c1312a5ffb'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

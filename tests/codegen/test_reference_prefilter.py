@@ -36,7 +36,7 @@ COMMITTED = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.p
 
 @pytest.fixture(scope="module")
 def pf(built, tmp_path_factory):  # noqa: F811
-    """The hand-built design of test_codegen_core with the prefilter: modules and C libraries."""
+    """The hand-built design of test_pipeline.py with the prefilter: modules and C libraries."""
     design = dataclasses.replace(built["design"], reference=(LAMBDA_S, FRACTION, K_MIN))
     return emit_targets(design, built["proof"], tmp_path_factory.mktemp("pf"))
 

@@ -1,6 +1,6 @@
 """Plugin controllers in real ``pressor sil`` processes (device process, pty, signed link): a
 runaway one is clamped and alarmed, a raising one ends the run with one line and exit 1 (the
-researcher sees the bug; ``pressor run`` holds instead: tests/test_controller_faults_run.py)."""
+researcher sees the bug; ``pressor run`` holds instead: test_controller_faults_run.py)."""
 
 from __future__ import annotations
 

@@ -15,9 +15,9 @@ from hil_sim.patient import Patient, PatientParams
 from hil_sim.patient_model import PatientModelError, check_model_for_scenario, load_patient_model
 from hil_sim.sensitivity import SensitivityScaled, check_factor, split_spec, with_sensitivity
 from pressor import api
-from tests.patient_plugin import FirstOrderPatient
+from tests.support.patient_plugin import FirstOrderPatient
 
-#: the paper model's patient of test_hil_patient_models.py: steady state k0·i·e^(−k1·i)
+#: the paper model's patient of tests/hil_sim/test_patient_model.py: steady state k0·i·e^(−k1·i)
 PAPER = PatientParams(
     a_k=500.0,
     k0=0.5,
@@ -107,7 +107,7 @@ def test_a_factor_of_one_steps_the_paper_patient_tick_for_tick_as_the_unwrapped_
 
 
 def test_the_spec_form_loads_any_model_scaled_with_the_factor_and_its_unit():
-    model = load_patient_model("tests.patient_plugin:FirstOrderPatient@sensitivity=2.5")
+    model = load_patient_model("tests.support.patient_plugin:FirstOrderPatient@sensitivity=2.5")
     inner = FirstOrderPatient.from_seed(11, 0.1)
     p = model.from_seed(11, 0.1)
     assert p.K == 2.5 * inner.K and p.T_s == inner.T_s and p.tau_s == inner.tau_s

@@ -2,7 +2,7 @@
 goes on, the commands after the failure are the HOLD rate (the last command, held), the device
 sees them as INFUSION_COMMAND frames with mode SAFE, and the failure is in the summary, on stderr
 and in the recording; the clinician's ``ack`` resumes the controller. ``pressor sil`` with the
-same plugin still stops with exit 1: tests/test_controller_plugins_sil.py."""
+same plugin still stops with exit 1: tests/integration/test_controller_plugins_sil.py."""
 
 from __future__ import annotations
 
@@ -17,10 +17,10 @@ import pytest
 
 from link import MODE_AUTO, MODE_SAFE, read_tlog
 from link.dialect import pressor as mavlink
-from tests.sil_helpers import ROOT, bridged_ttys, pressor, rrd_columns
-from tests.test_runtime_clinician import _events, _run_against_device
+from tests.runtime.test_clinician import _events, _run_against_device
+from tests.support.sil_helpers import ROOT, bridged_ttys, pressor, rrd_columns
 
-PLUGINS = str(Path(__file__).resolve().parent / "controller_plugins.py")
+PLUGINS = str(Path(__file__).resolve().parents[1] / "support" / "controller_plugins.py")
 #: the plugin's 50th step is tick 49 (AUTO from tick 0)
 FAULT_TICK = 49
 

@@ -2,7 +2,7 @@
 (``pressor run``) a step that raises, returns a non-number or a non-finite command holds the
 last command with the alarm until the clinician acknowledges; under ``"stop"`` (``pressor sil``,
 ``trial``) an exception ends the run and a non-finite command recovers by itself. The real
-``pressor run`` over a pty: tests/test_controller_faults_run.py."""
+``pressor run`` over a pty: tests/integration/test_controller_faults_run.py."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from runtime.controller_loader import load_controller
 from runtime.core import CLEAN_LINK, ClosedLoopCore, ControllerError
 from runtime.supervisor import Supervisor, SupervisorInput
 from runtime.supervisor_config import Fault, State, SupervisorConfig
-from tests.link_doubles import tick_inputs
-from tests.test_runtime_supervisor import TS, Rig, good_inputs
+from tests.runtime.test_supervisor import TS, Rig, good_inputs
+from tests.support.link_doubles import tick_inputs
 
 LATCH = SupervisorConfig(sample_period_s=TS, controller_faults="latch")
 
@@ -111,7 +111,7 @@ def _inputs(k: int) -> TickInputs:
     ],
 )
 def test_the_core_under_latch_keeps_stepping_holds_and_names_the_failure(how, cause, bit):
-    core = _core(f"tests.controller_plugins:FailsAt:at=50,how='{how}'", "latch")
+    core = _core(f"tests.support.controller_plugins:FailsAt:at=50,how='{how}'", "latch")
     records = [core.step(_inputs(k), k * TS, None, CLEAN_LINK) for k in range(200)]
     held = records[48].command_ml_h
     assert held > 0.0 and all(r.controller_error is None for r in records[:49])
@@ -126,7 +126,7 @@ def test_the_core_under_latch_keeps_stepping_holds_and_names_the_failure(how, ca
 
 
 def test_the_core_under_stop_ends_the_run_on_an_exception():
-    core = _core("tests.controller_plugins:FailsAt:at=3", "stop")
+    core = _core("tests.support.controller_plugins:FailsAt:at=3", "stop")
     core.step(_inputs(0), 0.0, None, CLEAN_LINK)
     core.step(_inputs(1), TS, None, CLEAN_LINK)
     with pytest.raises(ControllerError, match=r"'FailsAt'.*tick 2 .*ZeroDivisionError"):

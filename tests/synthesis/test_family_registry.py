@@ -15,7 +15,7 @@ from synthesis.family import (
     structures,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: the modules that may name a family: the registry and each family's own modules
 FAMILY_MODULES = {
     "synthesis/family.py",

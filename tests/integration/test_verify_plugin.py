@@ -15,7 +15,7 @@ from pressor import cli
 from synthesis.discrete_step import discrete_step_response
 from synthesis.smith_baseline import smith_step_response
 
-PLUGINS = str(Path(__file__).resolve().parent / "controller_plugins.py")
+PLUGINS = str(Path(__file__).resolve().parents[1] / "support" / "controller_plugins.py")
 CERTIFICATE = "certificate: not applicable (plugin controller)"
 
 
@@ -63,7 +63,7 @@ def test_a_settling_plugin_passes_its_nominal_step_and_says_no_certificate(tmp_p
     ],
 )
 def test_a_plugin_whose_step_fails_or_never_settles_exits_1(cls, needle, capsys):
-    rc, out, _ = _verify(capsys, "--controller", f"tests.controller_plugins:{cls}")
+    rc, out, _ = _verify(capsys, "--controller", f"tests.support.controller_plugins:{cls}")
     assert rc == 1, out
     assert CERTIFICATE in out and needle in out
     assert out.splitlines()[-1] == "verification FAIL (nominal step only; no certificate)"
@@ -76,7 +76,7 @@ def test_a_plugin_whose_step_fails_or_never_settles_exits_1(cls, needle, capsys)
     [
         (["--controller", "pi"], "takes a plugin"),
         (["--controller", "lpv"], "verified from its artifact"),
-        (["--controller", "tests.controller_plugins:NoStatus"], "does not satisfy"),
+        (["--controller", "tests.support.controller_plugins:NoStatus"], "does not satisfy"),
         (["x.npz", "--controller", f"{PLUGINS}:PlainPI"], "give one"),
     ],
 )
