@@ -26,3 +26,30 @@ def dialect(tmp_path_factory: pytest.TempPathFactory) -> ModuleType:
     """The protocol device's own bindings, generated from link/pressor.xml with pymavlink's
     mavgen (tests/support/protocol_device.py)."""
     return build_dialect(ROOT / "link" / "pressor.xml", tmp_path_factory.mktemp("dialect"))
+
+
+#: a 5-minute paper-disturbance (a +20 mmHg step, a haemorrhage at 2 min) for quick cohorts
+SHORT_SCENARIO_TOML = """
+name = "short-disturbance"
+description = "5 min version of paper-disturbance for tests"
+duration_s = 300.0
+[patient]
+mode = "nonlinear"
+[target]
+step_mmhg = 20.0
+[sensor]
+noise_std_mmhg = 0.1
+[[disturbances]]
+kind = "hemorrhage"
+start_s = 120.0
+ramp_s = 60.0
+depth_mmhg = 10.0
+"""
+
+
+@pytest.fixture
+def short_scenario(tmp_path: Path) -> Path:
+    """The path of :data:`SHORT_SCENARIO_TOML` written to a scenario file."""
+    path = tmp_path / "short.toml"
+    path.write_text(SHORT_SCENARIO_TOML)
+    return path

@@ -29,30 +29,6 @@ PAPER = PatientParams(
     baseline_mmhg=50.0,
 )
 
-SHORT = """
-name = "short-disturbance"
-description = "5 min version of paper-disturbance for tests"
-duration_s = 300.0
-[patient]
-mode = "nonlinear"
-[target]
-step_mmhg = 20.0
-[sensor]
-noise_std_mmhg = 0.1
-[[disturbances]]
-kind = "hemorrhage"
-start_s = 120.0
-ramp_s = 60.0
-depth_mmhg = 10.0
-"""
-
-
-@pytest.fixture()
-def short_scenario(tmp_path: Path) -> Path:
-    path = tmp_path / "short.toml"
-    path.write_text(SHORT)
-    return path
-
 
 def test_a_first_order_patient_at_4x_responds_as_to_four_times_the_rate_with_k_scaled_only():
     p = SensitivityScaled(FirstOrderPatient(0.5, 100.0, 20.0, 50.0, 0.1), 4.0)

@@ -7,33 +7,7 @@ import io
 import json
 from pathlib import Path
 
-import pytest
-
 from hil_sim.cli import main
-
-SHORT = """
-name = "short-disturbance"
-description = "5 min version of paper-disturbance for tests"
-duration_s = 300.0
-[patient]
-mode = "nonlinear"
-[target]
-step_mmhg = 20.0
-[sensor]
-noise_std_mmhg = 0.1
-[[disturbances]]
-kind = "hemorrhage"
-start_s = 120.0
-ramp_s = 60.0
-depth_mmhg = 10.0
-"""
-
-
-@pytest.fixture()
-def short_scenario(tmp_path: Path) -> Path:
-    path = tmp_path / "short.toml"
-    path.write_text(SHORT)
-    return path
 
 
 def _run(tmp: Path, scenario: Path, jobs: int, name: str) -> Path:

@@ -12,23 +12,6 @@ import pytest
 from benchmarks.sensitivity_sweep import figures, level_rows, main
 from hil_sim.cli import main as pressor_main
 
-SHORT = """
-name = "short-disturbance"
-description = "5 min version of paper-disturbance for tests"
-duration_s = 300.0
-[patient]
-mode = "nonlinear"
-[target]
-step_mmhg = 20.0
-[sensor]
-noise_std_mmhg = 0.1
-[[disturbances]]
-kind = "hemorrhage"
-start_s = 120.0
-ramp_s = 60.0
-depth_mmhg = 10.0
-"""
-
 
 def _record(reachable: bool, stable: bool, mdpe: float, in_band: float | None, os_: float) -> dict:
     return {
@@ -65,10 +48,9 @@ def test_a_level_has_a_row_for_its_reachable_and_one_for_its_unreachable_patient
 
 
 def test_the_sweep_prints_each_level_scales_k_at_10x_and_reuses_what_it_wrote(
-    tmp_path: Path, capsys
+    tmp_path: Path, short_scenario: Path, capsys
 ):
-    scenario = tmp_path / "short.toml"
-    scenario.write_text(SHORT)
+    scenario = short_scenario
     out = tmp_path / "sweep"
     argv = ["--patients", "2", "--seed", "1", "--levels", "1,10", "--controllers", "pi"]
     argv += ["--scenario", str(scenario), "--out", str(out)]
