@@ -153,6 +153,26 @@ def _closed_loop_at(artifact: Any, cfg: Any, rho: np.ndarray) -> DelaySystem:
     return close_loop(plant_at(rho, cfg), controller_at(artifact, rho), float(rho[2]))
 
 
+def baseline_steps(max_rate: float) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The nominal step's metrics of the PI and of the Smith predictor (the rows every verify
+    report carries beside the controller it checks), the command clamped to ``max_rate`` ml/h."""
+    pi = response_metrics(
+        simulate_step(
+            PIBaseline().step_loop(NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S),
+            NOMINAL_STEP_MMHG,
+            STEP_HORIZON_S,
+        ),
+        max_rate,
+    )
+    smith = response_metrics(
+        smith_step_response(
+            NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S, NOMINAL_STEP_MMHG, STEP_HORIZON_S, max_rate
+        ),
+        max_rate,
+    )
+    return pi, smith
+
+
 def nominal_lpv_step(
     cl: DelaySystem, rho: np.ndarray, reference: ReferenceConfig, max_rate_ml_h: float
 ) -> StepResponse:
@@ -281,20 +301,7 @@ def verify_with(
         if reference.enabled
         else "LPV feedback only"
     )
-    pi = response_metrics(
-        simulate_step(
-            PIBaseline().step_loop(NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S),
-            NOMINAL_STEP_MMHG,
-            STEP_HORIZON_S,
-        ),
-        max_rate,
-    )
-    smith = response_metrics(
-        smith_step_response(
-            NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S, NOMINAL_STEP_MMHG, STEP_HORIZON_S, max_rate
-        ),
-        max_rate,
-    )
+    pi, smith = baseline_steps(max_rate)
     step = {
         "rho": nominal.tolist(),
         "rho_in_box": in_box,

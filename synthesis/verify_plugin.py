@@ -22,17 +22,14 @@ from typing import Any
 
 from contracts.controller import Controller
 from synthesis.discrete_step import StepFailed, discrete_step_response
-from synthesis.pi_baseline import PIBaseline
-from synthesis.smith_baseline import smith_step_response
 from synthesis.step_response import (
     NOMINAL_K,
     NOMINAL_STEP_MMHG,
     NOMINAL_T_S,
     NOMINAL_TAU_S,
     response_metrics,
-    simulate_step,
 )
-from synthesis.verify import STEP_HORIZON_S
+from synthesis.verify import STEP_HORIZON_S, baseline_steps
 
 __all__ = ["BASELINE_MMHG", "CERTIFICATE_NOT_APPLICABLE", "verify_plugin_step"]
 
@@ -79,20 +76,7 @@ def verify_plugin_step(controller: Controller, spec: str) -> dict[str, Any]:
         plugin["commands_clamped"] = clamped
     passed = "error" not in plugin and plugin["settling_time_s"] is not None
     passed = passed and bool(plugin["stable"])
-    pi = response_metrics(
-        simulate_step(
-            PIBaseline().step_loop(NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S),
-            NOMINAL_STEP_MMHG,
-            STEP_HORIZON_S,
-        ),
-        max_rate,
-    )
-    smith = response_metrics(
-        smith_step_response(
-            NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S, NOMINAL_STEP_MMHG, STEP_HORIZON_S, max_rate
-        ),
-        max_rate,
-    )
+    pi, smith = baseline_steps(max_rate)
     return {
         "passed": passed,
         "controller": {
