@@ -31,7 +31,6 @@ from synthesis.analysis_interface import AnalysisResult
 from synthesis.artifact import ControllerArtifact
 from synthesis.closed_loop import DelaySystem
 from synthesis.config import DesignConfig, ModelConfig
-from synthesis.reconstruct import scaling_of
 from synthesis.scaling import Scaling
 from synthesis.smith_design import (
     P_DEPENDENCE,
@@ -39,7 +38,7 @@ from synthesis.smith_design import (
     certify_in_form,
     design_in_form,
 )
-from synthesis.smith_family import SMITH_GAMMA_CAP_FACTOR, SmithFamily
+from synthesis.smith_family import SmithFamily, capped_analysis
 from synthesis.theorem3 import Theorem3Family, jensen_analysis
 from synthesis.verify import VerificationReport, verify_with
 from synthesis.verify_analysis import Analysis
@@ -111,18 +110,9 @@ def _smith_all_vertices(
     progress: Progress,
 ) -> AnalysisResult:
     """The shipped family's check (a) with every rate vertex as its own LMI."""
-    cap = SMITH_GAMMA_CAP_FACTOR * float(artifact.gamma)
-    progress(f"analysis LMI (Wirtinger, all vertices): gamma <= {cap:.4g}, {len(mesh)} points")
-    return certify_in_form(
-        WirtingerForm(rate_form="vertex"),
-        systems,
-        mesh,
-        centre,
-        artifact.model_config,
-        scaling_of(artifact),
-        cap,
-        progress,
-        p_dependence,
+    form = WirtingerForm(rate_form="vertex")
+    return capped_analysis(
+        form, "all vertices", artifact, systems, mesh, centre, p_dependence, progress
     )
 
 

@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from synthesis.closed_loop import DelaySystem
     from synthesis.config import DesignConfig
     from synthesis.reconstruct import DelayedController
+    from synthesis.smith_design import WirtingerForm
 
 __all__ = [
     "FAMILY",
@@ -36,6 +37,7 @@ __all__ = [
     "SMITH_GAMMA_CAP_FACTOR",
     "SMITH_ORDER",
     "SmithFamily",
+    "capped_analysis",
     "smith_coef_shapes",
 ]
 
@@ -114,21 +116,42 @@ class SmithFamily:
         progress: Progress,
     ) -> AnalysisResult:
         """The design's Wirtinger analysis over every dense point, γ capped (module doc)."""
-        from synthesis.reconstruct import scaling_of
-        from synthesis.smith_design import certify_smith
+        from synthesis.smith_design import SHIPPED_FORM
 
-        cap = SMITH_GAMMA_CAP_FACTOR * float(artifact.gamma)
-        progress(f"analysis LMI (Wirtinger, smith family): gamma <= {cap:.4g}, {len(mesh)} points")
-        return certify_smith(
-            systems,
-            mesh,
-            centre,
-            artifact.model_config,
-            scaling_of(artifact),
-            cap,
-            progress,
-            p_dependence=p_dependence,
+        return capped_analysis(
+            SHIPPED_FORM, "smith family", artifact, systems, mesh, centre, p_dependence, progress
         )
+
+
+def capped_analysis(
+    form: WirtingerForm,
+    label: str,
+    artifact: ControllerArtifact,
+    systems: list[DelaySystem],
+    mesh: np.ndarray,
+    centre: tuple[DelaySystem, np.ndarray],
+    p_dependence: str,
+    progress: Progress,
+) -> AnalysisResult:
+    """Check (a) in ``form``: one feasibility solve over ``mesh``, γ capped at
+    :data:`SMITH_GAMMA_CAP_FACTOR` × the artifact's (the family's analysis with the shipped form;
+    :mod:`synthesis.research` with its ablations). ``label`` names it in the progress line."""
+    from synthesis.reconstruct import scaling_of
+    from synthesis.smith_design import certify_in_form
+
+    cap = SMITH_GAMMA_CAP_FACTOR * float(artifact.gamma)
+    progress(f"analysis LMI (Wirtinger, {label}): gamma <= {cap:.4g}, {len(mesh)} points")
+    return certify_in_form(
+        form,
+        systems,
+        mesh,
+        centre,
+        artifact.model_config,
+        scaling_of(artifact),
+        cap,
+        progress,
+        p_dependence,
+    )
 
 
 FAMILY = SmithFamily()
