@@ -184,6 +184,20 @@ def _verify_plugin(args: Any, load_plugin: PluginLoader | None) -> int:
             f"--controller {args.controller!r} and artifact {args.artifact}: give one (a plugin"
             " has no artifact)"
         )
+    certificate_options = [
+        flag
+        for flag, given, default in (
+            ("--density", args.density, 2),
+            ("--p-dependence", args.p_dependence, "quadratic"),
+            ("--kkt", args.kkt, ",".join(a.method for a in DEFAULT_KKT_CHAIN)),
+        )
+        if given != default
+    ]
+    if certificate_options:
+        raise UsageError(
+            f"{', '.join(certificate_options)} with --controller: these options apply to an"
+            " artifact's certificate, and a plugin controller has none"
+        )
     if load_plugin is None:
         raise UsageError("--controller needs the runtime's plugin loader: run it as pressor verify")
     _check_json_dir(args.json)

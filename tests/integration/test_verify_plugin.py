@@ -78,6 +78,9 @@ def test_a_plugin_whose_step_fails_or_never_settles_exits_1(cls, needle, capsys)
         (["--controller", "lpv"], "verified from its artifact"),
         (["--controller", "tests.support.controller_plugins:NoStatus"], "does not satisfy"),
         (["x.npz", "--controller", f"{PLUGINS}:PlainPI"], "give one"),
+        (["--controller", f"{PLUGINS}:PlainPI", "--density", "3"], "--density with --controller"),
+        (["--controller", f"{PLUGINS}:PlainPI", "--kkt", "qdldl"], "a plugin controller has none"),
+        (["--controller", f"{PLUGINS}:PlainPI", "--p-dependence", "affine"], "--p-dependence"),
     ],
 )
 def test_a_spec_that_names_no_usable_plugin_exits_2_with_one_line(argv, needle, capsys):
