@@ -91,7 +91,7 @@ def run_runtime(
     from runtime.core.supervisor import Supervisor
     from runtime.core.supervisor_config import supervisor_config_for
     from runtime.estimation.sources import make_schedule
-    from runtime.inputs.target_source import TargetedLoop, TargetSource
+    from runtime.inputs.target_source import TargetSource
     from runtime.shell.cpu_latency import CpuLatencyRequest
     from runtime.shell.loop import Loop
 
@@ -193,12 +193,9 @@ def run_runtime(
             "prog": "pressor run" if config.clinician is not None else "pressor sil",
             "ack_input": clinician.target_stdin or clinician.target_file is not None,
         }
-        target = None
-        if clinician.target_mmhg is None:
-            loop = Loop(controller, sup, ep, **loop_kw)
-        else:  # the runtime's own target, in place of the device's (runtime.inputs.target_source)
-            target = TargetSource(clinician)
-            loop = TargetedLoop(controller, sup, ep, target=target, **loop_kw)
+        # the runtime's own target, in place of the device's (runtime.inputs.target_source)
+        target = None if clinician.target_mmhg is None else TargetSource(clinician)
+        loop = Loop(controller, sup, ep, target=target, **loop_kw)
         with CpuLatencyRequest(config.cpu_latency_us) as wake:
             if config.realtime:
                 result = loop.run_realtime(peer.n_ticks if peer.n_ticks else config.ticks)

@@ -1,7 +1,7 @@
 """The runtime's own MAP target, changed while the loop runs (``pressor run --target-*``).
 
-A :class:`TargetSource` holds the target the clinician gave the runtime. The
-:class:`TargetedLoop` (a :class:`runtime.shell.loop.Loop` that runs every tick through it, silent ones
+A :class:`TargetSource` holds the target the clinician gave the runtime. The loop it is given to
+(:class:`runtime.shell.loop.Loop`'s ``target``, which runs every tick through it, silent ones
 included) asks it at each tick boundary to :meth:`~TargetSource.apply` itself to the tick's
 inputs: it first reads what arrived since the previous tick (the ``--target-file`` when its
 modification time, size or inode changed; complete lines on stdin with ``--target-stdin``), then
@@ -35,7 +35,6 @@ from typing import Any, TextIO
 from link import TickInputs
 from runtime.core.supervisor import AckOutcome
 from runtime.inputs.clinician import ClinicianInput, parse_target, split_ack
-from runtime.shell.loop import Loop
 
 
 class TargetSource:
@@ -211,37 +210,6 @@ class TargetSource:
             "refused": self.refused,
             "acks": list(self.acks),
         }
-
-
-class TargetedLoop(Loop):
-    """A :class:`runtime.shell.loop.Loop` whose every tick carries the runtime's own target.
-
-    Parameters
-    ----------
-    *args, **kw
-        As for :class:`runtime.shell.loop.Loop`.
-    target
-        The runtime's target; applied to each tick's inputs before the core steps, its changes
-        logged to the loop's recorder; the acknowledgements it read are handed to the supervisor
-        for the tick and their outcome logged.
-    """
-
-    def __init__(self, *args: Any, target: TargetSource, **kw: Any) -> None:
-        super().__init__(*args, **kw)
-        self.target = target
-
-    def tick(self, inp: TickInputs, *args: Any, **kw: Any) -> float:
-        """:meth:`runtime.shell.loop.Loop.tick` on ``inp`` with the runtime's target in place of the
-        device's, and the clinician's acknowledgement, if one came, judged at this tick."""
-        target = self.target
-        inp = target.apply(inp, self.recorder)
-        acks = target.take_acks()
-        if acks:
-            self.sup.acknowledge()
-        command = super().tick(inp, *args, **kw)
-        if acks and self.sup.last_ack is not None:
-            target.log_ack(self.sup.last_ack, acks, inp.tick, inp.sim_time_s, self.recorder)
-        return command
 
 
 def _file_state(path: Path) -> tuple[int, int, int] | None:

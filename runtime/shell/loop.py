@@ -36,7 +36,7 @@ from __future__ import annotations
 import math
 from contextlib import suppress
 from dataclasses import replace
-from typing import Any
+from typing import Any, Protocol
 
 from contracts.controller import Controller
 from link import (
@@ -51,7 +51,7 @@ from link import (
 from runtime.core.closed_loop import ClosedLoopCore, LinkHealth
 from runtime.core.events import EventLog
 from runtime.core.scheduling import ScheduleSource
-from runtime.core.supervisor import Supervisor
+from runtime.core.supervisor import AckOutcome, Supervisor
 from runtime.core.supervisor_config import State
 from runtime.record.recorder import Recorder
 from runtime.shell.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
@@ -64,6 +64,17 @@ _NAN = math.nan
 
 class DeviceStalled(RuntimeError):
     """The device sent no sample for ``stall_timeout_s`` (wall clock) in lockstep."""
+
+
+class TickTarget(Protocol):
+    """What the loop asks each tick of the runtime's own target (an input given to the loop, not a
+    subclass of it: :class:`runtime.inputs.target_source.TargetSource`)."""
+
+    def apply(self, inp: TickInputs, recorder: Any = None) -> TickInputs: ...
+    def take_acks(self) -> list[str]: ...
+    def log_ack(
+        self, outcome: AckOutcome, sources: list[str], tick: int, t: float, recorder: Any = None
+    ) -> None: ...
 
 
 class Loop:
@@ -95,6 +106,11 @@ class Loop:
     ack_input
         Whether the clinician can acknowledge (``pressor run --target-stdin`` or
         ``--target-file``): what those lines say ends a controller fault's hold.
+    target
+        The runtime's own target (``pressor run --target-*``), or ``None`` (the device's): applied
+        to every tick's inputs before the core steps, silent ticks included, its changes logged
+        to the recorder; the acknowledgements it read are handed to the supervisor for the tick
+        and their outcome logged.
     """
 
     def __init__(
@@ -109,11 +125,13 @@ class Loop:
         schedule: ScheduleSource | None = None,
         prog: str = "pressor",
         ack_input: bool = False,
+        target: TickTarget | None = None,
     ) -> None:
         self.core = ClosedLoopCore(controller, supervisor, schedule)
         self.sup = supervisor
         self.ep = endpoint
         self.recorder = recorder
+        self.target = target
         if recorder is not None:
             recorder.use_controller(controller)
         self.period_s = float(controller.sample_period_s)
@@ -148,8 +166,17 @@ class Loop:
         """Supervise, step, send and record one tick; return the command (ml/h).
 
         ``send=False`` (a silent tick of a stalled link, see the module docstring) skips the
-        link and records MAP as NaN (no sample arrived for this tick).
+        link and records MAP as NaN (no sample arrived for this tick). With a ``target``, ``inp``
+        carries the runtime's target in place of the device's, and the clinician's
+        acknowledgement, if one came, is judged at this tick.
         """
+        target = self.target
+        acks: list[str] = []
+        if target is not None:
+            inp = target.apply(inp, self.recorder)
+            acks = target.take_acks()
+            if acks:
+                self.sup.acknowledge()
         ep = self.ep
         pump = ep.pump_status if send else None
         if pump is not None and pump.tick == inp.tick:
@@ -179,6 +206,8 @@ class Loop:
             self.recorder.record_tick(rec, map_rec, ep.pump_status, bad, exec_s, lateness_s)
         if self.on_tick is not None:
             self.on_tick(inp.tick, int(state), int(out.faults), command)
+        if acks and target is not None and self.sup.last_ack is not None:
+            target.log_ack(self.sup.last_ack, acks, inp.tick, inp.sim_time_s, self.recorder)
         return command
 
     def _link_errors(self) -> int:
