@@ -9,10 +9,10 @@ Each seeded patient of :mod:`hil_sim.pkpd` (``--model two-compartment``:
 the benchmark's own pharmacology with its haemorrhage and bolus, target 70 mmHg, 60 min;
 ``--model one-compartment``: one-compartment kinetics, a Hill effect, no tolerance, a wide
 spread, a +15 mmHg step over the patient's baseline, 30 min, no disturbance) runs through the
-runtime's own closed-loop core (:class:`runtime.core.closed_loop.ClosedLoopCore`: supervisor, scheduling
-source, controller), in process, without a link: a 0.3 mmHg Gaussian monitor at 10 Hz (seeded)
-and a pump that delivers the command within [0, 120] ml/h. Runs per patient: the LPV with the
-``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-in ``validated``
+runtime's own closed-loop core (:class:`runtime.core.closed_loop.ClosedLoopCore`: supervisor,
+scheduling source, controller), in process, without a link: a 0.3 mmHg Gaussian monitor at 10 Hz
+(seeded) and a pump that delivers the command within [0, 120] ml/h. Runs per patient: the LPV with
+the ``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-in ``validated``
 schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after

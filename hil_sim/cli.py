@@ -6,9 +6,9 @@ prints a progress bar (stderr), then a table of the median and 90th percentile o
 peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
 ``DIR/patients.csv`` and ``DIR/summary.json`` atomically. Same arguments → identical files, whatever
 ``--jobs``. Exit 0 on completion, 1 when a controller raised (one line naming it, the patient and
-the tick: :class:`runtime.core.closed_loop.ControllerError`), 2 on bad usage or input (one line naming field,
-value and range). A plugin controller (:mod:`runtime.inputs.controller_plugin`) is named by
-``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]`` or an installed entry point's name.
+the tick: :class:`runtime.core.closed_loop.ControllerError`), 2 on bad usage or input (one line
+naming field, value and range). A plugin controller (:mod:`runtime.inputs.controller_plugin`) is
+named by ``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]`` or an installed entry point's name.
 """
 
 from __future__ import annotations

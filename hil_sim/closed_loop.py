@@ -1,8 +1,8 @@
 """Pure in-process closed-loop simulator: World + the runtime's closed-loop core, no I/O.
 
 Per tick k: ``obs = world.observe()`` → ``rec = core.step(obs, ...)`` (the runtime's
-:class:`~runtime.core.closed_loop.ClosedLoopCore`: the supervisor, then the controller if allowed, given the
-pump status of tick k and a clean link) → ``world.apply_command(rec.command_ml_h)`` →
+:class:`~runtime.core.closed_loop.ClosedLoopCore`: the supervisor, then the controller if allowed,
+given the pump status of tick k and a clean link) → ``world.apply_command(rec.command_ml_h)`` →
 ``world.advance()``: exactly the order and the core the serial SIL uses, on the same
 float32-rounded numbers, so both give the same trajectory and the same supervisor states - with any
 scheduling source (``schedule``: the core feeds it, as in the runtime).

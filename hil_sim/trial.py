@@ -1,9 +1,10 @@
 """In-silico cohort trial: one controller, one scenario, n seeded patients, §3 metrics.
 
 Each patient runs in the pure in-process simulator (:func:`hil_sim.closed_loop.simulate`) with a
-fresh controller from :func:`runtime.inputs.controller_loader.load_controller`. Patients are independent,
-so the worker processes (``jobs``) or the Dask cluster (``scheduler``) change only the wall time: results are collected in patient order and
-every output file is byte-identical whatever ``jobs`` is.
+fresh controller from :func:`runtime.inputs.controller_loader.load_controller`. Patients are
+independent, so the worker processes (``jobs``) or the Dask cluster (``scheduler``) change only the
+wall time: results are collected in patient order and every output file is byte-identical whatever
+``jobs`` is.
 
 Metrics judge the *true* MAP (what the patient experiences; a flushed or disconnected line must not
 count as hypertension), with the settling band chosen by whether the scenario's monitor is noisy

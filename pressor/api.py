@@ -23,8 +23,8 @@ is tick for tick what a lockstep ``pressor sil`` of that seed gives. ``controlle
 Errors: a bad argument raises :class:`ValueError` (a subclass naming the argument, the value and
 the allowed range: :class:`runtime.inputs.controller_loader.ControllerSpecError`,
 :class:`hil_sim.scenario.ScenarioError`, :class:`hil_sim.patient_model.PatientModelError`); a
-controller that raises mid-run raises :class:`runtime.core.closed_loop.ControllerError` naming it, the patient
-and the tick.
+controller that raises mid-run raises :class:`runtime.core.closed_loop.ControllerError` naming it,
+the patient and the tick.
 """
 
 from __future__ import annotations

@@ -8,13 +8,14 @@ pseudo-terminal (a real tty to pyserial), signs the link (a fresh key per run un
 :func:`runtime.session.run_runtime`, records everything to an ``.rrd``, prints the metric summary
 (:mod:`runtime.summary`, defined in docs/METRICS.md) and the ``rerun FILE.rrd`` command to replay
 it. The run lasts the scenario's ``duration_s`` unless ``--duration`` is given; on a terminal a
-status line shows simulated time and the real-time factor (:mod:`runtime.shell.progress`). The runtime
-itself never imports the simulator: the control path learns of the patient, and of any fault, only
-through what arrives on the link. ``--schedule`` picks where the controller's K, T, τ come from
-(:func:`runtime.estimation.sources.make_schedule`); the default here is still the oracle (the device's truth),
-because the online estimator's figures do not all hold yet (docs/notes/cohort-evidence.md).
-``--patient-model`` picks the device's patient model (:mod:`hil_sim.patient_model`); a model other
-than ``paper`` is named in the summary as ``patient_model``.
+status line shows simulated time and the real-time factor (:mod:`runtime.shell.progress`). The
+runtime itself never imports the simulator: the control path learns of the patient, and of any
+fault, only through what arrives on the link. ``--schedule`` picks where the controller's K, T, τ
+come from (:func:`runtime.estimation.sources.make_schedule`); the default here is still the oracle
+(the device's truth), because the online estimator's figures do not all hold yet
+(docs/notes/cohort-evidence.md). ``--patient-model`` picks the device's patient model
+(:mod:`hil_sim.patient_model`); a model other than ``paper`` is named in the summary as
+``patient_model``.
 
 Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
 Faults the scenario declares (``[[faults]]``) are injected by the device too; both are scored

@@ -1,8 +1,8 @@
 """``pressor run`` and ``pressor faults``: the runtime's own commands.
 
 ``pressor run --port DEV`` is the runtime end alone, on a device started by hand (a real cable or
-a ``socat`` pty). It parses its options into a :class:`runtime.inputs.config.RunConfig`, opens the port,
-signs the link (``--signing-key``, default the ``pressor keygen`` key), runs the loop
+a ``socat`` pty). It parses its options into a :class:`runtime.inputs.config.RunConfig`, opens the
+port, signs the link (``--signing-key``, default the ``pressor keygen`` key), runs the loop
 (:func:`runtime.session.run_runtime`) and prints the summary (:mod:`runtime.summary`). It
 schedules on its own online estimate by default (``--schedule estimated``): a real monitor and pump
 send no K, T, τ, and a device that never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs

@@ -64,8 +64,8 @@ def run_runtime(
         The loop's per-tick callback ``(tick, state, fault bits, command ml/h)``, e.g. a
         :class:`runtime.shell.progress.TerminalProgress`.
     before_close
-        Called with the :class:`runtime.record.recorder.Recorder` after the loop ended and before the
-        recording is closed (``pressor sil`` adds the simulated device's true MAP there).
+        Called with the :class:`runtime.record.recorder.Recorder` after the loop ended and before
+        the recording is closed (``pressor sil`` adds the simulated device's true MAP there).
     noisy_band
         Whether the summary's settling band is the noisy monitor's ±5 mmHg rather than 2 % of the
         step (docs/METRICS.md): the scenario's choice (``pressor sil``: whether its monitor adds
@@ -260,12 +260,13 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
     """Run a runtime command with its exit codes.
 
     0 success; 1 the run completed but a check failed, or the device stalled or the link failed,
-    or the controller raised under ``pressor sil`` (:class:`runtime.core.closed_loop.ControllerError`; ``pressor
-    run`` holds instead, :mod:`runtime.core.supervisor`) (one line on stderr); 2 bad usage or input
-    (:func:`contracts.usage.run_command`), or the
-    device's hello refused (:class:`link.Refusal`: one line, the device was told); 130 / 143
-    stopped by SIGINT / SIGTERM (:mod:`runtime.shell.interrupt`: the run stops at a tick boundary,
-    commands the safe rate, and keeps its outputs).
+    or the controller raised under ``pressor sil``
+    (:class:`runtime.core.closed_loop.ControllerError`; ``pressor run`` holds instead,
+    :mod:`runtime.core.supervisor`) (one line on stderr); 2 bad usage or input
+    (:func:`contracts.usage.run_command`), or the device's hello refused (:class:`link.Refusal`: one
+    line, the device was told); 130 / 143 stopped by SIGINT / SIGTERM
+    (:mod:`runtime.shell.interrupt`: the run stops at a tick boundary, commands the safe rate, and
+    keeps its outputs).
     """
     from link import LinkError, Refusal
     from runtime.core.closed_loop import ControllerError

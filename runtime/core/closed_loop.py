@@ -3,9 +3,10 @@
 Per tick the caller hands over what arrived for the tick (:class:`link.TickInputs`: MAP sample,
 target and whatever scheduling parameters the device sent), the pump status of the tick
 (:class:`link.PumpStatus`, if one arrived) and the link's health; :meth:`ClosedLoopCore.step`
-feeds the scheduling source (:mod:`runtime.core.scheduling`: oracle, estimated, nominal or validated)
-the MAP sample, its quality bits and the pump's latest delivered rate (0 ml/h before any status),
-assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source returned -
+feeds the scheduling source (:mod:`runtime.core.scheduling`: oracle, estimated, nominal or
+validated) the MAP sample, its quality bits and the pump's latest delivered rate (0 ml/h before any
+status), assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source
+returned -
 steps the controller with those K, T, τ if the supervisor allows it, finalizes the command and
 returns a :class:`TickRecord`. The caller sends ``record.command_ml_h`` to the pump.
 
@@ -36,9 +37,9 @@ handles its faults (PX4's rule). When ``step`` raises, or returns something ``fl
 the supervisor's ``controller_faults`` decides: ``"stop"`` (``pressor sil``, ``trial``, the API)
 raises :class:`ControllerError` - the run ends and the researcher sees the bug; ``"latch"``
 (``pressor run``) hands the failure to the supervisor (``CONTROLLER_FAULT``: HOLD at the held rate,
-alarm, until the clinician acknowledges; :mod:`runtime.core.supervisor`) and the tick's record carries
-the error's text (``TickRecord.controller_error``; also for a non-finite command, the supervisor's
-``COMMAND_INVALID``) for the shell to log; the loop goes on.
+alarm, until the clinician acknowledges; :mod:`runtime.core.supervisor`) and the tick's record
+carries the error's text (``TickRecord.controller_error``; also for a non-finite command, the
+supervisor's ``COMMAND_INVALID``) for the shell to log; the loop goes on.
 """
 
 from __future__ import annotations

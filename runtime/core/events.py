@@ -4,8 +4,8 @@ controller faults (:class:`EventLog`).
 A transition is kept for the summary (``supervisor.transitions``) and written to the recording's
 event log (HOLD and FAILSAFE as warnings); a rising advisory fault only to the event log. A
 controller fault (``pressor run``: the controller raised or returned a non-number, the supervisor
-holds, :mod:`runtime.core.supervisor`) is logged once per failure, with the error's text: one line on
-stderr, a warning in the recording's event log, and a record in the summary's
+holds, :mod:`runtime.core.supervisor`) is logged once per failure, with the error's text: one line
+on stderr, a warning in the recording's event log, and a record in the summary's
 ``supervisor.controller_faults``.
 """
 

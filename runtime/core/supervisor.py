@@ -10,7 +10,8 @@ same input sequence gives the same output sequence, byte for byte. The closed-lo
     out = sup.finalize(None, failed=True)   # instead, when the step raised (controller_faults="latch")
 
 With ``config.dose_limits`` (``pressor run``: the drug library) the last step of every tick cuts
-the command to the hard and hourly dose maxima and flags the soft one (:mod:`runtime.core.dose_guard`).
+the command to the hard and hourly dose maxima and flags the soft one
+(:mod:`runtime.core.dose_guard`).
 
 States
 ------
@@ -39,13 +40,13 @@ docs/PROTOCOL.md, "Alarms"; the acknowledgement rule: :mod:`runtime.core.supervi
 
 Controller faults (``config.controller_faults``). With ``"stop"`` (``pressor sil``, ``trial``, the
 API and the Gymnasium environment) a controller that raises ends the run (the core raises
-:class:`runtime.core.closed_loop.ControllerError`: a researcher sees the bug) and a non-finite command is
-``COMMAND_INVALID``: HOLD, re-entry once the inputs have been good for ``recover_after_s``. With
-``"latch"`` (``pressor run``: a patient on the line) a step that raises or returns a non-number
-(``CONTROLLER_FAULT``, via ``finalize(None, failed=True)``) and a non-finite command
-(``COMMAND_INVALID``) both HOLD the last command, raise the alarm and *stay* (HOLD, then FAILSAFE
-after ``hold_max_s`` like any lasting fault) until the clinician acknowledges. Why: an input
-fault ends when the input is good again, which the supervisor can see; nothing the supervisor
+:class:`runtime.core.closed_loop.ControllerError`: a researcher sees the bug) and a non-finite
+command is ``COMMAND_INVALID``: HOLD, re-entry once the inputs have been good for
+``recover_after_s``. With ``"latch"`` (``pressor run``: a patient on the line) a step that raises or
+returns a non-number (``CONTROLLER_FAULT``, via ``finalize(None, failed=True)``) and a non-finite
+command (``COMMAND_INVALID``) both HOLD the last command, raise the alarm and *stay* (HOLD, then
+FAILSAFE after ``hold_max_s`` like any lasting fault) until the clinician acknowledges. Why: an
+input fault ends when the input is good again, which the supervisor can see; nothing the supervisor
 sees tells that a controller which crashed or produced garbage is sound again (its internal state
 is unknown), and stepping it to find out would put its next output on the pump unattended. The
 acknowledgement is the clinician's decision to try it again: accepted (when no other holding
@@ -179,7 +180,8 @@ class Supervisor:
 
     def acknowledge(self) -> None:
         """The clinician acknowledges the alarm and asks to resume; judged at the next
-        :meth:`assess` (:func:`runtime.core.supervisor_io.judge_ack`), its outcome in ``last_ack``."""
+        :meth:`assess` (:func:`runtime.core.supervisor_io.judge_ack`), its outcome in
+        ``last_ack``."""
         self._ack_requested = True
 
     # -- input checks ---------------------------------------------------------------------------

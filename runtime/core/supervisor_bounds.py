@@ -1,5 +1,6 @@
 """What ``pressor faults`` prints for the runtime supervisor: each fault kind with its detection
-rule and bound under a :class:`runtime.core.supervisor_config.SupervisorConfig`, and the reaction."""
+rule and bound under a :class:`runtime.core.supervisor_config.SupervisorConfig`, and the
+reaction."""
 
 from __future__ import annotations
 

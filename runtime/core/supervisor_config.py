@@ -30,8 +30,9 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
 - ``COMMAND_INVALID`` the controller returned a non-finite command (held, → HOLD);
 - ``CONTROLLER_FAULT`` (``controller_faults="latch"``, ``pressor run``) the controller raised in
   ``step`` or returned something ``float()`` refuses (held, → HOLD); with ``"stop"`` (``pressor
-  sil``, ``trial``) the core ends the run instead (:class:`runtime.core.closed_loop.ControllerError`). Under
-  ``"latch"`` this and ``COMMAND_INVALID`` hold until the clinician's acknowledgement
+  sil``, ``trial``) the core ends the run instead
+  (:class:`runtime.core.closed_loop.ControllerError`). Under ``"latch"`` this and
+  ``COMMAND_INVALID`` hold until the clinician's acknowledgement
   (:mod:`runtime.core.supervisor_io`);
 - ``COMMAND_CLAMPED`` the controller returned a command outside [0, max] (clamped; an alarm, not a
   state change);

@@ -8,8 +8,8 @@ Acknowledge and resume
 ----------------------
 HOLD and FAILSAFE leave by themselves once every input has been good for ``recover_after_s``
 (RECOVERING, then AUTO). A clinician's acknowledgement (``pressor run``: the line ``ack`` on stdin
-or in the target file, :mod:`runtime.inputs.target_source`) shortens that wait: taken at the next tick,
-it is accepted only when that tick has no fault that holds the loop (advisory faults do not
+or in the target file, :mod:`runtime.inputs.target_source`) shortens that wait: taken at the next
+tick, it is accepted only when that tick has no fault that holds the loop (advisory faults do not
 count), and then moves HOLD or FAILSAFE to RECOVERING at once, so the command slews back to the
 controller's (bumpless) and the state reaches AUTO; while a fault persists it is refused naming the
 faults, and the state is unchanged. In STARTUP, AUTO and RECOVERING there is nothing to
@@ -43,8 +43,8 @@ class SupervisorInput(NamedTuple):
         Newest scheduling parameters (mmHg/(ml/h), s, s) and their validity flag.
     sample_age_s
         Age (s) of the sample: since it was received, or for a ``QUALITY_HELD`` repeat since the
-        last sample without the bit (:mod:`runtime.core.closed_loop`); 0 marks a new sample, the only kind
-        the flatline rules judge. The MAP checks are skipped once stale.
+        last sample without the bit (:mod:`runtime.core.closed_loop`); 0 marks a new sample, the
+        only kind the flatline rules judge. The MAP checks are skipped once stale.
     link_silence_s
         Time (s) since any frame was received from the device.
     target_mmhg

@@ -1,8 +1,8 @@
 """Online estimation of the scheduling parameters K, T, τ, and the sources that schedule on it.
 
 On the shipped path when ``pressor run --schedule estimated`` (or ``validated``) is chosen. Pure and
-light: imports only the standard library, ``contracts``, ``baselines`` and, below it, ``runtime.core``
-(no numpy on the hot path, no solver, no simulator). Modules:
+light: imports only the standard library, ``contracts``, ``baselines`` and, below it,
+``runtime.core`` (no numpy on the hot path, no solver, no simulator). Modules:
 
 :mod:`runtime.estimation.gate`
     Which MAP samples may enter the estimator (NaN, quality bits, range, spikes, flatlines).

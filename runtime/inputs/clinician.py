@@ -3,11 +3,12 @@
 ``pressor run`` takes the target from the device's MAP_TARGET by default. ``--target-mmhg`` (or
 ``--target-file``) makes it the runtime's own: the device's value is then ignored and MAP_TARGET is
 no longer required for a tick. ``--target-file`` and ``--target-stdin`` change it while the loop
-runs (:mod:`runtime.inputs.target_source`), and carry the clinician's acknowledgement (a line ``ack``:
-HOLD or FAILSAFE resume once the fault cleared, :mod:`runtime.core.supervisor_io`). ``--drug`` and ``--concentration-ug-ml`` state the drug and
-concentration in the syringe; they must match the loaded design's (:mod:`contracts.drug`: a
-generated module's ``DRUG`` and ``DRUG_CONCENTRATION_UG_ML``, else phenylephrine at 100 µg/ml) and
-default to them (:mod:`runtime.inputs.dosing` checks them, the drug library and ``--weight-kg``);
+runs (:mod:`runtime.inputs.target_source`), and carry the clinician's acknowledgement (a line
+``ack``: HOLD or FAILSAFE resume once the fault cleared, :mod:`runtime.core.supervisor_io`).
+``--drug`` and ``--concentration-ug-ml`` state the drug and concentration in the syringe; they must
+match the loaded design's (:mod:`contracts.drug`: a generated module's ``DRUG`` and
+``DRUG_CONCENTRATION_UG_ML``, else phenylephrine at 100 µg/ml) and default to them
+(:mod:`runtime.inputs.dosing` checks them, the drug library and ``--weight-kg``);
 :func:`check_device_hello` refuses a device whose hello announces another drug, another
 concentration or a pump that cannot reach the controller's maximum rate (docs/PROTOCOL.md,
 "Clinician's input"), :func:`check_link_hello` one whose sample period, link mode or announced
@@ -47,7 +48,8 @@ class ClinicianInput:
     target_stdin
         Read a new target from each stdin line while running.
     drug
-        Drug in the syringe (lower case); the loaded design's once checked (:mod:`runtime.inputs.dosing`).
+        Drug in the syringe (lower case); the loaded design's once checked
+        (:mod:`runtime.inputs.dosing`).
     concentration_ug_ml
         Syringe concentration (µg/ml); the loaded design's once checked.
     drug_given, concentration_given
@@ -56,7 +58,8 @@ class ClinicianInput:
         The patient's weight (kg, ``--weight-kg``), or ``None``.
     dose_limits
         The drug library's limits for this drug, syringe and weight
-        (:class:`runtime.inputs.drug_library.DoseLimits`), set by :func:`runtime.inputs.dosing.bind_syringe`.
+        (:class:`runtime.inputs.drug_library.DoseLimits`), set by
+        :func:`runtime.inputs.dosing.bind_syringe`.
     dose_unit
         The unit of the library's limits for this drug (``ug/min`` or ``ug/kg/min``).
     """

@@ -249,8 +249,9 @@ def run_config(
     ticks
         ``pressor run --ticks`` (0: until the device ends).
     clinician
-        ``pressor run``'s checked target and syringe options (:func:`runtime.inputs.clinician.clinician_input`);
-        checked against the loaded design and the drug library (:func:`runtime.inputs.dosing.bind_syringe`).
+        ``pressor run``'s checked target and syringe options
+        (:func:`runtime.inputs.clinician.clinician_input`); checked against the loaded design and
+        the drug library (:func:`runtime.inputs.dosing.bind_syringe`).
 
     Raises
     ------

@@ -2,13 +2,13 @@
 
 Any class whose instances satisfy :class:`contracts.controller.Controller` runs wherever the shipped
 controllers run (``pressor sil``, ``pressor run``, ``pressor trial``, :mod:`pressor.api`), behind
-the same supervisor, clamps and rate limits: the runtime's core (:mod:`runtime.core.closed_loop`) steps it and
-the supervisor turns what it returns into the pump command (non-finite: ``COMMAND_INVALID``, HOLD;
-outside [0, ``max_rate_ml_h``]: clamped, ``COMMAND_CLAMPED``, alarm). A controller that raises
-ends ``pressor sil`` and ``trial`` with :class:`runtime.core.closed_loop.ControllerError` naming it; under
-``pressor run`` the supervisor holds the last command until the clinician acknowledges
-(``CONTROLLER_FAULT``, :mod:`runtime.core.supervisor`). The whole contract: docs/INTERFACES.md,
-"Controller".
+the same supervisor, clamps and rate limits: the runtime's core (:mod:`runtime.core.closed_loop`)
+steps it and the supervisor turns what it returns into the pump command (non-finite:
+``COMMAND_INVALID``, HOLD; outside [0, ``max_rate_ml_h``]: clamped, ``COMMAND_CLAMPED``, alarm). A
+controller that raises ends ``pressor sil`` and ``trial`` with
+:class:`runtime.core.closed_loop.ControllerError` naming it; under ``pressor run`` the supervisor
+holds the last command until the clinician acknowledges (``CONTROLLER_FAULT``,
+:mod:`runtime.core.supervisor`). The whole contract: docs/INTERFACES.md, "Controller".
 
 Spec forms (the first that applies):
 

@@ -6,8 +6,8 @@
    (:func:`contracts.drug.binding_of`): the shipped design's gains count ml/h of its syringe, so
    another drug or concentration is refused naming both (no rescaling: docs/DRUGS.md);
 2. the drug and concentration against the drug library (``--drug-library``, default the shipped
-   ``runtime/inputs/drug_library.toml``): a drug it does not list, or a concentration it does not allow
-   for the drug, is refused;
+   ``runtime/inputs/drug_library.toml``): a drug it does not list, or a concentration it does not
+   allow for the drug, is refused;
 3. ``--weight-kg`` (kg, in [30, 250]): required when the drug's limits are per kg.
 
 It returns the clinician input with the design's drug and concentration and the

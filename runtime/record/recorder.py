@@ -1,11 +1,11 @@
 """The rerun recorder: every loop signal to an ``.rrd`` file, batched off the hot path.
 
 Per tick the loop calls :meth:`Recorder.record_tick` with the closed-loop core's
-:class:`~runtime.core.closed_loop.TickRecord` (or :meth:`Recorder.record` with one float per channel); the
-row goes into a preallocated ``float64`` array (``chunk_ticks`` rows). When the array is full —
-and at :meth:`Recorder.close` — each channel is sent as one column with ``send_columns`` on two
-timelines, ``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call and
-``send_columns`` ~0.3 µs a scalar (docs/PLATFORM-NOTES.md), so a 15-channel tick costs about a
+:class:`~runtime.core.closed_loop.TickRecord` (or :meth:`Recorder.record` with one float per
+channel); the row goes into a preallocated ``float64`` array (``chunk_ticks`` rows). When the array
+is full — and at :meth:`Recorder.close` — each channel is sent as one column with ``send_columns``
+on two timelines, ``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call
+and ``send_columns`` ~0.3 µs a scalar (docs/PLATFORM-NOTES.md), so a 15-channel tick costs about a
 microsecond amortised. Rare events (supervisor transitions, alarms, event markers) are logged one
 by one: ``/safety/events`` and ``/events/log`` as ``TextLog``.
 
@@ -19,8 +19,8 @@ run that fails (:meth:`abort`) never leaves a half-written or clobbered ``FILE.r
 Entities (units in the names): see :data:`CHANNELS`; besides them, the design box of a scheduled
 controller (:meth:`Recorder.use_controller`, two points per bound: first and last tick), markers on
 the MAP plot where a disturbance or fault starts (:meth:`Recorder.plan_markers`) and on the safety
-plot at each supervisor transition. The viewer's layout is :func:`runtime.record.blueprint.default_blueprint`
-(docs/VIEWER.md).
+plot at each supervisor transition. The viewer's layout is
+:func:`runtime.record.blueprint.default_blueprint` (docs/VIEWER.md).
 """
 
 from __future__ import annotations
@@ -103,8 +103,8 @@ class Recorder:
     chunk_ticks
         Rows buffered before a flush, in [16, 1_000_000].
     dose_view
-        Open the viewer with the dose plot (``pressor run``: :func:`runtime.inputs.dosing.log_dose_series`
-        adds its series).
+        Open the viewer with the dose plot (``pressor run``:
+        :func:`runtime.inputs.dosing.log_dose_series` adds its series).
     """
 
     def __init__(

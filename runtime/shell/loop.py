@@ -1,9 +1,9 @@
 """The fixed-rate loop: the shell around the controller step (PX4 module style).
 
 Each tick: read the newest sample, target and scheduling parameters from the link, hand them with
-the pump status and the link's health to the closed-loop core (:mod:`runtime.core.closed_loop`, the same core
-the in-process trial runs), send the command, record. The loop holds only link I/O, recording and
-its own timing (:class:`~runtime.shell.timing.TimingStats`).
+the pump status and the link's health to the closed-loop core (:mod:`runtime.core.closed_loop`, the
+same core the in-process trial runs), send the command, record. The loop holds only link I/O,
+recording and its own timing (:class:`~runtime.shell.timing.TimingStats`).
 
 Two ways to keep time (injected clocks, :mod:`runtime.shell.clock`):
 
@@ -21,14 +21,14 @@ Lockstep (default in ``pressor sil``)
     and LINK_LOSS (FAILSAFE) fall on exactly the ticks a wall-clock runtime would log them.
 
 Real time (``--realtime``)
-    Ticks are released at absolute deadlines ``t0 + k·Ts`` (:class:`~runtime.shell.clock.MonotonicClock`);
-    the newest sample is answered, sample age and link silence are wall-clock (real watchdogs), and
-    lateness and skipped periods are counted.
+    Ticks are released at absolute deadlines ``t0 + k·Ts``
+    (:class:`~runtime.shell.clock.MonotonicClock`); the newest sample is answered, sample age and
+    link silence are wall-clock (real watchdogs), and lateness and skipped periods are counted.
 
 Execution time = wall time from release (sample decoded, or deadline reached) to the command
 written; recording comes after. Real-time ticks run slower than lockstep ones (LPV p50 ~180 µs
-against ~36 µs: after 100 ms asleep the caches are cold). A stop signal (:mod:`runtime.shell.interrupt`)
-ends either loop at a tick boundary after a safe-rate command.
+against ~36 µs: after 100 ms asleep the caches are cold). A stop signal
+(:mod:`runtime.shell.interrupt`) ends either loop at a tick boundary after a safe-rate command.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The runtime's typed run configuration (runtime.inputs.config): checked once, at the command line."""
+"""The runtime's typed run configuration (runtime.inputs.config): checked once, at the command
+line."""
 
 from __future__ import annotations
 

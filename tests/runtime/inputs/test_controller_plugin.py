@@ -1,5 +1,6 @@
-"""Plugin controllers (runtime.inputs.controller_plugin): loading, the protocol check's messages, entry
-points, supervision in-process (clamp, alarm, a raising controller) and byte-identical trials."""
+"""Plugin controllers (runtime.inputs.controller_plugin): loading, the protocol check's messages,
+entry points, supervision in-process (clamp, alarm, a raising controller) and byte-identical
+trials."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""CPU placement of the lockstep ends (runtime.shell.placement), used by pressor sil and pressor device."""
+"""CPU placement of the lockstep ends (runtime.shell.placement), used by pressor sil and pressor
+device."""
 
 from __future__ import annotations
 
