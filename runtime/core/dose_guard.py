@@ -34,6 +34,9 @@ _HOUR_S = 3600.0
 class DoseLimits:
     """One drug's limits at one concentration and weight, in ml/h (what the supervisor compares).
 
+    Defined here, with the guard that enforces it, not in :mod:`runtime.inputs.drug_library` (which
+    builds it): the core imports nothing from the inputs above it.
+
     Attributes
     ----------
     hard_max_ml_h
