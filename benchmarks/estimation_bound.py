@@ -12,7 +12,7 @@ Each patient of the seeded cohort runs the shipped LPV in ``--scenario`` (defaul
 ``oracle``
     The simulator's true K, T, τ from the first tick (the denominator of every ratio).
 ``estimated``
-    The shipped online estimator (:class:`runtime.estimation.schedule.EstimatedSchedule`).
+    The shipped online estimator (:class:`runtime.estimation.sources.EstimatedSchedule`).
 ``K from 0 s``
     The estimator's T and τ, but the true K from the first tick: which parameter the gap is made of.
 ``truth from S s``
@@ -49,8 +49,9 @@ from hil_sim.closed_loop import simulate
 from hil_sim.cohort import cohort_seeds
 from hil_sim.scenario import load_scenario
 from hil_sim.world import World
-from runtime.controller_loader import load_controller
-from runtime.estimation.schedule import EstimatedSchedule, OracleSchedule, Schedule
+from runtime.core.scheduling import OracleSchedule, Schedule
+from runtime.estimation.sources import EstimatedSchedule
+from runtime.inputs.controller_loader import load_controller
 
 TS = 0.1  # s, the loop's sample period
 MOVED_MMHG = 0.5  # MAP change from the first sample that counts as "the MAP has moved"

@@ -24,9 +24,9 @@ from hil_sim.closed_loop import simulate
 from hil_sim.world import World
 from pressor.api import _scenario
 from pressor.gym import AgentController, MapEnv
-from runtime.core import CLEAN_LINK, ClosedLoopCore
-from runtime.supervisor import Supervisor
-from runtime.supervisor_config import supervisor_config_for
+from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from runtime.core.supervisor import Supervisor
+from runtime.core.supervisor_config import supervisor_config_for
 
 SEED = 3
 ACTION_ML_H = 12.0

@@ -9,10 +9,10 @@ Each seeded patient of :mod:`hil_sim.pkpd` (``--model two-compartment``:
 the benchmark's own pharmacology with its haemorrhage and bolus, target 70 mmHg, 60 min;
 ``--model one-compartment``: one-compartment kinetics, a Hill effect, no tolerance, a wide
 spread, a +15 mmHg step over the patient's baseline, 30 min, no disturbance) runs through the
-runtime's own closed-loop core (:class:`runtime.core.ClosedLoopCore`: supervisor, scheduling
-source, controller), in process, without a link: a 0.3 mmHg Gaussian monitor at 10 Hz (seeded)
-and a pump that delivers the command within [0, 120] ml/h. Runs per patient: the LPV with the
-``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-in ``validated``
+runtime's own closed-loop core (:class:`runtime.core.closed_loop.ClosedLoopCore`: supervisor,
+scheduling source, controller), in process, without a link: a 0.3 mmHg Gaussian monitor at 10 Hz
+(seeded) and a pump that delivers the command within [0, 120] ml/h. Runs per patient: the LPV with
+the ``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-in ``validated``
 schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
@@ -39,13 +39,13 @@ from hil_sim.pkpd import (
     draw_patient,
 )
 from link import PumpStatus, TickInputs
-from runtime.controller_loader import load_controller
-from runtime.core import CLEAN_LINK, ClosedLoopCore
-from runtime.estimation.schedule import EstimatedSchedule, make_schedule
+from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from runtime.core.supervisor import Supervisor
+from runtime.core.supervisor_config import Fault, State, supervisor_config_for
+from runtime.estimation.sources import EstimatedSchedule, make_schedule
 from runtime.estimation.validated import ValidatedSchedule
 from runtime.estimation.validation import ModelBank
-from runtime.supervisor import Supervisor
-from runtime.supervisor_config import Fault, State, supervisor_config_for
+from runtime.inputs.controller_loader import load_controller
 
 TS_S = 0.1
 PUMP_MAX_ML_H = 120.0
@@ -101,7 +101,7 @@ def make_source(source: str) -> Any:
     """The scheduling source ``source`` (a name of ``make_schedule``, ``fixed:K/T/tau`` or an
     experiment: ``fit-hold``, ``fit-slew``)."""
     if source.startswith("fixed:"):
-        from runtime.estimation.schedule import NominalSchedule
+        from runtime.core.scheduling import NominalSchedule
 
         return NominalSchedule(*(float(v) for v in source[6:].split("/")))
     if source in ("fit-hold", "fit-slew"):

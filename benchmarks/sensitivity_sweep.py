@@ -53,7 +53,7 @@ from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, PatientModelError
 from hil_sim.scenario import Scenario, load_scenario
 from hil_sim.sensitivity import check_factor, with_sensitivity
 from hil_sim.trial import controller_dir_name, run_cohort, write_outputs
-from runtime.estimation.schedule import SOURCES
+from runtime.estimation.sources import SOURCES
 
 #: sensitivity levels (× the model's; dimensionless)
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)

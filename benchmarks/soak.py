@@ -29,15 +29,15 @@ os.environ.setdefault("CI", "1")  # before rerun is imported: no analytics files
 
 from contracts.faults import FAULT_KINDS, FaultScorer, parse_faults  # noqa: E402
 from link import Hello, PtyPair, RuntimeSession, Signing  # noqa: E402
-from runtime.controller_loader import load_controller  # noqa: E402
-from runtime.loop import Loop  # noqa: E402
-from runtime.summary import print_fault_table  # noqa: E402
-from runtime.supervisor import Supervisor  # noqa: E402
-from runtime.supervisor_config import (  # noqa: E402
+from runtime.core.supervisor import Supervisor  # noqa: E402
+from runtime.core.supervisor_config import (  # noqa: E402
     Fault,
     sched_limits_of,
     supervisor_config_for,
 )
+from runtime.inputs.controller_loader import load_controller  # noqa: E402
+from runtime.shell.loop import Loop  # noqa: E402
+from runtime.summary import print_fault_table  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -113,7 +113,7 @@ def main() -> int:
                     marks["wall0"] = time.perf_counter()
 
             if args.rrd is not None:
-                from runtime.recorder import Recorder
+                from runtime.record.recorder import Recorder
 
                 recorder = Recorder(args.rrd, run_label=f"soak|{args.controller}|{args.hours}h")
             loop = Loop(

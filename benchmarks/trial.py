@@ -18,7 +18,7 @@ from hil_sim.cohort import cohort_seeds
 from hil_sim.patient_model import DEFAULT_PATIENT_MODEL
 from hil_sim.scenario import load_scenario
 from hil_sim.trial import run_patient
-from runtime.estimation.schedule import SOURCES
+from runtime.estimation.sources import SOURCES
 
 
 def main() -> None:

@@ -6,9 +6,9 @@ prints a progress bar (stderr), then a table of the median and 90th percentile o
 peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
 ``DIR/patients.csv`` and ``DIR/summary.json`` atomically. Same arguments → identical files, whatever
 ``--jobs``. Exit 0 on completion, 1 when a controller raised (one line naming it, the patient and
-the tick: :class:`runtime.core.ControllerError`), 2 on bad usage or input (one line naming field,
-value and range). A plugin controller (:mod:`runtime.controller_plugin`) is named by
-``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]`` or an installed entry point's name.
+the tick: :class:`runtime.core.closed_loop.ControllerError`), 2 on bad usage or input (one line
+naming field, value and range). A plugin controller (:mod:`runtime.inputs.controller_plugin`) is
+named by ``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]`` or an installed entry point's name.
 """
 
 from __future__ import annotations
@@ -108,8 +108,8 @@ def _progress_bar(done: int, total: int) -> None:
 
 
 def _trial(argv: Sequence[str]) -> int:
-    from runtime.config import ORACLE_DEFAULT_WHY, SCHEDULE_HELP
-    from runtime.estimation.schedule import SOURCES
+    from runtime.estimation.sources import SOURCES
+    from runtime.inputs.config import ORACLE_DEFAULT_WHY, SCHEDULE_HELP
 
     p = UsageParser(prog="pressor trial", description="in-silico cohort trial of a controller")
     p.add_argument(
@@ -175,9 +175,9 @@ def _trial(argv: Sequence[str]) -> int:
     from hil_sim.scenario import ScenarioError, load_scenario
     from hil_sim.sensitivity import with_sensitivity
     from hil_sim.trial import controller_dir_name, run_cohort, write_outputs
-    from runtime.controller_loader import ControllerSpecError, load_controller
-    from runtime.controller_plugin import split_controller_list
-    from runtime.core import ControllerError
+    from runtime.core.closed_loop import ControllerError
+    from runtime.inputs.controller_loader import ControllerSpecError, load_controller
+    from runtime.inputs.controller_plugin import split_controller_list
 
     period = 1.0 / args.rate
     try:

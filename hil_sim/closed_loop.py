@@ -1,8 +1,8 @@
 """Pure in-process closed-loop simulator: World + the runtime's closed-loop core, no I/O.
 
 Per tick k: ``obs = world.observe()`` → ``rec = core.step(obs, ...)`` (the runtime's
-:class:`~runtime.core.ClosedLoopCore`: the supervisor, then the controller if allowed, given the
-pump status of tick k and a clean link) → ``world.apply_command(rec.command_ml_h)`` →
+:class:`~runtime.core.closed_loop.ClosedLoopCore`: the supervisor, then the controller if allowed,
+given the pump status of tick k and a clean link) → ``world.apply_command(rec.command_ml_h)`` →
 ``world.advance()``: exactly the order and the core the serial SIL uses, on the same
 float32-rounded numbers, so both give the same trajectory and the same supervisor states - with any
 scheduling source (``schedule``: the core feeds it, as in the runtime).
@@ -16,10 +16,10 @@ import numpy as np
 
 from contracts.controller import Controller
 from hil_sim.world import World
-from runtime.core import CLEAN_LINK, ClosedLoopCore
-from runtime.estimation.schedule import ScheduleSource
-from runtime.supervisor import Supervisor
-from runtime.supervisor_config import supervisor_config_for
+from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from runtime.core.scheduling import ScheduleSource
+from runtime.core.supervisor import Supervisor
+from runtime.core.supervisor_config import supervisor_config_for
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,7 @@ class Trajectory:
     quality, alarms
         Monitor quality flags at the tick; pump alarms after the tick.
     state, faults
-        Supervisor state (:class:`runtime.supervisor_config.State`) and fault bits at the tick.
+        Supervisor state (:class:`runtime.core.supervisor_config.State`) and fault bits at the tick.
     """
 
     t_s: np.ndarray
@@ -91,9 +91,9 @@ def simulate(
         Simulated time (s); ``round(duration / Ts)`` ticks; default the scenario's duration.
     supervisor
         A fresh supervisor; default the one ``pressor sil`` builds for this controller and the
-        scenario's sensor (:func:`runtime.supervisor_config.supervisor_config_for`).
+        scenario's sensor (:func:`runtime.core.supervisor_config.supervisor_config_for`).
     schedule
-        A fresh scheduling source (:func:`runtime.estimation.schedule.make_schedule`); default
+        A fresh scheduling source (:func:`runtime.estimation.sources.make_schedule`); default
         the oracle (the world's true K, T, τ).
 
     Returns

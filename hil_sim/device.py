@@ -60,8 +60,8 @@ from hil_sim.device_options import (
     make_world,
 )
 from hil_sim.truth import TruthLog
-from runtime.interrupt import exit_code, signal_name, stop_requested
-from runtime.placement import pin_thread
+from runtime.shell.interrupt import exit_code, signal_name, stop_requested
+from runtime.shell.placement import pin_thread
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ class DeviceResult:
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point of ``pressor device`` (see the module docstring)."""
-    from runtime.interrupt import stop_on_signals
+    from runtime.shell.interrupt import stop_on_signals
 
     with stop_on_signals():
         return run_command(f"pressor {command}", lambda args: _main(command, args), argv)
@@ -92,7 +92,7 @@ def _main(command: str, argv: Sequence[str]) -> int:
     if args.pump_max_ml_h is not None:
         check_range("--pump-max-ml-h", args.pump_max_ml_h, 0.0, 10000.0, "ml/h", lo_open=True)
     faults = _parse_faults(args.fault)
-    pin_thread(args.cpu)  # the lockstep ends on their CPUs (runtime.placement)
+    pin_thread(args.cpu)  # the lockstep ends on their CPUs (runtime.shell.placement)
     world = make_world(args, faults)
 
     from link import (

@@ -11,8 +11,8 @@ from typing import Any
 from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
 from contracts.usage import UsageError, UsageParser
 from hil_sim.patient_model import add_patient_model_option
-from runtime.clinician import argtype, parse_concentration, parse_drug
-from runtime.placement import parse_cpu
+from runtime.inputs.clinician import argtype, parse_concentration, parse_drug
+from runtime.shell.placement import parse_cpu
 
 #: default wall-clock timeouts (s)
 RETRANSMIT_S = 0.5

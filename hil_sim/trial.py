@@ -1,9 +1,10 @@
 """In-silico cohort trial: one controller, one scenario, n seeded patients, §3 metrics.
 
 Each patient runs in the pure in-process simulator (:func:`hil_sim.closed_loop.simulate`) with a
-fresh controller from :func:`runtime.controller_loader.load_controller`. Patients are independent,
-so the worker processes (``jobs``) or the Dask cluster (``scheduler``) change only the wall time: results are collected in patient order and
-every output file is byte-identical whatever ``jobs`` is.
+fresh controller from :func:`runtime.inputs.controller_loader.load_controller`. Patients are
+independent, so the worker processes (``jobs``) or the Dask cluster (``scheduler``) change only the
+wall time: results are collected in patient order and every output file is byte-identical whatever
+``jobs`` is.
 
 Metrics judge the *true* MAP (what the patient experiences; a flushed or disconnected line must not
 count as hypertension), with the settling band chosen by whether the scenario's monitor is noisy
@@ -54,9 +55,9 @@ from hil_sim.cohort import cohort_seeds
 from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, load_patient_model
 from hil_sim.scenario import Scenario
 from hil_sim.world import World
-from runtime.controller_loader import load_controller
-from runtime.core import ControllerError
-from runtime.estimation.schedule import make_schedule
+from runtime.core.closed_loop import ControllerError
+from runtime.estimation.sources import make_schedule
+from runtime.inputs.controller_loader import load_controller
 
 
 def controller_dir_name(spec: str) -> str:
@@ -99,7 +100,7 @@ def run_patient(
 ) -> dict[str, Any]:
     """Simulate one patient and return its JSON-ready record (seed, coefficients, metrics).
 
-    ``schedule`` names the scheduling source (:func:`runtime.estimation.schedule.make_schedule`),
+    ``schedule`` names the scheduling source (:func:`runtime.estimation.sources.make_schedule`),
     run by the runtime's core exactly as ``pressor run``/``sil`` run it; when it is not the oracle
     the record gains ``estimation`` (:func:`estimation_errors`). ``patient_model`` names the
     patient model (:mod:`hil_sim.patient_model`).

@@ -4,8 +4,8 @@ Pure core, stepped in lockstep by its caller (the in-process simulator :mod:`hil
 the serial-link device process ``hil_sim.device``); the order per tick k is::
 
     obs = world.observe()            # tick k: measured MAP, target, scheduling truth
-    u = core.step(obs, ...)          # supervisor + controller (runtime.core), or the runtime
-    world.apply_command(u)           # the command answering tick k
+    u = core.step(obs, ...)          # supervisor + controller (runtime.core.closed_loop), or the
+    runtime world.apply_command(u)           # the command answering tick k
     status = world.advance()         # integrate one sample period -> tick k + 1
 
 Everything the world emits (observation and pump status fields) and every command it receives is

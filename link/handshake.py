@@ -4,7 +4,7 @@
 for the peer's hello (the first frame showing the peer signs differently ends the handshake), then
 :func:`check_peer_hello` on the hello itself. The runtime adds its own checks of the device's hello
 (sample period, link mode, noise, drug, concentration, pump maximum: ``runtime.session``,
-``runtime.clinician``); every refusal carries a ``PRESSOR_REFUSAL_REASON`` code that
+``runtime.inputs.clinician``); every refusal carries a ``PRESSOR_REFUSAL_REASON`` code that
 :meth:`link.Session.refuse` sends the peer (docs/PROTOCOL.md, "Refusals").
 """
 

@@ -17,14 +17,14 @@ Both run the code the command runs: :func:`trial` calls :func:`hil_sim.trial.run
 path: the world, the controller, the runtime's closed-loop core and supervisor, the metrics), which
 is tick for tick what a lockstep ``pressor sil`` of that seed gives. ``controller`` is any
 ``--controller`` spec (``pi``, ``lpv``, ``smith:45``, a generated module, a plugin
-``MODULE:CLASS[:ARGS]`` - :mod:`runtime.controller_plugin`) or a controller class itself (see
+``MODULE:CLASS[:ARGS]`` - :mod:`runtime.inputs.controller_plugin`) or a controller class itself (see
 :func:`controller_spec`). ``to_pandas`` needs pandas (``pip install -e ".[pandas]"``).
 
 Errors: a bad argument raises :class:`ValueError` (a subclass naming the argument, the value and
-the allowed range: :class:`runtime.controller_loader.ControllerSpecError`,
+the allowed range: :class:`runtime.inputs.controller_loader.ControllerSpecError`,
 :class:`hil_sim.scenario.ScenarioError`, :class:`hil_sim.patient_model.PatientModelError`); a
-controller that raises mid-run raises :class:`runtime.core.ControllerError` naming it, the patient
-and the tick.
+controller that raises mid-run raises :class:`runtime.core.closed_loop.ControllerError` naming it,
+the patient and the tick.
 """
 
 from __future__ import annotations
@@ -44,9 +44,9 @@ from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenari
 from hil_sim.scenario import Scenario, load_scenario
 from hil_sim.sensitivity import with_sensitivity
 from hil_sim.trial import _csv_text, _simulate_patient, run_cohort, write_outputs
-from runtime.controller_loader import load_controller
-from runtime.estimation.schedule import SOURCES
-from runtime.supervisor_config import ALARM_FAULTS, State
+from runtime.core.supervisor_config import ALARM_FAULTS, State
+from runtime.estimation.sources import SOURCES
+from runtime.inputs.controller_loader import load_controller
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas

@@ -8,13 +8,14 @@ pseudo-terminal (a real tty to pyserial), signs the link (a fresh key per run un
 :func:`runtime.session.run_runtime`, records everything to an ``.rrd``, prints the metric summary
 (:mod:`runtime.summary`, defined in docs/METRICS.md) and the ``rerun FILE.rrd`` command to replay
 it. The run lasts the scenario's ``duration_s`` unless ``--duration`` is given; on a terminal a
-status line shows simulated time and the real-time factor (:mod:`runtime.progress`). The runtime
-itself never imports the simulator: the control path learns of the patient, and of any fault, only
-through what arrives on the link. ``--schedule`` picks where the controller's K, T, τ come from
-(:mod:`runtime.estimation.schedule`); the default here is still the oracle (the device's truth),
-because the online estimator's figures do not all hold yet (docs/notes/cohort-evidence.md).
-``--patient-model`` picks the device's patient model (:mod:`hil_sim.patient_model`); a model other
-than ``paper`` is named in the summary as ``patient_model``.
+status line shows simulated time and the real-time factor (:mod:`runtime.shell.progress`). The
+runtime itself never imports the simulator: the control path learns of the patient, and of any
+fault, only through what arrives on the link. ``--schedule`` picks where the controller's K, T, τ
+come from (:func:`runtime.estimation.sources.make_schedule`); the default here is still the oracle
+(the device's truth), because the online estimator's figures do not all hold yet
+(docs/notes/cohort-evidence.md). ``--patient-model`` picks the device's patient model
+(:mod:`hil_sim.patient_model`); a model other than ``paper`` is named in the summary as
+``patient_model``.
 
 Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
 Faults the scenario declares (``[[faults]]``) are injected by the device too; both are scored
@@ -42,8 +43,14 @@ from typing import Any
 from contracts.drug import DEFAULT_BINDING, DrugBinding
 from contracts.usage import USAGE_EXIT, UsageError, UsageParser
 from hil_sim.patient_model import add_patient_model_option
-from runtime.config import ORACLE_DEFAULT_WHY, RunConfig, add_run_options, positive, run_config
-from runtime.placement import CpuChoice, parse_lockstep_cpus
+from runtime.inputs.config import (
+    ORACLE_DEFAULT_WHY,
+    RunConfig,
+    add_run_options,
+    positive,
+    run_config,
+)
+from runtime.shell.placement import CpuChoice, parse_lockstep_cpus
 
 DEFAULT_SCENARIO = "paper-tracking"
 DEFAULT_PATIENT_SEED = 1
@@ -70,7 +77,7 @@ class SilConfig:
     signed
         Whether the link is signed (``--no-signing`` turns a generated key off).
     cpu
-        Lockstep CPU placement choice (:mod:`runtime.placement`).
+        Lockstep CPU placement choice (:mod:`runtime.shell.placement`).
     events
         The scenario's disturbance events ``(kind, start_s)`` for the metrics.
     noisy
@@ -148,7 +155,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
     from hil_sim.patient_model import PatientModelError, check_model_for_scenario
     from hil_sim.scenario import ScenarioError, is_scenario_path, load_scenario
     from hil_sim.trial import scenario_events
-    from runtime.config import load_controller
+    from runtime.inputs.config import load_controller
 
     args = sil_parser().parse_args(argv)
     if args.rrd is None:
@@ -191,7 +198,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
 
 def _file_label(spec: str) -> str:
     """The controller's part of the default ``.rrd`` name (a plugin: its class name)."""
-    from runtime.controller_plugin import is_plugin_spec, plugin_label
+    from runtime.inputs.controller_plugin import is_plugin_spec, plugin_label
 
     if spec.partition(":")[0] == "lpv":  # lpv:DRUG, a shipped design
         return spec.replace(":", "_")
@@ -250,12 +257,12 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     any other device output is printed on stderr when the run fails or the device exits non-zero.
     """
     from link import PtyPair
-    from runtime.config import load_signing
-    from runtime.core import ControllerError
-    from runtime.interrupt import Interrupted
-    from runtime.placement import lockstep_cpus
-    from runtime.progress import TerminalProgress
+    from runtime.core.closed_loop import ControllerError
+    from runtime.inputs.config import load_signing
     from runtime.session import run_runtime
+    from runtime.shell.interrupt import Interrupted
+    from runtime.shell.placement import lockstep_cpus
+    from runtime.shell.progress import TerminalProgress
 
     run = config.run
     signing = load_signing(run, generate=config.signed)

@@ -2,8 +2,8 @@
 
 ``synthesis`` may not import ``runtime`` (docs/ARCHITECTURE.md), so ``pressor verify
 --controller SPEC`` gets its plugin from here: :func:`load_plugin` resolves the spec with
-:mod:`runtime.controller_plugin` and hands the instance to the synthesis side, which checks its
-nominal step (:mod:`synthesis.verify_plugin`). Without ``--controller`` this is the artifact
+:mod:`runtime.inputs.controller_plugin` and hands the instance to the synthesis side, which checks
+its nominal step (:mod:`synthesis.verify_plugin`). Without ``--controller`` this is the artifact
 verification, unchanged.
 """
 
@@ -18,12 +18,12 @@ def load_plugin(spec: str, sample_period_s: float) -> Controller:
     Raises
     ------
     ValueError
-        (:class:`runtime.controller_loader.ControllerSpecError`) ``spec`` is not a plugin - the
-        shipped controllers are checked by ``pressor verify [ARTIFACT]`` - or the plugin cannot
+        (:class:`runtime.inputs.controller_loader.ControllerSpecError`) ``spec`` is not a plugin -
+        the shipped controllers are checked by ``pressor verify [ARTIFACT]`` - or the plugin cannot
         be loaded (naming module, class and what is missing).
     """
-    from runtime.controller_loader import ControllerSpecError
-    from runtime.controller_plugin import is_plugin_spec, load_plugin_controller
+    from runtime.inputs.controller_loader import ControllerSpecError
+    from runtime.inputs.controller_plugin import is_plugin_spec, load_plugin_controller
 
     if not is_plugin_spec(spec):
         raise ControllerSpecError(

@@ -1,8 +1,8 @@
 """``pressor run`` and ``pressor faults``: the runtime's own commands.
 
 ``pressor run --port DEV`` is the runtime end alone, on a device started by hand (a real cable or
-a ``socat`` pty). It parses its options into a :class:`runtime.config.RunConfig`, opens the port,
-signs the link (``--signing-key``, default the ``pressor keygen`` key), runs the loop
+a ``socat`` pty). It parses its options into a :class:`runtime.inputs.config.RunConfig`, opens the
+port, signs the link (``--signing-key``, default the ``pressor keygen`` key), runs the loop
 (:func:`runtime.session.run_runtime`) and prints the summary (:mod:`runtime.summary`). It
 schedules on its own online estimate by default (``--schedule estimated``): a real monitor and pump
 send no K, T, τ, and a device that never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs
@@ -13,7 +13,7 @@ sets the MAP target on the runtime side instead of the device's MAP_TARGET (a li
 same inputs acknowledges an alarm: HOLD or FAILSAFE resume once the fault cleared); the device's
 hello must announce the drug and concentration the controller assumes (``--drug``,
 ``--concentration-ug-ml``) and a pump that reaches the controller's maximum rate, else the run
-refuses the device, telling it why (PRESSOR_REFUSAL), and exits 2 (:mod:`runtime.clinician`).
+refuses the device, telling it why (PRESSOR_REFUSAL), and exits 2 (:mod:`runtime.inputs.clinician`).
 ``pressor sil``, which also starts the device, is served by the front door (:mod:`pressor.sil`).
 
 ``pressor keygen`` writes a fresh signing key (default :func:`link.signing.default_key_path`):
@@ -34,15 +34,15 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from contracts.usage import UsageError, UsageParser, usage_exit
-from runtime.clinician import add_clinician_options, clinician_input
-from runtime.config import (
+from runtime.inputs.clinician import add_clinician_options, clinician_input
+from runtime.inputs.config import (
     DEFAULT_RATE_HZ,
     MAX_RATE_HZ,
     add_run_options,
     positive,
     run_config,
 )
-from runtime.dosing import add_dosing_options
+from runtime.inputs.dosing import add_dosing_options
 
 
 def _run_parser() -> UsageParser:
@@ -64,7 +64,7 @@ def _run_parser() -> UsageParser:
 
 def _main_run(argv: Sequence[str]) -> int:
     from link import fast_port, open_port
-    from runtime.config import load_signing
+    from runtime.inputs.config import load_signing
     from runtime.session import run_runtime
     from runtime.summary import finish
 
@@ -118,8 +118,8 @@ def _main_keygen(argv: Sequence[str]) -> int:
 
 def _main_faults(argv: Sequence[str]) -> int:
     from contracts.faults import catalogue_rows
-    from runtime.supervisor_bounds import detection_bounds
-    from runtime.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S, SupervisorConfig
+    from runtime.core.supervisor_bounds import detection_bounds
+    from runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S, SupervisorConfig
 
     p = UsageParser(prog="pressor faults", description="fault kinds the supervisor detects")
     p.add_argument(

@@ -14,11 +14,11 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from contracts.usage import USAGE_EXIT, run_command
-from runtime.clinician import ClinicianInput, check_device_hello, check_link_hello
-from runtime.config import RunConfig, load_controller
-from runtime.controller_loader import controller_name
-from runtime.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
-from runtime.placement import Pinned
+from runtime.inputs.clinician import ClinicianInput, check_device_hello, check_link_hello
+from runtime.inputs.config import RunConfig, load_controller
+from runtime.inputs.controller_loader import controller_name
+from runtime.shell.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
+from runtime.shell.placement import Pinned
 from runtime.summary import build_summary
 
 
@@ -52,7 +52,7 @@ def run_runtime(
     events
         The device scenario's disturbance events ``(kind, start_s)``; ``None`` when not known.
     cpus
-        ``(loop CPU, device CPU)`` of a pinned lockstep run (:mod:`runtime.placement`), or
+        ``(loop CPU, device CPU)`` of a pinned lockstep run (:mod:`runtime.shell.placement`), or
         ``None``; the loop thread runs on the first.
     on_connected
         Called once the handshake succeeded.
@@ -62,10 +62,10 @@ def run_runtime(
         Wall seconds to wait for the device's hello.
     on_tick
         The loop's per-tick callback ``(tick, state, fault bits, command ml/h)``, e.g. a
-        :class:`runtime.progress.TerminalProgress`.
+        :class:`runtime.shell.progress.TerminalProgress`.
     before_close
-        Called with the :class:`runtime.recorder.Recorder` after the loop ended and before the
-        recording is closed (``pressor sil`` adds the simulated device's true MAP there).
+        Called with the :class:`runtime.record.recorder.Recorder` after the loop ended and before
+        the recording is closed (``pressor sil`` adds the simulated device's true MAP there).
     noisy_band
         Whether the summary's settling band is the noisy monitor's ±5 mmHg rather than 2 % of the
         step (docs/METRICS.md): the scenario's choice (``pressor sil``: whether its monitor adds
@@ -88,12 +88,12 @@ def run_runtime(
         SigningMismatch,
     )
     from link.tlog import TlogWriter
-    from runtime.cpu_latency import CpuLatencyRequest
-    from runtime.estimation.schedule import make_schedule
-    from runtime.loop import Loop
-    from runtime.supervisor import Supervisor
-    from runtime.supervisor_config import supervisor_config_for
-    from runtime.target_source import TargetedLoop, TargetSource
+    from runtime.core.supervisor import Supervisor
+    from runtime.core.supervisor_config import supervisor_config_for
+    from runtime.estimation.sources import make_schedule
+    from runtime.inputs.target_source import TargetSource
+    from runtime.shell.cpu_latency import CpuLatencyRequest
+    from runtime.shell.loop import Loop
 
     period_s = config.period_s
     controller = load_controller(config.controller, period_s)
@@ -164,12 +164,12 @@ def run_runtime(
                 stale_after_s=config.sample_age_limit_s,
                 dose_limits=clinician.dose_limits,  # pressor run: the drug library's
                 # pressor run (a patient on the line) holds on a controller fault until the
-                # clinician acknowledges; pressor sil stops with exit 1 (runtime.supervisor)
+                # clinician acknowledges; pressor sil stops with exit 1 (runtime.core.supervisor)
                 controller_faults="latch" if config.clinician is not None else "stop",
             )
         )
         if config.rrd is not None:
-            from runtime.recorder import Recorder
+            from runtime.record.recorder import Recorder
 
             label = (
                 f"{identity['controller']}|{peer.name}|seed{peer.patient_seed}|{config.rate_hz}Hz"
@@ -193,12 +193,9 @@ def run_runtime(
             "prog": "pressor run" if config.clinician is not None else "pressor sil",
             "ack_input": clinician.target_stdin or clinician.target_file is not None,
         }
-        target = None
-        if clinician.target_mmhg is None:
-            loop = Loop(controller, sup, ep, **loop_kw)
-        else:  # the runtime's own target, in place of the device's (runtime.target_source)
-            target = TargetSource(clinician)
-            loop = TargetedLoop(controller, sup, ep, target=target, **loop_kw)
+        # the runtime's own target, in place of the device's (runtime.inputs.target_source)
+        target = None if clinician.target_mmhg is None else TargetSource(clinician)
+        loop = Loop(controller, sup, ep, target=target, **loop_kw)
         with CpuLatencyRequest(config.cpu_latency_us) as wake:
             if config.realtime:
                 result = loop.run_realtime(peer.n_ticks if peer.n_ticks else config.ticks)
@@ -211,7 +208,7 @@ def run_runtime(
             if before_close is not None:
                 before_close(recorder)
             if clinician.dose_limits is not None:
-                from runtime.dosing import log_dose_series
+                from runtime.inputs.dosing import log_dose_series
 
                 log_dose_series(recorder, result.trajectory, clinician)
             recorder.close()
@@ -219,7 +216,7 @@ def run_runtime(
         report = None
         if config.fault_specs:
             from contracts.faults import fault_report
-            from runtime.supervisor_config import FAULT_BITS, sched_limits_of
+            from runtime.core.supervisor_config import FAULT_BITS, sched_limits_of
 
             report = fault_report(
                 list(config.fault_specs),
@@ -244,7 +241,7 @@ def run_runtime(
                 "pump_max_ml_h": float(peer.pump_max_ml_h),
             }
             if clinician.dose_limits is not None:
-                from runtime.dosing import dose_summary
+                from runtime.inputs.dosing import dose_summary
 
                 summary["dose"] = dose_summary(
                     result.trajectory["command_ml_h"], period_s, clinician, sup.detections
@@ -263,16 +260,17 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
     """Run a runtime command with its exit codes.
 
     0 success; 1 the run completed but a check failed, or the device stalled or the link failed,
-    or the controller raised under ``pressor sil`` (:class:`runtime.core.ControllerError`; ``pressor
-    run`` holds instead, :mod:`runtime.supervisor`) (one line on stderr); 2 bad usage or input
-    (:func:`contracts.usage.run_command`), or the
-    device's hello refused (:class:`link.Refusal`: one line, the device was told); 130 / 143
-    stopped by SIGINT / SIGTERM (:mod:`runtime.interrupt`: the run stops at a tick boundary,
-    commands the safe rate, and keeps its outputs).
+    or the controller raised under ``pressor sil``
+    (:class:`runtime.core.closed_loop.ControllerError`; ``pressor run`` holds instead,
+    :mod:`runtime.core.supervisor`) (one line on stderr); 2 bad usage or input
+    (:func:`contracts.usage.run_command`), or the device's hello refused (:class:`link.Refusal`: one
+    line, the device was told); 130 / 143 stopped by SIGINT / SIGTERM
+    (:mod:`runtime.shell.interrupt`: the run stops at a tick boundary, commands the safe rate, and
+    keeps its outputs).
     """
     from link import LinkError, Refusal
-    from runtime.core import ControllerError
-    from runtime.loop import DeviceStalled
+    from runtime.core.closed_loop import ControllerError
+    from runtime.shell.loop import DeviceStalled
 
     def guarded(args: Sequence[str]) -> int:
         with stop_on_signals():

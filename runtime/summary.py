@@ -36,9 +36,9 @@ import numpy as np
 from contracts.files import write_atomic
 from contracts.metrics import reachable_band_mmhg, run_metrics
 from link.counters import DROP_CAUSES
-from runtime.clinician import describe_target
-from runtime.config import RunConfig
-from runtime.trajectory import held_delivered_ml_h
+from runtime.inputs.clinician import describe_target
+from runtime.inputs.config import RunConfig
+from runtime.shell.trajectory import held_delivered_ml_h
 
 
 def _step_of(
@@ -87,7 +87,7 @@ def build_summary(
     Parameters
     ----------
     result
-        The loop's :class:`runtime.trajectory.LoopResult`. The rate metrics (drug total, max
+        The loop's :class:`runtime.shell.trajectory.LoopResult`. The rate metrics (drug total, max
         rate, time at limit) use the rate the pump reported delivering (its ``delivered_ml_h``).
     identity
         Run identity (controller, scenario, seed, rate, ...), copied into the summary.
@@ -270,7 +270,7 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
     -------
     int
         128 + the signal number when a signal stopped the run (one line on stderr,
-        :mod:`runtime.interrupt`); else 1 if a command left [0, max] or the controller failed
+        :mod:`runtime.shell.interrupt`); else 1 if a command left [0, max] or the controller failed
         (``pressor run``: the supervisor held on it, ``supervisor.controller_faults``; a check
         failed), else 0.
     """
@@ -293,7 +293,7 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
     if config.rrd is not None:
         print(f"recording: {config.rrd}\nreplay:    rerun {config.rrd}")
     if result.stop_signal is not None:
-        from runtime.interrupt import exit_code
+        from runtime.shell.interrupt import exit_code
 
         print(
             f"{prog}: {result.ended} after {summary['ticks']} ticks; safe rate commanded,"

@@ -3,6 +3,8 @@
 The allowed arrows are written once, in :data:`ALLOWED`; every module of every package is parsed and
 each of its imports, function-local ones included, must land in its own package, in an allowed one,
 or outside the project. A new package has to be added here, with its arrows, before it can ship.
+Inside ``runtime`` the same holds between its subpackages and top-level modules
+(:data:`RUNTIME_ALLOWED`): core at the bottom, the shipped path's entry points on top.
 """
 
 from __future__ import annotations
@@ -34,6 +36,21 @@ FORBIDDEN_THIRD_PARTY: dict[str, frozenset[str]] = {
     "baselines": frozenset({"cvxpy", "clarabel", "scipy", "numpy", "serial", "pymavlink", "rerun"}),
     "runtime": frozenset({"cvxpy", "clarabel", "scipy"}),
     "link": frozenset({"cvxpy", "clarabel", "scipy", "rerun"}),
+}
+
+
+#: runtime's subpackage or top-level module -> the others of runtime it may import (besides itself)
+RUNTIME_ALLOWED: dict[str, frozenset[str]] = {
+    "generated": frozenset(),
+    "core": frozenset(),
+    "estimation": frozenset({"core", "generated"}),
+    "record": frozenset({"core"}),
+    "shell": frozenset({"core", "record"}),
+    "inputs": frozenset({"core", "estimation", "shell"}),
+    "summary": frozenset({"core", "inputs", "shell"}),
+    "session": frozenset({"core", "estimation", "inputs", "record", "shell", "summary"}),
+    "cli": frozenset({"core", "inputs", "session", "summary"}),
+    "__init__": frozenset(),
 }
 
 
@@ -77,6 +94,40 @@ def violations(package: str) -> list[str]:
     return found
 
 
+def runtime_part(path: Path) -> str:
+    """The node of :data:`RUNTIME_ALLOWED` a file of ``runtime`` belongs to: its subpackage, or
+    the stem of a top-level module."""
+    first = path.relative_to(ROOT / "runtime").parts[0]
+    return first.removesuffix(".py")
+
+
+def runtime_targets(path: Path) -> set[str]:
+    """The parts of ``runtime`` that ``path`` imports, at any depth of the syntax tree
+    (``runtime.core.supervisor`` -> ``core``; ``from runtime import session`` -> ``session``)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    modules: list[str] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            modules += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            if node.module == "runtime":
+                modules += [f"runtime.{alias.name}" for alias in node.names]
+            else:
+                modules.append(node.module)
+    return {m.split(".")[1] for m in modules if m.startswith("runtime.")}
+
+
+def runtime_violations() -> list[str]:
+    """``module -> part`` lines that break :data:`RUNTIME_ALLOWED`."""
+    found = []
+    for path in package_modules("runtime"):
+        part = runtime_part(path)
+        allowed = RUNTIME_ALLOWED.get(part, frozenset()) | {part}
+        rel = path.relative_to(ROOT).as_posix()
+        found += [f"{rel} -> {t}" for t in sorted(runtime_targets(path) - allowed)]
+    return found
+
+
 def test_every_package_of_the_checkout_has_its_arrows_written_down():
     assert set(project_packages()) == set(ALLOWED)
 
@@ -99,6 +150,23 @@ def test_the_allowed_arrows_form_no_cycle():
         visit(package, ())
 
 
+def test_every_part_of_runtime_has_its_arrows_written_down_and_they_form_no_cycle():
+    parts = {runtime_part(p) for p in package_modules("runtime")}
+    assert parts == set(RUNTIME_ALLOWED)
+    order: list[str] = []
+    pending = dict(RUNTIME_ALLOWED)
+    while pending:  # peel off the parts whose arrows all land on parts already placed
+        ready = sorted(p for p, deps in pending.items() if deps <= set(order))
+        assert ready, f"cycle among {sorted(pending)}"
+        order += ready
+        for p in ready:
+            del pending[p]
+
+
+def test_runtime_subpackages_import_only_downward():
+    assert runtime_violations() == []
+
+
 @pytest.mark.parametrize("package", sorted(ALLOWED))
 def test_package_imports_only_along_the_allowed_arrows(package):
     assert violations(package) == []
@@ -108,3 +176,9 @@ def test_the_import_scan_sees_function_local_imports(tmp_path):
     module = tmp_path / "m.py"
     module.write_text("def f():\n    from synthesis.lmi import x\n    import hil_sim.world\n")
     assert imported_top_levels(module) == {"synthesis", "hil_sim"}
+
+
+def test_the_runtime_scan_sees_function_local_and_from_runtime_imports(tmp_path):
+    module = tmp_path / "m.py"
+    module.write_text("from runtime import session\ndef f():\n    import runtime.shell.loop\n")
+    assert runtime_targets(module) == {"session", "shell"}

@@ -3,9 +3,9 @@
 The agent sits where a controller sits. :class:`AgentController` is a
 :class:`contracts.controller.Controller` whose ``step`` returns the agent's latest action; the
 environment drives :class:`hil_sim.world.World` and the runtime's
-:class:`runtime.core.ClosedLoopCore` tick by tick exactly as :func:`hil_sim.closed_loop.simulate`
+:class:`runtime.core.closed_loop.ClosedLoopCore` tick by tick exactly as :func:`hil_sim.closed_loop.simulate`
 (and so ``pressor trial`` and :func:`pressor.api.simulate`) does, with the supervisor
-:func:`runtime.supervisor_config.supervisor_config_for` builds for a controller. So the action
+:func:`runtime.core.supervisor_config.supervisor_config_for` builds for a controller. So the action
 passes the same supervisor (STARTUP/AUTO/HOLD/FAILSAFE/RECOVERING, clamp to [0, pump limit],
 bumpless re-entry) and the same float32 pump link a controller's command does; in HOLD or
 FAILSAFE the supervisor does not ask the agent and the pump gets the supervisor's command.
@@ -34,9 +34,9 @@ from hil_sim.scenario import Scenario
 from hil_sim.world import World
 from pressor.api import _scenario
 from pressor.gym.reward import MapReward, Ticks
-from runtime.core import CLEAN_LINK, ClosedLoopCore
-from runtime.supervisor import Supervisor
-from runtime.supervisor_config import supervisor_config_for
+from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from runtime.core.supervisor import Supervisor
+from runtime.core.supervisor_config import supervisor_config_for
 
 __all__ = ["AgentController", "MapEnv"]
 
@@ -115,7 +115,7 @@ class MapEnv(gymnasium.Env):
     max_rate_ml_h
         The pump limit (ml/h) of the action space and the supervisor; default the scenario pump's.
     supervisor
-        Overrides of the supervisor's configuration (:class:`runtime.supervisor_config.
+        Overrides of the supervisor's configuration (:class:`runtime.core.supervisor_config.
         SupervisorConfig` fields, e.g. ``{"safe_rate_ml_h": 5.0}``).
     render_mode
         Only ``None``: the environment does not render (``pressor view`` shows recordings).

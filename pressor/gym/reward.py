@@ -56,7 +56,7 @@ class Ticks(NamedTuple):
     alarms
         Pump alarm bits after the tick.
     state, faults
-        Supervisor state (:class:`runtime.supervisor_config.State`) and fault bits at the tick.
+        Supervisor state (:class:`runtime.core.supervisor_config.State`) and fault bits at the tick.
     period_s
         Loop period Ts (s).
     max_rate_ml_h

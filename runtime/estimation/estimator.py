@@ -58,7 +58,7 @@ Why this method (evidence: ``benchmarks/estimator.py`` and ``tests/runtime/estim
 Start-up and health: until the K and T relative standard deviations have fallen below
 ``learn_rel_std`` (≈ 40–80 s after the first rate step has reached the MAP) the prior (the nominal
 patient, :data:`NOMINAL_PLANT`) is reported with reason ``"learning"``; the scheduling source
-schedules cautiously around it (:class:`runtime.estimation.schedule.EstimatedSchedule`). Every
+schedules cautiously around it (:class:`runtime.estimation.sources.EstimatedSchedule`). Every
 estimate is checked (finite parameters and covariance, 0 < a < 1, K and T in the plausible ranges)
 before it is reported; when the bank's best model fails, the prior is reported with the reason
 (``"diverged"``, ``"K implausible"``, ``"T implausible"``) and ``healthy=False``; once an estimate
@@ -77,9 +77,9 @@ from __future__ import annotations
 import math
 
 from baselines.smith import INITIAL_SCHEDULE
+from runtime.core.estimate import Estimate
 from runtime.estimation.bank import DelayModel, FilterSettings
 from runtime.estimation.checks import check_positive, check_range
-from runtime.estimation.estimate import Estimate
 from runtime.estimation.gate import SampleGate
 from runtime.estimation.noise import WindowNoise
 

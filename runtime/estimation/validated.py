@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import math
 
+from runtime.core.estimate import Estimate
+from runtime.core.scheduling import Schedule
 from runtime.estimation.checks import check_positive
-from runtime.estimation.estimate import Estimate
 from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT, DelayBankEstimator
-from runtime.estimation.schedule import Schedule
 from runtime.estimation.validation import ModelBank
 from runtime.generated.lpv_map_controller import RATE_BOUNDS
 
@@ -30,8 +30,9 @@ DESIGN_RATES: tuple[float, float, float] = tuple(float(r) for r in RATE_BOUNDS) 
 class ValidatedSchedule:
     """Schedule on a validated model, slew-limited inside the design box and its certified rates.
 
-    Opt-in (``--schedule validated``; the default ``estimated`` is :class:`~runtime.estimation.schedule.EstimatedSchedule`).
-    Starts on ``start`` (default the nominal patient) and moves toward the model the
+    Opt-in (``--schedule validated``; the default ``estimated`` is
+    :class:`~runtime.estimation.sources.EstimatedSchedule`). Starts on ``start`` (default the
+    nominal patient) and moves toward the model the
     :class:`~runtime.estimation.validation.ModelBank` has adopted (the nominal one until another
     predicts the measured MAP changes better by its margins), each of K, T, τ by at most
     ``rate_fraction`` of the certified rate per tick, and never outside the design box: the
@@ -40,11 +41,12 @@ class ValidatedSchedule:
     ``Schedule.estimate`` (what the recorder and the trials' error summaries show) and its health
     is ``healthy``; it does not set the schedule. Why (evidence in ``docs/ESTIMATION.md``,
     "Adaptation that cannot make things worse"): on patients outside the FOPDT class the fit chased
-    the unmodelled dynamics with K, T, τ, and scheduling on it (:class:`~runtime.estimation.schedule.EstimatedSchedule`) was
-    worse than the nominal schedule; this source is below nominal there. Why it is not the
-    default: on the project's own cohort (paper-tracking, seed 11) its step overshoot is 33 %,
-    :class:`~runtime.estimation.schedule.EstimatedSchedule`'s 5 % (its start-up jump of K to the estimate, which no source
-    within the certified rates can make).
+    the unmodelled dynamics with K, T, τ, and scheduling on it
+    (:class:`~runtime.estimation.sources.EstimatedSchedule`) was worse than the nominal schedule;
+    this source is below nominal there. Why it is not the default: on the project's own cohort
+    (paper-tracking, seed 11) its step overshoot is 33 %,
+    :class:`~runtime.estimation.sources.EstimatedSchedule`'s 5 % (its start-up jump of K to the
+    estimate, which no source within the certified rates can make).
 
     Parameters
     ----------

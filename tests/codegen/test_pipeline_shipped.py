@@ -19,7 +19,7 @@ from codegen.emit_python import module_sha256
 from codegen.frozen_loop import frozen_loop_matrices, unstable_root_count
 from codegen.tables import interpolate
 from contracts.module_hash import module_text_sha256
-from runtime.controller_loader import ControllerSpecError, load_controller
+from runtime.inputs.controller_loader import ControllerSpecError, load_controller
 from tests.support.codegen_helpers import (
     CController,
     continuous_reference,

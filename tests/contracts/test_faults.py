@@ -16,7 +16,7 @@ from contracts.faults import (
 )
 from hil_sim.device import main as device_main
 from hil_sim.scenario import ScenarioError, load_scenario_file
-from runtime.supervisor_config import Fault
+from runtime.core.supervisor_config import Fault
 from tests.support.sil_helpers import pressor
 
 REQUIRED = (

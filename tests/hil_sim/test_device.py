@@ -327,9 +327,9 @@ def test_device_pump_maximum_outside_the_pumps_range_exits_2_with_one_line(capsy
 
 
 def test_realtime_device_with_a_1hz_monitor_sends_only_new_samples_and_applies_every_answer():
-    from runtime.loop import Loop
-    from runtime.supervisor import Supervisor
-    from runtime.supervisor_config import supervisor_config_for
+    from runtime.core.supervisor import Supervisor
+    from runtime.core.supervisor_config import supervisor_config_for
+    from runtime.shell.loop import Loop
 
     pair = PtyPair.open()
     ep = RuntimeSession(pair.leader_port())

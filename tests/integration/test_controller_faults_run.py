@@ -17,7 +17,7 @@ import pytest
 
 from link import MODE_AUTO, MODE_SAFE, read_tlog
 from link.dialect import pressor as mavlink
-from tests.runtime.test_clinician import _events, _run_against_device
+from tests.support.scripted_run import recorded_events, run_against_device
 from tests.support.sil_helpers import ROOT, bridged_ttys, pressor, rrd_columns
 
 PLUGINS = str(Path(__file__).resolve().parents[1] / "support" / "controller_plugins.py")
@@ -98,7 +98,7 @@ def test_run_holds_on_a_failing_plugin_and_the_device_sees_the_held_rate_in_safe
         " --target-stdin or --target-file gives one)"
     )
     assert lines[1].startswith("pressor run: the controller failed 1 time(s), first at tick 49")
-    events = _events(rrd)
+    events = recorded_events(rrd)
     assert (FAULT_TICK, lines[0].removeprefix("pressor run: ")) in events
     alarm = rrd_columns(rrd)["/safety/alarm"]
     assert [alarm[k] for k in range(FAULT_TICK, 200)] == [1.0] * (200 - FAULT_TICK)
@@ -110,7 +110,7 @@ def test_run_resumes_a_failed_plugin_on_the_clinicians_ack_through_recovering(tm
             run.stdin.write("ack\n")
             run.stdin.flush()
 
-    rc, output, summary, rrd = _run_against_device(
+    rc, output, summary, rrd = run_against_device(
         tmp_path,
         ["--controller", f"{PLUGINS}:FailsAt:at=50,once=True", "--target-mmhg", "70"]
         + ["--target-stdin"],

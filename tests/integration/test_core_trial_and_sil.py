@@ -14,11 +14,11 @@ from contracts.faults import parse_faults
 from hil_sim.closed_loop import simulate
 from hil_sim.world import World
 from link import LINK_LOCKSTEP, Hello, PtyPair, RuntimeSession
-from runtime.core import CLEAN_LINK, ClosedLoopCore, LinkHealth
-from runtime.loop import Loop
-from runtime.supervisor import Supervisor
-from runtime.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
-from runtime.trajectory import held_delivered_ml_h
+from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
+from runtime.core.supervisor import Supervisor
+from runtime.core.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
+from runtime.shell.loop import Loop
+from runtime.shell.trajectory import held_delivered_ml_h
 from tests.support.sil_helpers import spawn_device
 
 SCENARIO, SEED, DURATION_S, TS = "paper-tracking", 3, 120.0, 0.1

@@ -17,9 +17,9 @@ from baselines.pi import PIController
 from hil_sim.world import World
 from link import DeviceSession, RuntimeSession, Signing
 from link.dialect import pressor as mavlink
-from runtime.core import CLEAN_LINK, ClosedLoopCore
-from runtime.supervisor import Supervisor
-from runtime.supervisor_config import supervisor_config_for
+from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from runtime.core.supervisor import Supervisor
+from runtime.core.supervisor_config import supervisor_config_for
 from tests.support.link_doubles import loop_pair
 
 MAX = 120.0

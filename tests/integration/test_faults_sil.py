@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from link import DROP_CAUSES
-from runtime.supervisor_config import Fault, State, SupervisorConfig
+from runtime.core.supervisor_config import Fault, State, SupervisorConfig
 from tests.support.sil_helpers import rrd_columns
 
 REENTRY_STEP = SupervisorConfig().reentry_step_ml_h

@@ -15,7 +15,7 @@ import pytest
 from contracts.metrics import step_metrics
 from hil_sim.closed_loop import simulate
 from hil_sim.world import World
-from runtime.controller_loader import load_controller
+from runtime.inputs.controller_loader import load_controller
 
 ROOT = Path(__file__).resolve().parents[2]
 HORIZON_S = 1500.0

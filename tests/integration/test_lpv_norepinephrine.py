@@ -15,7 +15,7 @@ from contracts.module_hash import module_text_sha256
 from hil_sim.closed_loop import simulate
 from hil_sim.world import World
 from pressor.sil import device_command, sil_config
-from runtime.controller_loader import (
+from runtime.inputs.controller_loader import (
     LPV_DESIGNS,
     ControllerSpecError,
     controller_name,

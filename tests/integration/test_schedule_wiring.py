@@ -20,13 +20,14 @@ from hil_sim.trial import run_patient
 from hil_sim.world import World
 from link import DeviceSession, ManualClock, PtyPair, TickInputs, open_port
 from link.dialect import pressor as mavlink
-from runtime.controller_loader import load_controller
-from runtime.core import CLEAN_LINK, ClosedLoopCore, LinkHealth
+from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
+from runtime.core.scheduling import Schedule
+from runtime.core.supervisor import Supervisor
+from runtime.core.supervisor_config import Fault, State, supervisor_config_for
 from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT
-from runtime.estimation.schedule import Schedule, make_schedule
+from runtime.estimation.sources import make_schedule
+from runtime.inputs.controller_loader import load_controller
 from runtime.session import run_runtime
-from runtime.supervisor import Supervisor
-from runtime.supervisor_config import Fault, State, supervisor_config_for
 from tests.support.sil_helpers import (
     assert_recording_equals_simulation,
     lockstep_run_config,

@@ -112,7 +112,7 @@ def test_sil_with_shipped_lpv_over_30_min_equals_in_process_simulator(tmp_path):
     """The issue's done-when run: lpv, paper-tracking, patient seed 3, 1800 s, over a pty."""
     from hil_sim.closed_loop import simulate
     from hil_sim.world import World
-    from runtime.controller_loader import load_controller
+    from runtime.inputs.controller_loader import load_controller
 
     rrd, summary = tmp_path / "lpv.rrd", tmp_path / "lpv.json"
     proc = pressor(

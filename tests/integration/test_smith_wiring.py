@@ -9,7 +9,7 @@ import pytest
 
 from baselines.smith import SmithController
 from hil_sim.cli import main as hil_main
-from runtime.controller_loader import ControllerSpecError, load_controller
+from runtime.inputs.controller_loader import ControllerSpecError, load_controller
 from tests.support.sil_helpers import assert_recording_equals_simulation, pressor
 
 

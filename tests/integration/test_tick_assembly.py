@@ -26,8 +26,8 @@ from link import (
     open_port,
 )
 from link.dialect import pressor as mavlink
-from runtime.controller_loader import load_controller
-from runtime.estimation.schedule import make_schedule
+from runtime.estimation.sources import make_schedule
+from runtime.inputs.controller_loader import load_controller
 from runtime.session import run_runtime
 from tests.support.link_doubles import tick_inputs
 from tests.support.sil_helpers import lockstep_run_config

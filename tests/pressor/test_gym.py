@@ -20,7 +20,7 @@ from hil_sim.cohort import cohort_seeds
 from hil_sim.trial import run_patient, scenario_events
 from pressor import api
 from pressor.gym import MapEnv, MapReward, Ticks
-from runtime.supervisor_config import Fault, State
+from runtime.core.supervisor_config import Fault, State
 
 TRAJECTORY_FIELDS = (
     "t_s",

@@ -25,7 +25,12 @@ def runtime_modules() -> list[str]:
 
 def test_runtime_module_list_covers_loop_cli_supervisor_and_recorder():
     names = runtime_modules()
-    for expected in ("runtime.loop", "runtime.cli", "runtime.supervisor", "runtime.recorder"):
+    for expected in (
+        "runtime.shell.loop",
+        "runtime.cli",
+        "runtime.core.supervisor",
+        "runtime.record.recorder",
+    ):
         assert expected in names
 
 

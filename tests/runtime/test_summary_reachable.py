@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from link import LinkCounters
+from runtime.shell.trajectory import LoopResult
 from runtime.summary import build_summary
-from runtime.trajectory import LoopResult
 
 UMAX = 120.0
 

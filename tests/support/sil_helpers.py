@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 from rerun.chunk import RrdReader  # noqa: E402
 
 from link import LinkClosedError, PtyPair, RuntimeSession  # noqa: E402
-from runtime.config import RunConfig  # noqa: E402
+from runtime.inputs.config import RunConfig  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -1,6 +1,6 @@
 """The opt-in ``validated`` scheduling source (slew-limited, on a validated model): its model bank,
 its wiring and its closed loop off the FOPDT class (runtime/estimation/validation.py,
-runtime/estimation/schedule.py: ValidatedSchedule)."""
+runtime/estimation/sources.py: ValidatedSchedule)."""
 
 from __future__ import annotations
 
@@ -13,14 +13,15 @@ import pytest
 from hil_sim.closed_loop import simulate
 from hil_sim.world import World
 from link import PumpStatus, TickInputs
-from runtime.controller_loader import load_controller
-from runtime.core import CLEAN_LINK, ClosedLoopCore
+from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from runtime.core.scheduling import NominalSchedule
+from runtime.core.supervisor import Supervisor
+from runtime.core.supervisor_config import Fault, supervisor_config_for
 from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT
-from runtime.estimation.schedule import SOURCES, NominalSchedule, make_schedule
+from runtime.estimation.sources import SOURCES, make_schedule
 from runtime.estimation.validated import DESIGN_RATES, ValidatedSchedule
 from runtime.estimation.validation import ModelBank
-from runtime.supervisor import Supervisor
-from runtime.supervisor_config import Fault, supervisor_config_for
+from runtime.inputs.controller_loader import load_controller
 
 TS = 0.1
 WINDOW_S = 2.0

@@ -1,0 +1,160 @@
+"""Scheduling sources: where the controller's K, T, τ come from, one tick at a time.
+
+Every source has the same method::
+
+    update(map_mmhg, quality, delivered_ml_h, device_K, device_T_s, device_tau_s, device_valid)
+        -> Schedule
+
+with the tick's MAP sample (mmHg) and monitor quality bits, the pump's delivered rate (ml/h, from
+PUMP_STATUS) and whatever scheduling parameters the device sent (K mmHg/(ml/h), T s, τ s; NaN and
+``device_valid=False`` when it sent none). Units and ranges of the result: K > 0 mmHg/(ml/h),
+T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
+
+This module holds the protocol and the two sources that learn nothing; the learning ones live in
+:mod:`runtime.estimation` (which builds on :class:`Schedule`), and
+:func:`runtime.estimation.sources.make_schedule` picks one by name.
+
+:class:`OracleSchedule`
+    The device's values, exactly as sent (a simulator's truth; research comparisons only).
+    ``valid`` is False when the device sent none, flagged them invalid or sent non-finite values
+    (NaN when it sent none); the supervisor and the controller's own invalid-input handling then
+    apply, exactly as before this module existed.
+:class:`NominalSchedule`
+    Constant prior values (default: the nominal patient, :data:`NOMINAL_PLANT`); always valid.
+:class:`runtime.estimation.sources.EstimatedSchedule`
+    The online estimator, scheduled cautiously (see its docstring).
+:class:`runtime.estimation.validated.ValidatedSchedule`
+    Opt-in (``--schedule validated``): the nominal patient, with T and τ slewed inside the
+    certified rates toward a model validated on held-out windows.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Protocol
+
+from baselines.smith import INITIAL_SCHEDULE
+from runtime.core.estimate import Estimate
+
+#: the nominal patient (K mmHg/(ml/h), T s, τ s): the same constants as the estimator's prior
+#: (:data:`runtime.estimation.estimator.NOMINAL_PLANT`), named here so that the core needs no
+#: estimation import
+NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
+
+
+@dataclass(frozen=True, slots=True)
+class Schedule:
+    """The scheduling parameters of one tick.
+
+    Attributes
+    ----------
+    K, T_s, tau_s
+        Sensitivity (mmHg/(ml/h)), lag (s), delay (s); NaN only from an oracle without values.
+    source
+        ``"oracle"``, ``"estimated"``, ``"nominal"`` or ``"validated"``.
+    valid
+        Whether K, T, τ are usable (finite, positive).
+    healthy
+        False when the estimator's health check rejected its latest estimate (always True for the
+        other sources).
+    from_prior
+        True when the values are the prior's (the nominal source, or the estimator learning or
+        falling back).
+    reason
+        ``"ok"``, or why the values are not a fresh estimate (``"learning"``, ``"diverged"``,
+        ``"K implausible"``, ``"T implausible"``, ``"no device values"``, ``"prior"``).
+    estimate
+        The estimator's full report (uncertainty, confidence, design-box flag); None for the
+        other sources.
+    """
+
+    K: float
+    T_s: float
+    tau_s: float
+    source: str
+    valid: bool
+    healthy: bool
+    from_prior: bool
+    reason: str
+    estimate: Estimate | None = None
+
+
+class ScheduleSource(Protocol):
+    """What the closed-loop core (:mod:`runtime.core.closed_loop`) calls once per tick."""
+
+    source: str
+
+    def update(
+        self,
+        map_mmhg: float,
+        quality: int,
+        delivered_ml_h: float,
+        device_K: float,
+        device_T_s: float,
+        device_tau_s: float,
+        device_valid: bool,
+    ) -> Schedule:
+        """The tick's scheduling parameters (see the module docstring)."""
+        ...
+
+
+class OracleSchedule:
+    """Schedule on the device's K, T, τ (the simulator's truth), passed through as sent."""
+
+    source = "oracle"
+
+    def update(
+        self,
+        map_mmhg: float,
+        quality: int,
+        delivered_ml_h: float,
+        device_K: float,
+        device_T_s: float,
+        device_tau_s: float,
+        device_valid: bool,
+    ) -> Schedule:
+        """The device's values as sent; ``valid`` only if finite and flagged valid."""
+        ok = device_valid and math.isfinite(device_K + device_T_s + device_tau_s)
+        return Schedule(device_K, device_T_s, device_tau_s, "oracle", ok, True, False,
+                        "ok" if ok else "no device values")  # fmt: skip
+
+
+class NominalSchedule:
+    """Schedule on constant values (a fixed-gain controller at that point).
+
+    Parameters
+    ----------
+    K, T_s, tau_s
+        Sensitivity (mmHg/(ml/h)) > 0, lag (s) > 0, delay (s) >= 0; default the nominal patient.
+    """
+
+    source = "nominal"
+
+    def __init__(
+        self,
+        K: float = NOMINAL_PLANT[0],
+        T_s: float = NOMINAL_PLANT[1],
+        tau_s: float = NOMINAL_PLANT[2],
+    ) -> None:
+        if not (math.isfinite(K) and K > 0.0):
+            raise ValueError(f"K={K!r} mmHg/(ml/h) must be finite and > 0")
+        if not (math.isfinite(T_s) and T_s > 0.0):
+            raise ValueError(f"T_s={T_s!r} s must be finite and > 0")
+        if not (math.isfinite(tau_s) and tau_s >= 0.0):
+            raise ValueError(f"tau_s={tau_s!r} s must be finite and >= 0")
+        self._schedule = Schedule(float(K), float(T_s), float(tau_s), "nominal", True, True, True,
+                                  "prior")  # fmt: skip
+
+    def update(
+        self,
+        map_mmhg: float,
+        quality: int,
+        delivered_ml_h: float,
+        device_K: float,
+        device_T_s: float,
+        device_tau_s: float,
+        device_valid: bool,
+    ) -> Schedule:
+        """The constant values (the same object every tick)."""
+        return self._schedule

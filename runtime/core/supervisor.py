@@ -1,0 +1,398 @@
+"""The safety supervisor: a small, pure state machine between the inputs, the controller and the pump.
+
+No I/O, no clock: every call gets the time (s) and the inputs explicitly, in a typed record, so the
+same input sequence gives the same output sequence, byte for byte. The closed-loop core
+(:mod:`runtime.core.closed_loop`) calls, once per tick::
+
+    run_controller = sup.assess(SupervisorInput(now_s, map_mmhg, ...))   # every field given
+    raw = controller.step(...) if run_controller else None
+    out = sup.finalize(raw)       # SupervisorOutput; out.command_ml_h finite, in [0, max_rate_ml_h]
+    out = sup.finalize(None, failed=True)   # instead, when the step raised (controller_faults="latch")
+
+With ``config.dose_limits`` (``pressor run``: the drug library) the last step of every tick cuts
+the command to the hard and hourly dose maxima and flags the soft one
+(:mod:`runtime.core.dose_guard`).
+
+States
+------
+STARTUP
+    No good sample seen yet. Command 0 ml/h. The first good sample moves to AUTO *in the same tick*
+    (no warm-up delay), so a clean run is tick-for-tick the controller's own run.
+AUTO
+    Inputs good: the controller's command is passed through **unchanged** (the exact float) when it
+    lies in [0, max]; an out-of-range or non-finite command is clamped / held and flagged.
+HOLD
+    A fault was detected: the last command is held and the alarm is raised. The controller is not
+    stepped (bad inputs must not wind it up). A fault lasting longer than ``hold_max_s`` → FAILSAFE.
+FAILSAFE
+    Link loss (immediately) or a long fault: the command ramps at ``failsafe_ramp_ml_h_per_s`` to
+    ``safe_rate_ml_h`` (``None``: keep the held rate). Alarm raised.
+RECOVERING
+    From HOLD or FAILSAFE once every input has been good for ``recover_after_s``, or at once on a
+    clinician's acknowledgement (:meth:`Supervisor.acknowledge`) at a tick without a holding fault:
+    the controller is stepped again and the output slews towards its command by at most
+    ``reentry_step_ml_h`` per tick (bumpless transfer); when the two meet the state is AUTO. A new
+    fault → HOLD.
+
+Input faults do not latch: a HOLD or FAILSAFE lasts exactly as long as a fault persists, plus
+``recover_after_s`` (or until the acknowledgement). What clears each fault, and so ends the state:
+docs/PROTOCOL.md, "Alarms"; the acknowledgement rule: :mod:`runtime.core.supervisor_io`.
+
+Controller faults (``config.controller_faults``). With ``"stop"`` (``pressor sil``, ``trial``, the
+API and the Gymnasium environment) a controller that raises ends the run (the core raises
+:class:`runtime.core.closed_loop.ControllerError`: a researcher sees the bug) and a non-finite
+command is ``COMMAND_INVALID``: HOLD, re-entry once the inputs have been good for
+``recover_after_s``. With ``"latch"`` (``pressor run``: a patient on the line) a step that raises or
+returns a non-number (``CONTROLLER_FAULT``, via ``finalize(None, failed=True)``) and a non-finite
+command (``COMMAND_INVALID``) both HOLD the last command, raise the alarm and *stay* (HOLD, then
+FAILSAFE after ``hold_max_s`` like any lasting fault) until the clinician acknowledges. Why: an
+input fault ends when the input is good again, which the supervisor can see; nothing the supervisor
+sees tells that a controller which crashed or produced garbage is sound again (its internal state
+is unknown), and stepping it to find out would put its next output on the pump unattended. The
+acknowledgement is the clinician's decision to try it again: accepted (when no other holding
+fault persists) it clears the latch, moves to RECOVERING and the controller is stepped again as
+it is (not reset: its integrator carries the dose the patient is on), its command reached by the
+bumpless slew; a further failure latches again. Without an acknowledgement input (``pressor
+run`` without ``--target-stdin`` or ``--target-file``) the latch lasts for the rest of the run.
+
+The fault kinds, their detection bounds and the configuration are in
+:mod:`runtime.core.supervisor_config`.
+
+Deviation from the paper: the paper has no supervisor; this is the IEC 60601-1-10 shell around it.
+"""
+
+from __future__ import annotations
+
+import math
+
+from contracts.faults import PUMP_ALARM_WATCHDOG
+from runtime.core.dose_guard import DoseGuard
+from runtime.core.flatline import FlatlineRules
+from runtime.core.supervisor_config import (
+    ADVISORY,
+    ALARM_FAULTS,
+    SCHED_ENVELOPE,
+    Fault,
+    State,
+    SupervisorConfig,
+    fault_names,
+)
+from runtime.core.supervisor_io import AckOutcome, SupervisorInput, SupervisorOutput, judge_ack
+
+__all__ = ["AckOutcome", "Supervisor", "SupervisorInput", "SupervisorOutput"]
+
+#: the fault bits as plain ints: ``faults |= Fault.X`` would turn ``faults`` into an IntFlag, whose
+#: arithmetic runs Python-level enum code at every later ``|`` and ``&`` of the tick
+_COMMAND_CLAMPED, _COMMAND_INVALID = int(Fault.COMMAND_CLAMPED), int(Fault.COMMAND_INVALID)
+_CONTROLLER_FAULT = int(Fault.CONTROLLER_FAULT)
+_ESTIMATE_OUT_OF_BOX = int(Fault.ESTIMATE_OUT_OF_BOX)
+_ESTIMATOR_FALLBACK, _LINK_ERRORS = int(Fault.ESTIMATOR_FALLBACK), int(Fault.LINK_ERRORS)
+_LINK_LOSS, _MAP_FLATLINE = int(Fault.LINK_LOSS), int(Fault.MAP_FLATLINE)
+_MAP_NAN, _MAP_RANGE = int(Fault.MAP_NAN), int(Fault.MAP_RANGE)
+_MAP_SPIKE, _PUMP_ALARM = int(Fault.MAP_SPIKE), int(Fault.PUMP_ALARM)
+_PUMP_MISMATCH, _SCHED_INVALID = int(Fault.PUMP_MISMATCH), int(Fault.SCHED_INVALID)
+_SCHED_OUT_OF_BOX, _SCHED_RATE = int(Fault.SCHED_OUT_OF_BOX), int(Fault.SCHED_RATE)
+_SENSOR_QUALITY, _STALE_SAMPLE = int(Fault.SENSOR_QUALITY), int(Fault.STALE_SAMPLE)
+_TARGET_INVALID = int(Fault.TARGET_INVALID)
+
+#: slack (s) on time comparisons so that k·Ts sums reach a bound that is a whole number of ticks
+_EPS_S = 1e-9
+
+
+def _clamp(value: float, high: float) -> float:
+    # NaN-safe: a non-finite value never reaches the pump.
+    if value != value or value <= 0.0:
+        return 0.0
+    return high if value >= high else value
+
+
+class Supervisor:
+    """The state machine; see the module docstring.
+
+    Parameters
+    ----------
+    config
+        Limits and timings.
+
+    Attributes
+    ----------
+    state
+        Current :class:`State`.
+    faults
+        Fault bits found at the last :meth:`assess` / :meth:`finalize`.
+    command_ml_h
+        The last command output (ml/h), always in [0, max_rate_ml_h]; held between ticks.
+    detections
+        Count of rising edges of each fault kind (by name) over the run.
+    last_ack
+        What became of the acknowledgement taken at the last :meth:`assess`, else ``None``.
+    """
+
+    def __init__(self, config: SupervisorConfig | None = None) -> None:
+        self.config = config or SupervisorConfig()
+        advisory = ADVISORY | (SCHED_ENVELOPE if self.config.sched_action == "advise" else 0)
+        #: the faults that change the state (plain int, for the per-tick path)
+        self._holding_faults = ~int(advisory)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to STARTUP with command 0 and no history."""
+        self.state = State.STARTUP
+        self.faults = 0
+        self.command_ml_h = 0.0
+        self.detections: dict[str, int] = {}
+        self._prev_faults = 0
+        self._prev_map: float | None = None
+        cfg = self.config
+        self._flat = (
+            FlatlineRules(
+                cfg.sensor_noise_mmhg,
+                cfg.flatline_s,
+                cfg.flatline_eps_mmhg,
+                cfg.flatline_window,
+                cfg.flatline_ratio,
+            )
+            if cfg.sensor_noise_mmhg > 0.0
+            else None
+        )
+        self._flat_fault = 0  # the flatline verdict of the last new sample, held between them
+        self._prev_sched: tuple[float, float, float] | None = None
+        self._prev_sched_s = 0.0
+        self._fault_since_s: float | None = None
+        self._good_since_s: float | None = None
+        self._now_s = 0.0
+        self._run_controller = False
+        self._entry_state = State.STARTUP
+        self._mismatch_since_s: float | None = None
+        self._out_of_box_since_s: float | None = None
+        self._ack_requested = False
+        self.last_ack: AckOutcome | None = None
+        self._latched = 0  # controller faults kept until acknowledged (controller_faults="latch")
+        self._latch = cfg.controller_faults == "latch"
+        limits = cfg.dose_limits
+        #: the drug library's limits on the final command (None: no library)
+        self.dose_guard = None if limits is None else DoseGuard(limits, cfg.sample_period_s)
+
+    @property
+    def alarm(self) -> bool:
+        """True while the supervisor is not in normal automatic control or a fault is present."""
+        return self.state in (State.HOLD, State.FAILSAFE) or bool(self.faults & ALARM_FAULTS)
+
+    def acknowledge(self) -> None:
+        """The clinician acknowledges the alarm and asks to resume; judged at the next
+        :meth:`assess` (:func:`runtime.core.supervisor_io.judge_ack`), its outcome in
+        ``last_ack``."""
+        self._ack_requested = True
+
+    # -- input checks ---------------------------------------------------------------------------
+    def _check_map(self, now_s: float, map_mmhg: float, quality: int, new: bool) -> int:
+        cfg = self.config
+        faults = 0
+        if quality & cfg.quality_mask:
+            faults |= _SENSOR_QUALITY
+        if not math.isfinite(map_mmhg):
+            return faults | _MAP_NAN
+        if not cfg.map_min_mmhg <= map_mmhg <= cfg.map_max_mmhg:
+            return faults | _MAP_RANGE
+        if self._prev_map is not None and abs(map_mmhg - self._prev_map) > cfg.spike_mmhg:
+            faults |= _MAP_SPIKE
+        self._prev_map = map_mmhg
+        if self._flat is not None:
+            if new:
+                self._flat_fault = _MAP_FLATLINE if self._flat.update(now_s, map_mmhg) else 0
+            faults |= self._flat_fault
+        return faults
+
+    def _check_sched(self, now_s: float, K: float, T_s: float, tau_s: float, valid: bool) -> int:
+        # written out for the three parameters: this runs every tick of every trial patient
+        cfg = self.config
+        if not (cfg.sched_required or cfg.sched_box or cfg.sched_rate_bounds):
+            return 0
+        isfinite = math.isfinite
+        if not (valid and isfinite(K) and isfinite(T_s) and isfinite(tau_s)):
+            self._prev_sched = None
+            return _SCHED_INVALID
+        faults = 0
+        box = cfg.sched_box
+        if box is not None:
+            (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
+            if not (k_lo <= K <= k_hi and t_lo <= T_s <= t_hi and d_lo <= tau_s <= d_hi):
+                faults |= _SCHED_OUT_OF_BOX
+        prev = self._prev_sched
+        if cfg.sched_rate_bounds is not None and prev is not None:
+            dt = now_s - self._prev_sched_s
+            if dt > 0.0:
+                tol = cfg.sched_rate_tolerance
+                b_k, b_t, b_d = cfg.sched_rate_bounds
+                if (
+                    abs(K - prev[0]) > tol * b_k * dt
+                    or abs(T_s - prev[1]) > tol * b_t * dt
+                    or abs(tau_s - prev[2]) > tol * b_d * dt
+                ):
+                    faults |= _SCHED_RATE
+        if prev is None or now_s > self._prev_sched_s:
+            self._prev_sched = (K, T_s, tau_s)
+            self._prev_sched_s = now_s
+        return faults
+
+    def _check_estimate(self, now_s: float, inp: SupervisorInput) -> int:
+        """``ESTIMATOR_FALLBACK`` and ``ESTIMATE_OUT_OF_BOX`` (the box held for estimate_box_s)."""
+        cfg = self.config
+        faults = 0 if inp.estimate_healthy else _ESTIMATOR_FALLBACK
+        box = cfg.sched_box
+        if box is None:
+            return faults
+        (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
+        if k_lo <= inp.K <= k_hi and t_lo <= inp.T_s <= t_hi and d_lo <= inp.tau_s <= d_hi:
+            self._out_of_box_since_s = None
+            return faults
+        if self._out_of_box_since_s is None:
+            self._out_of_box_since_s = now_s
+        if now_s - self._out_of_box_since_s >= cfg.estimate_box_s - _EPS_S:
+            faults |= _ESTIMATE_OUT_OF_BOX
+        return faults
+
+    def _check_pump(self, now_s: float, delivered: float, alarms: int) -> int:
+        cfg = self.config
+        if delivered != delivered:  # no fresh status: neither fault nor evidence of health
+            return 0
+        faults = 0
+        if alarms & cfg.pump_alarm_mask:
+            faults |= _PUMP_ALARM
+            if alarms & PUMP_ALARM_WATCHDOG:
+                # the pump fell back to its own safe rate: hold *that*, re-enter from it
+                self.command_ml_h = _clamp(delivered, cfg.max_rate_ml_h)
+        sent = self.command_ml_h
+        if alarms & cfg.pump_alarm_mask or abs(delivered - sent) <= max(
+            cfg.pump_mismatch_abs_ml_h, cfg.pump_mismatch_rel * abs(sent)
+        ):
+            self._mismatch_since_s = None
+        else:
+            if self._mismatch_since_s is None:
+                self._mismatch_since_s = now_s
+            if now_s - self._mismatch_since_s >= cfg.pump_mismatch_s - _EPS_S:
+                faults |= _PUMP_MISMATCH
+        return faults
+
+    # -- the two phases of a tick -----------------------------------------------------------------
+    def assess(self, inp: SupervisorInput) -> bool:
+        """Check this tick's inputs and update the state; return True if the controller is to run."""
+        now_s = inp.now_s
+        cfg = self.config
+        self._now_s = now_s
+        self._entry_state = self.state
+        faults = 0
+        if inp.link_silence_s >= cfg.link_loss_after_s - _EPS_S:
+            faults |= _LINK_LOSS
+        if inp.sample_age_s > cfg.stale_after_s + _EPS_S:  # the limit itself is not stale
+            faults |= _STALE_SAMPLE
+        else:
+            faults |= self._check_map(now_s, inp.map_mmhg, inp.quality, inp.sample_age_s == 0.0)
+            faults |= self._check_sched(now_s, inp.K, inp.T_s, inp.tau_s, inp.sched_valid)
+            if not cfg.map_min_mmhg <= inp.target_mmhg <= cfg.map_max_mmhg:  # False for NaN too
+                faults |= _TARGET_INVALID
+        if inp.link_errors:
+            faults |= _LINK_ERRORS
+        faults |= self._check_pump(now_s, inp.pump_delivered_ml_h, inp.pump_alarms)
+        if inp.estimated:
+            faults |= self._check_estimate(now_s, inp)
+        faults |= self._latched
+        self.faults = faults
+        state = self.state
+        if faults & self._holding_faults:
+            self._good_since_s = None
+            if self._fault_since_s is None:
+                self._fault_since_s = now_s
+            if state in (State.AUTO, State.RECOVERING):
+                state = State.FAILSAFE if faults & _LINK_LOSS else State.HOLD
+            elif state == State.HOLD and (
+                faults & _LINK_LOSS or now_s - self._fault_since_s >= cfg.hold_max_s - _EPS_S
+            ):
+                state = State.FAILSAFE
+        else:
+            self._fault_since_s = None
+            if self._good_since_s is None:
+                self._good_since_s = now_s
+            if state == State.STARTUP:
+                state = State.AUTO
+            elif (
+                state in (State.HOLD, State.FAILSAFE)
+                and now_s - self._good_since_s >= cfg.recover_after_s - _EPS_S
+            ):
+                state = State.RECOVERING
+        self.last_ack = None
+        if self._ack_requested:
+            self._ack_requested = False
+            latched = self._latched
+            self.last_ack = judge_ack(state, faults & self._holding_faults & ~latched, latched)
+            if self.last_ack.accepted:
+                state = State.RECOVERING
+                self._latched = 0
+                self.faults = faults & ~latched
+        self.state = state
+        self._run_controller = state in (State.AUTO, State.RECOVERING)
+        return self._run_controller
+
+    def finalize(self, raw_command_ml_h: float | None, failed: bool = False) -> SupervisorOutput:
+        """Turn the controller's command (``None`` if it did not run) into the pump command.
+
+        ``failed``: the controller was stepped and raised, or returned something that is not a
+        number (``CONTROLLER_FAULT``; see the module docstring). The output's ``command_ml_h`` is
+        finite and in [0, max_rate_ml_h] on every path.
+        """
+        cfg = self.config
+        high = cfg.max_rate_ml_h
+        previous = self.command_ml_h
+        state = self.state
+        if self._run_controller:
+            raw = math.nan if raw_command_ml_h is None or failed else raw_command_ml_h
+            if not math.isfinite(raw):
+                bit = _CONTROLLER_FAULT if failed else _COMMAND_INVALID
+                self.faults |= bit
+                if self._latch:
+                    self._latched |= bit  # a plain int: it joins every tick's faults
+                self._good_since_s = None
+                self._fault_since_s = self._now_s
+                state = State.HOLD
+                command = previous
+            else:
+                if not 0.0 <= raw <= high:
+                    self.faults |= _COMMAND_CLAMPED
+                target = _clamp(raw, high)
+                if state == State.AUTO:
+                    command = target
+                else:  # RECOVERING: bumpless slew towards the controller
+                    step = cfg.reentry_step_ml_h
+                    delta = target - previous
+                    if abs(delta) <= step:
+                        command = target
+                        state = State.AUTO
+                    else:
+                        command = previous + (step if delta > 0.0 else -step)
+        elif state == State.FAILSAFE:
+            goal = previous if cfg.safe_rate_ml_h is None else cfg.safe_rate_ml_h
+            step = cfg.failsafe_ramp_ml_h_per_s * cfg.sample_period_s
+            delta = goal - previous
+            command = goal if abs(delta) <= step else previous + (step if delta > 0.0 else -step)
+        elif state == State.STARTUP:
+            command = 0.0
+        else:  # HOLD
+            command = previous
+        command = _clamp(command, high)
+        if self.dose_guard is not None:  # the last word: the drug library's dose limits
+            command, dose_faults = self.dose_guard.limit(command)
+            self.faults |= dose_faults
+        self.command_ml_h = command
+        self.state = state
+        faults = self.faults
+        entry = self._entry_state
+        transition = (entry, state, faults) if state != entry else None
+        rising = faults & ~self._prev_faults
+        if rising:
+            for name in fault_names(rising):
+                self.detections[name] = self.detections.get(name, 0) + 1
+        self._prev_faults = faults
+        alarm = state == State.HOLD or state == State.FAILSAFE or bool(faults & ALARM_FAULTS)
+        return SupervisorOutput(
+            self._run_controller, state, faults, rising, transition, command, alarm
+        )

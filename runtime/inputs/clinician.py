@@ -1,0 +1,335 @@
+"""The clinician's input on the runtime side: the MAP target and the syringe the controller assumes.
+
+``pressor run`` takes the target from the device's MAP_TARGET by default. ``--target-mmhg`` (or
+``--target-file``) makes it the runtime's own: the device's value is then ignored and MAP_TARGET is
+no longer required for a tick. ``--target-file`` and ``--target-stdin`` change it while the loop
+runs (:mod:`runtime.inputs.target_source`), and carry the clinician's acknowledgement (a line
+``ack``: HOLD or FAILSAFE resume once the fault cleared, :mod:`runtime.core.supervisor_io`).
+``--drug`` and ``--concentration-ug-ml`` state the drug and concentration in the syringe; they must
+match the loaded design's (:mod:`contracts.drug`: a generated module's ``DRUG`` and
+``DRUG_CONCENTRATION_UG_ML``, else phenylephrine at 100 µg/ml) and default to them
+(:mod:`runtime.inputs.dosing` checks them, the drug library and ``--weight-kg``);
+:func:`check_device_hello` refuses a device whose hello announces another drug, another
+concentration or a pump that cannot reach the controller's maximum rate (docs/PROTOCOL.md,
+"Clinician's input"), :func:`check_link_hello` one whose sample period, link mode or announced
+noise does not fit the run; each raises :class:`link.HelloRefused` with its reason code, which the
+runtime sends the device before it closes the link (docs/PROTOCOL.md, "Refusals").
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
+from contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS
+from contracts.usage import UsageError
+
+#: MAP targets the runtime accepts (mmHg), from any source
+TARGET_MIN_MMHG = 50.0
+TARGET_MAX_MMHG = 120.0
+#: the line that acknowledges an alarm and asks to resume (stdin, the target file)
+ACK_WORD = "ack"
+
+
+@dataclass(frozen=True)
+class ClinicianInput:
+    """What ``pressor run`` was told about the target and the syringe (checked).
+
+    Attributes
+    ----------
+    target_mmhg
+        The runtime's starting target (mmHg); ``None``: the device's MAP_TARGET is used.
+    target_file
+        File re-read whenever it changes (one number, mmHg); ``None``: none.
+    target_stdin
+        Read a new target from each stdin line while running.
+    drug
+        Drug in the syringe (lower case); the loaded design's once checked
+        (:mod:`runtime.inputs.dosing`).
+    concentration_ug_ml
+        Syringe concentration (µg/ml); the loaded design's once checked.
+    drug_given, concentration_given
+        Whether ``--drug`` / ``--concentration-ug-ml`` were given (else the design's are taken).
+    weight_kg
+        The patient's weight (kg, ``--weight-kg``), or ``None``.
+    dose_limits
+        The drug library's limits for this drug, syringe and weight
+        (:class:`runtime.inputs.drug_library.DoseLimits`), set by
+        :func:`runtime.inputs.dosing.bind_syringe`.
+    dose_unit
+        The unit of the library's limits for this drug (``ug/min`` or ``ug/kg/min``).
+    """
+
+    target_mmhg: float | None = None
+    target_file: Path | None = None
+    target_stdin: bool = False
+    drug: str = DESIGN_DRUG
+    concentration_ug_ml: float = DESIGN_CONCENTRATION_UG_ML
+    drug_given: bool = False
+    concentration_given: bool = False
+    weight_kg: float | None = None
+    dose_limits: Any = None
+    dose_unit: str = "ug/min"
+
+    @property
+    def target_source(self) -> str:
+        """``runtime`` when the runtime sets the target, else ``device``."""
+        return "device" if self.target_mmhg is None else "runtime"
+
+
+def number_in(text: str, lo: float, hi: float, unit: str, *, lo_open: bool = False) -> float:
+    """The number ``text`` holds if it lies in [lo, hi] (``lo_open``: (lo, hi]) ``unit``;
+    ``ValueError`` naming the text and the allowed range otherwise (NaN included)."""
+    allowed = f"allowed {'(' if lo_open else '['}{lo:g}, {hi:g}] {unit}"
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{text.strip()!r}: not a number ({allowed})") from None
+    if not ((lo < value) if lo_open else (lo <= value)) or not value <= hi:
+        raise ValueError(f"{text.strip()!r}: {allowed}")
+    return value
+
+
+def split_ack(text: str) -> tuple[str, bool]:
+    """``text`` without its :data:`ACK_WORD` lines, and whether it had one (case and surrounding
+    blanks ignored): the clinician's acknowledgement rides on stdin and the target file."""
+    lines = text.splitlines()
+    rest = [line for line in lines if line.strip().lower() != ACK_WORD]
+    return "\n".join(rest), len(rest) < len(lines)
+
+
+def parse_target(text: str) -> float:
+    """A MAP target (mmHg) from ``text``; ``ValueError`` naming the allowed range otherwise."""
+    return number_in(text, TARGET_MIN_MMHG, TARGET_MAX_MMHG, "mmHg")
+
+
+def read_target_file(path: Path) -> float:
+    """The target (mmHg) ``path`` holds (an ``ack`` line in it is not a target); ``ValueError`` if
+    it cannot be read or is out of range."""
+    try:
+        text = path.read_text(encoding="ascii", errors="replace")
+    except OSError as exc:
+        raise ValueError(f"cannot read: {exc.strerror}") from None
+    return parse_target(split_ack(text)[0])
+
+
+def argtype(name: str, parse: Any) -> Any:
+    """An argparse type for option ``name`` from a parser raising ``ValueError``."""
+
+    def convert(text: str) -> Any:
+        try:
+            return parse(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(f"{name} {exc}") from None
+
+    return convert
+
+
+def parse_concentration(text: str) -> float:
+    """A concentration (µg/ml) from ``text``; ``ValueError`` naming the allowed range otherwise."""
+    return number_in(text, 0.0, MAX_CONCENTRATION_UG_ML, "ug/ml", lo_open=True)
+
+
+def parse_drug(text: str) -> str:
+    """A drug name (lower case, 1-16 ASCII characters); ``ValueError`` otherwise."""
+    name = text.strip().lower()
+    if not (name and name.isascii() and len(name) <= MAX_DRUG_CHARS):
+        raise ValueError(f"{text!r}: allowed 1 to {MAX_DRUG_CHARS} ASCII characters")
+    return name
+
+
+def add_clinician_options(p: argparse.ArgumentParser) -> None:
+    """Add ``--target-mmhg``, ``--target-file``, ``--target-stdin``, ``--drug`` and
+    ``--concentration-ug-ml`` to ``p`` (``pressor run``)."""
+    rng = f"allowed [{TARGET_MIN_MMHG:g}, {TARGET_MAX_MMHG:g}]"
+    p.add_argument(
+        "--target-mmhg",
+        type=argtype("--target-mmhg", parse_target),
+        default=None,
+        metavar="MMHG",
+        help=f"the runtime's own MAP target (mmHg, {rng}); the device's MAP_TARGET is"
+        " then ignored and not required (default: the device's MAP_TARGET)",
+    )
+    p.add_argument(
+        "--target-file",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help=f"a file holding one number, the MAP target (mmHg, {rng}): read at start (the"
+        " starting target, instead of --target-mmhg) and again whenever it changes; a bad value"
+        " is refused with one line on stderr and the target kept; a line 'ack' in it"
+        " acknowledges an alarm and resumes automatic control once the fault cleared"
+        " (default: none)",
+    )
+    p.add_argument(
+        "--target-stdin",
+        action="store_true",
+        help=f"read a new MAP target (mmHg, {rng}) from each line on stdin while running, or"
+        " 'ack' to acknowledge an alarm and resume automatic control once the fault cleared;"
+        " needs --target-mmhg or --target-file for the starting target (default: off)",
+    )
+    p.add_argument(
+        "--drug",
+        type=argtype("--drug", parse_drug),
+        default=None,
+        help="drug in the syringe: must be the loaded design's, and the device's hello must"
+        f" announce the same (default: the design's; the shipped one's is {DESIGN_DRUG})",
+    )
+    p.add_argument(
+        "--concentration-ug-ml",
+        type=argtype("--concentration-ug-ml", parse_concentration),
+        default=None,
+        metavar="UG_ML",
+        help="syringe concentration (ug/ml): must be the one whose ml/h the design's gain K"
+        " (mmHg per ml/h) counts, and the device's hello must announce the same (default: the"
+        f" design's; the shipped one's is {DESIGN_CONCENTRATION_UG_ML:g})",
+    )
+
+
+def clinician_input(args: argparse.Namespace) -> ClinicianInput:
+    """Check the options :func:`add_clinician_options` parsed into a :class:`ClinicianInput`.
+
+    Raises
+    ------
+    contracts.usage.UsageError
+        Both ``--target-mmhg`` and ``--target-file``; ``--target-stdin`` without a starting
+        target; a target file that cannot be read or holds no valid target.
+    """
+    target = args.target_mmhg
+    if args.target_file is not None:
+        if target is not None:
+            raise UsageError(
+                "--target-mmhg and --target-file: choose one (the file holds the starting target)"
+            )
+        try:
+            target = read_target_file(args.target_file)
+        except ValueError as exc:
+            raise UsageError(f"--target-file {args.target_file}: {exc}") from None
+    if args.target_stdin and target is None:
+        raise UsageError("--target-stdin: needs a starting target (--target-mmhg or --target-file)")
+    return ClinicianInput(
+        target_mmhg=target,
+        target_file=args.target_file,
+        target_stdin=args.target_stdin,
+        drug=DESIGN_DRUG if args.drug is None else args.drug,
+        concentration_ug_ml=(
+            DESIGN_CONCENTRATION_UG_ML
+            if args.concentration_ug_ml is None
+            else args.concentration_ug_ml
+        ),
+        drug_given=args.drug is not None,
+        concentration_given=args.concentration_ug_ml is not None,
+        weight_kg=getattr(args, "weight_kg", None),
+    )
+
+
+def check_link_hello(peer: Any, period_s: float, rate_hz: float, link_mode: int) -> None:
+    """Refuse a device whose hello does not fit the run's timing or announces impossible noise.
+
+    Parameters
+    ----------
+    peer
+        The device's :class:`link.Hello`.
+    period_s, rate_hz
+        The runtime's loop period (s) and rate (Hz, as given by ``--rate``).
+    link_mode
+        The runtime's ``LINK_LOCKSTEP`` / ``LINK_REALTIME``.
+
+    Raises
+    ------
+    link.HelloRefused
+        One line naming both values: ``REFUSAL_SAMPLE_PERIOD`` (the periods differ by more than
+        1e-9 s), ``REFUSAL_SENSOR_NOISE`` (noise not in [0, 50] mmHg) or ``REFUSAL_LINK_MODE``.
+    """
+    from link import (
+        LINK_REALTIME,
+        REFUSAL_LINK_MODE,
+        REFUSAL_SAMPLE_PERIOD,
+        REFUSAL_SENSOR_NOISE,
+        HelloRefused,
+    )
+
+    if not abs(peer.sample_period_s - period_s) <= 1e-9:  # NaN refused too
+        raise HelloRefused(
+            REFUSAL_SAMPLE_PERIOD,
+            f"device sample_period_s {peer.sample_period_s} s differs from --rate"
+            f" {rate_hz} Hz (period {period_s} s)",
+        )
+    if not 0.0 <= peer.sensor_noise_mmhg <= 50.0:  # False for NaN too
+        raise HelloRefused(
+            REFUSAL_SENSOR_NOISE,
+            f"device announces sensor_noise_mmhg {peer.sensor_noise_mmhg}: allowed [0, 50] mmHg",
+        )
+    if peer.link_mode != link_mode:  # the device's clock and ours would both think they lead
+        theirs, ours = (
+            "real time" if m == LINK_REALTIME else "lockstep" for m in (peer.link_mode, link_mode)
+        )
+        raise HelloRefused(
+            REFUSAL_LINK_MODE,
+            f"device runs {theirs} (hello link_mode {peer.link_mode}) but this runtime"
+            f" runs {ours}: {'add' if peer.link_mode == LINK_REALTIME else 'drop'} --realtime",
+        )
+
+
+def check_device_hello(peer: Any, max_rate_ml_h: float, clinician: ClinicianInput) -> None:
+    """Refuse a device whose syringe or pump does not fit the loaded controller.
+
+    Parameters
+    ----------
+    peer
+        The device's :class:`link.Hello`.
+    max_rate_ml_h
+        The controller's largest command (ml/h).
+    clinician
+        The drug and concentration the loaded design is for (checked against the design by
+        :func:`runtime.inputs.dosing.bind_syringe`).
+
+    Raises
+    ------
+    link.HelloRefused
+        One line naming both values: another drug (``REFUSAL_DRUG``), another concentration
+        beyond float32 rounding (``REFUSAL_CONCENTRATION``), or a pump maximum below the
+        controller's (``REFUSAL_PUMP_MAXIMUM``: a pump that cannot deliver every rate the
+        controller commands; a larger pump maximum is fine: the runtime never commands more than
+        the controller's).
+    """
+    from link import REFUSAL_CONCENTRATION, REFUSAL_DRUG, REFUSAL_PUMP_MAXIMUM, HelloRefused
+
+    drug = peer.drug.strip().lower()
+    if drug != clinician.drug:
+        raise HelloRefused(
+            REFUSAL_DRUG,
+            f"device drug {drug or '(none announced)'} differs from the loaded design's"
+            f" {clinician.drug}",
+        )
+    conc, want = float(peer.concentration_ug_ml), clinician.concentration_ug_ml
+    if not math.isclose(conc, want, rel_tol=1e-6):
+        raise HelloRefused(
+            REFUSAL_CONCENTRATION,
+            f"device concentration {conc:g} ug/ml differs from the loaded design's {want:g} ug/ml",
+        )
+    pump_max = float(peer.pump_max_ml_h)
+    if not pump_max >= max_rate_ml_h * (1.0 - 1e-6):  # NaN refused too
+        raise HelloRefused(
+            REFUSAL_PUMP_MAXIMUM,
+            f"device pump maximum {pump_max:g} ml/h differs from the controller's"
+            f" {max_rate_ml_h:g} ml/h: the pump cannot deliver every rate the controller commands",
+        )
+
+
+def describe_target(record: dict[str, Any]) -> str:
+    """One terminal line for the summary's ``target`` record (its source, changes, refusals)."""
+    if record["source"] == "device":
+        return "target: the device's MAP_TARGET"
+    text = f"target: the runtime's, {record['initial_mmhg']:g} mmHg"
+    for c in record["changes"]:
+        text += f"; at {c['sim_time_s']:g} s {c['old_mmhg']:g} -> {c['new_mmhg']:g} mmHg"
+    if record["refused"]:
+        text += f"; {record['refused']} refused"
+    for a in record.get("acks", ()):
+        text += f"; ack at {a['sim_time_s']:g} s {'accepted' if a['accepted'] else 'not taken'}"
+    return text

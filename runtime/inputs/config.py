@@ -1,0 +1,361 @@
+"""The runtime's typed run configuration, parsed and checked at the command line.
+
+``pressor run`` and ``pressor sil`` share the runtime's options (:func:`add_run_options`); the
+parsed namespace becomes a frozen :class:`RunConfig` in :func:`run_config`, which checks every
+value before anything starts (output directories, the controller, the fault specs). A bad value
+raises :class:`contracts.usage.UsageError` naming the option, the value and the allowed range;
+past this boundary the run code trusts its configuration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from contracts.faults import FaultSpec, FaultSpecError, parse_faults
+from contracts.usage import UsageError
+from runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S
+from runtime.estimation.sources import SOURCES
+from runtime.inputs.clinician import ClinicianInput
+from runtime.shell.cpu_latency import MAX_LATENCY_US
+
+#: what ``--schedule`` means, for the help of every command that takes it
+SCHEDULE_HELP = (
+    "where the controller's K, T, tau come from: oracle = the device's SCHEDULING_PARAMS (a"
+    " simulator's truth; research comparisons, needs a device that sends them), estimated ="
+    " the runtime's online estimator from MAP and the delivered rate (falls back to the nominal"
+    " patient until it has learned or when its health check rejects an estimate), nominal ="
+    " the nominal patient's constants (a fixed-gain controller), validated = opt-in: the nominal"
+    " patient's K with T and tau slewed, inside the design box at 0.9x the certified rates,"
+    " toward a model that predicts the MAP better than the nominal one (docs/ESTIMATION.md)"
+)
+#: why ``pressor sil`` and ``pressor trial`` still default to the oracle
+ORACLE_DEFAULT_WHY = (
+    "; default oracle here, because with the target step at t = 0, before the drug has moved MAP,"
+    " the estimated LPV's median IAE is still ~1.46x the oracle's (docs/notes/cohort-evidence.md)"
+)
+
+DEFAULT_RATE_HZ = 10.0
+#: fastest loop rate accepted (Hz)
+MAX_RATE_HZ = 1000.0
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """One runtime run, as the command line asked for it (checked by :func:`run_config`).
+
+    Attributes
+    ----------
+    controller
+        The ``--controller`` spec (``lpv``, ``pi``, ``smith[:LAMBDA_S]``, a generated module or a
+        plugin, :mod:`runtime.inputs.controller_plugin`).
+    rate_hz
+        Loop rate (Hz).
+    realtime
+        Wall clock instead of lockstep.
+    rrd, tlog, summary, timing
+        Output files (``None``: not written); their directories exist.
+    signing_key
+        Key file of the signed link (``None``: none given).
+    signed
+        ``False`` with ``--no-signing``.
+    sched_faults
+        ``advise`` or ``hold``: the supervisor's answer to scheduling outside the design box.
+    faults
+        The ``--fault`` texts as given (a device process gets them verbatim).
+    fault_specs
+        The faults to score after the run: the parsed ``--fault`` texts, then any the device's
+        scenario declares.
+    stall_timeout_s
+        Lockstep: wall seconds without a sample before giving up.
+    cpu_latency_us
+        CPU wake-up latency to hold during the run (µs; ``None``: no request).
+    ticks
+        Ticks to run (0: until the device ends).
+    schedule
+        The scheduling source (``oracle``, ``estimated``, ``nominal``, ``validated``;
+        :func:`runtime.estimation.sources.make_schedule`).
+    clinician
+        ``pressor run``'s target and syringe options (:mod:`runtime.inputs.clinician`); ``None``
+        (``pressor sil``): the device's target, the shipped designs' drug and concentration.
+    sample_age_limit_s
+        Age (s) past which the held MAP sample is stale (the supervisor's ``STALE_SAMPLE``).
+    """
+
+    controller: str
+    rate_hz: float
+    realtime: bool
+    rrd: Path | None
+    tlog: Path | None
+    summary: Path | None
+    timing: Path | None
+    signing_key: Path | None
+    sched_faults: str
+    faults: tuple[str, ...]
+    fault_specs: tuple[FaultSpec, ...]
+    stall_timeout_s: float
+    cpu_latency_us: int | None
+    ticks: int = 0
+    schedule: str = "oracle"
+    signed: bool = True
+    clinician: ClinicianInput | None = None
+    sample_age_limit_s: float = DEFAULT_SAMPLE_AGE_LIMIT_S
+
+    @property
+    def period_s(self) -> float:
+        """The sample period (s)."""
+        return 1.0 / self.rate_hz
+
+    @property
+    def mode(self) -> str:
+        """``realtime`` or ``lockstep``."""
+        return "realtime" if self.realtime else "lockstep"
+
+
+def positive(name: str, high: float) -> Callable[[str], float]:
+    """An argparse type: a number in (0, ``high``] for option ``name``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} {text!r}: not a number") from None
+        if not (math.isfinite(value) and 0.0 < value <= high):
+            raise argparse.ArgumentTypeError(f"{name} {text!r}: allowed (0, {high:g}]")
+        return value
+
+    return parse
+
+
+def _cpu_latency(text: str) -> int | None:
+    """``off`` -> None (no request), ``hold`` -> 0 µs, else an integer in [0, MAX_LATENCY_US] µs."""
+    if text == "off":
+        return None
+    if text == "hold":
+        return 0
+    allowed = f"allowed off, hold (0 us) or an integer in [0, {MAX_LATENCY_US}] us"
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--cpu-latency {text!r}: {allowed}") from None
+    if not 0 <= value <= MAX_LATENCY_US:
+        raise argparse.ArgumentTypeError(f"--cpu-latency {text!r}: {allowed}")
+    return value
+
+
+def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_why: str) -> None:
+    """Add the runtime's options (controller, schedule, rate, outputs, signing, faults, timing) to
+    ``p``; ``--schedule`` defaults to ``schedule_default`` (``schedule_why`` ends its help)."""
+    p.add_argument(
+        "--controller",
+        default="lpv",
+        help="lpv (default: the shipped LPV module), pi, smith[:LAMBDA_S] (Smith predictor,"
+        " closed-loop time constant LAMBDA_S in s, default 30 s), a generated .py, or your own"
+        " class: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed 'pressor.controllers'"
+        " entry point NAME[:ARGS] (ARGS: key=value,...; runtime.inputs.controller_plugin)",
+    )
+    p.add_argument(
+        "--schedule",
+        choices=SOURCES,
+        default=schedule_default,
+        help=f"{SCHEDULE_HELP}{schedule_why}",
+    )
+    p.add_argument(
+        "--rate",
+        type=positive("--rate", MAX_RATE_HZ),
+        default=DEFAULT_RATE_HZ,
+        help="loop rate (Hz)",
+    )
+    p.add_argument(
+        "--realtime",
+        action="store_true",
+        help="wall clock instead of lockstep (as fast as possible)",
+    )
+    p.add_argument(
+        "--rrd",
+        type=Path,
+        help="rerun recording to write (FILE.rrd; default: pressor sil writes"
+        " pressor_sil_CONTROLLER_SCENARIO_seedN.rrd, pressor run none)",
+    )
+    p.add_argument("--tlog", type=Path, help="MAVLink telemetry log of every frame (FILE.tlog)")
+    p.add_argument("--summary", type=Path, help="write the metric summary as JSON (FILE.json)")
+    p.add_argument(
+        "--timing",
+        type=Path,
+        help="write loop timing (p50/p99/max), wall time and link counters as JSON"
+        " (host-dependent, unlike --summary)",
+    )
+    p.add_argument(
+        "--signing-key",
+        type=Path,
+        help="32-byte key file (raw or 64 hex chars); pressor run defaults to the one"
+        " 'pressor keygen' wrote, pressor sil to a fresh key per run",
+    )
+    p.add_argument(
+        "--no-signing", action="store_true", help="run the link unsigned (warned; default: signed)"
+    )
+    p.add_argument(
+        "--sched-faults",
+        choices=("advise", "hold"),
+        default="advise",
+        help="scheduling outside the design box / rate bounds: advisory alarm (default) or hold",
+    )
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="KIND[:ARGS]",
+        help="inject a fault (repeatable; 'pressor faults' lists kinds, arguments, defaults)",
+    )
+    p.add_argument(
+        "--stall-timeout",
+        type=positive("--stall-timeout", 3600.0),
+        default=10.0,
+        help="lockstep: give up after this many wall-clock seconds without a sample (s)",
+    )
+    p.add_argument(
+        "--sample-age-limit-s",
+        type=positive("--sample-age-limit-s", 60.0),
+        default=DEFAULT_SAMPLE_AGE_LIMIT_S,
+        help="the runtime holds the newest MAP sample and uses it until it is this old (s; a"
+        " sample repeated with the HELD quality bit ages from the last new one), then"
+        " STALE_SAMPLE; at least one loop period, default 3 s: three updates of a 1 Hz monitor",
+    )
+    p.add_argument(
+        "--cpu-latency",
+        type=_cpu_latency,
+        default=None,
+        metavar="off|hold|US",
+        help="host-wide CPU wake-up latency request while the run lasts (/dev/cpu_dma_latency,"
+        " best effort, usually needs root): off (default) makes none; hold keeps idle CPUs"
+        " polling (0 us; ~5 %% faster lockstep on a quiet 2-core host); US holds that many"
+        " microseconds",
+    )
+
+
+def run_config(
+    args: argparse.Namespace, ticks: int = 0, clinician: ClinicianInput | None = None
+) -> RunConfig:
+    """Check the options :func:`add_run_options` parsed and freeze them into a :class:`RunConfig`.
+
+    Parameters
+    ----------
+    args
+        The parsed namespace.
+    ticks
+        ``pressor run --ticks`` (0: until the device ends).
+    clinician
+        ``pressor run``'s checked target and syringe options
+        (:func:`runtime.inputs.clinician.clinician_input`); checked against the loaded design and
+        the drug library (:func:`runtime.inputs.dosing.bind_syringe`).
+
+    Raises
+    ------
+    contracts.usage.UsageError
+        A value out of range, an output directory that does not exist, a controller that does
+        not load, a bad fault spec.
+    """
+    if ticks < 0:
+        raise UsageError(f"--ticks {ticks}: allowed >= 0")
+    _check_out_path("--rrd", args.rrd, ".rrd")
+    _check_out_path("--tlog", args.tlog)
+    _check_out_path("--summary", args.summary)
+    _check_out_path("--timing", args.timing)
+    if args.no_signing and args.signing_key is not None:
+        raise UsageError("--no-signing and --signing-key: choose one")
+    if args.sample_age_limit_s < 1.0 / args.rate:
+        raise UsageError(
+            f"--sample-age-limit-s {args.sample_age_limit_s:g}: allowed [1/--rate ="
+            f" {1.0 / args.rate:g}, 60] s"
+        )
+    controller = load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device
+    if clinician is not None:  # pressor run: the syringe and patient against design and library
+        from contracts.drug import binding_of
+        from runtime.inputs.dosing import bind_syringe
+
+        try:
+            design = binding_of(controller)
+        except ValueError as exc:
+            raise UsageError(f"--controller {args.controller}: {exc}") from None
+        clinician = bind_syringe(clinician, design, args.controller, args.drug_library)
+    try:
+        specs = tuple(parse_faults(args.fault))
+    except FaultSpecError as exc:
+        raise UsageError(str(exc)) from None
+    return RunConfig(
+        controller=args.controller,
+        rate_hz=args.rate,
+        realtime=args.realtime,
+        rrd=args.rrd,
+        tlog=args.tlog,
+        summary=args.summary,
+        timing=args.timing,
+        signing_key=args.signing_key,
+        sched_faults=args.sched_faults,
+        faults=tuple(args.fault),
+        fault_specs=specs,
+        stall_timeout_s=args.stall_timeout,
+        cpu_latency_us=args.cpu_latency,
+        ticks=ticks,
+        schedule=args.schedule,
+        signed=not args.no_signing,
+        clinician=clinician,
+        sample_age_limit_s=args.sample_age_limit_s,
+    )
+
+
+def _check_out_path(opt: str, path: Path | None, suffix: str | None = None) -> None:
+    if path is None:
+        return
+    if suffix and path.suffix != suffix:
+        raise UsageError(f"{opt} {path}: expected a {suffix} file name")
+    if not path.parent.resolve().is_dir():
+        raise UsageError(f"{opt} {path}: directory {path.parent} does not exist")
+
+
+def load_controller(spec: str, period_s: float) -> Any:
+    """The controller ``spec`` names at ``period_s`` (s); a :class:`UsageError` if it does not load."""
+    from runtime.inputs.controller_loader import ControllerSpecError
+    from runtime.inputs.controller_loader import load_controller as load
+
+    try:
+        return load(spec, sample_period_s=period_s)
+    except ControllerSpecError as exc:
+        hint = ""
+        if spec == "lpv":
+            hint = (
+                " (the shipped LPV module is generated by 'pressor codegen --target python"
+                " --out runtime/generated'; use --controller pi meanwhile)"
+            )
+        raise UsageError(f"--controller {spec}: {exc}{hint}") from None
+
+
+def load_signing(config: RunConfig, generate: bool) -> Any:
+    """The link's :class:`Signing`, or ``None`` with ``--no-signing``.
+
+    From ``--signing-key``; else a fresh key if ``generate`` (``pressor sil``); else the key file
+    at :func:`link.signing.default_key_path` (``pressor run``). A key file that is missing or
+    cannot be read is a :class:`UsageError` saying how to make one.
+    """
+    from link.signing import Signing, default_key_path
+
+    if not config.signed:
+        return None
+    path = config.signing_key
+    if path is None:
+        if generate:
+            return Signing.generate()
+        path = default_key_path()
+        if not path.exists():
+            raise UsageError(
+                f"--signing-key: no key at the default {path}: make one with 'pressor keygen'"
+                " (the device needs the same file), or pass --no-signing"
+            )
+    try:
+        return Signing.from_file(path)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"--signing-key {path}: {exc}") from None

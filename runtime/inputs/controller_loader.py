@@ -1,0 +1,219 @@
+"""Resolve a ``--controller`` spec (``pi``, ``smith[:λ]``, ``lpv``, a path or a plugin) to a :class:`Controller`.
+
+A plugin (``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]``, an installed ``pressor.controllers``
+entry point) is any class satisfying the protocol, loaded and checked by
+:mod:`runtime.inputs.controller_plugin`; the integrity check below is for generated modules only.
+
+``smith`` is the scheduled Smith predictor of :mod:`baselines.smith` with its default
+closed-loop time constant (30 s); ``smith:45`` sets λ = 45 s (allowed range in that module).
+
+``lpv`` is the generated module for the shipped default design, committed at
+``runtime/generated/lpv_map_controller.py``; ``lpv:DRUG`` names a drug's shipped design
+(:data:`LPV_DESIGNS`: ``lpv:phenylephrine`` is ``lpv``, ``lpv:norepinephrine`` the module
+``runtime/generated/lpv_norepinephrine.py`` of ``synthesis/data/norepinephrine_design.npz``); a path names any module written by ``pressor codegen``
+(``--target python``). Loading a generated module imports it from its file: it must be the standard
+library-only module codegen writes, exposing a ``Controller`` class.
+
+Integrity: before anything is executed, the file's ``MODULE_SHA256`` line must equal the sha256 of
+the file's text with that value blanked (codegen writes it), so an edited, truncated or appended
+module is refused with :class:`ControllerSpecError` naming the file. When the path of the artifact
+the module was generated from is given, its stored sha256 must equal the module's
+``ARTIFACT_SHA256`` (a stale module for a replaced design is refused too).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+from baselines.pi import PIController
+from baselines.smith import LAMBDA_MAX_S, LAMBDA_MIN_S, SmithController
+from contracts.controller import Controller
+from contracts.module_hash import ARTIFACT_SHA_LINE, MODULE_SHA_LINE, module_text_sha256
+
+GENERATED_DIR = Path(__file__).resolve().parents[1] / "generated"
+DEFAULT_LPV_MODULE = GENERATED_DIR / "lpv_map_controller.py"
+#: ``lpv:DRUG`` -> the committed generated module of that drug's shipped design (``lpv`` alone is
+#: the default design, phenylephrine at 100 µg/ml; docs/DRUGS.md)
+LPV_DESIGNS: dict[str, Path] = {
+    "phenylephrine": DEFAULT_LPV_MODULE,
+    "norepinephrine": GENERATED_DIR / "lpv_norepinephrine.py",
+}
+LPV_PREFIX = "lpv"
+
+
+class ControllerSpecError(ValueError):
+    """A ``--controller`` value that names no loadable controller (message names spec and choices)."""
+
+
+SMITH_PREFIX = "smith"
+
+
+def _smith(spec: str, sample_period_s: float) -> SmithController:
+    """``smith`` or ``smith:LAMBDA_S``; a bad λ names the value and the allowed range."""
+    _, sep, text = spec.partition(":")
+    if not sep:
+        return SmithController(sample_period_s=sample_period_s)
+    try:
+        lambda_s = float(text)
+    except ValueError:
+        lambda_s = float("nan")
+    if not LAMBDA_MIN_S <= lambda_s <= LAMBDA_MAX_S:  # also refuses nan and inf
+        raise ControllerSpecError(
+            f"--controller {spec!r}: closed-loop time constant lambda {text!r} s outside "
+            f"[{LAMBDA_MIN_S:g}, {LAMBDA_MAX_S:g}] s (e.g. smith:45)"
+        )
+    return SmithController(sample_period_s=sample_period_s, lambda_s=lambda_s)
+
+
+def lpv_design_module(spec: str) -> Path | None:
+    """The committed module ``lpv`` or ``lpv:DRUG`` names, ``None`` for any other spec.
+
+    Raises
+    ------
+    ControllerSpecError
+        ``lpv:DRUG`` with a drug that has no shipped design (naming the ones that do).
+    """
+    if spec == LPV_PREFIX:
+        return DEFAULT_LPV_MODULE
+    head, sep, drug = spec.partition(":")
+    if head != LPV_PREFIX or not sep:
+        return None
+    if drug not in LPV_DESIGNS:
+        raise ControllerSpecError(
+            f"--controller {spec!r}: no shipped design for drug {drug!r}; one of"
+            f" {', '.join(f'lpv:{d}' for d in LPV_DESIGNS)}"
+        )
+    return LPV_DESIGNS[drug]
+
+
+def verify_module_file(path: Path, artifact_sha256: str | None = None) -> str:
+    """Check a generated module's self-hash (and artifact sha256); return its text.
+
+    Raises
+    ------
+    ControllerSpecError
+        Unreadable file, missing or mismatching ``MODULE_SHA256``, or (with ``artifact_sha256``) an
+        ``ARTIFACT_SHA256`` that differs from it. The caller supplies the artifact's sha256 (the
+        runtime never loads the synthesis package).
+    """
+    try:
+        text = Path(path).read_bytes().decode("utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ControllerSpecError(f"{path}: cannot read generated controller ({exc})") from exc
+    m = MODULE_SHA_LINE.search(text)
+    if m is None:
+        raise ControllerSpecError(
+            f"{path}: field 'MODULE_SHA256' missing; not an intact pressor codegen module"
+        )
+    actual = module_text_sha256(text)
+    if actual != m.group(1):
+        raise ControllerSpecError(
+            f"{path}: field 'MODULE_SHA256' = {m.group(1)[:12]}... but the file hashes to "
+            f"{actual[:12]}...; the module was modified or truncated, regenerate it with "
+            "pressor codegen"
+        )
+    if artifact_sha256 is not None:
+        a = ARTIFACT_SHA_LINE.search(text)
+        if a is None or a.group(1) != artifact_sha256:
+            got = a.group(1)[:12] if a else "missing"
+            raise ControllerSpecError(
+                f"{path}: field 'ARTIFACT_SHA256' = {got}... but the expected artifact has sha256 "
+                f"{artifact_sha256[:12]}...; regenerate with pressor codegen"
+            )
+    return text
+
+
+def load_generated_module(path: Path, artifact_sha256: str | None = None) -> ModuleType:
+    """Verify (:func:`verify_module_file`) and import a generated controller module from ``path``.
+
+    Raises
+    ------
+    ControllerSpecError
+        If the file is missing, fails the integrity check, fails to import, or has no
+        ``Controller`` class.
+    """
+    path = Path(path).resolve()
+    if not path.is_file():
+        raise ControllerSpecError(f"{path}: controller module not found")
+    verify_module_file(path, artifact_sha256)
+    name = f"_pressor_generated_{abs(hash(str(path))):x}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise ControllerSpecError(f"{path}: not an importable Python module")
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except Exception as exc:  # a tampered or truncated file: report, never crash the caller
+        raise ControllerSpecError(f"{path}: failed to import generated controller: {exc}") from exc
+    if not hasattr(module, "Controller"):
+        raise ControllerSpecError(
+            f"{path}: field 'Controller' missing; not a pressor codegen module"
+        )
+    sys.modules[name] = module
+    return module
+
+
+def load_controller(
+    spec: str, sample_period_s: float = 0.1, artifact_sha256: str | None = None
+) -> Controller:
+    """Return a fresh controller for ``spec``.
+
+    Parameters
+    ----------
+    spec
+        ``"pi"`` (the paper's PI baseline), ``"smith"`` / ``"smith:LAMBDA_S"`` (the scheduled Smith
+        predictor, λ in s), ``"lpv"`` / ``"lpv:DRUG"`` (a shipped generated LPV module), a path
+        to a generated ``.py`` module, or a plugin (:mod:`runtime.inputs.controller_plugin`:
+        ``MODULE:CLASS[:ARGS]``,
+        ``FILE.py:CLASS[:ARGS]`` or an installed ``pressor.controllers`` entry point name).
+    sample_period_s
+        Loop period (s). A generated module is discretised for one period; a mismatch is an error.
+    artifact_sha256
+        Optional sha256 of the artifact the module must have been generated from.
+
+    Raises
+    ------
+    ControllerSpecError
+        Unknown spec, missing, tampered or broken module, artifact mismatch, or a sample-period
+        mismatch.
+    """
+    if spec == "pi":
+        return PIController(sample_period_s=sample_period_s)
+    if spec == SMITH_PREFIX or spec.startswith(SMITH_PREFIX + ":"):
+        return _smith(spec, sample_period_s)
+    from runtime.inputs.controller_plugin import is_plugin_spec, load_plugin_controller
+
+    named = lpv_design_module(spec)
+    if named is None and is_plugin_spec(spec):
+        return load_plugin_controller(spec, sample_period_s)
+    path = named if named is not None else Path(spec)
+    if named is None and path.suffix != ".py":
+        raise ControllerSpecError(
+            f"--controller {spec!r}: expected 'pi', 'smith[:LAMBDA_S]', 'lpv', a path to a generated"
+            " .py module, or a plugin: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed"
+            " 'pressor.controllers' entry point (runtime.inputs.controller_plugin)"
+        )
+    module = load_generated_module(path, artifact_sha256)
+    controller = module.Controller()
+    period = float(getattr(controller, "sample_period_s", float("nan")))
+    if abs(period - sample_period_s) > 1e-12:
+        raise ControllerSpecError(
+            f"{path}: field 'sample_period_s' = {period} s but the loop runs at {sample_period_s} s;"
+            " regenerate with pressor codegen for this rate"
+        )
+    return controller
+
+
+def controller_name(spec: str) -> str:
+    """A short name for ``spec`` (the link's hello, file names): ``pi``, ``lpv``, ``smith:45`` as
+    given, a generated module's file stem, a plugin's class name."""
+    from runtime.inputs.controller_plugin import is_plugin_spec, plugin_label
+
+    if spec in ("pi", "lpv") or spec == SMITH_PREFIX or spec.startswith(SMITH_PREFIX + ":"):
+        return spec
+    if spec.startswith(LPV_PREFIX + ":") and spec.partition(":")[2] in LPV_DESIGNS:
+        return spec
+    return plugin_label(spec) if is_plugin_spec(spec) else Path(spec).stem

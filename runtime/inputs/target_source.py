@@ -1,0 +1,221 @@
+"""The runtime's own MAP target, changed while the loop runs (``pressor run --target-*``).
+
+A :class:`TargetSource` holds the target the clinician gave the runtime. The loop it is given to
+(:class:`runtime.shell.loop.Loop`'s ``target``, which runs every tick through it, silent ones
+included) asks it at each tick boundary to :meth:`~TargetSource.apply` itself to the tick's
+inputs: it first reads what arrived since the previous tick (the ``--target-file`` when its
+modification time, size or inode changed; complete lines on stdin with ``--target-stdin``), then
+puts the current target into the tick's :class:`~link.TickInputs` in place of the device's
+MAP_TARGET. A new value therefore takes effect at the first tick after it was read. It is logged
+to the recording's event log and listed in :meth:`~TargetSource.summary` (tick, sim time, old,
+new, source). A bad value (not a number, outside [50, 120] mmHg, an unreadable file) is refused
+with one line on stderr, logged, counted, and the old target kept; an empty file or a blank line
+is ignored (a writer that truncates the file before it writes).
+
+The same two inputs carry the clinician's acknowledgement: the line ``ack`` on stdin, or an
+``ack`` line in the target file (each time the file changes and holds one; the file read at start
+acknowledges nothing). It is taken at the next tick: the supervisor judges it
+(:func:`runtime.core.supervisor_io.judge_ack`: HOLD or FAILSAFE resume at once, through RECOVERING,
+only if no fault holds the loop at that tick) and the outcome is printed on stderr, logged to the
+event log with the tick and the time, and listed in :meth:`~TargetSource.summary` (``acks``).
+
+Which tick a change lands on depends on when it was written in wall-clock time, so a lockstep run
+with live changes is not reproducible byte for byte; a run with a fixed ``--target-mmhg`` is.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, TextIO
+
+from link import TickInputs
+from runtime.core.supervisor import AckOutcome
+from runtime.inputs.clinician import ClinicianInput, parse_target, split_ack
+
+
+class TargetSource:
+    """The runtime's MAP target and its live changes (see the module docstring).
+
+    Parameters
+    ----------
+    clinician
+        The checked options; its ``target_mmhg`` (not ``None``) is the starting target (mmHg).
+    stdin_fd
+        File descriptor read with ``--target-stdin`` (default 0).
+    err
+        Where refusals are reported (default ``sys.stderr``).
+    prog
+        Program name in front of each reported line.
+    """
+
+    def __init__(
+        self,
+        clinician: ClinicianInput,
+        *,
+        stdin_fd: int = 0,
+        err: TextIO | None = None,
+        prog: str = "pressor run",
+    ) -> None:
+        if clinician.target_mmhg is None:
+            raise ValueError("TargetSource needs a starting target")
+        self.initial_mmhg = float(clinician.target_mmhg)
+        #: the current target (mmHg)
+        self.target_mmhg = self.initial_mmhg
+        #: applied changes: tick, sim_time_s, old_mmhg, new_mmhg, source
+        self.changes: list[dict[str, Any]] = []
+        #: values refused (bad text, out of range, unreadable file)
+        self.refused = 0
+        #: acknowledgements taken: tick, sim_time_s, from, state, accepted, outcome
+        self.acks: list[dict[str, Any]] = []
+        self._pending_acks: list[str] = []
+        self._path = clinician.target_file
+        # never a real state: the first poll reads the file again (it may have changed since
+        # the command line read the starting target)
+        self._file_state: tuple[int, int, int] | None | str = "unread"
+        self._first_read = True
+        self._fd: int | None = stdin_fd if clinician.target_stdin else None
+        self._buf = b""
+        self._err = err
+        self._prog = prog
+        self._pending: list[tuple[float, str]] = []
+        self._pending_refusals: list[str] = []
+        self._announced = False
+
+    # ------------------------------------------------------------------ reading
+    def poll(self) -> None:
+        """Read what changed since the last call (non-blocking); new values wait for the next
+        :meth:`apply`."""
+        path = self._path
+        if path is not None:
+            state = _file_state(path)
+            if state != self._file_state:
+                self._file_state = state
+                try:
+                    text = path.read_text(encoding="ascii", errors="replace")
+                except OSError as exc:
+                    self._refuse(f"file {path}", f"cannot read: {exc.strerror}")
+                else:  # the file as read at start acknowledges nothing
+                    first, self._first_read = self._first_read, False
+                    self._offer(text, f"file {path}", ack=not first)
+        if self._fd is not None:
+            for line in self._read_lines():
+                self._offer(line, "stdin")
+
+    def _read_lines(self) -> list[str]:
+        """Complete lines that arrived on stdin (the end of input ends the last one)."""
+        fd = self._fd
+        assert fd is not None
+        data = b""
+        while select.select([fd], [], [], 0.0)[0]:
+            chunk = os.read(fd, 4096)
+            if not chunk:  # end of input: keep the target, stop reading
+                self._fd = None
+                data += b"\n"
+                break
+            data += chunk
+        if not data:
+            return []
+        *lines, self._buf = (self._buf + data).split(b"\n")
+        return [line.decode("ascii", "replace") for line in lines]
+
+    def _offer(self, text: str, source: str, *, ack: bool = True) -> None:
+        text, acked = split_ack(text)
+        if acked and ack:
+            self._pending_acks.append(source)
+        if not text.strip():
+            return  # an empty file (being rewritten) or a blank line
+        try:
+            self._pending.append((parse_target(text), source))
+        except ValueError as exc:
+            self._refuse(source, str(exc))
+
+    def _refuse(self, source: str, why: str) -> None:
+        self.refused += 1
+        keep = self._pending[-1][0] if self._pending else self.target_mmhg
+        line = f"target from {source} refused: {why}; keeping {keep:g} mmHg"
+        print(f"{self._prog}: {line}", file=self._err or sys.stderr)
+        self._pending_refusals.append(line)
+
+    # ------------------------------------------------------------------ applying
+    def apply(self, inp: TickInputs, recorder: Any = None) -> TickInputs:
+        """Read pending changes, apply them at this tick, and return ``inp`` carrying the
+        runtime's target (``target_tick`` = the tick: it is current). Changes and refusals are
+        logged to ``recorder`` (a :class:`runtime.record.recorder.Recorder`) when given."""
+        self.poll()
+        tick, t = inp.tick, inp.sim_time_s
+        if not self._announced:
+            self._announced = True
+            if recorder is not None:
+                recorder.event(
+                    tick,
+                    t,
+                    f"target {self.initial_mmhg:g} mmHg from the runtime; the device's MAP_TARGET"
+                    " is ignored",
+                    warn=False,
+                )
+        for line in self._pending_refusals:
+            if recorder is not None:
+                recorder.event(tick, t, line, warn=True)
+        self._pending_refusals.clear()
+        for value, source in self._pending:
+            old = self.target_mmhg
+            if value == old:
+                continue  # rewritten with the same target: no change
+            self.target_mmhg = value
+            self.changes.append(
+                {"tick": tick, "sim_time_s": t, "old_mmhg": old, "new_mmhg": value, "from": source}
+            )
+            if recorder is not None:
+                recorder.event(tick, t, f"target {old:g} -> {value:g} mmHg ({source})", warn=False)
+        self._pending.clear()
+        return replace(inp, target_mmhg=self.target_mmhg, target_tick=tick)
+
+    def take_acks(self) -> list[str]:
+        """The sources of the acknowledgements read since the last call (taken by the tick)."""
+        acks, self._pending_acks = self._pending_acks, []
+        return acks
+
+    def log_ack(
+        self, outcome: AckOutcome, sources: list[str], tick: int, t: float, recorder: Any = None
+    ) -> None:
+        """Keep, print and log (to ``recorder``, a :class:`runtime.record.recorder.Recorder`) what
+        became of the acknowledgement from ``sources`` taken at ``tick`` (sim time ``t``, s)."""
+        source = ", ".join(dict.fromkeys(sources))
+        self.acks.append(
+            {
+                "tick": tick,
+                "sim_time_s": t,
+                "from": source,
+                "state": outcome.state.name,
+                "accepted": outcome.accepted,
+                "outcome": outcome.text,
+            }
+        )
+        line = f"ack ({source}) at {t:g} s, tick {tick}: {outcome.text}"
+        print(f"{self._prog}: {line}", file=self._err or sys.stderr)
+        if recorder is not None:
+            recorder.event(tick, t, line, warn=not outcome.accepted)
+
+    def summary(self) -> dict[str, Any]:
+        """The summary's ``target`` record: source, starting target, changes, refusals,
+        acknowledgements."""
+        return {
+            "source": "runtime",
+            "initial_mmhg": self.initial_mmhg,
+            "changes": list(self.changes),
+            "refused": self.refused,
+            "acks": list(self.acks),
+        }
+
+
+def _file_state(path: Path) -> tuple[int, int, int] | None:
+    """What tells a rewritten file apart: (mtime ns, size, inode); ``None`` when missing."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_mtime_ns, st.st_size, st.st_ino)

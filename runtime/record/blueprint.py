@@ -1,0 +1,151 @@
+"""The layout the rerun viewer opens a recording on (docs/VIEWER.md describes every panel).
+
+The viewer opens on the ``sim_time`` timeline (a duration: the axis reads in minutes and seconds)
+and every plot shows the WHOLE run (both ends of its visible time range infinite), whatever the
+time cursor, so a 51 → 71 mmHg rise is visible at once. Legends sit in the top-right corner, away
+from the start of the traces. Series colours are set where the recorder logs each channel's
+static style (:data:`SERIES_COLORS`), so the commanded and the delivered infusion never share one.
+
+Entity paths referenced here but absent from a recording (``/patient/map_true_mmhg`` when the
+runtime never saw the true MAP, ``/schedule/estimated/*`` when no estimator ran) leave their view
+without that series; referencing them is harmless.
+"""
+
+from __future__ import annotations
+
+import rerun.blueprint as rrb
+import rerun.encodings as rre
+
+#: the timeline the viewer opens on (s of simulated time, logged as a duration)
+TIMELINE = "sim_time"
+#: the safety event log (supervisor transitions, advisory faults) and the run's event markers
+EVENTS_ENTITY = "/safety/events"
+MARKERS_LOG = "/events/log"
+DISTURBANCE_MARKERS = "/events/disturbance"
+FAULT_MARKERS = "/events/fault"
+TRANSITION_MARKERS = "/safety/transitions"
+#: scheduling variables: (name, unit, device entity, entity as the controller used it)
+SCHED_VARS: tuple[tuple[str, str, str, str], ...] = (
+    ("K", "mmHg/(ml/h)", "/schedule/K", "/controller/rho/K"),
+    ("T", "s", "/schedule/T_s", "/controller/rho/T_s"),
+    ("tau", "s", "/schedule/tau_s", "/controller/rho/tau_s"),
+)
+#: design-box bounds: entity of the (low, high) of each scheduling variable, K, T, τ order
+BOX_ENTITIES: tuple[tuple[str, str], ...] = tuple(
+    (f"/schedule/box/{name}_lo", f"/schedule/box/{name}_hi") for name, *_ in SCHED_VARS
+)
+
+_BLUE, _ORANGE, _GREEN, _RED = (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40)
+_PURPLE, _GREY, _BROWN, _BLACK = (148, 103, 189), (127, 127, 127), (140, 86, 75), (0, 0, 0)
+#: entity -> RGB colour of its series (the recorder logs it with the static series style)
+SERIES_COLORS: dict[str, tuple[int, int, int]] = {
+    "/patient/map_mmhg": _BLUE,
+    "/patient/map_true_mmhg": _PURPLE,
+    "/controller/target_mmhg": _BLACK,
+    "/controller/command_ml_h": _ORANGE,
+    "/pump/command_ml_h": _BROWN,
+    "/pump/rate_ml_h": _GREEN,
+    "/pump/volume_ml": _GREEN,
+    "/schedule/K": _BLUE,
+    "/schedule/T_s": _BLUE,
+    "/schedule/tau_s": _BLUE,
+    "/controller/rho/K": _ORANGE,
+    "/controller/rho/T_s": _ORANGE,
+    "/controller/rho/tau_s": _ORANGE,
+    "/loop/exec_us": _BLUE,
+    "/loop/lateness_us": _ORANGE,
+    "/safety/state": _BLUE,
+    "/safety/alarm": _RED,
+    "/safety/faults": _PURPLE,
+    "/link/bad_frames": _BROWN,
+    DISTURBANCE_MARKERS: _PURPLE,
+    FAULT_MARKERS: _RED,
+    TRANSITION_MARKERS: _RED,
+}
+BOX_COLOR = _GREY
+
+_WHOLE_RUN = rrb.VisibleTimeRange(
+    TIMELINE, start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+)
+
+# the data range alone is not enough: without a view range of its own the viewer's x axis follows
+# the time cursor (about 100 s around the newest tick when a recording streams in)
+_WHOLE_RUN_AXIS = rrb.archetypes.TimeAxis(
+    view_range=rre.TimeRange(
+        start=rrb.TimeRangeBoundary.infinite(), end=rrb.TimeRangeBoundary.infinite()
+    )
+)
+
+
+def _plot(name: str, contents: list[str]) -> rrb.TimeSeriesView:
+    """A time-series view of ``contents`` over the whole run, legend top right."""
+    return rrb.TimeSeriesView(
+        name=name,
+        origin="/",
+        contents=contents,
+        time_ranges=_WHOLE_RUN,
+        axis_x=_WHOLE_RUN_AXIS,
+        plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop, visible=True),
+    )
+
+
+def _sched_view(index: int) -> rrb.TimeSeriesView:
+    """K, T or τ: the device's, the controller's (clamped, rate-limited), an estimator's with its
+    90 % band (``/schedule/estimated/*``, when one ran) and the design box."""
+    name, unit, device, used = SCHED_VARS[index]
+    suffix = "" if name == "K" else "_s"
+    estimated = [f"/schedule/estimated/{name}{s}" for s in (suffix, "_lo" + suffix, "_hi" + suffix)]
+    return _plot(f"{name} ({unit})", [device, used, *estimated, *BOX_ENTITIES[index]])
+
+
+#: the dose channels of a ``pressor run`` recording (:func:`runtime.inputs.dosing.log_dose_series`)
+DOSE_ENTITIES = (
+    "/dose/command_ug_min",
+    "/dose/command_ug_kg_min",
+    "/dose/hard_max",
+    "/dose/soft_max",
+)
+
+
+def default_blueprint(dose: bool = False) -> rrb.Blueprint:
+    """The layout the viewer opens on: MAP, infusion, volume, scheduling, timing and safety; with
+    ``dose`` (``pressor run``) the commanded dose (µg/min, µg/kg/min) and the drug library's hard
+    and soft maxima beside the infusion in ml/h."""
+    infusion = [
+        _plot(
+            "Infusion (ml/h)",
+            ["/controller/command_ml_h", "/pump/command_ml_h", "/pump/rate_ml_h"],
+        )
+    ]
+    if dose:
+        infusion.append(_plot("Dose (ug/min, ug/kg/min; library maxima)", list(DOSE_ENTITIES)))
+    infusion.append(_plot("Volume infused (ml)", ["/pump/volume_ml"]))
+    return rrb.Blueprint(
+        rrb.Vertical(
+            _plot(
+                "MAP vs target (mmHg)",
+                [
+                    "/patient/map_mmhg",
+                    "/patient/map_true_mmhg",
+                    "/controller/target_mmhg",
+                    DISTURBANCE_MARKERS,
+                    FAULT_MARKERS,
+                ],
+            ),
+            rrb.Horizontal(*infusion, column_shares=[3, 2, 1] if dose else [3, 1]),
+            rrb.Horizontal(*(_sched_view(i) for i in range(len(SCHED_VARS)))),
+            rrb.Horizontal(
+                _plot("Loop timing (us)", ["/loop/exec_us", "/loop/lateness_us"]),
+                _plot(
+                    "Safety state (0 STARTUP 1 AUTO 2 HOLD 3 FAILSAFE 4 RECOVERING)",
+                    ["/safety/state", "/safety/alarm", TRANSITION_MARKERS],
+                ),
+                rrb.TextLogView(
+                    name="Safety and run events", origin="/", contents=[EVENTS_ENTITY, MARKERS_LOG]
+                ),
+            ),
+            row_shares=[3, 2, 2, 2],
+        ),
+        rrb.TimePanel(timeline=TIMELINE, state="collapsed"),
+        collapse_panels=True,
+    )

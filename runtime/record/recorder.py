@@ -1,0 +1,373 @@
+"""The rerun recorder: every loop signal to an ``.rrd`` file, batched off the hot path.
+
+Per tick the loop calls :meth:`Recorder.record_tick` with the closed-loop core's
+:class:`~runtime.core.closed_loop.TickRecord` (or :meth:`Recorder.record` with one float per
+channel); the row goes into a preallocated ``float64`` array (``chunk_ticks`` rows). When the array
+is full — and at :meth:`Recorder.close` — each channel is sent as one column with ``send_columns``
+on two timelines, ``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call
+and ``send_columns`` ~0.3 µs a scalar (docs/PLATFORM-NOTES.md), so a 15-channel tick costs about a
+microsecond amortised. Rare events (supervisor transitions, alarms, event markers) are logged one
+by one: ``/safety/events`` and ``/events/log`` as ``TextLog``.
+
+Reproducibility: the wall-clock ``log_time`` and ``log_tick`` timelines are disabled, recording
+properties (which carry the wall-clock start time) are not sent, and the recording id is derived from
+the run's label, so two runs with the same seed log the same values on the same timelines.
+
+The file is written to a hidden temporary name next to the target and renamed on :meth:`close`; a
+run that fails (:meth:`abort`) never leaves a half-written or clobbered ``FILE.rrd``.
+
+Entities (units in the names): see :data:`CHANNELS`; besides them, the design box of a scheduled
+controller (:meth:`Recorder.use_controller`, two points per bound: first and last tick), markers on
+the MAP plot where a disturbance or fault starts (:meth:`Recorder.plan_markers`) and on the safety
+plot at each supervisor transition. The viewer's layout is
+:func:`runtime.record.blueprint.default_blueprint` (docs/VIEWER.md).
+"""
+
+from __future__ import annotations
+
+import math
+import uuid
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rerun as rr
+
+from contracts.controller import Controller
+from contracts.files import AtomicFile
+from runtime.core.closed_loop import TickRecord
+from runtime.core.supervisor_config import sched_limits_of
+from runtime.record.blueprint import (
+    BOX_COLOR,
+    BOX_ENTITIES,
+    DISTURBANCE_MARKERS,
+    EVENTS_ENTITY,
+    FAULT_MARKERS,
+    MARKERS_LOG,
+    SERIES_COLORS,
+    TRANSITION_MARKERS,
+    default_blueprint,
+)
+
+#: (entity path, legend label) — the column order of :meth:`Recorder.record`.
+CHANNELS: tuple[tuple[str, str], ...] = (
+    ("/patient/map_mmhg", "MAP measured (mmHg)"),
+    ("/controller/target_mmhg", "target (mmHg)"),
+    ("/controller/command_ml_h", "controller command (ml/h)"),
+    ("/pump/command_ml_h", "command sent (ml/h)"),
+    ("/pump/rate_ml_h", "delivered rate (ml/h)"),
+    ("/pump/volume_ml", "volume delivered (ml)"),
+    ("/schedule/K", "K (mmHg/(ml/h))"),
+    ("/schedule/T_s", "T (s)"),
+    ("/schedule/tau_s", "tau (s)"),
+    ("/controller/rho/K", "K as the controller used it (mmHg/(ml/h))"),
+    ("/controller/rho/T_s", "T as the controller used it (s)"),
+    ("/controller/rho/tau_s", "tau as the controller used it (s)"),
+    ("/loop/exec_us", "execution time (us)"),
+    ("/loop/lateness_us", "release lateness (us)"),
+    ("/safety/state", "supervisor state (0 STARTUP 1 AUTO 2 HOLD 3 FAILSAFE 4 RECOVERING)"),
+    ("/safety/faults", "fault bits"),
+    ("/safety/alarm", "alarm (0/1)"),
+    ("/link/bad_frames", "bad frames (count)"),
+    ("/schedule/estimated/K", "K scheduled on (mmHg/(ml/h))"),
+    ("/schedule/estimated/T_s", "T scheduled on (s)"),
+    ("/schedule/estimated/tau_s", "tau scheduled on (s)"),
+    ("/schedule/estimated/K_lo", "K 90 % band low (mmHg/(ml/h))"),
+    ("/schedule/estimated/K_hi", "K 90 % band high (mmHg/(ml/h))"),
+    ("/schedule/estimated/T_lo_s", "T 90 % band low (s)"),
+    ("/schedule/estimated/T_hi_s", "T 90 % band high (s)"),
+    ("/schedule/estimated/tau_lo_s", "tau 90 % interval low (s)"),
+    ("/schedule/estimated/tau_hi_s", "tau 90 % interval high (s)"),
+)
+#: standard normal quantile of a two-sided 90 % band (K and T bands from their standard deviations)
+_Z90 = 1.6449
+CHANNEL_INDEX: dict[str, int] = {path: i for i, (path, _) in enumerate(CHANNELS)}
+_NO_RHO = (math.nan, math.nan, math.nan)
+_BAND_CHANNELS = tuple(
+    f"/schedule/estimated/{name}"
+    for name in ("K_lo", "K_hi", "T_lo_s", "T_hi_s", "tau_lo_s", "tau_hi_s")
+)
+
+
+class Recorder:
+    """Buffered ``.rrd`` writer for the loop.
+
+    Parameters
+    ----------
+    path
+        Target ``.rrd`` file; its directory must exist. Written only on :meth:`close`.
+    run_label
+        Text identifying the run (controller, scenario, seed, ...): the recording id is derived
+        from it (UUID v5) so identical runs get identical ids.
+    chunk_ticks
+        Rows buffered before a flush, in [16, 1_000_000].
+    dose_view
+        Open the viewer with the dose plot (``pressor run``:
+        :func:`runtime.inputs.dosing.log_dose_series` adds its series).
+    """
+
+    def __init__(
+        self, path: str | Path, run_label: str, chunk_ticks: int = 4096, dose_view: bool = False
+    ) -> None:
+        if not 16 <= chunk_ticks <= 1_000_000:
+            raise ValueError(f"chunk_ticks={chunk_ticks!r} outside [16, 1000000]")
+        self.path = Path(path)
+        if not self.path.parent.is_dir():
+            raise FileNotFoundError(f"{self.path}: directory {self.path.parent} does not exist")
+        self._target = AtomicFile(self.path)
+        rid = uuid.uuid5(uuid.NAMESPACE_URL, f"pressor:{run_label}")
+        self._rec = rr.RecordingStream("pressor", recording_id=rid, send_properties=False)
+        self._rec.set_log_time_enabled(False)
+        self._rec.set_log_tick_enabled(False)
+        self._rec.save(str(self._target.tmp), default_blueprint=default_blueprint(dose_view))
+        self._rec.send_recording_name(run_label)
+        for entity, label in CHANNELS:
+            self._rec.log(
+                entity, rr.SeriesLines(names=label, colors=SERIES_COLORS.get(entity)), static=True
+            )
+        for entity, label in (
+            (DISTURBANCE_MARKERS, "disturbance starts"),
+            (FAULT_MARKERS, "fault starts"),
+            (TRANSITION_MARKERS, "supervisor transition"),
+        ):
+            style = rr.SeriesPoints(names=label, colors=SERIES_COLORS[entity], marker_sizes=6.0)
+            self._rec.log(entity, style, static=True)
+        self._box: tuple[tuple[float, float], ...] | None = None
+        self._rho_of: Any = None
+        self._markers: list[tuple[float, str, str]] = []
+        self._first_tick: tuple[int, float] | None = None
+        self._last_tick: tuple[int, float] | None = None
+        self._ticks = np.zeros(chunk_ticks, dtype=np.int64)
+        self._times = np.zeros(chunk_ticks, dtype=np.float64)
+        self._values = np.full((chunk_ticks, len(CHANNELS)), math.nan, dtype=np.float64)
+        self._n = 0
+        self._row = [math.nan] * len(CHANNELS)
+        self.rows_written = 0
+        self._closed = False
+
+    def use_controller(self, controller: Controller) -> None:
+        """Record what ``controller`` declares: its design box (``/schedule/box/*``) and the K, T, τ
+        it scheduled on after its own clamp and rate limit (``/controller/rho/*``: its
+        ``scheduled_rho()``, or for a generated LPV module the last three values of its
+        ``state()``). Call before the first tick; other controllers leave those channels NaN."""
+        self._box = sched_limits_of(controller)[0]
+        scheduled_rho, state = (getattr(controller, n, None) for n in ("scheduled_rho", "state"))
+        if callable(scheduled_rho):
+            self._rho_of = scheduled_rho
+        elif self._box is not None and callable(state):
+            self._rho_of = lambda: state()[-3:]
+        else:
+            self._rho_of = None
+        if self._box is not None:
+            for lo_entity, hi_entity in BOX_ENTITIES:
+                for entity, side in ((lo_entity, "low"), (hi_entity, "high")):
+                    style = rr.SeriesLines(names=f"design box {side}", colors=BOX_COLOR)
+                    self._rec.log(entity, style, static=True)
+
+    def plan_markers(self, markers: Sequence[tuple[float, str, str]]) -> None:
+        """Mark events on the MAP plot when the run reaches them.
+
+        Parameters
+        ----------
+        markers
+            ``(start_s, kind, text)``: sim time (s), ``disturbance`` or ``fault``, and the text
+            logged to ``/events/log``. The marker sits on the measured MAP of the first tick at or
+            after ``start_s`` (on the target when MAP is missing).
+        """
+        self._markers = sorted(markers, reverse=True)
+
+    def record(self, tick: int, sim_time_s: float, values: Sequence[float]) -> None:
+        """Buffer one tick: ``values`` in :data:`CHANNELS` order (NaN for "not available")."""
+        if self._first_tick is None:
+            self._first_tick = (tick, sim_time_s)
+            self._log_box(tick, sim_time_s)
+        self._last_tick = (tick, sim_time_s)
+        if self._markers and self._markers[-1][0] <= sim_time_s:
+            self._log_markers(tick, sim_time_s, values)
+        n = self._n
+        self._ticks[n] = tick
+        self._times[n] = sim_time_s
+        self._values[n] = values
+        self._n = n + 1
+        if self._n == self._ticks.shape[0]:
+            self.flush()
+
+    def record_tick(
+        self,
+        rec: TickRecord,
+        map_mmhg: float,
+        pump: Any,
+        bad_frames: int,
+        exec_s: float,
+        lateness_s: float,
+    ) -> None:
+        """Buffer one tick of the loop.
+
+        Parameters
+        ----------
+        rec
+            The closed-loop core's record of the tick.
+        map_mmhg
+            MAP as recorded (mmHg; NaN on a silent tick).
+        pump
+            Newest pump status (``delivered_ml_h``, ``volume_ml``), ``None`` before the first.
+        bad_frames
+            Frames the link refused so far (bad CRC, refused signatures, resyncs).
+        exec_s, lateness_s
+            The tick's execution time and release lateness (s).
+        """
+        inp, out = rec.inputs, rec.supervisor
+        row = self._row
+        ix = CHANNEL_INDEX
+        row[ix["/patient/map_mmhg"]] = map_mmhg
+        row[ix["/controller/target_mmhg"]] = inp.target_mmhg
+        row[ix["/controller/command_ml_h"]] = rec.controller_ml_h
+        row[ix["/pump/command_ml_h"]] = out.command_ml_h
+        row[ix["/pump/rate_ml_h"]] = pump.delivered_ml_h if pump is not None else math.nan
+        row[ix["/pump/volume_ml"]] = pump.volume_ml if pump is not None else math.nan
+        row[ix["/schedule/K"]] = inp.K
+        row[ix["/schedule/T_s"]] = inp.T_s
+        row[ix["/schedule/tau_s"]] = inp.tau_s
+        stepped = self._rho_of is not None and rec.controller_ml_h == rec.controller_ml_h
+        used = self._rho_of() if stepped else _NO_RHO  # NaN: controller not stepped
+        row[ix["/controller/rho/K"]] = used[0]
+        row[ix["/controller/rho/T_s"]] = used[1]
+        row[ix["/controller/rho/tau_s"]] = used[2]
+        row[ix["/loop/exec_us"]] = exec_s * 1e6
+        row[ix["/loop/lateness_us"]] = lateness_s * 1e6
+        row[ix["/safety/state"]] = float(out.state)
+        row[ix["/safety/faults"]] = float(out.faults)
+        row[ix["/safety/alarm"]] = 1.0 if out.alarm else 0.0
+        row[ix["/link/bad_frames"]] = float(bad_frames)
+        self._record_schedule(rec, row)
+        self.record(inp.tick, inp.sim_time_s, row)
+
+    @staticmethod
+    def _record_schedule(rec: TickRecord, row: list[float]) -> None:
+        """``/schedule/estimated/*``: the K, T, τ the controller was scheduled on when the source
+        is not the oracle (``/schedule/K`` ... stay the device's values, its truth when it sends
+        one), with the estimator's 90 % bands (NaN for the nominal source and the oracle)."""
+        ix = CHANNEL_INDEX
+        sched = rec.schedule
+        nan = math.nan
+        own = sched.source != "oracle"
+        row[ix["/schedule/estimated/K"]] = sched.K if own else nan
+        row[ix["/schedule/estimated/T_s"]] = sched.T_s if own else nan
+        row[ix["/schedule/estimated/tau_s"]] = sched.tau_s if own else nan
+        est = sched.estimate
+        if est is None:
+            band = (nan,) * 6
+        else:
+            dk, dt = _Z90 * est.K_std, _Z90 * est.T_std_s
+            band = (est.K - dk, est.K + dk, est.T_s - dt, est.T_s + dt, est.tau_lo_s, est.tau_hi_s)
+        for name, value in zip(_BAND_CHANNELS, band, strict=True):
+            row[ix[name]] = value
+
+    def event(
+        self, tick: int, sim_time_s: float, text: str, warn: bool = True, state: int | None = None
+    ) -> None:
+        """Log a supervisor transition or alarm to ``/safety/events`` (rare; not batched); a
+        transition (``state``: the new state) is also marked on the safety plot."""
+        self._at(tick, sim_time_s)
+        level = rr.TextLogLevel.WARN if warn else rr.TextLogLevel.INFO
+        self._rec.log(EVENTS_ENTITY, rr.TextLog(text, level=level))
+        if state is not None:
+            self._rec.log(TRANSITION_MARKERS, rr.Scalars(float(state)))
+
+    def _log_markers(self, tick: int, sim_time_s: float, values: Sequence[float]) -> None:
+        """Log every planned marker due by ``sim_time_s`` on this tick's MAP (else target)."""
+        y = values[CHANNEL_INDEX["/patient/map_mmhg"]]
+        if y != y:
+            y = values[CHANNEL_INDEX["/controller/target_mmhg"]]
+        self._at(tick, sim_time_s)
+        markers = self._markers
+        while markers and markers[-1][0] <= sim_time_s:
+            _, kind, text = markers.pop()
+            entity = DISTURBANCE_MARKERS if kind == "disturbance" else FAULT_MARKERS
+            self._rec.log(entity, rr.Scalars(y))
+            self._rec.log(MARKERS_LOG, rr.TextLog(text, level=rr.TextLogLevel.INFO))
+
+    def _at(self, tick: int, sim_time_s: float) -> None:
+        self._rec.set_time("tick", sequence=tick)
+        self._rec.set_time("sim_time", duration=sim_time_s)
+
+    def _log_box(self, tick: int, sim_time_s: float) -> None:
+        """Log the design box's bounds at this tick (the first and the last of the run)."""
+        if self._box is None:
+            return
+        self._at(tick, sim_time_s)
+        for (lo, hi), (lo_entity, hi_entity) in zip(self._box, BOX_ENTITIES, strict=True):
+            self._rec.log(lo_entity, rr.Scalars(lo))
+            self._rec.log(hi_entity, rr.Scalars(hi))
+
+    def flush(self) -> None:
+        """Send the buffered rows as one column per channel."""
+        n = self._n
+        if n == 0:
+            return
+        indexes = [
+            rr.TimeColumn("tick", sequence=self._ticks[:n].copy()),
+            rr.TimeColumn("sim_time", duration=self._times[:n].copy()),
+        ]
+        for j, (entity, _) in enumerate(CHANNELS):
+            self._rec.send_columns(
+                entity,
+                indexes=indexes,
+                columns=rr.Scalars.columns(scalars=self._values[:n, j].copy()),
+            )
+        self.rows_written += n
+        self._n = 0
+
+    def log_series(
+        self,
+        entity: str,
+        label: str,
+        ticks: np.ndarray,
+        times_s: np.ndarray,
+        values: np.ndarray,
+    ) -> None:
+        """Add a whole series named ``label`` that did not come through the loop (the simulated
+        device's true MAP) on the same two timelines; call before :meth:`close`."""
+        style = rr.SeriesLines(names=label, colors=SERIES_COLORS.get(entity))
+        self._rec.log(entity, style, static=True)
+        self._rec.send_columns(
+            entity,
+            indexes=[
+                rr.TimeColumn("tick", sequence=np.asarray(ticks, dtype=np.int64)),
+                rr.TimeColumn("sim_time", duration=np.asarray(times_s, dtype=np.float64)),
+            ],
+            columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64)),
+        )
+
+    def close(self) -> Path:
+        """Flush, finish the file and move it to ``path``; return ``path``."""
+        if self._closed:
+            return self.path
+        self.flush()
+        if self._last_tick is not None and self._last_tick != self._first_tick:
+            self._log_box(*self._last_tick)
+        self._rec.flush()
+        self._rec.disconnect()
+        self._target.commit()
+        self._closed = True
+        return self.path
+
+    def abort(self) -> None:
+        """Drop the recording: the temporary file is removed, ``path`` is left untouched."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._rec.disconnect()
+        finally:
+            self._target.discard()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
