@@ -5,9 +5,9 @@ the same algorithm (see :mod:`codegen.fixed_point` for the integer formats):
 
 1. e = target - MAP; any non-finite input (or e) holds the last command, updates nothing and sets
    ``status.input_invalid``. With the design's two-degree-of-freedom prefilter
-   (:mod:`synthesis.reference`, emitted only when the artifact enables it) e = r_m - MAP instead,
-   r_m and the feedforward u_ff from the scheduled model, in double in both modes. e is clamped to
-   +-E_LIM.
+   (:mod:`synthesis.problem.reference`, emitted only when the artifact enables it) e = r_m - MAP
+   instead, r_m and the feedforward u_ff from the scheduled model, in double in both modes. e is
+   clamped to +-E_LIM.
 2. rho -> grid coordinates s_i = (rho_i - lo_i) * inv_h_i, clamped to [0, n_i - 1] (never
    extrapolated, ``rho_clamped``), then rate-limited to the synthesis bounds (``rho_rate_limited``;
    the first step after reset takes rho as is).

@@ -3,7 +3,7 @@
 ``synthesis`` may not import ``runtime`` (docs/ARCHITECTURE.md), so ``pressor verify
 --controller SPEC`` gets its plugin from here: :func:`load_plugin` resolves the spec with
 :mod:`runtime.controller_plugin` and hands the instance to the synthesis side, which checks its
-nominal step (:mod:`synthesis.verify_plugin`). Without ``--controller`` this is the artifact
+nominal step (:mod:`synthesis.verification.plugin`). Without ``--controller`` this is the artifact
 verification, unchanged.
 """
 

@@ -106,5 +106,7 @@ def test_package_imports_only_along_the_allowed_arrows(package):
 
 def test_the_import_scan_sees_function_local_imports(tmp_path):
     module = tmp_path / "m.py"
-    module.write_text("def f():\n    from synthesis.lmi import x\n    import hil_sim.world\n")
+    module.write_text(
+        "def f():\n    from synthesis.families.theorem3.lmi import x\n    import hil_sim.world\n"
+    )
     assert imported_top_levels(module) == {"synthesis", "hil_sim"}

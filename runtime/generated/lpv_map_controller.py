@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  d60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b
-Content hash:     cdccc0035530754b4a726e0c31d58c1b8af05d55c7cbae8ad37749814e056ada
+Content hash:     7dc02a1fb9551f08782b9c236aac635e87329a245b7cae459eb8bf1f09ae9f21
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '0486d3e7daab33be512ccad557acdb3a225a5101ddf1fc525988b9f5894cfe93'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '1e39a0826154af0e50eef2774365f5ddf5a7d48a3b568c24ed23dc7b27224ad5'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'd60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b'
-CONTENT_HASH = 'cdccc0035530754b4a726e0c31d58c1b8af05d55c7cbae8ad37749814e056ada'
+CONTENT_HASH = '7dc02a1fb9551f08782b9c236aac635e87329a245b7cae459eb8bf1f09ae9f21'
 TABLES_SHA256 = 'e736ddebfe5179dfdbc6981025cbb0e5ef7298da5c7e699a452a7017523f1499'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31
 Artifact sha256:  114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd
-Content hash:     6dca39406ecc028277f8c2b85203532354a1dcba04591cb20da7cdd2f4c74eb1
+Content hash:     9e9bf0e3fdf52857f83906533ac3629bef8bef431f330380e673e7b5749ff810
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'd8d86f38d5817a609fdbedfdb10d91552c9d80f4da80e1a85c92f2e0146512a4'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '653a9681f0f2027a8a265dccdcdda7557883ad674d635d4c4f4a35594b4c49f1'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = '114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd'
-CONTENT_HASH = '6dca39406ecc028277f8c2b85203532354a1dcba04591cb20da7cdd2f4c74eb1'
+CONTENT_HASH = '9e9bf0e3fdf52857f83906533ac3629bef8bef431f330380e673e7b5749ff810'
 TABLES_SHA256 = '0d1ccefeea03128a1d935e8d7cc8d5bfdac89085e3823c267c71c6c1312a5ffb'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
