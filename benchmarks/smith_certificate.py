@@ -1,29 +1,31 @@
 """Certify the Smith predictor in the LPV controller class with the Wirtinger-based analysis LMI.
 
-Builds the scheduled Smith predictor (:class:`synthesis.smith_lpv.SmithLPV`) at every point of a
-grid over the shipped design's box, closes it with the shipped plant model and weights (so γ
-compares with the shipped design's, :func:`synthesis.smith_design.smith_loops`), and runs the
-design's own certificate (the Wirtinger analysis LMI conditioned by the nominal point's frozen
+Builds the scheduled Smith predictor (:class:`synthesis.families.smith.law.SmithLPV`) at every point
+of a grid over the shipped design's box, closes it with the shipped plant model and weights (so γ
+compares with the shipped design's, :func:`synthesis.families.smith.design.smith_loops`), and runs
+the design's own certificate (the Wirtinger analysis LMI conditioned by the nominal point's frozen
 certificate) through the research entry :func:`synthesis.research.certify_smith_form`, which takes
-the formulation options the shipped :func:`synthesis.smith_design.certify_smith` does not: all rate
-vertices or one LMI per point, working set, coupling, parameters of P, coordinates. Prints the certificate verdict, γ, the smallest re-checked margin, wall and CPU time and
-peak RSS (figures in docs/CERTIFICATE-STRUCTURE.md)::
+the formulation options the shipped :func:`synthesis.families.smith.design.certify_smith` does not:
+all rate vertices or one LMI per point, working set, coupling, parameters of P, coordinates. Prints
+the certificate verdict, γ, the smallest re-checked margin, wall and CPU time and peak RSS (figures
+in docs/CERTIFICATE-STRUCTURE.md)::
 
     python -m benchmarks.smith_certificate --loop-gain 2 --grid 3,3,3 [--p-dependence quadratic]
-    python -m benchmarks.smith_certificate --loop-gain 2 --grid 5,5,5 --working-set 27 --gamma-cap 15
+    python -m benchmarks.smith_certificate --loop-gain 2 --grid 5,5,5 --working-set 27 --gamma-cap
+    15
 
 ``--working-set K`` imposes the LMI at K spread points and re-checks every point and rate vertex
-(the verdict covers the whole grid either way); ``--gamma-cap G`` solves the feasibility form (γ ≤ G,
-largest common margin), whose solution is off the boundary of the points left out; it uses the
-Clarabel settings of the shipped feasibility solve (``FEASIBILITY_SOLVER_OPTIONS``: looser
-gap tolerances, no iterative refinement), so its margin t and timings can differ slightly from
-capped figures measured before that (the verdict is the floating-point re-check either way).
-``--rate-form bound`` is the cheap form (one LMI per point with rate slacks; ``--epsilon 5e-5``
-keeps its minimum-γ solution inside the vertex LMIs, so no back-off solve is needed);
-``--coupling per_point`` gives each point its own copy of P, ``--p-params K,tau`` lets P depend on
-those parameters only. ``--coordinates k_scaled`` uses the K-scaled functional
-(:mod:`synthesis.k_scaling`: u and û times K, the K rate and r = K(t)/K(t − τ) as rate
-coordinates), which certifies loop gain 3::
+(the verdict covers the whole grid either way); ``--gamma-cap G`` solves the feasibility form (γ ≤
+G, largest common margin), whose solution is off the boundary of the points left out; it uses the
+Clarabel settings of the shipped feasibility solve (``FEASIBILITY_SOLVER_OPTIONS``: looser gap
+tolerances, no iterative refinement), so its margin t and timings can differ slightly from capped
+figures measured before that (the verdict is the floating-point re-check either way). ``--rate-form
+bound`` is the cheap form (one LMI per point with rate slacks; ``--epsilon 5e-5`` keeps its
+minimum-γ solution inside the vertex LMIs, so no back-off solve is needed); ``--coupling per_point``
+gives each point its own copy of P, ``--p-params K,tau`` lets P depend on those parameters only.
+``--coordinates k_scaled`` uses the K-scaled functional
+(:mod:`synthesis.certificates.wirtinger.k_scaling`: u and û times K, the K rate and r = K(t)/K(t −
+τ) as rate coordinates), which certifies loop gain 3::
 
     python -m benchmarks.smith_certificate --loop-gain 3 --grid 5,5,5 --rate-form bound \
         --coordinates k_scaled --gamma-cap 8
@@ -59,10 +61,10 @@ def _progress(t0: float) -> Callable[[str], None]:
 def main() -> None:
     """Parse the arguments, solve, print one line of figures."""
     from synthesis.artifact import default_artifact_path, load_artifact
-    from synthesis.reconstruct import scaling_of
+    from synthesis.families.smith.design import nominal_centre, smith_loops
+    from synthesis.families.smith.law import SmithLPV
+    from synthesis.problem.reconstruct import scaling_of
     from synthesis.research import certify_smith_form
-    from synthesis.smith_design import nominal_centre, smith_loops
-    from synthesis.smith_lpv import SmithLPV
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--loop-gain", type=float, default=2.0, help="K*Kc = T/lambda (default 2)")

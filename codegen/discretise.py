@@ -1,6 +1,7 @@
 """Exact sampled-data (ZOH) discretisation of the delayed controller, input filter and integrator.
 
-The synthesis controller (``synthesis.reconstruct.controller_at``, physical units, time in s) is::
+The synthesis controller (``synthesis.problem.reconstruct.controller_at``, physical units, time in
+s) is::
 
     dx_k/dt = Ak x_k + Adk x_k(t - tau) + Bk y,      y = [e_mmhg, x_e_mmhg_s]
     u_a     = Ck x_k + Cdk x_k(t - tau) + Dk y
@@ -53,7 +54,10 @@ Matrix = NDArray[np.float64]
 
 
 class ContinuousController(Protocol):
-    """Anything with the ``synthesis.reconstruct.DelayedController`` matrices (time in s)."""
+    """Anything with the ``synthesis.problem.reconstruct.DelayedController`` matrices.
+
+    Time in s.
+    """
 
     Ak: Matrix
     Adk: Matrix

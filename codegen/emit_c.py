@@ -3,9 +3,9 @@
 One scalar typedef (``lpvmap_scalar_t``: ``int32_t`` Q0.31 in fixed-point mode, ``double`` in float
 mode), static const tables, caller-owned ``lpvmap_state_t``, no heap and no libm call in the step
 (reciprocals of the grid spacings are stored; finiteness is tested with ``x - x != 0``). The only
-divisions are the prefilter's (:mod:`synthesis.reference`, emitted when the design enables it), by
-its K and T clamped to strictly positive ranges. The fixed-point step is the integer twin of the
-Python module's ``Controller(fixed_point=True)`` and agrees with it bit for bit (see
+divisions are the prefilter's (:mod:`synthesis.problem.reference`, emitted when the design enables
+it), by its K and T clamped to strictly positive ranges. The fixed-point step is the integer twin
+of the Python module's ``Controller(fixed_point=True)`` and agrees with it bit for bit (see
 :mod:`codegen.fixed_point` for formats, accumulators and shifts; it relies on arithmetic right
 shifts of negative values, asserted at compile time, and the prefilter's double arithmetic on
 IEEE-754 operations in the Python order, i.e. no contraction into fused multiply-adds: gcc's
@@ -154,7 +154,8 @@ def emit_c(
 
 
 def _reference_fields(spec: EmitSpec) -> str:
-    """State of the two-degree-of-freedom prefilter (synthesis.reference), when the design has one."""
+    """State of the two-degree-of-freedom prefilter (synthesis.problem.reference), when the design
+    has one."""
     if spec.reference is None:
         return ""
     lam, frac, k_min = spec.reference

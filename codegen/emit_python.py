@@ -5,9 +5,9 @@ the same algorithm (see :mod:`codegen.fixed_point` for the integer formats):
 
 1. e = target - MAP; any non-finite input (or e) holds the last command, updates nothing and sets
    ``status.input_invalid``. With the design's two-degree-of-freedom prefilter
-   (:mod:`synthesis.reference`, emitted only when the artifact enables it) e = r_m - MAP instead,
-   r_m and the feedforward u_ff from the scheduled model, in double in both modes. e is clamped to
-   +-E_LIM.
+   (:mod:`synthesis.problem.reference`, emitted only when the artifact enables it) e = r_m - MAP
+   instead, r_m and the feedforward u_ff from the scheduled model, in double in both modes. e is
+   clamped to +-E_LIM.
 2. rho -> grid coordinates s_i = (rho_i - lo_i) * inv_h_i, clamped to [0, n_i - 1] (never
    extrapolated, ``rho_clamped``), then rate-limited to the synthesis bounds (``rho_rate_limited``;
    the first step after reset takes rho as is).
@@ -103,8 +103,8 @@ def _reference_doc(spec: EmitSpec) -> str:
     if spec.reference is None:
         return ""
     lam, frac, k_min = spec.reference
-    return f"""Two degrees of freedom (synthesis.reference; lambda {lam!r} s, pump fraction {frac!r},
-K floor {k_min!r} mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
+    return f"""Two degrees of freedom (synthesis.problem.reference; lambda {lam!r} s, pump fraction
+{frac!r}, K floor {k_min!r} mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
 MAP after reset generates the reference MAP r_m and the feedforward
 u_ff = clamp((p + T (dr - p) / lambda) / K, 0, cap), with p = y0 + y_m - y0(t - tau) (Smith
 prediction), dr = target - anchor and cap = max(fraction * MAX_RATE_ML_H, min(MAX_RATE_ML_H,

@@ -26,7 +26,8 @@ def _clamp_lines(var: str, src: str, i: int, lo: str = "") -> list[str]:
 
 
 def _reference_lines() -> list[str]:
-    """The prefilter (synthesis.reference), in double in both modes; sets e = r_m - MAP, uff."""
+    """The prefilter (synthesis.problem.reference), in double in both modes; sets e = r_m - MAP,
+    uff."""
     L = []
     L.append("        if not self._anchored:")
     L.append("            self._m0 = map_mmhg")

@@ -40,7 +40,7 @@ class EmitSpec:
         Name -> (value, description) error budgets stated in the header.
     reference
         (lambda_s, pump_fraction, k_min) of the two-degree-of-freedom prefilter
-        (:mod:`synthesis.reference`), or None: the controller then sees the target directly.
+        (:mod:`synthesis.problem.reference`), or None: the controller then sees the target directly.
     drug
         The drug and syringe concentration (µg/ml) the gains are for.
     """

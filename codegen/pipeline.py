@@ -85,7 +85,7 @@ class LoadedDesign:
     display_path
         Path as shown in the generation command (repository-relative when inside the repo).
     controller_fn
-        rho -> delayed continuous controller (``synthesis.reconstruct.controller_at``).
+        rho -> delayed continuous controller (``synthesis.problem.reconstruct.controller_at``).
     box, rate_bounds
         (3, 2) box and (3,) rate bounds (K mmHg/(ml/h), T s, tau s; per s).
     omega, lambda_
@@ -96,7 +96,7 @@ class LoadedDesign:
         Node counts of the synthesis grid (the tabulation search starts there).
     reference
         (lambda_s, pump_fraction, k_min) of the design's two-degree-of-freedom prefilter
-        (``synthesis.reference``), or None when the artifact has none or it is disabled.
+        (``synthesis.problem.reference``), or None when the artifact has none or it is disabled.
     drug
         The drug and syringe concentration the gains are for (the artifact's ``design.drug``,
         phenylephrine at 100 µg/ml when it names none); emitted as ``DRUG`` and
@@ -164,7 +164,7 @@ def load_design(path: str | Path) -> LoadedDesign:
     if not path.is_file():
         raise CodegenError(f"{path}: artifact not found")
     from synthesis.artifact import ArtifactError, load_artifact
-    from synthesis.reconstruct import controller_at
+    from synthesis.problem.reconstruct import controller_at
 
     try:
         art = load_artifact(path)

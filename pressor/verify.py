@@ -3,8 +3,8 @@
 ``synthesis`` may not import ``runtime`` (docs/ARCHITECTURE.md), so ``pressor verify
 --controller SPEC`` gets its plugin from here: :func:`load_plugin` resolves the spec with
 :mod:`runtime.inputs.controller_plugin` and hands the instance to the synthesis side, which checks
-its nominal step (:mod:`synthesis.verify_plugin`). Without ``--controller`` this is the artifact
-verification, unchanged.
+its nominal step (:mod:`synthesis.verification.plugin`). Without ``--controller`` this is the
+artifact verification, unchanged.
 """
 
 from __future__ import annotations

@@ -8,20 +8,20 @@ Layout (``numpy.savez``, no pickled objects):
   config), ``scaling``, ``lambda2``, ``lambda3``, ``gamma``, ``solver`` (name, status, times,
   iterations), ``verification`` (``null`` until :func:`with_verification` fills it), ``created_by``,
   and optionally ``reference`` (``enabled``, ``lambda_s``, ``pump_fraction``, ``k_min``: the 2-DOF
-  prefilter of :mod:`synthesis.reference`; absent in older artifacts, read as disabled), and
-  optionally ``controller`` (``structure``, ``loop_gain``: the family of :mod:`synthesis.family`;
-  absent in older artifacts and in every artifact of the default family; a family without a
-  synthesis LMI stores null ``lambda2``/``lambda3`` and its analysis' bound on the design grid as
-  ``gamma``), and optionally ``design.drug`` (``name``, ``concentration_ug_ml``: the drug and
-  syringe the gains are for, :class:`contracts.drug.DrugBinding`; absent in artifacts made before
-  designs named their drug, read as :data:`contracts.drug.DEFAULT_BINDING`, phenylephrine at
-  100 µg/ml).
+  prefilter of :mod:`synthesis.problem.reference`; absent in older artifacts, read as disabled), and
+  optionally ``controller`` (``structure``, ``loop_gain``: the family of
+  :mod:`synthesis.families.registry`; absent in older artifacts and in every artifact of the default
+  family; a family without a synthesis LMI stores null ``lambda2``/``lambda3`` and its analysis'
+  bound on the design grid as ``gamma``), and optionally ``design.drug`` (``name``,
+  ``concentration_ug_ml``: the drug and syringe the gains are for,
+  :class:`contracts.drug.DrugBinding`; absent in artifacts made before designs named their drug,
+  read as :data:`contracts.drug.DEFAULT_BINDING`, phenylephrine at 100 µg/ml).
 * ``coef_<name>`` — the family's coefficients
-  (:meth:`synthesis.family.Family.coefficient_shapes`): the decision variables of a synthesised
-  family (scaled coordinates), the certificate of an analysed one.
+  (:meth:`synthesis.families.registry.Family.coefficient_shapes`): the decision variables of a
+  synthesised family (scaled coordinates), the certificate of an analysed one.
 * ``node_<name>`` — the controller at the grid nodes, physical units (time in s), shape
   ``(nK, nT, ntau, rows, cols)`` for Ak, Adk, Bk, Ck, Cdk, Dk (controller order:
-  :meth:`synthesis.family.Family.controller_order`).
+  :meth:`synthesis.families.registry.Family.controller_order`).
 * ``sha256`` — uint8 bytes of the hex digest of everything above (canonical order).
 
 Loading checks the format version, every expected field's presence, dtype, shape and finiteness and
@@ -43,10 +43,10 @@ import numpy as np
 
 from contracts.drug import DEFAULT_BINDING, DrugBinding
 from contracts.files import AtomicFile
-from synthesis.config import ModelConfig
-from synthesis.family import ControllerFamily
-from synthesis.model import dims
-from synthesis.reference import ReferenceConfig
+from synthesis.families.registry import ControllerFamily
+from synthesis.problem.config import ModelConfig
+from synthesis.problem.model import dims
+from synthesis.problem.reference import ReferenceConfig
 
 FORMAT_VERSION = 1
 
@@ -54,7 +54,7 @@ FORMAT_VERSION = 1
 def node_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
     """Controller of order ``n`` at the grid nodes: name -> (rows, cols).
 
-    The order is the family's (:meth:`synthesis.family.Family.controller_order`).
+    The order is the family's (:meth:`synthesis.families.registry.Family.controller_order`).
     """
     return {
         "Ak": (n, n),
@@ -96,7 +96,7 @@ class ControllerArtifact:
         The JSON metadata (see module docstring).
     coefficients
         The family's coefficients, name -> array
-        (:meth:`synthesis.family.Family.coefficient_shapes`).
+        (:meth:`synthesis.families.registry.Family.coefficient_shapes`).
     nodes
         Reconstructed controller at the grid nodes, name -> (nK, nT, ntau, rows, cols) (physical).
     """
@@ -149,15 +149,15 @@ class ControllerArtifact:
 
     @property
     def reference(self) -> ReferenceConfig:
-        """The design's prefilter (:class:`~synthesis.reference.ReferenceConfig`); disabled when the
-        artifact carries none."""
+        """The design's prefilter (:class:`~synthesis.problem.reference.ReferenceConfig`); disabled
+        when the artifact carries none."""
         ref = self.metadata.get("reference")
         return ReferenceConfig() if ref is None else ReferenceConfig.from_dict(ref)
 
     @property
     def family(self) -> ControllerFamily:
-        """The controller family (:mod:`synthesis.family`); the default one when the artifact has
-        none."""
+        """The controller family (:mod:`synthesis.families.registry`); the default one when the
+        artifact has none."""
         return ControllerFamily.from_metadata(self.metadata)
 
     @property
@@ -168,7 +168,7 @@ class ControllerArtifact:
 
     @property
     def model_config(self) -> ModelConfig:
-        """The design's :class:`~synthesis.config.ModelConfig`."""
+        """The design's :class:`~synthesis.problem.config.ModelConfig`."""
         return ModelConfig.from_dict(self.metadata["model"])
 
 

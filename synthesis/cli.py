@@ -7,17 +7,18 @@
 
 Prints progress on stderr (per λ point, per stage and one line per solver iteration: iteration,
 cost, relative gap, primal and dual residuals), then on stdout γ, solve time, solver status and the
-verification verdict (from :func:`synthesis.verify.verify_artifact`; the result is stored in the artifact's
-``verification`` field). Exit codes: 0 ok, 1 the synthesis finished but the solver or the
-verification failed, 2 bad usage or a bad config value (one line naming file, field, value and
-allowed range).
+verification verdict (from :func:`synthesis.verification.verify.verify_artifact`; the result is
+stored in the artifact's ``verification`` field). Exit codes: 0 ok, 1 the synthesis finished but the
+solver or the verification failed, 2 bad usage or a bad config value (one line naming file, field,
+value and allowed range).
 
-The design stage is the config's controller family's (:meth:`synthesis.family.Family.design`):
-the shipped family certifies its closed-form law with the Wirtinger analysis on the design grid,
-the Theorem-3 family synthesises; if the design does not certify, the command says so, writes
-nothing and exits 1. ``--lambda-search``, ``--lambda2``, ``--lambda3`` and ``--backoff`` are
-options of the families that list them (:attr:`synthesis.family.Family.synth_options`) and a usage
-error (exit 2) for the others.
+The design stage is the config's controller family's
+(:meth:`synthesis.families.registry.Family.design`): the shipped family certifies its closed-form
+law with the Wirtinger analysis on the design grid, the Theorem-3 family synthesises; if the design
+does not certify, the command says so, writes nothing and exits 1. ``--lambda-search``,
+``--lambda2``, ``--lambda3`` and ``--backoff`` are options of the families that list them
+(:attr:`synthesis.families.registry.Family.synth_options`) and a usage error (exit 2) for the
+others.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from contracts.usage import UsageError, UsageParser, run_command
-from synthesis.family import SynthRequest, family_named, structures
-from synthesis.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
+from synthesis.families.registry import SynthRequest, family_named, structures
+from synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 if TYPE_CHECKING:
     from synthesis.artifact import ControllerArtifact
@@ -125,9 +126,9 @@ def main(command: str, argv: list[str]) -> int:
 
 
 def _synth(argv: Sequence[str]) -> int:
-    from synthesis.blas_threads import single_blas_thread
+    from synthesis.solver.blas_threads import single_blas_thread
 
-    single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
+    single_blas_thread()  # before numpy is imported (see synthesis.solver.blas_threads)
     args = _parser().parse_args(argv)
     if not 1 <= args.jobs <= 64:
         raise UsageError(f"field '--jobs' = {args.jobs} outside [1, 64]")
@@ -143,8 +144,8 @@ def _synth_with(args: argparse.Namespace) -> int:
 
     from dataclasses import replace
 
-    from synthesis.config import ConfigError
-    from synthesis.config_toml import load_config
+    from synthesis.problem.config import ConfigError
+    from synthesis.problem.config_toml import load_config
 
     def say(msg: str) -> None:
         if not args.quiet:
@@ -217,7 +218,7 @@ def _verify_and_save(
     if no_verify:
         print("verification     skipped (--no-verify)")
     else:
-        from synthesis.verify import verify_artifact
+        from synthesis.verification.verify import verify_artifact
 
         say("verify: independent checks ...")
         report = verify_artifact(art, density=2, progress=say)

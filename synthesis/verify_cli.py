@@ -1,17 +1,17 @@
 """``pressor verify [ARTIFACT | --controller SPEC] [--json FILE] [--density N] [--p-dependence ...]``.
 
-Runs :func:`synthesis.verify.verify_artifact` on ARTIFACT (default: the shipped
+Runs :func:`synthesis.verification.verify.verify_artifact` on ARTIFACT (default: the shipped
 ``synthesis/data/default_design.npz``), prints progress on stderr (one line per stage and per
 solver iteration: iteration, cost, relative gap, residuals) and a summary on stdout, and
 optionally writes the full report as JSON (``nominal_step.lpv`` / ``.pi`` / ``.smith`` carry the
 metric names of docs/METRICS.md; ``smith`` is the scheduled Smith predictor, lambda 30 s;
-``artifact.controller`` the artifact's family, :mod:`synthesis.family`). Exit codes:
+``artifact.controller`` the artifact's family, :mod:`synthesis.families.registry`). Exit codes:
 0 every check passed, 1 a check failed, 2 bad input (a missing, unreadable or corrupt artifact, a
 bad option value) with one line naming it.
 
 ``--controller SPEC`` checks a plugin controller instead of an artifact
-(:mod:`synthesis.verify_plugin`): its nominal step beside the PI and the Smith predictor, and the
-line ``certificate: not applicable (plugin controller)...``; exit 0 when the step is stable and
+(:mod:`synthesis.verification.plugin`): its nominal step beside the PI and the Smith predictor, and
+the line ``certificate: not applicable (plugin controller)...``; exit 0 when the step is stable and
 settles, 1 when it does not (or the plugin raised, or returned a non-finite command), 2 when the
 spec names no loadable plugin. ``synthesis`` does not import the runtime's loader: the ``pressor``
 front door (:mod:`pressor.verify`) passes it in as ``load_plugin``.
@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.usage import UsageError, UsageParser, run_command
-from synthesis.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
+from synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 DEFAULT_ARTIFACT = Path(__file__).resolve().parent / "data" / "default_design.npz"
 #: the loop period (s) a plugin is loaded at: the runtime's default 10 Hz
@@ -98,9 +98,9 @@ def main(command: str, argv: list[str], load_plugin: PluginLoader | None = None)
 
 
 def _verify(command: str, argv: Sequence[str], load_plugin: PluginLoader | None) -> int:
-    from synthesis.blas_threads import single_blas_thread
+    from synthesis.solver.blas_threads import single_blas_thread
 
-    single_blas_thread()  # before numpy is imported (see synthesis.blas_threads)
+    single_blas_thread()  # before numpy is imported (see synthesis.solver.blas_threads)
     args = _parser(command).parse_args(argv)
     if args.controller is not None:
         return _verify_plugin(args, load_plugin)
@@ -118,7 +118,7 @@ def _verify(command: str, argv: Sequence[str], load_plugin: PluginLoader | None)
     _check_json_dir(args.json)
 
     from synthesis.artifact import ArtifactError, load_artifact
-    from synthesis.verify import verify_artifact
+    from synthesis.verification.verify import verify_artifact
 
     try:
         artifact = load_artifact(path)
@@ -178,7 +178,7 @@ def _verify(command: str, argv: Sequence[str], load_plugin: PluginLoader | None)
 
 
 def _verify_plugin(args: Any, load_plugin: PluginLoader | None) -> int:
-    """``--controller SPEC``: the plugin's nominal step (:mod:`synthesis.verify_plugin`)."""
+    """``--controller SPEC``: the plugin's nominal step (:mod:`synthesis.verification.plugin`)."""
     if args.artifact is not None:
         raise UsageError(
             f"--controller {args.controller!r} and artifact {args.artifact}: give one (a plugin"
@@ -201,8 +201,8 @@ def _verify_plugin(args: Any, load_plugin: PluginLoader | None) -> int:
     if load_plugin is None:
         raise UsageError("--controller needs the runtime's plugin loader: run it as pressor verify")
     _check_json_dir(args.json)
-    from synthesis.step_response import NOMINAL_STEP_MMHG
-    from synthesis.verify_plugin import verify_plugin_step
+    from synthesis.verification.plugin import verify_plugin_step
+    from synthesis.verification.step_response import NOMINAL_STEP_MMHG
 
     try:
         controller = load_plugin(args.controller, PLUGIN_PERIOD_S)

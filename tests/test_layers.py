@@ -3,8 +3,9 @@
 The allowed arrows are written once, in :data:`ALLOWED`; every module of every package is parsed and
 each of its imports, function-local ones included, must land in its own package, in an allowed one,
 or outside the project. A new package has to be added here, with its arrows, before it can ship.
-Inside ``runtime`` the same holds between its subpackages and top-level modules
-(:data:`RUNTIME_ALLOWED`): core at the bottom, the shipped path's entry points on top.
+
+Inside ``synthesis`` and ``runtime`` the same holds one level down, between their parts
+(:data:`INNER_ALLOWED`, docs/ARCHITECTURE.md).
 """
 
 from __future__ import annotations
@@ -39,8 +40,51 @@ FORBIDDEN_THIRD_PARTY: dict[str, frozenset[str]] = {
 }
 
 
-#: runtime's subpackage or top-level module -> the others of runtime it may import (besides itself)
+#: part of synthesis -> the parts of synthesis it may import (besides itself). The registry is its
+#: own part, at the bottom: it names the families but loads their modules only on lookup (by
+#: name), so the config and the artifact can name a family.
+SYNTHESIS_ALLOWED: dict[str, frozenset[str]] = {
+    "__init__": frozenset(),
+    "solver": frozenset(),
+    "families": frozenset(),
+    "families.registry": frozenset(),
+    "problem": frozenset({"families.registry"}),
+    "artifact": frozenset({"problem", "families.registry"}),
+    "certificates": frozenset({"problem"}),
+    "certificates.wirtinger": frozenset({"certificates", "problem", "solver"}),
+    "certificates.jensen": frozenset({"certificates", "problem", "solver"}),
+    "families.smith": frozenset(
+        {"families.registry", "certificates", "certificates.wirtinger", "problem", "artifact"}
+    ),
+    "families.theorem3": frozenset(
+        {
+            "families.registry",
+            "certificates",
+            "certificates.jensen",
+            "problem",
+            "solver",
+            "artifact",
+        }
+    ),
+    "verification": frozenset({"certificates", "problem"}),
+    "research": frozenset(
+        {
+            "artifact",
+            "certificates",
+            "families.smith",
+            "families.theorem3",
+            "problem",
+            "verification",
+        }
+    ),
+    "cli": frozenset({"artifact", "families.registry", "problem", "solver", "verification"}),
+    "verify_cli": frozenset({"artifact", "solver", "verification"}),
+}
+
+#: part of runtime -> the parts of runtime it may import (besides itself): the per-tick core at
+#: the bottom, the shipped path's entry points (session, cli) on top
 RUNTIME_ALLOWED: dict[str, frozenset[str]] = {
+    "__init__": frozenset(),
     "generated": frozenset(),
     "core": frozenset(),
     "estimation": frozenset({"core", "generated"}),
@@ -50,7 +94,13 @@ RUNTIME_ALLOWED: dict[str, frozenset[str]] = {
     "summary": frozenset({"core", "inputs", "shell"}),
     "session": frozenset({"core", "estimation", "inputs", "record", "shell", "summary"}),
     "cli": frozenset({"core", "inputs", "session", "summary"}),
-    "__init__": frozenset(),
+}
+
+#: package -> its parts and their allowed arrows. A part is a subpackage (dotted below the
+#: package) or a top-level module; a module belongs to the longest part that prefixes it.
+INNER_ALLOWED: dict[str, dict[str, frozenset[str]]] = {
+    "synthesis": SYNTHESIS_ALLOWED,
+    "runtime": RUNTIME_ALLOWED,
 }
 
 
@@ -94,38 +144,99 @@ def violations(package: str) -> list[str]:
     return found
 
 
-def runtime_part(path: Path) -> str:
-    """The node of :data:`RUNTIME_ALLOWED` a file of ``runtime`` belongs to: its subpackage, or
-    the stem of a top-level module."""
-    first = path.relative_to(ROOT / "runtime").parts[0]
-    return first.removesuffix(".py")
+def part_of(package: str, module: str) -> str | None:
+    """The part of ``package`` (:data:`INNER_ALLOWED`) holding the dotted ``module``; None when
+    ``module`` is outside ``package`` or in no part."""
+    parts = module.split(".")
+    if parts[0] != package:
+        return None
+    if len(parts) == 1:
+        return "__init__"
+    best = None
+    for key in INNER_ALLOWED[package]:
+        depth = key.count(".") + 1
+        if parts[1 : 1 + depth] == key.split(".") and (best is None or depth > best.count(".") + 1):
+            best = key
+    return best
 
 
-def runtime_targets(path: Path) -> set[str]:
-    """The parts of ``runtime`` that ``path`` imports, at any depth of the syntax tree
-    (``runtime.core.supervisor`` -> ``core``; ``from runtime import session`` -> ``session``)."""
+def is_type_checking_block(node: ast.AST) -> bool:
+    """``if TYPE_CHECKING:`` (or ``typing.TYPE_CHECKING``): its imports never run."""
+    return isinstance(node, ast.If) and ast.unparse(node.test).split(".")[-1] == "TYPE_CHECKING"
+
+
+def run_time_imports(path: Path, package: str) -> set[str]:
+    """Dotted modules of ``package`` that ``path`` imports at run time, at any depth
+    (function-local too).
+
+    Imports under ``if TYPE_CHECKING:`` are left out: they only name a type for the annotations
+    (this is how synthesis's registry and reconstruction name types from above without loading
+    them). ``from package import x`` counts as ``package.x``.
+    """
     tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
-    modules: list[str] = []
+    type_only = {
+        id(inner)
+        for node in ast.walk(tree)
+        if is_type_checking_block(node)
+        for stmt in node.body
+        for inner in ast.walk(stmt)
+    }
+    found: set[str] = set()
     for node in ast.walk(tree):
+        if id(node) in type_only:
+            continue
         if isinstance(node, ast.Import):
-            modules += [alias.name for alias in node.names]
+            found.update(a.name for a in node.names if a.name.split(".")[0] == package)
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            if node.module == "runtime":
-                modules += [f"runtime.{alias.name}" for alias in node.names]
-            else:
-                modules.append(node.module)
-    return {m.split(".")[1] for m in modules if m.startswith("runtime.")}
-
-
-def runtime_violations() -> list[str]:
-    """``module -> part`` lines that break :data:`RUNTIME_ALLOWED`."""
-    found = []
-    for path in package_modules("runtime"):
-        part = runtime_part(path)
-        allowed = RUNTIME_ALLOWED.get(part, frozenset()) | {part}
-        rel = path.relative_to(ROOT).as_posix()
-        found += [f"{rel} -> {t}" for t in sorted(runtime_targets(path) - allowed)]
+            if node.module.split(".")[0] == package:
+                found.update(f"{node.module}.{a.name}" for a in node.names)
     return found
+
+
+def inner_violations(package: str) -> list[str]:
+    """``module -> imported module`` lines that break ``package``'s :data:`INNER_ALLOWED`."""
+    allowed = INNER_ALLOWED[package]
+    found = []
+    for path in package_modules(package):
+        rel = path.relative_to(ROOT).with_suffix("")
+        module = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        own = part_of(package, module)
+        if own is None:
+            found.append(f"{rel.as_posix()}.py: in no part of {package}'s arrows")
+            continue
+        for imported in sorted(run_time_imports(path, package)):
+            # ``from synthesis.problem import basis`` names synthesis.problem.basis: its part is
+            # problem either way; a plain ``import synthesis`` is the front door
+            target = part_of(package, imported)
+            if target is not None and target != own and target not in allowed[own]:
+                found.append(f"{rel.as_posix()}.py ({own}) -> {imported} ({target})")
+    return found
+
+
+def first_cycle(graph: dict[str, frozenset[str]]) -> str | None:
+    """One cycle of ``graph`` as ``a -> b -> a``, or None."""
+    visiting: set[str] = set()
+    done: set[str] = set()
+
+    def visit(node: str, path: tuple[str, ...]) -> str | None:
+        if node in visiting:
+            return " -> ".join((*path, node))
+        if node in done:
+            return None
+        visiting.add(node)
+        for nxt in sorted(graph[node]):
+            cycle = visit(nxt, (*path, node))
+            if cycle:
+                return cycle
+        visiting.discard(node)
+        done.add(node)
+        return None
+
+    for node in graph:
+        cycle = visit(node, ())
+        if cycle:
+            return cycle
+    return None
 
 
 def test_every_package_of_the_checkout_has_its_arrows_written_down():
@@ -133,38 +244,7 @@ def test_every_package_of_the_checkout_has_its_arrows_written_down():
 
 
 def test_the_allowed_arrows_form_no_cycle():
-    visiting: set[str] = set()
-    done: set[str] = set()
-
-    def visit(node: str, path: tuple[str, ...]) -> None:
-        assert node not in visiting, f"cycle: {' -> '.join((*path, node))}"
-        if node in done:
-            return
-        visiting.add(node)
-        for nxt in ALLOWED[node]:
-            visit(nxt, (*path, node))
-        visiting.discard(node)
-        done.add(node)
-
-    for package in ALLOWED:
-        visit(package, ())
-
-
-def test_every_part_of_runtime_has_its_arrows_written_down_and_they_form_no_cycle():
-    parts = {runtime_part(p) for p in package_modules("runtime")}
-    assert parts == set(RUNTIME_ALLOWED)
-    order: list[str] = []
-    pending = dict(RUNTIME_ALLOWED)
-    while pending:  # peel off the parts whose arrows all land on parts already placed
-        ready = sorted(p for p, deps in pending.items() if deps <= set(order))
-        assert ready, f"cycle among {sorted(pending)}"
-        order += ready
-        for p in ready:
-            del pending[p]
-
-
-def test_runtime_subpackages_import_only_downward():
-    assert runtime_violations() == []
+    assert first_cycle(ALLOWED) is None
 
 
 @pytest.mark.parametrize("package", sorted(ALLOWED))
@@ -174,11 +254,38 @@ def test_package_imports_only_along_the_allowed_arrows(package):
 
 def test_the_import_scan_sees_function_local_imports(tmp_path):
     module = tmp_path / "m.py"
-    module.write_text("def f():\n    from synthesis.lmi import x\n    import hil_sim.world\n")
+    module.write_text(
+        "def f():\n    from synthesis.families.theorem3.lmi import x\n    import hil_sim.world\n"
+    )
     assert imported_top_levels(module) == {"synthesis", "hil_sim"}
 
 
-def test_the_runtime_scan_sees_function_local_and_from_runtime_imports(tmp_path):
+@pytest.mark.parametrize("package", sorted(INNER_ALLOWED))
+def test_the_arrows_between_a_packages_parts_form_no_cycle(package):
+    graph = INNER_ALLOWED[package]
+    assert all(nxt in graph for targets in graph.values() for nxt in targets)
+    assert first_cycle(graph) is None
+
+
+@pytest.mark.parametrize("package", sorted(INNER_ALLOWED))
+def test_a_packages_parts_import_only_downward(package):
+    assert inner_violations(package) == []
+
+
+def test_the_inner_scan_skips_only_type_checking_imports(tmp_path):
     module = tmp_path / "m.py"
-    module.write_text("from runtime import session\ndef f():\n    import runtime.shell.loop\n")
-    assert runtime_targets(module) == {"session", "shell"}
+    module.write_text(
+        "from typing import TYPE_CHECKING\n"
+        "from synthesis import cli\n"
+        "if TYPE_CHECKING:\n    from synthesis.artifact import A\n"
+        "def f():\n    import synthesis.research.naive_lmi\n"
+    )
+    assert run_time_imports(module, "synthesis") == {
+        "synthesis.cli",
+        "synthesis.research.naive_lmi",
+    }
+    assert part_of("synthesis", "synthesis.research.naive_lmi") == "research"
+    assert part_of("synthesis", "synthesis.families.smith.law") == "families.smith"
+    assert part_of("synthesis", "synthesis.families.registry.Family") == "families.registry"
+    assert part_of("runtime", "runtime.shell.loop.Loop") == "shell"
+    assert part_of("runtime", "runtime.session") == "session"

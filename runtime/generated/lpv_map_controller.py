@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  d60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b
-Content hash:     cdccc0035530754b4a726e0c31d58c1b8af05d55c7cbae8ad37749814e056ada
+Content hash:     dc7331a5a4eb6aa17c12ee9c4d1862a2a11109b8e4381e41d76e7669509b3ef9
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -29,8 +29,8 @@ Drug (DRUG, DRUG_CONCENTRATION_UG_ML): phenylephrine at 100.0 ug/ml.
 The gains (K in mmHg/(ml/h)) count ml/h of this syringe: pressor run refuses another drug or
 concentration (docs/DRUGS.md).
 
-Two degrees of freedom (synthesis.reference; lambda 10.0 s, pump fraction 0.9,
-K floor 0.05 mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
+Two degrees of freedom (synthesis.problem.reference; lambda 10.0 s, pump fraction
+0.9, K floor 0.05 mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
 MAP after reset generates the reference MAP r_m and the feedforward
 u_ff = clamp((p + T (dr - p) / lambda) / K, 0, cap), with p = y0 + y_m - y0(t - tau) (Smith
 prediction), dr = target - anchor and cap = max(fraction * MAX_RATE_ML_H, min(MAX_RATE_ML_H,
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '0486d3e7daab33be512ccad557acdb3a225a5101ddf1fc525988b9f5894cfe93'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '079cc5f12d75cf01c94aabd1a45ae217a798232fcb4bf123492bd5f45a19b4ad'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'd60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b'
-CONTENT_HASH = 'cdccc0035530754b4a726e0c31d58c1b8af05d55c7cbae8ad37749814e056ada'
+CONTENT_HASH = 'dc7331a5a4eb6aa17c12ee9c4d1862a2a11109b8e4381e41d76e7669509b3ef9'
 TABLES_SHA256 = 'e736ddebfe5179dfdbc6981025cbb0e5ef7298da5c7e699a452a7017523f1499'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

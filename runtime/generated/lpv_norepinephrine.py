@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31
 Artifact sha256:  114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd
-Content hash:     6dca39406ecc028277f8c2b85203532354a1dcba04591cb20da7cdd2f4c74eb1
+Content hash:     7ce39b5fe285f00ebd68370fc14067bc822d1aa92b25c5295cf806401264bd1e
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -29,8 +29,8 @@ Drug (DRUG, DRUG_CONCENTRATION_UG_ML): norepinephrine at 16.0 ug/ml.
 The gains (K in mmHg/(ml/h)) count ml/h of this syringe: pressor run refuses another drug or
 concentration (docs/DRUGS.md).
 
-Two degrees of freedom (synthesis.reference; lambda 10.0 s, pump fraction 0.9,
-K floor 0.05 mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
+Two degrees of freedom (synthesis.problem.reference; lambda 10.0 s, pump fraction
+0.9, K floor 0.05 mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
 MAP after reset generates the reference MAP r_m and the feedforward
 u_ff = clamp((p + T (dr - p) / lambda) / K, 0, cap), with p = y0 + y_m - y0(t - tau) (Smith
 prediction), dr = target - anchor and cap = max(fraction * MAX_RATE_ML_H, min(MAX_RATE_ML_H,
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'd8d86f38d5817a609fdbedfdb10d91552c9d80f4da80e1a85c92f2e0146512a4'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '22df292c95039814887c79a36718a0a12cf40604fe6d7c2bbebf750d2a015d13'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = '114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd'
-CONTENT_HASH = '6dca39406ecc028277f8c2b85203532354a1dcba04591cb20da7cdd2f4c74eb1'
+CONTENT_HASH = '7ce39b5fe285f00ebd68370fc14067bc822d1aa92b25c5295cf806401264bd1e'
 TABLES_SHA256 = '0d1ccefeea03128a1d935e8d7cc8d5bfdac89085e3823c267c71c6c1312a5ffb'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -12,8 +12,8 @@ import pytest
 
 from baselines.smith import SmithController
 from pressor import cli
-from synthesis.discrete_step import discrete_step_response
-from synthesis.smith_baseline import smith_step_response
+from synthesis.verification.discrete_step import discrete_step_response
+from synthesis.verification.smith_baseline import smith_step_response
 
 PLUGINS = str(Path(__file__).resolve().parents[1] / "support" / "controller_plugins.py")
 CERTIFICATE = "certificate: not applicable (plugin controller)"

@@ -17,7 +17,7 @@ from synthesis.artifact import (
     save_artifact,
     with_verification,
 )
-from synthesis.config import NOMINAL_RHO
+from synthesis.problem.config import NOMINAL_RHO
 
 
 @pytest.fixture(scope="module")

@@ -158,8 +158,8 @@ def test_health_check_never_reports_a_negative_gain():
 
 
 def test_prior_is_the_projects_nominal_patient_and_the_box_the_default_design():
-    from synthesis.config import NOMINAL_RHO
-    from synthesis.config_toml import load_config
+    from synthesis.problem.config import NOMINAL_RHO
+    from synthesis.problem.config_toml import load_config
 
     assert NOMINAL_PLANT == NOMINAL_RHO
     est = DelayBankEstimator(TS)

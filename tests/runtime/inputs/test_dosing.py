@@ -168,7 +168,7 @@ def test_the_shipped_module_carries_the_binding_of_the_design_toml():
     import runtime.generated.lpv_map_controller as mod
     from runtime.inputs.controller_loader import load_controller
     from synthesis.artifact import default_artifact_path, load_artifact
-    from synthesis.config_toml import default_config_path, load_config
+    from synthesis.problem.config_toml import default_config_path, load_config
 
     toml = load_config().drug
     with open(default_config_path(), "rb") as fh:
@@ -272,8 +272,8 @@ def test_library_path_is_package_data():
     ],
 )
 def test_design_toml_drug_section_is_checked_naming_the_field(drug, field):
-    from synthesis.config import ConfigError
-    from synthesis.config_toml import parse_config
+    from synthesis.problem.config import ConfigError
+    from synthesis.problem.config_toml import parse_config
 
     with pytest.raises(ConfigError, match=f"field '{field}'"):
         parse_config({"drug": drug}, source="d.toml")

@@ -1,0 +1,372 @@
+"""Reading and validating a design TOML file for the LPV synthesis.
+
+A design is described by a TOML file with the sections below (all physical units, time in s)::
+
+    [box]        K = [lo, hi]  (mmHg/(ml/h)),  T_s = [lo, hi] (s),  tau_s = [lo, hi] (s)
+    [rates]      K_per_s (mmHg/(ml/h)/s),  T_s_per_s (s/s),  tau_s_per_s (s/s, < 1)
+    [filter]     omega (1/s), lambda (1/s)            u = omega/(s + lambda) u_a
+    [weights]    phi (1/(mmHg·s)) on x_e,  xi on u_a,  eta_xe (mmHg·s) x_e measurement-noise weight,
+                 performance ("integral" | "shaped") and, for "shaped", the frequency weights
+                 e_crossover_rad_s (ω_b), e_peak (M), e_dc (A) of W_e(s) = (s/M + ω_b)/(s + ω_b A)
+                 on the tracking error and u_crossover_rad_s (ω_u), u_dc (M_u, (ml/h)/mmHg),
+                 u_hf (ε_u) of W_u(s) = (s + ω_u/M_u)/(ε_u s + ω_u) on the infusion
+                 (see :mod:`synthesis.problem.model`; optional keys, defaults in
+                 ``SHAPING_DEFAULTS``)
+    [grid]       points = [nK, nT, ntau]              synthesis grid (each >= 2)
+    [solver]     lambda2, lambda3 (scaled-time slack multipliers), backoff (fraction, >= 0),
+                 epsilon (strictness margin), xy_dependence ("constant" | "x" | "xy"),
+                 time_scale_s (the time unit of the scaled problem), rate_terms
+                 ("vertices" | "bound"), mean_gamma_weight
+    [line_search] lambda2 = [...], lambda3 = [...]   candidate values for ``--lambda-search``
+    [pump]       max_rate_ml_h
+    [controller] structure (a family of :func:`synthesis.families.registry.structures`), loop_gain
+                 (dimensionless, in (0, 10], only and required for a family that takes it): the
+                 controller family of :mod:`synthesis.families.registry`. Unlike the other sections
+                 it never takes the shipped default: no [controller] section (or no ``structure``)
+                 means :data:`synthesis.families.registry.DEFAULT_STRUCTURE`, so a design file
+                 written before the section existed keeps its meaning. For a family without a
+                 synthesis LMI the [solver] (but ``time_scale_s``) and [line_search] keys are unused
+                 (they are still validated if present)
+    [drug]       name (lower case, 1-16 ASCII characters), concentration_ug_ml (µg/ml, in (0, 1e5]):
+                 the drug and the syringe concentration whose ml/h the design's gains count
+                 (:class:`contracts.drug.DrugBinding`); carried into the artifact
+                 (``design.drug``) and the generated module (``DRUG``,
+                 ``DRUG_CONCENTRATION_UG_ML``); ``pressor run`` refuses any other (docs/DRUGS.md)
+    [reference]  enabled (bool), lambda_s (s, in [1, 1000]), pump_fraction (in [0.1, 1]),
+                 k_min (mmHg/(ml/h), in [0.001, box K upper])
+                 the two-degree-of-freedom prefilter of :mod:`synthesis.problem.reference` (outside
+                 the certified loop: it changes the reference and adds a feedforward, not the LMIs)
+
+Every missing key takes the shipped default (``synthesis/data/default_design.toml``). Any bad
+value raises :class:`~synthesis.problem.config.ConfigError` naming the file, the field, the value
+and the allowed range.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS, DrugBinding
+from synthesis.families.registry import (
+    DEFAULT_STRUCTURE,
+    LOOP_GAIN_RANGE,
+    ControllerFamily,
+    family_named,
+    structures,
+)
+from synthesis.problem.config import (
+    ConfigError,
+    DesignConfig,
+    ModelConfig,
+    PerformanceShaping,
+    SolverConfig,
+    check_grid,
+    check_pos,
+    check_range,
+    field_error,
+)
+from synthesis.problem.reference import (
+    K_MIN_RANGE,
+    LAMBDA_RANGE_S,
+    PUMP_FRACTION_RANGE,
+    ReferenceConfig,
+)
+
+__all__ = ["SHAPING_DEFAULTS", "default_config_path", "load_config", "parse_config"]
+
+PARAM_NAMES = ("K", "T_s", "tau_s")
+RATE_NAMES = ("K_per_s", "T_s_per_s", "tau_s_per_s")
+
+#: Allowed ranges: (lo, hi) for box edges, rates, filter, weights.
+_BOX_RANGE = {"K": (1e-3, 10.0), "T_s": (1.0, 2000.0), "tau_s": (0.0, 600.0)}
+_RATE_RANGE = {"K_per_s": (0.0, 1.0), "T_s_per_s": (0.0, 10.0), "tau_s_per_s": (0.0, 0.999)}
+
+
+#: Optional [weights] keys (not in the shipped TOML, whose design uses performance = "integral").
+SHAPING_DEFAULTS: dict[str, Any] = {
+    "performance": "integral",
+    "e_crossover_rad_s": 0.005,
+    "e_peak": 2.0,
+    "e_dc": 0.0,
+    "u_crossover_rad_s": 0.05,
+    "u_dc": 20.0,
+    "u_hf": 0.0,
+}
+
+
+def default_config_path() -> Path:
+    """Path of the shipped default design TOML."""
+    return Path(str(resources.files("synthesis") / "data" / "default_design.toml"))
+
+
+def _get(table: dict[str, Any], section: str, key: str, default: dict[str, Any]) -> Any:
+    sec = table.get(section, {})
+    if key in sec:
+        return sec[key]
+    return default.get(section, {}).get(key)
+
+
+def _merge_check_keys(source: str, table: dict[str, Any], default: dict[str, Any]) -> None:
+    """Unknown sections/keys are errors (a typo must not silently fall back to a default)."""
+    default = {**default, "weights": {**default.get("weights", {}), **SHAPING_DEFAULTS}}
+    for section, body in table.items():
+        if section not in default:
+            raise field_error(source, section, "<section>", f"one of {sorted(default)}")
+        if not isinstance(body, dict):
+            raise field_error(source, section, body, "a TOML table")
+        for key in body:
+            if key not in default[section]:
+                raise field_error(
+                    source, f"{section}.{key}", body[key], f"one of {sorted(default[section])}"
+                )
+
+
+def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfig:
+    """Validate a parsed TOML table (missing keys take the shipped defaults).
+
+    Parameters
+    ----------
+    table
+        The parsed TOML document.
+    source
+        File name used in error messages.
+
+    Raises
+    ------
+    ConfigError
+        On any unknown key or out-of-range value.
+    """
+    with open(default_config_path(), "rb") as fh:
+        default = tomllib.load(fh)
+    _merge_check_keys(source, table, default)
+
+    box = np.zeros((3, 2))
+    for i, name in enumerate(PARAM_NAMES):
+        f = f"box.{name}"
+        val = _get(table, "box", name, default)
+        if not isinstance(val, list | tuple) or len(val) != 2:
+            raise field_error(source, f, val, "a list [lower, upper]")
+        lo_ok, hi_ok = _BOX_RANGE[name]
+        lo = check_range(source, f, val[0], lo_ok, hi_ok)
+        hi = check_range(source, f, val[1], lo_ok, hi_ok)
+        if not lo < hi:
+            raise field_error(source, f, val, "a list [lower, upper] with lower < upper")
+        box[i] = (lo, hi)
+    if box[1, 0] <= 0.0:
+        raise field_error(source, "box.T_s", box[1].tolist(), "positive")
+
+    rates = np.zeros(3)
+    for i, name in enumerate(RATE_NAMES):
+        lo, hi = _RATE_RANGE[name]
+        rates[i] = check_range(source, f"rates.{name}", _get(table, "rates", name, default), lo, hi)
+
+    omega = check_pos(source, "filter.omega", _get(table, "filter", "omega", default), 100.0)
+    lam = check_pos(source, "filter.lambda", _get(table, "filter", "lambda", default), 100.0)
+    phi = check_pos(source, "weights.phi", _get(table, "weights", "phi", default), 1e3)
+    xi = check_pos(source, "weights.xi", _get(table, "weights", "xi", default), 1e3)
+    eta = check_pos(source, "weights.eta_xe", _get(table, "weights", "eta_xe", default), 1e6)
+    shaping = _parse_shaping(table, source)
+    pump = check_pos(
+        source, "pump.max_rate_ml_h", _get(table, "pump", "max_rate_ml_h", default), 1e4
+    )
+    grid = check_grid(source, "grid.points", _get(table, "grid", "points", default))
+
+    l2 = check_range(source, "solver.lambda2", _get(table, "solver", "lambda2", default), 1e-4, 1e4)
+    l3 = check_range(source, "solver.lambda3", _get(table, "solver", "lambda3", default), 1e-4, 1e4)
+    backoff = check_range(
+        source, "solver.backoff", _get(table, "solver", "backoff", default), 0.0, 1.0
+    )
+    eps = check_range(
+        source, "solver.epsilon", _get(table, "solver", "epsilon", default), 0.0, 1e-2
+    )
+    xy = _get(table, "solver", "xy_dependence", default)
+    if xy not in ("constant", "x", "xy"):
+        raise field_error(source, "solver.xy_dependence", xy, "one of 'constant', 'x', 'xy'")
+    ts = check_pos(
+        source, "solver.time_scale_s", _get(table, "solver", "time_scale_s", default), 1e4
+    )
+    mgw = check_range(
+        source,
+        "solver.mean_gamma_weight",
+        _get(table, "solver", "mean_gamma_weight", default),
+        0.0,
+        1e3,
+    )
+    rt = _get(table, "solver", "rate_terms", default)
+    if rt not in ("vertices", "bound"):
+        raise field_error(source, "solver.rate_terms", rt, "one of 'vertices', 'bound'")
+
+    cands = []
+    for key in ("lambda2", "lambda3"):
+        f = f"line_search.{key}"
+        val = _get(table, "line_search", key, default)
+        if not isinstance(val, list | tuple) or not 1 <= len(val) <= 20:
+            raise field_error(source, f, val, "a list of 1 to 20 numbers in [1e-4, 1e4]")
+        cands.append(tuple(check_range(source, f, v, 1e-4, 1e4) for v in val))
+
+    enabled = _get(table, "reference", "enabled", default)
+    if not isinstance(enabled, bool):
+        raise field_error(source, "reference.enabled", enabled, "true or false")
+    reference = ReferenceConfig(
+        enabled=enabled,
+        lambda_s=check_range(
+            source,
+            "reference.lambda_s",
+            _get(table, "reference", "lambda_s", default),
+            *LAMBDA_RANGE_S,
+        ),
+        pump_fraction=check_range(
+            source,
+            "reference.pump_fraction",
+            _get(table, "reference", "pump_fraction", default),
+            *PUMP_FRACTION_RANGE,
+        ),
+        k_min=check_range(
+            source,
+            "reference.k_min",
+            _get(table, "reference", "k_min", default),
+            K_MIN_RANGE[0],
+            min(K_MIN_RANGE[1], float(box[0, 1])),
+        ),
+    )
+
+    model = ModelConfig(
+        omega=omega,
+        lambda_=lam,
+        phi=phi,
+        xi=xi,
+        eta_xe=eta,
+        box=box,
+        rate_bounds=rates,
+        max_rate_ml_h=pump,
+        shaping=shaping,
+    )
+    solver = SolverConfig(
+        lambda2=l2,
+        lambda3=l3,
+        backoff=backoff,
+        epsilon=eps,
+        xy_dependence=xy,
+        time_scale_s=ts,
+        rate_terms=rt,
+        mean_gamma_weight=mgw,
+    )
+    return DesignConfig(
+        model=model,
+        grid_points=grid,
+        solver=solver,
+        reference=reference,
+        controller=_parse_controller(table, source),
+        lambda2_candidates=cands[0],
+        lambda3_candidates=cands[1],
+        drug=_parse_drug(table, source, default),
+        source=source,
+        raw=table,
+    )
+
+
+def _parse_drug(table: dict[str, Any], source: str, default: dict[str, Any]) -> DrugBinding:
+    """The [drug] section (missing keys: the shipped default's)."""
+    name = _get(table, "drug", "name", default)
+    if not (
+        isinstance(name, str)
+        and name
+        and name.isascii()
+        and name == name.strip().lower()
+        and len(name) <= MAX_DRUG_CHARS
+    ):
+        raise field_error(
+            source, "drug.name", name, f"1 to {MAX_DRUG_CHARS} lower-case ASCII characters"
+        )
+    conc = check_pos(
+        source,
+        "drug.concentration_ug_ml",
+        _get(table, "drug", "concentration_ug_ml", default),
+        MAX_CONCENTRATION_UG_ML,
+    )
+    return DrugBinding(name, conc)
+
+
+def _parse_controller(table: dict[str, Any], source: str) -> ControllerFamily:
+    """The [controller] section, read from ``table`` only (absent: the default family, see
+    module doc)."""
+    sec = table.get("controller", {})
+    structure = sec.get("structure", DEFAULT_STRUCTURE)
+    names = structures()
+    if structure not in names:
+        allowed = ", ".join(repr(n) for n in names)
+        raise field_error(source, "controller.structure", structure, f"one of {allowed}")
+    lo, hi = LOOP_GAIN_RANGE
+    if not family_named(structure).takes_loop_gain:
+        if "loop_gain" in sec:
+            raise field_error(
+                source,
+                "controller.loop_gain",
+                sec["loop_gain"],
+                f"absent for structure {structure!r}",
+            )
+        return ControllerFamily(structure)
+    if "loop_gain" not in sec:
+        raise field_error(
+            source, "controller.loop_gain", None, f"given for {structure!r}, in ({lo:g}, {hi:g}]"
+        )
+    return ControllerFamily(
+        structure, check_pos(source, "controller.loop_gain", sec["loop_gain"], hi)
+    )
+
+
+def _parse_shaping(table: dict[str, Any], source: str) -> PerformanceShaping | None:
+    """The [weights] frequency-shaping keys (validated even when ``performance = "integral"``)."""
+    sec = table.get("weights", {})
+
+    def get(key: str) -> Any:
+        return sec.get(key, SHAPING_DEFAULTS[key])
+
+    mode = get("performance")
+    if mode not in ("integral", "shaped"):
+        raise field_error(source, "weights.performance", mode, "one of 'integral', 'shaped'")
+    wb = check_pos(source, "weights.e_crossover_rad_s", get("e_crossover_rad_s"), 10.0)
+    m = check_range(source, "weights.e_peak", get("e_peak"), 1.0, 100.0)
+    if m <= 1.0:
+        raise field_error(
+            source, "weights.e_peak", get("e_peak"), "in (1, 100] (|S| peaks above 1)"
+        )
+    a = check_range(source, "weights.e_dc", get("e_dc"), 0.0, 1.0)
+    if a >= 1.0:
+        raise field_error(source, "weights.e_dc", get("e_dc"), "in [0, 1) (|S(0)| below 1)")
+    wu = check_pos(source, "weights.u_crossover_rad_s", get("u_crossover_rad_s"), 100.0)
+    mu = check_pos(source, "weights.u_dc", get("u_dc"), 1e4)
+    eu = check_range(source, "weights.u_hf", get("u_hf"), 0.0, 1e4)
+    if eu >= mu:
+        raise field_error(
+            source, "weights.u_hf", get("u_hf"), f"in [0, u_dc = {mu:g}) (W_u is a high-pass)"
+        )
+    if mode == "integral":
+        return None
+    return PerformanceShaping(wb, m, a, wu, mu, eu)
+
+
+def load_config(path: str | Path | None = None) -> DesignConfig:
+    """Load and validate a design TOML file (the shipped default when ``path`` is None).
+
+    Raises
+    ------
+    ConfigError
+        If the file cannot be read or parsed, or any field is invalid.
+    """
+    p = default_config_path() if path is None else Path(path)
+    try:
+        with open(p, "rb") as fh:
+            table = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML ({exc})") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
+    return parse_config(table, source=str(p))
