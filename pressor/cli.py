@@ -40,6 +40,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+#: the offline commands whose many small dense problems (delay-system eigenvalues, LMI blocks) run
+#: fastest on one OpenBLAS thread; the pin must come before numpy's import, which importing their
+#: stage module already triggers (:mod:`synthesis.solver.blas_threads`)
+ONE_BLAS_THREAD = frozenset({"synth", "verify"})
+
+
 def _usage() -> str:
     width = max(len(name) for name in COMMANDS)
     lines = ["usage: pressor COMMAND [ARGS...]", "", "commands:"]
@@ -74,6 +80,10 @@ def main(argv: list[str] | None = None) -> int:
     command, rest = args[0], args[1:]
     if command not in COMMANDS:
         return usage_exit("pressor", f"unknown command {command!r}; one of: {', '.join(COMMANDS)}")
+    if command in ONE_BLAS_THREAD:
+        from synthesis.solver.blas_threads import single_blas_thread
+
+        single_blas_thread()
     module = importlib.import_module(COMMANDS[command][0])
     return int(module.main(command, rest))
 

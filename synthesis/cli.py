@@ -126,9 +126,6 @@ def main(command: str, argv: list[str]) -> int:
 
 
 def _synth(argv: Sequence[str]) -> int:
-    from synthesis.solver.blas_threads import single_blas_thread
-
-    single_blas_thread()  # before numpy is imported (see synthesis.solver.blas_threads)
     args = _parser().parse_args(argv)
     if not 1 <= args.jobs <= 64:
         raise UsageError(f"field '--jobs' = {args.jobs} outside [1, 64]")

@@ -98,9 +98,6 @@ def main(command: str, argv: list[str], load_plugin: PluginLoader | None = None)
 
 
 def _verify(command: str, argv: Sequence[str], load_plugin: PluginLoader | None) -> int:
-    from synthesis.solver.blas_threads import single_blas_thread
-
-    single_blas_thread()  # before numpy is imported (see synthesis.solver.blas_threads)
     args = _parser(command).parse_args(argv)
     if args.controller is not None:
         return _verify_plugin(args, load_plugin)

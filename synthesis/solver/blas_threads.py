@@ -1,5 +1,9 @@
 """One BLAS thread for the synthesis commands (set before numpy is first imported).
 
+The ``pressor`` dispatcher (:mod:`pressor.cli`) calls :func:`single_blas_thread` for ``synth`` and
+``verify`` before it imports their stage module: importing that module already loads numpy, so a
+call from inside the command would come too late and silently do nothing.
+
 The synthesis and verification work on many small dense matrices (eigenvalues of 100-250 square
 generators, 6-22 square LMI blocks); OpenBLAS' thread pool does not speed those up and, on a
 loaded machine, its waiting threads make them many times slower. Measured with ``pressor synth``

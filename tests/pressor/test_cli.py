@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+
+import pytest
 
 from pressor import cli
 
@@ -36,3 +39,41 @@ def test_version_prints_the_installed_package_version(capsys):
     assert cli.main(["--version"]) == 0
     out = capsys.readouterr().out.strip()
     assert out == f"pressor {version('pressor')}" and out.split()[1][0].isdigit()
+
+
+SPY_ON_NUMPY = """
+import os, sys
+seen = []
+class Spy:
+    def find_spec(self, name, path=None, target=None):
+        if name == "numpy" and not seen:
+            seen.append(os.environ.get("OPENBLAS_NUM_THREADS"))
+        return None
+sys.meta_path.insert(0, Spy())
+import pytest
+
+from pressor import cli
+try:
+    cli.main(sys.argv[1:])
+except SystemExit:
+    pass
+print(seen)
+"""
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["synth", "--help"], ["verify", "--controller", "x:Y"]],
+)
+def test_the_synthesis_commands_pin_openblas_to_one_thread_before_numpy_loads(argv, tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    proc = subprocess.run(
+        [sys.executable, "-c", SPY_ON_NUMPY, *argv],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        check=True,
+    )
+    # the value OpenBLAS reads when numpy loads it (a later setting has no effect)
+    assert proc.stdout.strip().splitlines()[-1] == "['1']"
