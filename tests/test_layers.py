@@ -25,9 +25,9 @@ ALLOWED: dict[str, frozenset[str]] = {
     "synthesis": frozenset({"contracts", "baselines"}),
     "codegen": frozenset({"contracts", "synthesis"}),
     "runtime": frozenset({"contracts", "baselines", "link"}),
-    "hil_sim": frozenset({"contracts", "baselines", "link", "runtime"}),
+    "sim": frozenset({"contracts", "baselines", "link", "runtime"}),
     "pressor": frozenset(
-        {"contracts", "baselines", "link", "synthesis", "codegen", "runtime", "hil_sim"}
+        {"contracts", "baselines", "link", "synthesis", "codegen", "runtime", "sim"}
     ),
 }
 
@@ -255,9 +255,9 @@ def test_package_imports_only_along_the_allowed_arrows(package):
 def test_the_import_scan_sees_function_local_imports(tmp_path):
     module = tmp_path / "m.py"
     module.write_text(
-        "def f():\n    from synthesis.families.theorem3.lmi import x\n    import hil_sim.world\n"
+        "def f():\n    from synthesis.families.theorem3.lmi import x\n    import sim.world\n"
     )
-    assert imported_top_levels(module) == {"synthesis", "hil_sim"}
+    assert imported_top_levels(module) == {"synthesis", "sim"}
 
 
 @pytest.mark.parametrize("package", sorted(INNER_ALLOWED))
