@@ -11,9 +11,9 @@ Every patient of the cohort ``(--seed, --patients)`` runs the scenario (default
 model's, the seven responsiveness levels of published closed-loop vasopressor robustness tests)
 under each controller (default ``lpv``, ``pi``, ``smith``), all on one scheduling source (default
 ``estimated``, the runtime's own; the PI ignores it). A level is the patient model
-``MODEL@sensitivity=f`` (:mod:`sim.patients.sensitivity`: the patient responds to each delivered ml/h
-as the model's responds to f ml/h, so K is f × the model's); level 1 is the unwrapped model, so
-its records are ``pressor trial``'s bytes. Every cohort runs through
+``MODEL@sensitivity=f`` (:mod:`sim.patients.sensitivity`: the patient responds to each delivered
+ml/h as the model's responds to f ml/h, so K is f × the model's); level 1 is the unwrapped model,
+so its records are ``pressor trial``'s bytes. Every cohort runs through
 :func:`sim.trials.trial.run_cohort`, the code path of ``pressor trial`` (``--jobs`` local processes
 or ``--scheduler`` a Dask cluster; the results do not depend on either), with progress on stderr.
 

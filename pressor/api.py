@@ -22,8 +22,8 @@ is tick for tick what a lockstep ``pressor sil`` of that seed gives. ``controlle
 
 Errors: a bad argument raises :class:`ValueError` (a subclass naming the argument, the value and
 the allowed range: :class:`runtime.inputs.controller_loader.ControllerSpecError`,
-:class:`sim.scenarios.scenario.ScenarioError`, :class:`sim.patients.patient_model.PatientModelError`); a
-controller that raises mid-run raises :class:`runtime.core.closed_loop.ControllerError` naming it,
+:class:`sim.scenarios.scenario.ScenarioError`,
+:class:`sim.patients.patient_model.PatientModelError`); a controller that raises mid-run raises :class:`runtime.core.closed_loop.ControllerError` naming it,
 the patient and the tick.
 """
 

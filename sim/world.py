@@ -16,13 +16,13 @@ are the patient's truth (the paper's "parameter generation" block; an estimator 
 Random numbers (sensor noise) come from the patient's own seeded stream, so a trajectory depends only
 on (scenario, patient_seed, sample period, commands).
 
-The patient is any :class:`sim.patients.patient_model.PatientModel` (``patient_model=``, a registry name
-or ``MODULE:CLASS``; default the paper's model, :class:`sim.patients.patient.Patient`); a frozen scenario
-fixes the paper model's LTI mode and takes no other model.
+The patient is any :class:`sim.patients.patient_model.PatientModel` (``patient_model=``, a
+registry name or ``MODULE:CLASS``; default the paper's model, :class:`sim.patients.patient.Patient`);
+a frozen scenario fixes the paper model's LTI mode and takes no other model.
 
 Faults (``faults=``, plus the scenario's own ``[[faults]]``) are injected here for the sensor, the
-pump and the scheduling parameters (:class:`sim.scenarios.faults.WorldFaults`); link faults belong to the
-device process. A world without faults behaves exactly as before.
+pump and the scheduling parameters (:class:`sim.scenarios.faults.WorldFaults`); link faults belong
+to the device process. A world without faults behaves exactly as before.
 """
 
 from __future__ import annotations
@@ -73,7 +73,8 @@ class World:
     faults
         Extra injected faults (:class:`contracts.faults.FaultSpec`), after the scenario's own.
     patient_model
-        The patient model: a :data:`sim.patients.patient_model.PATIENT_MODELS` name or ``MODULE:CLASS``.
+        The patient model: a :data:`sim.patients.patient_model.PATIENT_MODELS` name or
+        ``MODULE:CLASS``.
 
     Raises
     ------

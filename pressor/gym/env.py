@@ -3,8 +3,8 @@
 The agent sits where a controller sits. :class:`AgentController` is a
 :class:`contracts.controller.Controller` whose ``step`` returns the agent's latest action; the
 environment drives :class:`sim.world.World` and the runtime's
-:class:`runtime.core.closed_loop.ClosedLoopCore` tick by tick exactly as :func:`sim.episode.simulate`
-(and so ``pressor trial`` and :func:`pressor.api.simulate`) does, with the supervisor
+:class:`runtime.core.closed_loop.ClosedLoopCore` tick by tick exactly as
+:func:`sim.episode.simulate` (and so ``pressor trial`` and :func:`pressor.api.simulate`) does, with the supervisor
 :func:`runtime.core.supervisor_config.supervisor_config_for` builds for a controller. So the action
 passes the same supervisor (STARTUP/AUTO/HOLD/FAILSAFE/RECOVERING, clamp to [0, pump limit],
 bumpless re-entry) and the same float32 pump link a controller's command does; in HOLD or

@@ -6,7 +6,8 @@ Wraps :class:`sim.world.World` (the pure core) in the link protocol of :mod:`lin
    created, or one end of a ``socat`` pair), handshake: announce itself with a hello (scenario,
    patient seed, sample period, sensor noise, number of ticks, link mode, and the syringe:
    ``--drug``, ``--concentration-ug-ml``, the pump's maximum rate) every 0.5 s until the runtime
-   answers; the patient is ``--patient-model`` (:mod:`sim.patients.patient_model`, default the paper's);
+   answers; the patient is ``--patient-model`` (:mod:`sim.patients.patient_model`, default the
+   paper's);
 2. per tick k (lockstep, PX4 SITL style): send tick k's scheduling parameters, target and MAP sample
    (plus a heartbeat once per simulated second), wait for the infusion command answering tick k,
    apply it, advance the world one sample period, queue the pump status (it leaves with the next
@@ -25,8 +26,8 @@ updates carry none, and the runtime's command for each of them answers the lates
 (docs/PROTOCOL.md, sample-and-hold).
 
 Faults (``--fault KIND[:ARGS]``, repeatable; see ``pressor faults`` and :mod:`contracts.faults`):
-sensor, pump and scheduling faults are injected in the world (:mod:`sim.scenarios.faults`); byte-level
-link faults by a wrapper of the port; ``link-stall`` / ``link-disconnect`` by this loop: during
+sensor, pump and scheduling faults are injected in the world (:mod:`sim.scenarios.faults`);
+byte-level link faults by a wrapper of the port; ``link-stall`` / ``link-disconnect`` by this loop: during
 the window the device keeps simulating (the pump holds its last rate until its own watchdog trips)
 but sends nothing and waits for nothing, so the runtime sees a jump in sim time and runs its
 watchdogs over the silent ticks on its virtual clock. A disconnect also cuts the burst in flight

@@ -43,8 +43,8 @@ not give):
 Steady state under a constant R: C = Ce = Css = C_endo + R·c/(60·CL), ΔMAP = (1 − g)·E(Css)
 (:meth:`Norepinephrine1C.steady_state_delta_mmhg`).
 
-As a :class:`~sim.patients.patient_model.PatientModel`: K, T, τ are *apparent*. K is the MAP rise one
-more ml/h gives once the kinetics settled, counter-regulation unmoved (the Hill curve from Ce to
+As a :class:`~sim.patients.patient_model.PatientModel`: K, T, τ are *apparent*. K is the MAP rise
+one more ml/h gives once the kinetics settled, counter-regulation unmoved (the Hill curve from Ce to
 Ce + c/(60·CL)); T = 60·V/CL + 60/ke0 s (the two time constants added); τ = d.
 
 Integration on the internal step h: (C, Ce) uses its exact discretisation for the input held over
@@ -156,8 +156,8 @@ class NorepinephrineParams:
 
 
 def draw_params(patient_seed: int) -> NorepinephrineParams:
-    """The patient of ``patient_seed``: stream 0 of :func:`sim.patients.cohort.patient_rng` draws the
-    :data:`RANGES` in their order, uniformly, ``v_l`` and ``ec50_ng_ml`` log-uniformly."""
+    """The patient of ``patient_seed``: stream 0 of :func:`sim.patients.cohort.patient_rng` draws
+    the :data:`RANGES` in their order, uniformly, ``v_l`` and ``ec50_ng_ml`` log-uniformly."""
     rng = patient_rng(patient_seed, 0)
     values = {}
     for name, (lo, hi) in RANGES.items():

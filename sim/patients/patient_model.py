@@ -10,8 +10,8 @@ down; any class that has those members plays in ``pressor trial``, ``pressor sil
 Named models (:data:`PATIENT_MODELS`; docs/PATIENTS.md lists equations, ranges and sources):
 
 ``paper`` (default)
-    The seed paper's nonlinear first order plus time-varying delay (:class:`sim.patients.patient.Patient`);
-    K, T, τ are the model's own.
+    The seed paper's nonlinear first order plus time-varying delay
+    (:class:`sim.patients.patient.Patient`); K, T, τ are the model's own.
 ``pkpd``
     Two-compartment pharmacokinetics, effect site, sigmoid Emax, tachyphylaxis
     (:class:`sim.patients.pkpd.PkpdPatient`, the model of ``benchmarks/independent_patients.py``).

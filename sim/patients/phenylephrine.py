@@ -1,7 +1,7 @@
 """The ``phenylephrine-2c`` patient model: label kinetics, effect site, Emax, counter-regulation.
 
-Written from published equations, independently of the paper's model (:mod:`sim.patients.patient`) and
-of :mod:`sim.patients.pkpd`. With the delivered rate R (ml/h) of a syringe at c µg/ml
+Written from published equations, independently of the paper's model (:mod:`sim.patients.patient`)
+and of :mod:`sim.patients.pkpd`. With the delivered rate R (ml/h) of a syringe at c µg/ml
 (:data:`~contracts.controller.DESIGN_CONCENTRATION_UG_ML`), rate constants in 1/min::
 
     u(t)      = R(t − d) · c / 60                                   µg/min, after the line delay d
@@ -40,14 +40,15 @@ Sources and ranges (drawn per patient, :data:`RANGES`):
 Steady state under a constant R: every level is Css = R·c / (60·k10·V1) ng/ml and
 ΔMAP = (1 − g)·Emax·Css/(EC50 + Css) (:meth:`Phenylephrine2C.steady_state_delta_mmhg`).
 
-As a :class:`~sim.patients.patient_model.PatientModel`: K, T, τ are *apparent* values, K the MAP rise
-one more ml/h gives once the plasma's fast mode settled (peripheral amount and counter-regulation
+As a :class:`~sim.patients.patient_model.PatientModel`: K, T, τ are *apparent* values, K the MAP
+rise one more ml/h gives once the plasma's fast mode settled (peripheral amount and counter-regulation
 unmoved: the Emax curve from Ce to Ce + c/(60·V1·(k10 + k12))), T = 60/(k10 + k12) + 60/ke0 s (the
 two fast time constants added), τ = d.
 
 Integration on the internal step h: the linear part (A1, A2, Ce) uses its exact discretisation for
 an input held over the step (the input being the exact mean of the delayed rate, as in
-:mod:`sim.patients.patient`), F the exact solution for an effect E that moves linearly over the step.
+:mod:`sim.patients.patient`), F the exact solution for an effect E that moves linearly over the
+step.
 """
 
 from __future__ import annotations
@@ -123,8 +124,8 @@ class PhenylephrineParams:
 
 
 def draw_params(patient_seed: int) -> PhenylephrineParams:
-    """The patient of ``patient_seed``: stream 0 of :func:`sim.patients.cohort.patient_rng` draws the
-    :data:`RANGES` in their order, uniformly, the rate constants log-uniformly."""
+    """The patient of ``patient_seed``: stream 0 of :func:`sim.patients.cohort.patient_rng` draws
+    the :data:`RANGES` in their order, uniformly, the rate constants log-uniformly."""
     rng = patient_rng(patient_seed, 0)
     values = {}
     for name, (lo, hi) in RANGES.items():

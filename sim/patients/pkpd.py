@@ -266,8 +266,8 @@ PHARMACOLOGY = (
 
 
 class PkpdPatient(IndependentPatient):
-    """The ``pkpd`` :class:`~sim.patients.patient_model.PatientModel`: this module's patient, without
-    its own disturbances, on a 100 µg/ml syringe (module docstring: seeds, apparent K, T, τ).
+    """The ``pkpd`` :class:`~sim.patients.patient_model.PatientModel`: this module's patient,
+    without its own disturbances, on a 100 µg/ml syringe (module docstring: seeds, apparent K, T, τ).
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """Patient models defined outside :mod:`sim`, loaded by ``--patient-model tests.support.patient_plugin:CLASS``.
 
-:class:`FirstOrderPatient` satisfies :class:`sim.patients.patient_model.PatientModel`; the others each
-lack one thing, for the error messages.
+:class:`FirstOrderPatient` satisfies :class:`sim.patients.patient_model.PatientModel`; the others
+each lack one thing, for the error messages.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""Drug sensitivity scaled by a factor (sim/patients/sensitivity.py): the wrapped patients' responses
-against closed forms computed here, the factor's range, ``pressor trial --sensitivity`` and the
-API's ``sensitivity=``; a factor of 1 is the unwrapped model byte for byte."""
+"""Drug sensitivity scaled by a factor (sim/patients/sensitivity.py): the wrapped patients'
+responses against closed forms computed here, the factor's range, ``pressor trial --sensitivity``
+and the API's ``sensitivity=``; a factor of 1 is the unwrapped model byte for byte."""
 
 from __future__ import annotations
 
@@ -21,7 +21,8 @@ from sim.patients.patient_model import (
 from sim.patients.sensitivity import SensitivityScaled, check_factor, split_spec, with_sensitivity
 from tests.support.patient_plugin import FirstOrderPatient
 
-#: the paper model's patient of tests/sim/patients/test_patient_model.py: steady state k0·i·e^(−k1·i)
+#: the paper model's patient of tests/sim/patients/test_patient_model.py: steady state
+#: k0·i·e^(−k1·i)
 PAPER = PatientParams(
     a_k=500.0,
     k0=0.5,

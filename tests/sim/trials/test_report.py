@@ -1,4 +1,5 @@
-"""The trial's HTML report (sim.trials.report): self-contained, its data written beside it, reproducible."""
+"""The trial's HTML report (sim.trials.report): self-contained, its data written beside it,
+reproducible."""
 
 from __future__ import annotations
 
