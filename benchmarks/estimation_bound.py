@@ -7,7 +7,7 @@ Usage::
 
 Each patient of the seeded cohort runs the shipped LPV in ``--scenario`` (default
 ``paper-tracking``) under several scheduling sources, through the trial's own closed loop
-(:func:`hil_sim.closed_loop.simulate`, the runtime's core):
+(:func:`sim.episode.simulate`, the runtime's core):
 
 ``oracle``
     The simulator's true K, T, τ from the first tick (the denominator of every ratio).
@@ -45,13 +45,13 @@ import sys
 import numpy as np
 
 from contracts.parallel import run_ordered
-from hil_sim.closed_loop import simulate
-from hil_sim.cohort import cohort_seeds
-from hil_sim.scenario import load_scenario
-from hil_sim.world import World
 from runtime.core.scheduling import OracleSchedule, Schedule
 from runtime.estimation.sources import EstimatedSchedule
 from runtime.inputs.controller_loader import load_controller
+from sim.episode import simulate
+from sim.patients.cohort import cohort_seeds
+from sim.scenarios.scenario import load_scenario
+from sim.world import World
 
 TS = 0.1  # s, the loop's sample period
 MOVED_MMHG = 0.5  # MAP change from the first sample that counts as "the MAP has moved"

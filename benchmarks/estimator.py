@@ -29,10 +29,10 @@ import random
 import statistics
 import time
 
-from hil_sim.cohort import cohort_seeds
-from hil_sim.world import World
 from runtime.estimation.sources import EstimatedSchedule
 from runtime.inputs.controller_loader import load_controller
+from sim.patients.cohort import cohort_seeds
+from sim.world import World
 
 SCENARIOS = ("paper-tracking", "paper-disturbance")
 TARGETS = {"K_rel_err_pct": 15.0, "T_rel_err_pct": 25.0, "tau_abs_err_s": 5.0}

@@ -1,12 +1,12 @@
 """LPV vs PI vs Smith on a patient model not the paper's, through the real ``pressor run``.
 
-Each seeded patient of :mod:`hil_sim.pkpd` (the ``pkpd`` patient model: two-compartment
+Each seeded patient of :mod:`sim.patients.pkpd` (the ``pkpd`` patient model: two-compartment
 pharmacokinetics, an effect compartment, a sigmoid Emax on MAP, a transport delay, tachyphylaxis,
 a haemorrhage-like drop at 20 min and a fluid-bolus-like rise at 40 min) is played by the device
 of ``tests/support/protocol_device.py`` (written from docs/PROTOCOL.md alone) on a pty, signed, in
 lockstep, against a real ``pressor run --controller SPEC`` with its default estimated schedule (a
 real monitor sends no K, T, tau). The device announces phenylephrine at 100 µg/ml, the runtime's
-defaults. Of :mod:`hil_sim` only the patient model's module is used (its world, device and paper
+defaults. Of :mod:`sim` only the patient model's module is used (its world, device and paper
 model are not)::
 
     python -m benchmarks.independent_patients                  # 10 patients x lpv, pi, smith
@@ -40,7 +40,7 @@ from types import ModuleType
 from typing import Any
 
 from contracts.metrics import run_metrics
-from hil_sim.pkpd import (
+from sim.patients.pkpd import (
     BOLUS_AT_S,
     HEMORRHAGE_AT_S,
     IndependentPatient,

@@ -5,7 +5,7 @@ Usage::
     python -m benchmarks.schedule_sources                          # both models, 10 patients
     python -m benchmarks.schedule_sources --model one-compartment --patients 20 --seed 7
 
-Each seeded patient of :mod:`hil_sim.pkpd` (``--model two-compartment``:
+Each seeded patient of :mod:`sim.patients.pkpd` (``--model two-compartment``:
 the benchmark's own pharmacology with its haemorrhage and bolus, target 70 mmHg, 60 min;
 ``--model one-compartment``: one-compartment kinetics, a Hill effect, no tolerance, a wide
 spread, a +15 mmHg step over the patient's baseline, 30 min, no disturbance) runs through the
@@ -32,12 +32,6 @@ import sys
 from typing import Any
 
 from contracts.metrics import run_metrics
-from hil_sim.pkpd import (
-    BOLUS_AT_S,
-    HEMORRHAGE_AT_S,
-    IndependentPatient,
-    draw_patient,
-)
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
 from runtime.core.supervisor import Supervisor
@@ -46,6 +40,12 @@ from runtime.estimation.sources import EstimatedSchedule, make_schedule
 from runtime.estimation.validated import ValidatedSchedule
 from runtime.estimation.validation import ModelBank
 from runtime.inputs.controller_loader import load_controller
+from sim.patients.pkpd import (
+    BOLUS_AT_S,
+    HEMORRHAGE_AT_S,
+    IndependentPatient,
+    draw_patient,
+)
 
 TS_S = 0.1
 PUMP_MAX_ML_H = 120.0
@@ -166,8 +166,8 @@ def run_one(
 
 
 def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dict[str, Any]:
-    """One patient of the project's own cohort (:mod:`hil_sim`) through the trial's closed loop."""
-    import hil_sim.trial as trial
+    """One patient of the project's own cohort (:mod:`sim`) through the trial's closed loop."""
+    import sim.trials.trial as trial
 
     trial.make_schedule = lambda name, ts: make_source(name)  # type: ignore[assignment]
     rec, traj = trial._simulate_patient(scenario, spec, patient_seed, TS_S, source)
@@ -226,8 +226,8 @@ def main(argv: list[str] | None = None) -> int:
             RUNS[lab] = ("lpv", lab)
     models = ("two-compartment", "one-compartment") if args.model == "both" else (args.model,)
     if args.scenario:
-        from hil_sim.cohort import cohort_seeds
-        from hil_sim.scenario import load_scenario
+        from sim.patients.cohort import cohort_seeds
+        from sim.scenarios.scenario import load_scenario
 
         scenario = load_scenario(args.scenario)
         seeds = cohort_seeds(args.seed, args.patients)

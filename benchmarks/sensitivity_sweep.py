@@ -11,10 +11,10 @@ Every patient of the cohort ``(--seed, --patients)`` runs the scenario (default
 model's, the seven responsiveness levels of published closed-loop vasopressor robustness tests)
 under each controller (default ``lpv``, ``pi``, ``smith``), all on one scheduling source (default
 ``estimated``, the runtime's own; the PI ignores it). A level is the patient model
-``MODEL@sensitivity=f`` (:mod:`hil_sim.sensitivity`: the patient responds to each delivered ml/h
-as the model's responds to f ml/h, so K is f × the model's); level 1 is the unwrapped model, so
-its records are ``pressor trial``'s bytes. Every cohort runs through
-:func:`hil_sim.trial.run_cohort`, the code path of ``pressor trial`` (``--jobs`` local processes
+``MODEL@sensitivity=f`` (:mod:`sim.patients.sensitivity`: the patient responds to each delivered
+ml/h as the model's responds to f ml/h, so K is f × the model's); level 1 is the unwrapped model,
+so its records are ``pressor trial``'s bytes. Every cohort runs through
+:func:`sim.trials.trial.run_cohort`, the code path of ``pressor trial`` (``--jobs`` local processes
 or ``--scheduler`` a Dask cluster; the results do not depend on either), with progress on stderr.
 
 Printed (stdout, a Markdown table as each level finishes): per level and controller one row for
@@ -49,11 +49,11 @@ from pathlib import Path
 from typing import Any
 
 from contracts.metrics import percentile_summary
-from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, PatientModelError
-from hil_sim.scenario import Scenario, load_scenario
-from hil_sim.sensitivity import check_factor, with_sensitivity
-from hil_sim.trial import controller_dir_name, run_cohort, write_outputs
 from runtime.estimation.sources import SOURCES
+from sim.patients.patient_model import DEFAULT_PATIENT_MODEL, PatientModelError
+from sim.patients.sensitivity import check_factor, with_sensitivity
+from sim.scenarios.scenario import Scenario, load_scenario
+from sim.trials.trial import controller_dir_name, run_cohort, write_outputs
 
 #: sensitivity levels (× the model's; dimensionless)
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)

@@ -14,11 +14,11 @@ from __future__ import annotations
 import argparse
 import time
 
-from hil_sim.cohort import cohort_seeds
-from hil_sim.patient_model import DEFAULT_PATIENT_MODEL
-from hil_sim.scenario import load_scenario
-from hil_sim.trial import run_patient
 from runtime.estimation.sources import SOURCES
+from sim.patients.cohort import cohort_seeds
+from sim.patients.patient_model import DEFAULT_PATIENT_MODEL
+from sim.scenarios.scenario import load_scenario
+from sim.trials.trial import run_patient
 
 
 def main() -> None:

@@ -16,8 +16,8 @@ import time
 
 from distributed import LocalCluster
 
-from hil_sim.scenario import load_scenario
-from hil_sim.trial import run_trial
+from sim.scenarios.scenario import load_scenario
+from sim.trials.trial import run_trial
 
 
 def main() -> None:

@@ -1,7 +1,7 @@
 """The one small interface every controller the runtime can run implements.
 
 Both the generated LPV modules (``codegen``) and the PI baseline (:mod:`baselines.pi`)
-satisfy :class:`Controller`; the loop, the in-process simulator (``hil_sim``) and user code call
+satisfy :class:`Controller`; the loop, the in-process simulator (``sim``) and user code call
 nothing else. A step is a pure function of the controller's own state and its arguments: no clock,
 no I/O, no allocation that grows.
 

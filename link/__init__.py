@@ -1,6 +1,6 @@
 """The serial link between the controller runtime and the pump/patient device (MAVLink 2).
 
-Both ends speak it: the runtime (``runtime``) and the simulated device (``hil_sim.device``). It
+Both ends speak it: the runtime (``runtime``) and the simulated device (``sim.devices.device``). It
 imports no other package of this project.
 
 Modules
@@ -74,7 +74,7 @@ Ts, noise, n_ticks), ...)``, ``ep.send_tick(world.observe())`` (a :class:`TickIn
 ``ep.wait_for_command(tick, timeout_s)`` -> :class:`Command` ``(tick, rate_ml_h, mode)``,
 ``ep.send_pump_status(world.advance())`` (a :class:`PumpStatus`), ``ep.send_heartbeat(...)``.
 
-Values are float32 on the wire (sim time is double), matching ``hil_sim.world``'s rounding.
+Values are float32 on the wire (sim time is double), matching ``sim.world``'s rounding.
 """
 
 from link.counters import (

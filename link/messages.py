@@ -1,6 +1,6 @@
 """The typed messages of the pressor link, one per frame (or frame bundle), used by both ends.
 
-The device (``hil_sim``) builds them and the runtime receives them: the same types on both sides,
+The device (``sim``) builds them and the runtime receives them: the same types on both sides,
 so a value never changes shape between the world, the wire and the loop. Floats are float32 on the
 wire (sim time is double); the world rounds to float32 before it builds a message, so a message
 reads back from the wire exactly as it was sent.

@@ -11,9 +11,9 @@ Two functions, two typed results::
     result.summary["metrics"], result.to_pandas()      # one row per patient (patients.csv)
     result.write("out/")                               # patients.json, patients.csv, summary.json
 
-Both run the code the command runs: :func:`trial` calls :func:`hil_sim.trial.run_cohort`, as
+Both run the code the command runs: :func:`trial` calls :func:`sim.trials.trial.run_cohort`, as
 ``pressor trial`` does (same seed, same records, same bytes, whatever ``jobs``), and
-:func:`simulate` runs one patient exactly as a trial does (:func:`hil_sim.trial.run_patient`'s
+:func:`simulate` runs one patient exactly as a trial does (:func:`sim.trials.trial.run_patient`'s
 path: the world, the controller, the runtime's closed-loop core and supervisor, the metrics), which
 is tick for tick what a lockstep ``pressor sil`` of that seed gives. ``controller`` is any
 ``--controller`` spec (``pi``, ``lpv``, ``smith:45``, a generated module, a plugin
@@ -22,8 +22,8 @@ is tick for tick what a lockstep ``pressor sil`` of that seed gives. ``controlle
 
 Errors: a bad argument raises :class:`ValueError` (a subclass naming the argument, the value and
 the allowed range: :class:`runtime.inputs.controller_loader.ControllerSpecError`,
-:class:`hil_sim.scenario.ScenarioError`, :class:`hil_sim.patient_model.PatientModelError`); a
-controller that raises mid-run raises :class:`runtime.core.closed_loop.ControllerError` naming it,
+:class:`sim.scenarios.scenario.ScenarioError`,
+:class:`sim.patients.patient_model.PatientModelError`); a controller that raises mid-run raises :class:`runtime.core.closed_loop.ControllerError` naming it,
 the patient and the tick.
 """
 
@@ -39,14 +39,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from hil_sim.closed_loop import Trajectory
-from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
-from hil_sim.scenario import Scenario, load_scenario
-from hil_sim.sensitivity import with_sensitivity
-from hil_sim.trial import _csv_text, _simulate_patient, run_cohort, write_outputs
 from runtime.core.supervisor_config import ALARM_FAULTS, State
 from runtime.estimation.sources import SOURCES
 from runtime.inputs.controller_loader import load_controller
+from sim.episode import Trajectory
+from sim.patients.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
+from sim.patients.sensitivity import with_sensitivity
+from sim.scenarios.scenario import Scenario, load_scenario
+from sim.trials.trial import _csv_text, _simulate_patient, run_cohort, write_outputs
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas
@@ -100,7 +100,7 @@ class SimulationResult:
         The patient's record, as ``pressor trial`` writes it in ``patients.json`` (seed,
         coefficients, schedule range, §3 metrics, disturbance events; docs/METRICS.md).
     trajectory
-        Every tick (:class:`hil_sim.closed_loop.Trajectory`: MAP in mmHg, rates in ml/h, K in
+        Every tick (:class:`sim.episode.Trajectory`: MAP in mmHg, rates in ml/h, K in
         mmHg/(ml/h), T and τ in s, supervisor state and fault bits).
     """
 
@@ -287,10 +287,10 @@ def simulate(
     schedule
         Where K, T, τ come from: ``oracle``, ``estimated``, ``nominal`` or ``validated``.
     patient_model
-        A patient model name or ``MODULE:CLASS`` (:mod:`hil_sim.patient_model`).
+        A patient model name or ``MODULE:CLASS`` (:mod:`sim.patients.patient_model`).
     sensitivity
         The patient's drug sensitivity × this factor (dimensionless, [0.05, 20];
-        :mod:`hil_sim.sensitivity`); 1 (default) runs the model as drawn, byte for byte.
+        :mod:`sim.patients.sensitivity`); 1 (default) runs the model as drawn, byte for byte.
 
     Returns
     -------

@@ -1,7 +1,7 @@
 """``pressor sil``: the software-in-the-loop run, device process and runtime over a serial link.
 
 The front door knows both ends, so the two-process orchestration lives here: ``pressor sil``
-loads the scenario through the simulator's scenario API (:mod:`hil_sim.scenario`), starts the
+loads the scenario through the simulator's scenario API (:mod:`sim.scenarios.scenario`), starts the
 device as its own process (``python -m pressor device --port ...``), connects to it over a
 pseudo-terminal (a real tty to pyserial), signs the link (a fresh key per run unless
 ``--signing-key``), runs the runtime in lockstep (or ``--realtime``) through
@@ -14,7 +14,7 @@ fault, only through what arrives on the link. ``--schedule`` picks where the con
 come from (:func:`runtime.estimation.sources.make_schedule`); the default here is still the oracle
 (the device's truth), because the online estimator's figures do not all hold yet
 (docs/notes/cohort-evidence.md). ``--patient-model`` picks the device's patient model
-(:mod:`hil_sim.patient_model`); a model other than ``paper`` is named in the summary as
+(:mod:`sim.patients.patient_model`); a model other than ``paper`` is named in the summary as
 ``patient_model``.
 
 Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
@@ -42,7 +42,6 @@ from typing import Any
 
 from contracts.drug import DEFAULT_BINDING, DrugBinding
 from contracts.usage import USAGE_EXIT, UsageError, UsageParser
-from hil_sim.patient_model import add_patient_model_option
 from runtime.inputs.config import (
     ORACLE_DEFAULT_WHY,
     RunConfig,
@@ -51,6 +50,7 @@ from runtime.inputs.config import (
     run_config,
 )
 from runtime.shell.placement import CpuChoice, parse_lockstep_cpus
+from sim.patients.patient_model import add_patient_model_option
 
 DEFAULT_SCENARIO = "paper-tracking"
 DEFAULT_PATIENT_SEED = 1
@@ -83,7 +83,7 @@ class SilConfig:
     noisy
         Whether the scenario's monitor adds noise (the metrics' settling band, docs/METRICS.md).
     patient_model
-        The device's patient model (a :data:`hil_sim.patient_model.PATIENT_MODELS` name or
+        The device's patient model (a :data:`sim.patients.patient_model.PATIENT_MODELS` name or
         ``MODULE:CLASS``).
     drug
         The loaded design's drug and syringe (:func:`contracts.drug.binding_of`): the device is
@@ -152,10 +152,10 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
     """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
     disturbance events (raises :class:`contracts.usage.UsageError`)."""
     from contracts.drug import binding_of
-    from hil_sim.patient_model import PatientModelError, check_model_for_scenario
-    from hil_sim.scenario import ScenarioError, is_scenario_path, load_scenario
-    from hil_sim.trial import scenario_events
     from runtime.inputs.config import load_controller
+    from sim.patients.patient_model import PatientModelError, check_model_for_scenario
+    from sim.scenarios.scenario import ScenarioError, is_scenario_path, load_scenario
+    from sim.trials.trial import scenario_events
 
     args = sil_parser().parse_args(argv)
     if args.rrd is None:
@@ -337,7 +337,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
 def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:
     """Add the device's true MAP to the recording once the device has ended and written it
     (``pressor device --truth-out``); a device that did not write it leaves the series out."""
-    from hil_sim.truth import load_truth
+    from sim.patients.truth import load_truth
 
     try:
         proc.wait(timeout=10.0)

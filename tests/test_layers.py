@@ -4,7 +4,7 @@ The allowed arrows are written once, in :data:`ALLOWED`; every module of every p
 each of its imports, function-local ones included, must land in its own package, in an allowed one,
 or outside the project. A new package has to be added here, with its arrows, before it can ship.
 
-Inside ``synthesis`` and ``runtime`` the same holds one level down, between their parts
+Inside ``synthesis``, ``runtime`` and ``sim`` the same holds one level down, between their parts
 (:data:`INNER_ALLOWED`, docs/ARCHITECTURE.md).
 """
 
@@ -25,9 +25,9 @@ ALLOWED: dict[str, frozenset[str]] = {
     "synthesis": frozenset({"contracts", "baselines"}),
     "codegen": frozenset({"contracts", "synthesis"}),
     "runtime": frozenset({"contracts", "baselines", "link"}),
-    "hil_sim": frozenset({"contracts", "baselines", "link", "runtime"}),
+    "sim": frozenset({"contracts", "baselines", "link", "runtime"}),
     "pressor": frozenset(
-        {"contracts", "baselines", "link", "synthesis", "codegen", "runtime", "hil_sim"}
+        {"contracts", "baselines", "link", "synthesis", "codegen", "runtime", "sim"}
     ),
 }
 
@@ -96,11 +96,29 @@ RUNTIME_ALLOWED: dict[str, frozenset[str]] = {
     "cli": frozenset({"core", "inputs", "session", "summary"}),
 }
 
+#: part of sim -> the parts of sim it may import (besides itself): patients and the two devices
+#: (pump, monitor) at the bottom, scenarios on them, the world on all three, one patient's episode
+#: on the world, trials and the cli on top. The device process is its own part of ``devices``
+#: (``devices.device``, ``devices.device_options``): it runs the world, which runs the pump.
+SIM_ALLOWED: dict[str, frozenset[str]] = {
+    "__init__": frozenset(),
+    "patients": frozenset(),
+    "devices": frozenset(),
+    "scenarios": frozenset({"patients", "devices"}),
+    "world": frozenset({"patients", "devices", "scenarios"}),
+    "episode": frozenset({"world"}),
+    "devices.device_options": frozenset({"patients", "scenarios", "world"}),
+    "devices.device": frozenset({"devices.device_options", "patients", "scenarios"}),
+    "trials": frozenset({"episode", "patients", "scenarios", "world"}),
+    "cli": frozenset({"patients", "scenarios", "trials"}),
+}
+
 #: package -> its parts and their allowed arrows. A part is a subpackage (dotted below the
 #: package) or a top-level module; a module belongs to the longest part that prefixes it.
 INNER_ALLOWED: dict[str, dict[str, frozenset[str]]] = {
     "synthesis": SYNTHESIS_ALLOWED,
     "runtime": RUNTIME_ALLOWED,
+    "sim": SIM_ALLOWED,
 }
 
 
@@ -255,9 +273,9 @@ def test_package_imports_only_along_the_allowed_arrows(package):
 def test_the_import_scan_sees_function_local_imports(tmp_path):
     module = tmp_path / "m.py"
     module.write_text(
-        "def f():\n    from synthesis.families.theorem3.lmi import x\n    import hil_sim.world\n"
+        "def f():\n    from synthesis.families.theorem3.lmi import x\n    import sim.world\n"
     )
-    assert imported_top_levels(module) == {"synthesis", "hil_sim"}
+    assert imported_top_levels(module) == {"synthesis", "sim"}
 
 
 @pytest.mark.parametrize("package", sorted(INNER_ALLOWED))
@@ -289,3 +307,6 @@ def test_the_inner_scan_skips_only_type_checking_imports(tmp_path):
     assert part_of("synthesis", "synthesis.families.registry.Family") == "families.registry"
     assert part_of("runtime", "runtime.shell.loop.Loop") == "shell"
     assert part_of("runtime", "runtime.session") == "session"
+    assert part_of("sim", "sim.devices.pump") == "devices"
+    assert part_of("sim", "sim.devices.device_options") == "devices.device_options"
+    assert part_of("sim", "sim.episode.simulate") == "episode"

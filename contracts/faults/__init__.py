@@ -8,7 +8,7 @@ Times are in simulated seconds and are rounded to whole ticks of the loop (fault
 virtual time, so a lockstep run with faults is as deterministic as one without).
 
 This package is pure (no I/O besides reading a scenario TOML on request) and imports nothing from
-``hil_sim``: the device side (``hil_sim.faults``) imports it to *inject* the faults, the runtime
+``sim``: the device side (``sim.scenarios.faults``) imports it to *inject* the faults, the runtime
 uses it only to *label and score* them in its summary, from the schedule it was given on its own
 command line and from the supervisor's detection log. The runtime's control path never sees a
 fault except through its inputs.

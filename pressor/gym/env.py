@@ -2,9 +2,9 @@
 
 The agent sits where a controller sits. :class:`AgentController` is a
 :class:`contracts.controller.Controller` whose ``step`` returns the agent's latest action; the
-environment drives :class:`hil_sim.world.World` and the runtime's
-:class:`runtime.core.closed_loop.ClosedLoopCore` tick by tick exactly as :func:`hil_sim.closed_loop.simulate`
-(and so ``pressor trial`` and :func:`pressor.api.simulate`) does, with the supervisor
+environment drives :class:`sim.world.World` and the runtime's
+:class:`runtime.core.closed_loop.ClosedLoopCore` tick by tick exactly as
+:func:`sim.episode.simulate` (and so ``pressor trial`` and :func:`pressor.api.simulate`) does, with the supervisor
 :func:`runtime.core.supervisor_config.supervisor_config_for` builds for a controller. So the action
 passes the same supervisor (STARTUP/AUTO/HOLD/FAILSAFE/RECOVERING, clamp to [0, pump limit],
 bumpless re-entry) and the same float32 pump link a controller's command does; in HOLD or
@@ -29,14 +29,14 @@ import numpy as np
 from gymnasium import spaces
 
 from contracts.faults import QUALITY_HELD, QUALITY_INVALID, FaultSpec, parse_fault
-from hil_sim.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
-from hil_sim.scenario import Scenario
-from hil_sim.world import World
 from pressor.api import _scenario
 from pressor.gym.reward import MapReward, Ticks
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import supervisor_config_for
+from sim.patients.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
+from sim.scenarios.scenario import Scenario
+from sim.world import World
 
 __all__ = ["AgentController", "MapEnv"]
 
@@ -98,7 +98,7 @@ class MapEnv(gymnasium.Env):
     scenario
         A scenario name (``pressor scenarios``), a ``.toml`` path or a :class:`Scenario`.
     patient_model
-        A patient model name or ``MODULE:CLASS`` (:mod:`hil_sim.patient_model`).
+        A patient model name or ``MODULE:CLASS`` (:mod:`sim.patients.patient_model`).
     faults
         Extra faults, ``--fault`` texts (``"sensor-nan:300,5"``) or :class:`FaultSpec`, after the
         scenario's own; sensor, pump and scheduling faults (the link is perfect).
@@ -292,7 +292,7 @@ class MapEnv(gymnasium.Env):
     # -- helpers ----------------------------------------------------------------------------------
     def episode(self) -> Ticks:
         """Every tick of the episode so far (arrays of :class:`Ticks`; the same names and values
-        as :class:`hil_sim.closed_loop.Trajectory` for the same seed and commands)."""
+        as :class:`sim.episode.Trajectory` for the same seed and commands)."""
         if self.world is None:
             raise RuntimeError("episode() before reset()")
         return self._slice(0, self.world.tick)

@@ -33,7 +33,7 @@ class Ticks(NamedTuple):
     """Control ticks of the loop, oldest first: one environment step's, or a whole episode's.
 
     Every array has one entry per tick k (sampled at the tick, the command held over it), with the
-    names and units of :class:`hil_sim.closed_loop.Trajectory`.
+    names and units of :class:`sim.episode.Trajectory`.
 
     Attributes
     ----------

@@ -14,9 +14,9 @@ from contracts.faults import (
     fault_report,
     parse_fault,
 )
-from hil_sim.device import main as device_main
-from hil_sim.scenario import ScenarioError, load_scenario_file
 from runtime.core.supervisor_config import Fault
+from sim.devices.device import main as device_main
+from sim.scenarios.scenario import ScenarioError, load_scenario_file
 from tests.support.sil_helpers import pressor
 
 REQUIRED = (

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from contracts.parallel import BackendError, run_ordered
-from hil_sim.cli import main
+from sim.cli import main
 
 distributed = pytest.importorskip("distributed")
 
@@ -106,8 +106,8 @@ def test_a_worker_killed_mid_trial_costs_only_a_retry_not_the_records(tmp_path, 
                 os.kill(pids[0], signal.SIGKILL)
                 killed.append(pids[0])
 
-        from hil_sim.scenario import load_scenario
-        from hil_sim.trial import run_trial, summarize, write_outputs
+        from sim.scenarios.scenario import load_scenario
+        from sim.trials.trial import run_trial, summarize, write_outputs
 
         sc = load_scenario(str(scenario))
         records = run_trial(sc, "pi", 3, 6, progress=kill_one_worker, scheduler=c.scheduler_address)

@@ -11,14 +11,14 @@ import pytest
 
 from baselines.pi import PIController
 from contracts.faults import parse_faults
-from hil_sim.closed_loop import simulate
-from hil_sim.world import World
 from link import LINK_LOCKSTEP, Hello, PtyPair, RuntimeSession
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
 from runtime.shell.loop import Loop
 from runtime.shell.trajectory import held_delivered_ml_h
+from sim.episode import simulate
+from sim.world import World
 from tests.support.sil_helpers import spawn_device
 
 SCENARIO, SEED, DURATION_S, TS = "paper-tracking", 3, 120.0, 0.1

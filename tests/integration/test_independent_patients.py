@@ -17,7 +17,7 @@ from benchmarks.independent_patients import (
     run_patient,
     summary_lines,
 )
-from hil_sim.pkpd import (
+from sim.patients.pkpd import (
     BOLUS_AT_S,
     HEMORRHAGE_AT_S,
     RANGES,

@@ -90,8 +90,8 @@ def test_signal_stops_sil_keeping_recording_tlog_and_summary(tmp_path, sig):
 
 def _device_thread(pair: PtyPair, stop: threading.Event, key: Path) -> threading.Thread:
     """A simulated device (the project's world) driving the runtime from this process."""
-    from hil_sim.device import run_device
-    from hil_sim.world import World
+    from sim.devices.device import run_device
+    from sim.world import World
 
     def run() -> None:
         clock = ManualClock()

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from contracts.metrics import step_metrics
-from hil_sim.closed_loop import simulate
-from hil_sim.world import World
 from runtime.inputs.controller_loader import load_controller
+from sim.episode import simulate
+from sim.world import World
 
 ROOT = Path(__file__).resolve().parents[2]
 HORIZON_S = 1500.0

@@ -12,8 +12,6 @@ from codegen import pipeline as pl
 from codegen.emit_python import module_sha256
 from contracts.drug import DEFAULT_BINDING, DrugBinding, binding_of
 from contracts.module_hash import module_text_sha256
-from hil_sim.closed_loop import simulate
-from hil_sim.world import World
 from pressor.sil import device_command, sil_config
 from runtime.inputs.controller_loader import (
     LPV_DESIGNS,
@@ -21,6 +19,8 @@ from runtime.inputs.controller_loader import (
     controller_name,
     load_controller,
 )
+from sim.episode import simulate
+from sim.world import World
 from synthesis.artifact import load_artifact
 
 ARTIFACT = Path(pl.REPO_ROOT) / "synthesis" / "data" / "norepinephrine_design.npz"

@@ -36,7 +36,7 @@ PROJECT_PACKAGES = {
     "synthesis",
     "codegen",
     "runtime",
-    "hil_sim",
+    "sim",
     "pressor",
 }
 

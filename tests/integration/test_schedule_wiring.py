@@ -13,11 +13,6 @@ import pytest
 
 from baselines.pi import PIController
 from contracts.metrics import step_metrics
-from hil_sim.closed_loop import simulate
-from hil_sim.device import run_device
-from hil_sim.scenario import load_scenario
-from hil_sim.trial import run_patient
-from hil_sim.world import World
 from link import DeviceSession, ManualClock, PtyPair, TickInputs, open_port
 from link.dialect import pressor as mavlink
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
@@ -28,6 +23,11 @@ from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT
 from runtime.estimation.sources import make_schedule
 from runtime.inputs.controller_loader import load_controller
 from runtime.session import run_runtime
+from sim.devices.device import run_device
+from sim.episode import simulate
+from sim.scenarios.scenario import load_scenario
+from sim.trials.trial import run_patient
+from sim.world import World
 from tests.support.sil_helpers import (
     assert_recording_equals_simulation,
     lockstep_run_config,

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from baselines.smith import SmithController
-from hil_sim.cli import main as hil_main
 from runtime.inputs.controller_loader import ControllerSpecError, load_controller
+from sim.cli import main as sim_main
 from tests.support.sil_helpers import assert_recording_equals_simulation, pressor
 
 
@@ -44,7 +44,7 @@ def test_trial_with_smith_beats_the_pi_on_every_patient_of_a_small_cohort(tmp_pa
     for spec in ("smith", "pi"):
         argv = ["--controller", spec, "--patients", "3", "--seed", "11"]
         argv += ["--scenario", "paper-tracking", "--jobs", "2", "--out", str(tmp_path / spec)]
-        assert hil_main("trial", argv) == 0
+        assert sim_main("trial", argv) == 0
         patients = json.loads((tmp_path / spec / "patients.json").read_text())
         assert all(p["reachable"] and p["stable"] for p in patients)
         assert all(p["commands_out_of_range"] == 0 for p in patients)
@@ -56,15 +56,15 @@ def test_trial_with_smith_beats_the_pi_on_every_patient_of_a_small_cohort(tmp_pa
 
 def test_trial_with_bad_lambda_exits_2_with_one_line(tmp_path: Path, capsys):
     argv = ["--controller", "smith:1", "--patients", "1", "--out", str(tmp_path / "x")]
-    assert hil_main("trial", argv) == 2
+    assert sim_main("trial", argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "'1'" in err[0] and "[5, 600] s" in err[0]
     assert not (tmp_path / "x").exists()
 
 
 def test_sil_with_smith_over_the_pty_equals_the_in_process_simulator(tmp_path: Path):
-    from hil_sim.closed_loop import simulate
-    from hil_sim.world import World
+    from sim.episode import simulate
+    from sim.world import World
 
     rrd, summary = tmp_path / "s.rrd", tmp_path / "s.json"
     proc = pressor(

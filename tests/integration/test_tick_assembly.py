@@ -11,9 +11,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from hil_sim.closed_loop import simulate
-from hil_sim.device import run_device
-from hil_sim.world import World
 from link import (
     STATE_FINISHED,
     DeviceSession,
@@ -29,6 +26,9 @@ from link.dialect import pressor as mavlink
 from runtime.estimation.sources import make_schedule
 from runtime.inputs.controller_loader import load_controller
 from runtime.session import run_runtime
+from sim.devices.device import run_device
+from sim.episode import simulate
+from sim.world import World
 from tests.support.link_doubles import tick_inputs
 from tests.support.sil_helpers import lockstep_run_config
 

@@ -16,11 +16,11 @@ import pressor.gym
 from baselines.pi import PIController
 from contracts.faults import QUALITY_HELD, QUALITY_INVALID
 from contracts.metrics import run_metrics
-from hil_sim.cohort import cohort_seeds
-from hil_sim.trial import run_patient, scenario_events
 from pressor import api
 from pressor.gym import MapEnv, MapReward, Ticks
 from runtime.core.supervisor_config import Fault, State
+from sim.patients.cohort import cohort_seeds
+from sim.trials.trial import run_patient, scenario_events
 
 TRAJECTORY_FIELDS = (
     "t_s",

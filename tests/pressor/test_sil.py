@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from contracts.usage import UsageError
-from hil_sim.scenario import SCENARIO_DIR, load_scenario
 from pressor.sil import device_command, sil_config
+from sim.scenarios.scenario import SCENARIO_DIR, load_scenario
 
 
 def test_scenario_events_and_faults_come_from_the_simulators_scenario(tmp_path: Path):
@@ -61,7 +61,7 @@ def test_default_recording_name_names_controller_scenario_and_seed():
         (["--patient-seed", "-1"], "--patient-seed '-1': allowed [0, 2**32)"),
         (["--duration", "0"], "--duration '0': allowed (0, 604800]"),
         (["--patient-model", "nope"], "--patient-model 'nope': unknown model; one of paper,"),
-        (["--patient-model", "hil_sim.pump:Pump"], "class 'Pump' of module 'hil_sim.pump'"),
+        (["--patient-model", "sim.devices.pump:Pump"], "class 'Pump' of module 'sim.devices.pump'"),
         (["--scenario", "nominal-step", "--patient-model", "pkpd"], "fixes a frozen first-order"),
     ],
 )

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-FORBIDDEN = ("synthesis", "cvxpy", "clarabel", "hil_sim")
+FORBIDDEN = ("synthesis", "cvxpy", "clarabel", "sim")
 
 
 def runtime_modules() -> list[str]:

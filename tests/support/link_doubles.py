@@ -1,7 +1,7 @@
 """Test doubles for the link: in-process crossed ``loop://`` ports, a write-fault port, and a
 complete tick as the world would build it.
 
-Not shipped: the device's own link fault injection is :class:`hil_sim.faults.LinkFaultPort`.
+Not shipped: the device's own link fault injection is :class:`sim.scenarios.faults.LinkFaultPort`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
-"""Patient models defined outside :mod:`hil_sim`, loaded by ``--patient-model tests.support.patient_plugin:CLASS``.
+"""Patient models defined outside :mod:`sim`, loaded by ``--patient-model tests.support.patient_plugin:CLASS``.
 
-:class:`FirstOrderPatient` satisfies :class:`hil_sim.patient_model.PatientModel`; the others each
-lack one thing, for the error messages.
+:class:`FirstOrderPatient` satisfies :class:`sim.patients.patient_model.PatientModel`; the others
+each lack one thing, for the error messages.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from collections import deque
 from collections.abc import Mapping
 from typing import ClassVar
 
-from hil_sim.cohort import patient_rng
+from sim.patients.cohort import patient_rng
 
 
 class FirstOrderPatient:

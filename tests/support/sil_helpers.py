@@ -73,7 +73,7 @@ def rrd_columns(path: Path) -> dict[str, dict[int, float]]:
 def assert_recording_equals_simulation(rrd: Path, ref) -> np.ndarray:
     """Every tick of a SIL recording has the in-process simulation's MAP and command, bit for bit.
 
-    ``ref`` is a :class:`hil_sim.closed_loop.Trajectory`; returns the recorded commands (ml/h).
+    ``ref`` is a :class:`sim.episode.Trajectory`; returns the recorded commands (ml/h).
     """
     cols = rrd_columns(rrd)
     n = ref.t_s.size

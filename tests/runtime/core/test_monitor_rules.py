@@ -2,7 +2,7 @@
 
 Each rule has a run with the quantized monitor on a steady patient (must not fire) and one with the
 real fault (must fire within its documented latency). The monitor is the simulator's
-(:mod:`hil_sim.sensor`, repeating its value with ``QUALITY_HELD`` between updates) driven through
+(:mod:`sim.devices.sensor`, repeating its value with ``QUALITY_HELD`` between updates) driven through
 the runtime's closed-loop core in process, as ``pressor trial`` and a lockstep ``pressor sil`` run.
 """
 
@@ -15,14 +15,14 @@ import pytest
 
 from baselines.pi import PIController
 from contracts.faults import QUALITY_HELD, QUALITY_WAVEFORM, parse_faults
-from hil_sim.closed_loop import simulate
-from hil_sim.scenario import parse_scenario
-from hil_sim.world import World
 from link.messages import TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
 from runtime.core.flatline import FlatlineRules, grain_mmhg, stuck_samples
 from runtime.core.supervisor import Supervisor, SupervisorInput
 from runtime.core.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
+from sim.episode import simulate
+from sim.scenarios.scenario import parse_scenario
+from sim.world import World
 from tests.support.supervisor_rig import good_inputs
 
 TS = 0.1

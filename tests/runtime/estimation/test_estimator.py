@@ -1,6 +1,6 @@
 """The online K, T, τ estimator on synthetic first-order-plus-delay data simulated here.
 
-The plant below is independent of hil_sim: MAP = baseline + x, x' = (K·i(t − τ) − x)/T, exact
+The plant below is independent of sim: MAP = baseline + x, x' = (K·i(t − τ) − x)/T, exact
 discretisation at 10 Hz with an integer-tick delay, seeded Gaussian monitor noise, a random
 staircase infusion (the excitation a titrating clinician or controller gives).
 """

@@ -193,7 +193,7 @@ def test_make_schedule_builds_each_named_source():
 def test_estimation_imports_no_numpy_solver_or_simulator():
     code = (
         "import sys, runtime.estimation.sources\n"
-        "print(sorted(m for m in ('numpy', 'scipy', 'cvxpy', 'hil_sim', 'synthesis', 'link')"
+        "print(sorted(m for m in ('numpy', 'scipy', 'cvxpy', 'sim', 'synthesis', 'link')"
         " if m in sys.modules))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -10,8 +10,6 @@ import random
 import numpy as np
 import pytest
 
-from hil_sim.closed_loop import simulate
-from hil_sim.world import World
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
 from runtime.core.scheduling import NominalSchedule
@@ -22,6 +20,8 @@ from runtime.estimation.sources import SOURCES, make_schedule
 from runtime.estimation.validated import DESIGN_RATES, ValidatedSchedule
 from runtime.estimation.validation import ModelBank
 from runtime.inputs.controller_loader import load_controller
+from sim.episode import simulate
+from sim.world import World
 
 TS = 0.1
 WINDOW_S = 2.0

@@ -122,7 +122,7 @@ def test_a_runaway_plugin_is_clamped_and_alarmed(short):
 
 
 def test_a_raising_plugin_is_a_clean_error_in_process_and_across_workers(short, capsys):
-    from hil_sim.cli import main
+    from sim.cli import main
 
     with pytest.raises(ControllerError, match=r"'Raises'.*tick 19.*ZeroDivisionError"):
         api.trial(f"{PLUGINS}:Raises", short, n_patients=2)
@@ -137,7 +137,7 @@ def test_a_raising_plugin_is_a_clean_error_in_process_and_across_workers(short, 
 def test_plugin_trials_are_byte_identical_in_process_across_workers_and_the_command(
     short, tmp_path
 ):
-    from hil_sim.cli import main
+    from sim.cli import main
 
     spec = f"{PLUGINS}:PlainPI:kp=0.6"
     one = api.trial(spec, short, n_patients=4, seed=2).write(tmp_path / "api1")

@@ -10,9 +10,9 @@ import threading
 import pytest
 
 from contracts.usage import UsageError
-from hil_sim.device import main as device_main
 from pressor.sil import sil_parser
 from runtime.shell.placement import Pinned, lockstep_cpus, parse_cpu
+from sim.devices.device import main as device_main
 
 
 def test_sil_cpu_option_takes_one_or_two_allowed_cpus():

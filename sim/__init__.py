@@ -1,0 +1,20 @@
+"""The software-in-the-loop simulator: the world on the far side of the serial link. Nothing here
+ships to the bedside; the shipped path is ``runtime`` (and the ``link`` protocol it speaks).
+
+It simulates seeded patients (the seed paper's nonlinear model by default, or a plugin), the
+infusion pump, the MAP monitor, scenarios with disturbances and injected faults, and cohort trials.
+What a user runs: ``pressor trial`` (in-process cohort trial, :mod:`sim.cli`), ``pressor sil``
+(this device against the real runtime over a pty; :mod:`pressor.sil`) and ``pressor device`` (the
+device process alone, :mod:`sim.devices.device`). Where each part is, bottom to top
+(tests/test_layers.py's ``SIM_ALLOWED``):
+
+- :mod:`sim.patients`: the patient models, the ``PatientModel`` plugin protocol, seeded cohorts;
+- :mod:`sim.devices`: pump and monitor, and the device process over the link (above the world);
+- :mod:`sim.scenarios`: the named scenario TOMLs, their loader, disturbances and faults;
+- :mod:`sim.world`: the one simulated world, stepped tick by tick (patient + pump + monitor);
+- :mod:`sim.episode`: one patient's run in process (world + the runtime's closed-loop core);
+- :mod:`sim.trials`: cohort trials, paired comparisons, reports; :mod:`sim.cli` their commands.
+
+May import ``contracts``, ``baselines``, ``link`` and ``runtime`` (its closed-loop core, so the
+in-process run is the shipped loop); never imported by them.
+"""
