@@ -9,7 +9,7 @@ prints and writes the run's metrics. :mod:`runtime.estimation` is the online K/T
 ``--schedule estimated``; :mod:`runtime.generated` holds the generated controller modules. Parts
 import one way (docs/ARCHITECTURE.md, ``tests/test_layers.py``): core at the bottom, cli on top.
 
-Never imports ``synthesis``, ``cvxpy`` or ``hil_sim``: a bedside box has no solver and no simulated
+Never imports ``synthesis``, ``cvxpy`` or ``sim``: a bedside box has no solver and no simulated
 patient. Keep this ``__init__`` free of imports so that light modules (``contracts.controller``,
 ``baselines.pi``, ``contracts.metrics``) load without serial or rerun.
 """

@@ -26,7 +26,7 @@ does not step the controller.
 Two callers drive the same core, so they cannot drift apart:
 
 - the runtime loop (:mod:`runtime.shell.loop`), which adds only link I/O, timing and recording;
-- the in-process trial (:func:`hil_sim.closed_loop.simulate`), which feeds it the world's
+- the in-process trial (:func:`sim.episode.simulate`), which feeds it the world's
   observations and pump statuses directly, with a perfect link (:data:`CLEAN_LINK`).
 
 A lockstep SIL run and an in-process run of the same seed therefore give the same commands and

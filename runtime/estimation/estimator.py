@@ -27,7 +27,7 @@ from the filter covariance (first order); τ an interval holding ~90 % of the ba
 weight.
 
 Two priors from the literature patient model this project simulates (the paper's Table 1,
-``hil_sim/patient.py``) stand in where a settled loop carries no information. The τ prior
+``sim/patients/patient.py``) stand in where a settled loop carries no information. The τ prior
 (``tau_prior_s``, Gaussian, mode 15 s, std 10 s: a held infusion's delay) weighs the delays where
 the data do not: after a rate change the likelihood differences between delays are hundreds of
 units and the prior (at most 9) does not matter; once the loop has settled the forgetting shrinks
@@ -88,7 +88,7 @@ NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
 #: the default design box: (low, high) of K (mmHg/(ml/h)), T (s), τ (s)
 DESIGN_BOX: tuple[tuple[float, float], ...] = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
 #: the T-drift prior: T rises this many s per (ml/h)·s of infusion (the literature patient model's
-#: b_T, middle of its [1e-4, 3e-4] range; hil_sim/patient.py)
+#: b_T, middle of its [1e-4, 3e-4] range; sim/patients/patient.py)
 T_DRIFT_PER_ML_H = 2e-4
 
 
