@@ -51,7 +51,7 @@ from typing import NamedTuple
 from contracts.controller import Controller
 from contracts.faults import QUALITY_HELD
 from link import PumpStatus, TickInputs
-from runtime.core.scheduling import OracleSchedule, Schedule, ScheduleSource
+from runtime.core.scheduling import OracleSchedule, Schedule, ScheduleInput, ScheduleSource
 from runtime.core.supervisor import Supervisor, SupervisorInput, SupervisorOutput
 
 
@@ -199,14 +199,16 @@ class ClosedLoopCore:
         else:
             delivered, alarms = math.nan, 0
         age_s = self.sample_age_s(inp.quality, now_s, link.sample_age_s)
-        sched = self.schedule.update(
-            inp.map_mmhg if age_s <= self._age_limit_s else math.nan,
-            inp.quality & ~QUALITY_HELD,
-            self._latest_delivered_ml_h,
-            inp.K,
-            inp.T_s,
-            inp.tau_s,
-            inp.sched_valid,
+        sched = self.schedule.update(  # positional: the per-tick path (declaration order)
+            ScheduleInput(
+                inp.map_mmhg if age_s <= self._age_limit_s else math.nan,
+                inp.quality & ~QUALITY_HELD,
+                self._latest_delivered_ml_h,
+                inp.K,
+                inp.T_s,
+                inp.tau_s,
+                inp.sched_valid,
+            )
         )
         K, T_s, tau_s = sched.K, sched.T_s, sched.tau_s
         sup = self.supervisor

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 
 from runtime.core.estimate import Estimate
-from runtime.core.scheduling import Schedule
+from runtime.core.scheduling import Schedule, ScheduleInput
 from runtime.estimation.checks import check_positive
 from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT, DelayBankEstimator
 from runtime.estimation.validation import ModelBank
@@ -105,18 +105,9 @@ class ValidatedSchedule:
         self._last: Estimate | None = None
         self._schedule: Schedule | None = None
 
-    def update(
-        self,
-        map_mmhg: float,
-        quality: int,
-        delivered_ml_h: float,
-        device_K: float,
-        device_T_s: float,
-        device_tau_s: float,
-        device_valid: bool,
-    ) -> Schedule:
+    def update(self, inputs: ScheduleInput) -> Schedule:
         """Feed the estimator and the bank one tick; move the schedule one slew step."""
-        est = self.estimator.update(map_mmhg, quality, delivered_ml_h)
+        est = self.estimator.update(inputs.map_mmhg, inputs.quality, inputs.delivered_ml_h)
         bank = self.bank
         closed = self.estimator.windows_closed
         if closed != self._windows:
