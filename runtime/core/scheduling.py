@@ -33,7 +33,7 @@ from baselines.smith import INITIAL_SCHEDULE
 from runtime.core.estimate import Estimate
 
 #: the nominal patient (K mmHg/(ml/h), T s, τ s): the same constants as the estimator's prior
-#: (:data:`runtime.estimation.estimator.NOMINAL_PLANT`), named here so that the core needs no
+#: (:data:`runtime.estimation.settings.NOMINAL_PLANT`), named here so that the core needs no
 #: estimation import
 NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
 

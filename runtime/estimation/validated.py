@@ -16,7 +16,8 @@ import math
 from runtime.core.estimate import Estimate
 from runtime.core.scheduling import Schedule, ScheduleInput
 from runtime.estimation.checks import check_positive
-from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT, DelayBankEstimator
+from runtime.estimation.estimator import DelayBankEstimator
+from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
 from runtime.estimation.validation import ModelBank
 from runtime.generated.lpv_map_controller import RATE_BOUNDS
 

@@ -24,7 +24,7 @@ from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
 from runtime.core.scheduling import Schedule, ScheduleInput
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, State, supervisor_config_for
-from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT
+from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
 from runtime.estimation.sources import make_schedule
 from runtime.inputs.controller_loader import load_controller
 from runtime.session import run_runtime

@@ -11,8 +11,9 @@ import pytest
 from contracts.faults import QUALITY_INVALID, QUALITY_WAVEFORM
 from runtime.core.estimate import Estimate
 from runtime.core.scheduling import NominalSchedule, OracleSchedule, ScheduleInput
-from runtime.estimation.estimator import NOMINAL_PLANT, DelayBankEstimator
+from runtime.estimation.estimator import DelayBankEstimator
 from runtime.estimation.gate import SampleGate
+from runtime.estimation.settings import NOMINAL_PLANT, EstimatorSettings
 from runtime.estimation.sources import SOURCES, EstimatedSchedule, make_schedule
 
 #: MAP 60 mmHg, good quality, nothing delivered, no scheduling parameters from the device
@@ -151,12 +152,14 @@ def test_keep_slope_moves_a_lag_below_the_box_onto_its_edge_at_the_same_K_over_T
 
 def test_a_prior_lag_below_the_box_is_scheduled_on_the_box_edge_with_the_sensitivity_raised():
     # prior T 60 s is below the design box (100-200 s): caution leaves it there, keep_slope moves it
-    est = DelayBankEstimator(0.1, prior=(0.3, 60.0, 20.0))
+    est = DelayBankEstimator(0.1, EstimatorSettings(prior=(0.3, 60.0, 20.0)))
     s = EstimatedSchedule(est).update(NO_DEVICE_AT_60)
     cautious_K = 0.3 + 0.75 * 0.6 * 0.3
     assert s.from_prior and s.T_s == 100.0
     assert s.K == pytest.approx(cautious_K * 100.0 / 60.0)
-    off = EstimatedSchedule(DelayBankEstimator(0.1, prior=(0.3, 60.0, 20.0)), keep_slope=False)
+    off = EstimatedSchedule(
+        DelayBankEstimator(0.1, EstimatorSettings(prior=(0.3, 60.0, 20.0))), keep_slope=False
+    )
     s_off = off.update(NO_DEVICE_AT_60)
     assert s_off.T_s == 60.0 and s_off.K == pytest.approx(cautious_K)
 

@@ -17,7 +17,7 @@ from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
 from runtime.core.scheduling import NominalSchedule, ScheduleInput
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, supervisor_config_for
-from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT
+from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
 from runtime.estimation.sources import SOURCES, make_schedule
 from runtime.estimation.validated import DESIGN_RATES, ValidatedSchedule
 from runtime.estimation.validation import ModelBank
