@@ -76,9 +76,9 @@ from __future__ import annotations
 
 import math
 
+from contracts.checks import check_range
 from runtime.core.estimate import Estimate
 from runtime.estimation.bank import DelayModel, FilterSettings
-from runtime.estimation.checks import check_positive
 from runtime.estimation.gate import SampleGate
 from runtime.estimation.noise import WindowNoise
 from runtime.estimation.settings import DEFAULT_SETTINGS, EstimatorSettings
@@ -104,7 +104,7 @@ class DelayBankEstimator:
         settings: EstimatorSettings = DEFAULT_SETTINGS,
         gate: SampleGate | None = None,
     ) -> None:
-        check_positive(sample_period_s=sample_period_s)
+        check_range("sample_period_s", sample_period_s, 0.0, lo_open=True, unit="s")
         window_s, tau_range_s, prior = settings.window_s, settings.tau_range_s, settings.prior
         T_plausible_s, rel_std = settings.T_plausible_s, settings.prior_rel_std
         n_win = round(window_s / sample_period_s)

@@ -8,11 +8,10 @@ estimator's module docstring; the tuning evidence: ``docs/ESTIMATION.md``.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from baselines.smith import INITIAL_SCHEDULE
-from runtime.estimation.checks import check_positive, check_range
+from contracts.checks import check_range
 
 __all__ = [
     "DEFAULT_SETTINGS",
@@ -106,34 +105,51 @@ class EstimatorSettings:
 
     def __post_init__(self) -> None:
         """Check every setting against its range (see the class docstring)."""
-        check_positive(
-            window_s=self.window_s, prior_rel_std=self.prior_rel_std, q_a=self.q_a, q_b=self.q_b,
-            q_c=self.q_c, r_mmhg=self.r_mmhg, jump_sigma=self.jump_sigma,
-            baseline_std_mmhg=self.baseline_std_mmhg, reseed_nll=self.reseed_nll,
-            learn_rel_std=self.learn_rel_std,
-        )  # fmt: skip
-        drift = self.T_drift_per_ml_h
-        if not (math.isfinite(drift) and drift >= 0.0):
-            raise ValueError(f"T_drift_per_ml_h={drift!r} must be finite and >= 0")
-        if not (math.isfinite(self.min_age_s) and self.min_age_s >= 0.0):
-            raise ValueError(f"min_age_s={self.min_age_s!r} must be finite and >= 0")
-        if not (math.isfinite(self.memory_s) and self.memory_s > self.window_s):
-            raise ValueError(
-                f"memory_s={self.memory_s!r} must be finite and > window_s={self.window_s!r}"
-            )
-        check_range("tau_range_s", *self.tau_range_s)
+        for name, unit in _POSITIVE:
+            check_range(name, getattr(self, name), 0.0, lo_open=True, unit=unit)
+        check_range("T_drift_per_ml_h", self.T_drift_per_ml_h, 0.0, unit="s per (ml/h)·s")
+        check_range("min_age_s", self.min_age_s, 0.0, unit="s")
+        check_range("memory_s", self.memory_s, self.window_s, lo_open=True, unit="s")
+        _check_interval("tau_range_s", self.tau_range_s, "s")
         if len(self.tau_prior_s) != 2:
             raise ValueError(f"tau_prior_s={self.tau_prior_s!r} must be (mode s, std s)")
-        check_positive(tau_prior_mode_s=self.tau_prior_s[0], tau_prior_std_s=self.tau_prior_s[1])
-        check_range("K_plausible", *self.K_plausible)
-        check_range("T_plausible_s", *self.T_plausible_s)
+        check_range("tau_prior_mode_s", self.tau_prior_s[0], 0.0, lo_open=True, unit="s")
+        check_range("tau_prior_std_s", self.tau_prior_s[1], 0.0, lo_open=True, unit="s")
+        _check_interval("K_plausible", self.K_plausible, "mmHg/(ml/h)")
+        _check_interval("T_plausible_s", self.T_plausible_s, "s")
         if len(self.prior) != 3:
             raise ValueError(f"prior={self.prior!r} must be (K, T_s, tau_s)")
-        check_positive(prior_K=self.prior[0], prior_T_s=self.prior[1], prior_tau_s=self.prior[2])
+        for name, value, unit in zip(_PRIOR, self.prior, _UNITS, strict=True):
+            check_range(name, value, 0.0, lo_open=True, unit=unit)
         if len(self.box) != 3:
             raise ValueError(f"box={self.box!r} must be ((K lo, hi), (T lo, hi), (tau lo, hi))")
-        for name, (lo, hi) in zip(("box K", "box T_s", "box tau_s"), self.box, strict=True):
-            check_range(name, lo, hi)
+        for name, pair, unit in zip(
+            ("box K", "box T_s", "box tau_s"), self.box, _UNITS, strict=True
+        ):
+            _check_interval(name, pair, unit)
+
+
+#: the settings that must be > 0, with their units ("" for a pure number)
+_POSITIVE = (
+    ("window_s", "s"),
+    ("prior_rel_std", ""),
+    ("q_a", ""),
+    ("q_b", "mmHg/(ml/h)"),
+    ("q_c", "mmHg"),
+    ("r_mmhg", "mmHg"),
+    ("jump_sigma", ""),
+    ("baseline_std_mmhg", "mmHg"),
+    ("reseed_nll", ""),
+    ("learn_rel_std", ""),
+)
+_PRIOR = ("prior_K", "prior_T_s", "prior_tau_s")
+_UNITS = ("mmHg/(ml/h)", "s", "s")
+
+
+def _check_interval(name: str, pair: tuple[float, float], unit: str) -> None:
+    """``pair`` = (low, high) with 0 < low < high, both finite; ValueError naming the end."""
+    lo = check_range(f"{name} low", pair[0], 0.0, lo_open=True, unit=unit)
+    check_range(f"{name} high", pair[1], lo, lo_open=True, unit=unit)
 
 
 #: the shipped tuning (every default above); one shared value, since settings are immutable

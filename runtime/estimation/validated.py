@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import math
 
+from contracts.checks import check_range
 from runtime.core.estimate import Estimate
 from runtime.core.scheduling import Schedule, ScheduleInput
-from runtime.estimation.checks import check_positive
 from runtime.estimation.estimator import DelayBankEstimator
 from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
 from runtime.estimation.validation import ModelBank
@@ -84,9 +84,8 @@ class ValidatedSchedule:
         rate_fraction: float = 0.9,
         adapt_K: bool = False,
     ) -> None:
-        check_positive(sample_period_s=sample_period_s)
-        if not (math.isfinite(rate_fraction) and 0.0 < rate_fraction <= 1.0):
-            raise ValueError(f"rate_fraction={rate_fraction!r} must be in (0, 1]")
+        check_range("sample_period_s", sample_period_s, 0.0, lo_open=True, unit="s")
+        check_range("rate_fraction", rate_fraction, 0.0, 1.0, lo_open=True)
         if len(rate_bounds) != 3 or not all(math.isfinite(r) and r > 0.0 for r in rate_bounds):
             raise ValueError(f"rate_bounds={rate_bounds!r} must be 3 finite values > 0 (per s)")
         if len(box) != 3 or not all(math.isfinite(lo) and lo < hi for lo, hi in box):
