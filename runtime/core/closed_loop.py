@@ -95,6 +95,9 @@ def _controller_failed(controller: Controller, tick: int, now_s: float, cause: s
     )
 
 
+#: builds a named tuple from a tuple of its fields without the named tuple's Python-level __new__
+_new_tuple = tuple.__new__
+
 #: a link that delivers every tick on time and loses nothing (the in-process trial)
 CLEAN_LINK = LinkHealth(sample_age_s=0.0, link_silence_s=0.0, link_errors=0)
 
@@ -199,15 +202,20 @@ class ClosedLoopCore:
         else:
             delivered, alarms = math.nan, 0
         age_s = self.sample_age_s(inp.quality, now_s, link.sample_age_s)
-        sched = self.schedule.update(  # positional: the per-tick path (declaration order)
-            ScheduleInput(
-                inp.map_mmhg if age_s <= self._age_limit_s else math.nan,
-                inp.quality & ~QUALITY_HELD,
-                self._latest_delivered_ml_h,
-                inp.K,
-                inp.T_s,
-                inp.tau_s,
-                inp.sched_valid,
+        # tuple.__new__ rather than ScheduleInput(...): the per-tick path, and a named tuple's
+        # own __new__ is a Python-level call (~0.2 µs a tick; fields in declaration order)
+        sched = self.schedule.update(
+            _new_tuple(
+                ScheduleInput,
+                (
+                    inp.map_mmhg if age_s <= self._age_limit_s else math.nan,
+                    inp.quality & ~QUALITY_HELD,
+                    self._latest_delivered_ml_h,
+                    inp.K,
+                    inp.T_s,
+                    inp.tau_s,
+                    inp.sched_valid,
+                ),
             )
         )
         K, T_s, tau_s = sched.K, sched.T_s, sched.tau_s
