@@ -45,7 +45,7 @@ import sys
 import numpy as np
 
 from contracts.parallel import run_ordered
-from runtime.core.scheduling import OracleSchedule, Schedule
+from runtime.core.scheduling import OracleSchedule, Schedule, ScheduleInput
 from runtime.estimation.sources import EstimatedSchedule
 from runtime.inputs.controller_loader import load_controller
 from sim.episode import simulate
@@ -84,19 +84,9 @@ class PartialTruth:
         self._startup = (K, T, self._est.estimator.estimate.tau_s)
         self.learned_s = float("nan")
 
-    def update(
-        self,
-        map_mmhg: float,
-        quality: int,
-        delivered_ml_h: float,
-        device_K: float,
-        device_T_s: float,
-        device_tau_s: float,
-        device_valid: bool,
-    ) -> Schedule:
+    def update(self, inputs: ScheduleInput) -> Schedule:
         """The estimator's schedule, with the chosen fields from the device from ``from_s`` on."""
-        args = (map_mmhg, quality, delivered_ml_h, device_K, device_T_s, device_tau_s, device_valid)
-        sched = self._est.update(*args)
+        sched = self._est.update(inputs)
         if not sched.from_prior and math.isnan(self.learned_s):
             self.learned_s = self._tick * TS
         self._tick += 1
@@ -106,7 +96,7 @@ class PartialTruth:
             if not self._use_startup:
                 return sched
             return Schedule(*self._startup, "estimated", True, True, True, "learning")
-        truth = {"K": device_K, "T_s": device_T_s, "tau_s": device_tau_s}
+        truth = {"K": inputs.device_K, "T_s": inputs.device_T_s, "tau_s": inputs.device_tau_s}
         K, T, tau = (
             truth[f] if f in self._fields else getattr(sched, f) for f in ("K", "T_s", "tau_s")
         )

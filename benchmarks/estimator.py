@@ -29,6 +29,7 @@ import random
 import statistics
 import time
 
+from runtime.core.scheduling import ScheduleInput
 from runtime.estimation.sources import EstimatedSchedule
 from runtime.inputs.controller_loader import load_controller
 from sim.patients.cohort import cohort_seeds
@@ -54,7 +55,7 @@ def tick_cost_us(ticks: int, seed: int = 0) -> list[float]:
         y = 55.0 + x + rng.gauss(0.0, 0.1)
         prev = rates[(k - 1) % len(rates)]
         t0 = clock()
-        src.update(y, 0, prev, math.nan, math.nan, math.nan, False)
+        src.update(ScheduleInput(y, 0, prev, math.nan, math.nan, math.nan, False))
         times.append((clock() - t0) / 1000.0)
         rates[k % len(rates)] = rate
         x = d * x + (1.0 - d) * 0.5 * rates[(k - delay) % len(rates)]

@@ -34,6 +34,7 @@ from typing import Any
 from contracts.metrics import run_metrics
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from runtime.core.scheduling import ScheduleInput
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, State, supervisor_config_for
 from runtime.estimation.sources import EstimatedSchedule, make_schedule
@@ -80,8 +81,8 @@ class LimitedFit:
         self.box = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
         self.step_ = tuple(0.9 * r * TS_S for r in (2e-4, 0.06, 0.1))
 
-    def update(self, *args: Any) -> Any:
-        s = self.fit.update(*args)
+    def update(self, inputs: ScheduleInput) -> Any:
+        s = self.fit.update(inputs)
         goal = [
             min(max(v, lo), hi) for v, (lo, hi) in zip((s.K, s.T_s, s.tau_s), self.box, strict=True)
         ]

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from contracts.usage import USAGE_EXIT, run_command
 from runtime.inputs.clinician import ClinicianInput, check_device_hello, check_link_hello
@@ -20,6 +20,14 @@ from runtime.inputs.controller_loader import controller_name
 from runtime.shell.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
 from runtime.shell.placement import Pinned
 from runtime.summary import build_summary
+
+if TYPE_CHECKING:  # the stages' types; at run time each stage imports what it needs, when it runs
+    from contracts.controller import Controller
+    from link import Hello, RuntimeSession
+    from runtime.core.supervisor import Supervisor
+    from runtime.inputs.target_source import TargetSource
+    from runtime.record.recorder import Recorder
+    from runtime.shell.trajectory import LoopResult
 
 
 def run_runtime(
@@ -38,6 +46,9 @@ def run_runtime(
     noisy_band: bool = True,
 ) -> tuple[dict[str, Any], Any]:
     """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result).
+
+    The stages, in order: :func:`_handshake`, :func:`_build_supervisor`, :func:`_open_recorder`,
+    :func:`_run_loop`, :func:`_close_recording`, :func:`_summarize`.
 
     Parameters
     ----------
@@ -78,32 +89,12 @@ def run_runtime(
     tuple
         The summary (:func:`runtime.summary.build_summary`) and the loop's result.
     """
-    from link import (
-        LINK_LOCKSTEP,
-        LINK_REALTIME,
-        Hello,
-        HelloRefused,
-        LinkError,
-        RuntimeSession,
-        SigningMismatch,
-    )
+    from link import RuntimeSession
     from link.tlog import TlogWriter
-    from runtime.core.supervisor import Supervisor
-    from runtime.core.supervisor_config import supervisor_config_for
-    from runtime.estimation.sources import make_schedule
-    from runtime.inputs.target_source import TargetSource
-    from runtime.shell.cpu_latency import CpuLatencyRequest
-    from runtime.shell.loop import Loop
 
     period_s = config.period_s
     controller = load_controller(config.controller, period_s)
-    if config.clinician is not None:
-        clinician = config.clinician
-    else:  # pressor sil: the loaded design's syringe (a device announcing another is refused)
-        from contracts.drug import binding_of
-
-        design = binding_of(controller)
-        clinician = ClinicianInput(drug=design.name, concentration_ug_ml=design.concentration_ug_ml)
+    clinician = _clinician_for(config, controller)
     tlog = TlogWriter(config.tlog) if config.tlog is not None else None
     ok = False
     # only the oracle schedules on the device's SCHEDULING_PARAMS: otherwise a device may send
@@ -117,135 +108,20 @@ def run_runtime(
     )
     recorder = None
     try:
-        mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
-        name = controller_name(config.controller)
-        hello = Hello(
-            name[:32],
-            sample_period_s=period_s,
-            link_mode=mode,
-            drug=clinician.drug,
-            concentration_ug_ml=clinician.concentration_ug_ml,
-            pump_max_ml_h=controller.max_rate_ml_h,
-        )
-        waited = 0.0
-        while True:  # short attempts, so a device process that died is noticed at once
-            if (stop := stop_requested()) is not None:
-                raise Interrupted(stop, "before the device connected")
-            try:
-                peer = ep.handshake(hello, timeout_s=0.25)
-                break
-            except (SigningMismatch, HelloRefused):  # a refused device was told why
-                raise
-            except LinkError:
-                waited += 0.25
-                if (peer_alive is not None and not peer_alive()) or waited >= handshake_timeout_s:
-                    raise
-        if on_connected is not None:
-            on_connected()
-        try:
-            check_link_hello(peer, period_s, config.rate_hz, mode)
-            check_device_hello(peer, controller.max_rate_ml_h, clinician)
-        except HelloRefused as exc:  # the device is told why before the link closes
-            ep.refuse(exc)
-            raise
-        if config.schedule != "oracle":  # oracle summaries keep their pre-schedule bytes
-            identity = {**identity, "schedule": config.schedule}
-        identity = {
-            **identity,
-            "scenario": peer.name,
-            "patient_seed": peer.patient_seed,
-            "sensor_noise_mmhg": float(peer.sensor_noise_mmhg),
-        }
-        sup = Supervisor(
-            supervisor_config_for(
-                controller,
-                peer.sensor_noise_mmhg,
-                sched_action=config.sched_faults,
-                stale_after_s=config.sample_age_limit_s,
-                dose_limits=clinician.dose_limits,  # pressor run: the drug library's
-                # pressor run (a patient on the line) holds on a controller fault until the
-                # clinician acknowledges; pressor sil stops with exit 1 (runtime.core.supervisor)
-                controller_faults="latch" if config.clinician is not None else "stop",
-            )
-        )
-        if config.rrd is not None:
-            from runtime.record.recorder import Recorder
-
-            label = (
-                f"{identity['controller']}|{peer.name}|seed{peer.patient_seed}|{config.rate_hz}Hz"
-                f"|{config.mode}"
-            )
-            recorder = Recorder(
-                config.rrd, run_label=label, dose_view=clinician.dose_limits is not None
-            )
-            recorder.plan_markers(
-                [(t, "disturbance", f"disturbance: {kind} at {t:g} s") for kind, t in events or ()]
-                + [
-                    (f.start_s, "fault", f"fault: {f.kind} at {f.start_s:g} s")
-                    for f in config.fault_specs
-                ]
-            )
-        loop_kw: dict[str, Any] = {
-            "recorder": recorder,
-            "heartbeat_every": round(config.rate_hz),
-            "on_tick": on_tick,
-            "schedule": make_schedule(config.schedule, period_s),
-            "prog": "pressor run" if config.clinician is not None else "pressor sil",
-            "ack_input": clinician.target_stdin or clinician.target_file is not None,
-        }
-        # the runtime's own target, in place of the device's (runtime.inputs.target_source)
-        target = None if clinician.target_mmhg is None else TargetSource(clinician)
-        loop = Loop(controller, sup, ep, target=target, **loop_kw)
-        with CpuLatencyRequest(config.cpu_latency_us) as wake:
-            if config.realtime:
-                result = loop.run_realtime(peer.n_ticks if peer.n_ticks else config.ticks)
-            else:
-                n = config.ticks or peer.n_ticks
-                with Pinned(None if cpus is None else cpus[0]):  # rerun's threads exist already
-                    result = loop.run_lockstep(n, stall_timeout_s=config.stall_timeout_s)
-        result.host = {"cpu_latency": wake.status, "cpus": cpus}
+        peer = _handshake(ep, config, controller, clinician, peer_alive, handshake_timeout_s,
+                          on_connected)  # fmt: skip
+        identity = _run_identity(identity, config, peer)
+        sup = _build_supervisor(config, controller, clinician, peer)
+        recorder = _open_recorder(config, identity, clinician, peer)
         if recorder is not None:
-            if before_close is not None:
-                before_close(recorder)
-            if clinician.dose_limits is not None:
-                from runtime.inputs.dosing import log_dose_series
-
-                log_dose_series(recorder, result.trajectory, clinician)
-            recorder.close()
+            recorder.plan_markers(_markers(config, events))
+        result, target = _run_loop(config, controller, clinician, sup, ep, peer, recorder, cpus,
+                                   on_tick)  # fmt: skip
+        if recorder is not None:
+            _close_recording(recorder, result, clinician, before_close)
             recorder = None
-        report = None
-        if config.fault_specs:
-            from contracts.faults import fault_report
-            from runtime.core.supervisor_config import FAULT_BITS, sched_limits_of
-
-            report = fault_report(
-                list(config.fault_specs),
-                result.trajectory,
-                FAULT_BITS,
-                period_s,
-                scheduled=sched_limits_of(controller)[0] is not None,
-            )
-        summary = build_summary(
-            result,
-            identity,
-            controller.max_rate_ml_h,
-            noisy=noisy_band,
-            faults=report,
-            events=events,
-        )
-        if config.clinician is not None:  # pressor run: where the target came from, the syringe
-            summary["target"] = {"source": "device"} if target is None else target.summary()
-            summary["syringe"] = {
-                "drug": clinician.drug,
-                "concentration_ug_ml": clinician.concentration_ug_ml,
-                "pump_max_ml_h": float(peer.pump_max_ml_h),
-            }
-            if clinician.dose_limits is not None:
-                from runtime.inputs.dosing import dose_summary
-
-                summary["dose"] = dose_summary(
-                    result.trajectory["command_ml_h"], period_s, clinician, sup.detections
-                )
+        summary = _summarize(result, identity, config, controller, clinician, sup, peer, target,
+                             events, noisy_band)  # fmt: skip
         ok = True
         return summary, result
     finally:
@@ -254,6 +130,235 @@ def run_runtime(
         ep.close()
         if tlog is not None:
             tlog.close(commit=ok)
+
+
+def _clinician_for(config: RunConfig, controller: Controller) -> ClinicianInput:
+    """The clinician's input: ``pressor run``'s own, or for ``pressor sil`` the loaded design's
+    syringe (a device announcing another is refused)."""
+    if config.clinician is not None:
+        return config.clinician
+    from contracts.drug import binding_of
+
+    design = binding_of(controller)
+    return ClinicianInput(drug=design.name, concentration_ug_ml=design.concentration_ug_ml)
+
+
+def _handshake(
+    ep: RuntimeSession,
+    config: RunConfig,
+    controller: Controller,
+    clinician: ClinicianInput,
+    peer_alive: Callable[[], bool] | None,
+    handshake_timeout_s: float,
+    on_connected: Callable[[], object] | None,
+) -> Hello:
+    """Send the runtime's hello until the device answers, call ``on_connected``, check the
+    device's hello against the run (link mode and rate, pump, syringe); return it.
+
+    Short attempts, so that a device process that died (``peer_alive`` false) or a stop request
+    ends the wait at once; a signing mismatch or a refused hello is raised at once, any other link
+    error once ``handshake_timeout_s`` wall seconds have passed. A mismatch is sent to the device
+    (so it is told why) before :class:`link.HelloRefused` is raised.
+    """
+    from link import LINK_LOCKSTEP, LINK_REALTIME, Hello, HelloRefused, LinkError, SigningMismatch
+
+    mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
+    hello = Hello(
+        controller_name(config.controller)[:32],
+        sample_period_s=config.period_s,
+        link_mode=mode,
+        drug=clinician.drug,
+        concentration_ug_ml=clinician.concentration_ug_ml,
+        pump_max_ml_h=controller.max_rate_ml_h,
+    )
+    waited = 0.0
+    while True:  # short attempts, so a device process that died is noticed at once
+        if (stop := stop_requested()) is not None:
+            raise Interrupted(stop, "before the device connected")
+        try:
+            peer = ep.handshake(hello, timeout_s=0.25)
+            break
+        except (SigningMismatch, HelloRefused):  # a refused device was told why
+            raise
+        except LinkError:
+            waited += 0.25
+            if (peer_alive is not None and not peer_alive()) or waited >= handshake_timeout_s:
+                raise
+    if on_connected is not None:
+        on_connected()
+    try:
+        check_link_hello(peer, config.period_s, config.rate_hz, mode)
+        check_device_hello(peer, controller.max_rate_ml_h, clinician)
+    except HelloRefused as exc:  # the device is told why before the link closes
+        ep.refuse(exc)
+        raise
+    return peer
+
+
+def _run_identity(identity: dict[str, Any], config: RunConfig, peer: Hello) -> dict[str, Any]:
+    """The run's identity for the summary, with the schedule (unless the oracle) and what the
+    device's hello says: scenario, patient seed, monitor noise."""
+    if config.schedule != "oracle":  # oracle summaries keep their pre-schedule bytes
+        identity = {**identity, "schedule": config.schedule}
+    return {
+        **identity,
+        "scenario": peer.name,
+        "patient_seed": peer.patient_seed,
+        "sensor_noise_mmhg": float(peer.sensor_noise_mmhg),
+    }
+
+
+def _build_supervisor(
+    config: RunConfig, controller: Controller, clinician: ClinicianInput, peer: Hello
+) -> Supervisor:
+    """The safety supervisor matched to the controller and the device's monitor noise."""
+    from runtime.core.supervisor import Supervisor
+    from runtime.core.supervisor_config import supervisor_config_for
+
+    return Supervisor(
+        supervisor_config_for(
+            controller,
+            peer.sensor_noise_mmhg,
+            sched_action=config.sched_faults,
+            stale_after_s=config.sample_age_limit_s,
+            dose_limits=clinician.dose_limits,  # pressor run: the drug library's
+            # pressor run (a patient on the line) holds on a controller fault until the
+            # clinician acknowledges; pressor sil stops with exit 1 (runtime.core.supervisor)
+            controller_faults="latch" if config.clinician is not None else "stop",
+        )
+    )
+
+
+def _open_recorder(
+    config: RunConfig, identity: dict[str, Any], clinician: ClinicianInput, peer: Hello
+) -> Recorder | None:
+    """The rerun recorder of ``config.rrd`` (labelled with controller, scenario, seed, rate and
+    mode), or ``None`` without one."""
+    if config.rrd is None:
+        return None
+    from runtime.record.recorder import Recorder
+
+    label = (
+        f"{identity['controller']}|{peer.name}|seed{peer.patient_seed}|{config.rate_hz}Hz"
+        f"|{config.mode}"
+    )
+    return Recorder(config.rrd, run_label=label, dose_view=clinician.dose_limits is not None)
+
+
+def _markers(
+    config: RunConfig, events: list[tuple[str, float]] | None
+) -> list[tuple[float, str, str]]:
+    """The recording's planned markers (s, kind, text): the scenario's disturbances, the faults."""
+    return [(t, "disturbance", f"disturbance: {kind} at {t:g} s") for kind, t in events or ()] + [
+        (f.start_s, "fault", f"fault: {f.kind} at {f.start_s:g} s") for f in config.fault_specs
+    ]
+
+
+def _run_loop(
+    config: RunConfig,
+    controller: Controller,
+    clinician: ClinicianInput,
+    sup: Supervisor,
+    ep: RuntimeSession,
+    peer: Hello,
+    recorder: Recorder | None,
+    cpus: tuple[int, int] | None,
+    on_tick: Callable[[int, int, int, float], object] | None,
+) -> tuple[LoopResult, TargetSource | None]:
+    """Run the fixed-rate loop (real time, or lockstep pinned to ``cpus[0]``) under the CPU
+    wake-up latency request; return (the loop's result, the runtime's own target or ``None``)."""
+    from runtime.estimation.sources import make_schedule
+    from runtime.inputs.target_source import TargetSource
+    from runtime.shell.cpu_latency import CpuLatencyRequest
+    from runtime.shell.loop import Loop
+
+    loop_kw: dict[str, Any] = {
+        "recorder": recorder,
+        "heartbeat_every": round(config.rate_hz),
+        "on_tick": on_tick,
+        "schedule": make_schedule(config.schedule, config.period_s),
+        "prog": "pressor run" if config.clinician is not None else "pressor sil",
+        "ack_input": clinician.target_stdin or clinician.target_file is not None,
+    }
+    # the runtime's own target, in place of the device's (runtime.inputs.target_source)
+    target = None if clinician.target_mmhg is None else TargetSource(clinician)
+    loop = Loop(controller, sup, ep, target=target, **loop_kw)
+    with CpuLatencyRequest(config.cpu_latency_us) as wake:
+        if config.realtime:
+            result = loop.run_realtime(peer.n_ticks if peer.n_ticks else config.ticks)
+        else:
+            n = config.ticks or peer.n_ticks
+            with Pinned(None if cpus is None else cpus[0]):  # rerun's threads exist already
+                result = loop.run_lockstep(n, stall_timeout_s=config.stall_timeout_s)
+    result.host = {"cpu_latency": wake.status, "cpus": cpus}
+    return result, target
+
+
+def _close_recording(
+    recorder: Recorder,
+    result: LoopResult,
+    clinician: ClinicianInput,
+    before_close: Callable[[Any], object] | None,
+) -> None:
+    """Finish the recording: the caller's additions (``before_close``), the dose series when a
+    drug library limits the dose, then close it (moved into place)."""
+    if before_close is not None:
+        before_close(recorder)
+    if clinician.dose_limits is not None:
+        from runtime.inputs.dosing import log_dose_series
+
+        log_dose_series(recorder, result.trajectory, clinician)
+    recorder.close()
+
+
+def _summarize(
+    result: LoopResult,
+    identity: dict[str, Any],
+    config: RunConfig,
+    controller: Controller,
+    clinician: ClinicianInput,
+    sup: Supervisor,
+    peer: Hello,
+    target: TargetSource | None,
+    events: list[tuple[str, float]] | None,
+    noisy_band: bool,
+) -> dict[str, Any]:
+    """The run's metric summary, with the fault report when faults were injected and, for
+    ``pressor run``, where the target came from, the syringe and the dose."""
+    report = None
+    if config.fault_specs:
+        from contracts.faults import fault_report
+        from runtime.core.supervisor_config import FAULT_BITS, sched_limits_of
+
+        report = fault_report(
+            list(config.fault_specs),
+            result.trajectory,
+            FAULT_BITS,
+            config.period_s,
+            scheduled=sched_limits_of(controller)[0] is not None,
+        )
+    summary = build_summary(
+        result,
+        identity,
+        controller.max_rate_ml_h,
+        noisy=noisy_band,
+        faults=report,
+        events=events,
+    )
+    if config.clinician is not None:  # pressor run: where the target came from, the syringe
+        summary["target"] = {"source": "device"} if target is None else target.summary()
+        summary["syringe"] = {
+            "drug": clinician.drug,
+            "concentration_ug_ml": clinician.concentration_ug_ml,
+            "pump_max_ml_h": float(peer.pump_max_ml_h),
+        }
+        if clinician.dose_limits is not None:
+            from runtime.inputs.dosing import dose_summary
+
+            summary["dose"] = dose_summary(
+                result.trajectory["command_ml_h"], config.period_s, clinician, sup.detections
+            )
+    return summary
 
 
 def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequence[str]) -> int:

@@ -1,14 +1,9 @@
 """Scheduling sources: where the controller's K, T, τ come from, one tick at a time.
 
-Every source has the same method::
-
-    update(map_mmhg, quality, delivered_ml_h, device_K, device_T_s, device_tau_s, device_valid)
-        -> Schedule
-
-with the tick's MAP sample (mmHg) and monitor quality bits, the pump's delivered rate (ml/h, from
-PUMP_STATUS) and whatever scheduling parameters the device sent (K mmHg/(ml/h), T s, τ s; NaN and
-``device_valid=False`` when it sent none). Units and ranges of the result: K > 0 mmHg/(ml/h),
-T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
+Every source has the same method, ``update(inputs: ScheduleInput) -> Schedule``: the tick's
+:class:`ScheduleInput` (MAP sample, quality bits, delivered rate and whatever scheduling parameters
+the device sent) in, the tick's :class:`Schedule` out. Units and ranges of the result:
+K > 0 mmHg/(ml/h), T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
 
 This module holds the protocol and the two sources that learn nothing; the learning ones live in
 :mod:`runtime.estimation` (which builds on :class:`Schedule`), and
@@ -32,15 +27,46 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 from baselines.smith import INITIAL_SCHEDULE
 from runtime.core.estimate import Estimate
 
 #: the nominal patient (K mmHg/(ml/h), T s, τ s): the same constants as the estimator's prior
-#: (:data:`runtime.estimation.estimator.NOMINAL_PLANT`), named here so that the core needs no
+#: (:data:`runtime.estimation.settings.NOMINAL_PLANT`), named here so that the core needs no
 #: estimation import
 NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
+
+
+class ScheduleInput(NamedTuple):
+    """What a scheduling source is given at one tick (immutable; a named tuple for the per-tick
+    cost).
+
+    Attributes
+    ----------
+    map_mmhg
+        The tick's MAP sample (mmHg); NaN when there is none or it is too old to use.
+    quality
+        Monitor quality bits (0 = good; :data:`contracts.faults` sensor-quality bits).
+    delivered_ml_h
+        The pump's latest delivered rate (ml/h, from PUMP_STATUS; 0 before any status).
+    device_K
+        Sensitivity the device sent (mmHg/(ml/h)); NaN when it sent none.
+    device_T_s
+        Lag the device sent (s); NaN when it sent none.
+    device_tau_s
+        Delay the device sent (s); NaN when it sent none.
+    device_valid
+        The device flagged its scheduling parameters valid (False when it sent none).
+    """
+
+    map_mmhg: float
+    quality: int
+    delivered_ml_h: float
+    device_K: float
+    device_T_s: float
+    device_tau_s: float
+    device_valid: bool
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,16 +111,7 @@ class ScheduleSource(Protocol):
 
     source: str
 
-    def update(
-        self,
-        map_mmhg: float,
-        quality: int,
-        delivered_ml_h: float,
-        device_K: float,
-        device_T_s: float,
-        device_tau_s: float,
-        device_valid: bool,
-    ) -> Schedule:
+    def update(self, inputs: ScheduleInput) -> Schedule:
         """The tick's scheduling parameters (see the module docstring)."""
         ...
 
@@ -104,19 +121,11 @@ class OracleSchedule:
 
     source = "oracle"
 
-    def update(
-        self,
-        map_mmhg: float,
-        quality: int,
-        delivered_ml_h: float,
-        device_K: float,
-        device_T_s: float,
-        device_tau_s: float,
-        device_valid: bool,
-    ) -> Schedule:
+    def update(self, inputs: ScheduleInput) -> Schedule:
         """The device's values as sent; ``valid`` only if finite and flagged valid."""
-        ok = device_valid and math.isfinite(device_K + device_T_s + device_tau_s)
-        return Schedule(device_K, device_T_s, device_tau_s, "oracle", ok, True, False,
+        K, T_s, tau_s = inputs.device_K, inputs.device_T_s, inputs.device_tau_s
+        ok = inputs.device_valid and math.isfinite(K + T_s + tau_s)
+        return Schedule(K, T_s, tau_s, "oracle", ok, True, False,
                         "ok" if ok else "no device values")  # fmt: skip
 
 
@@ -146,15 +155,6 @@ class NominalSchedule:
         self._schedule = Schedule(float(K), float(T_s), float(tau_s), "nominal", True, True, True,
                                   "prior")  # fmt: skip
 
-    def update(
-        self,
-        map_mmhg: float,
-        quality: int,
-        delivered_ml_h: float,
-        device_K: float,
-        device_T_s: float,
-        device_tau_s: float,
-        device_valid: bool,
-    ) -> Schedule:
+    def update(self, inputs: ScheduleInput) -> Schedule:
         """The constant values (the same object every tick)."""
         return self._schedule

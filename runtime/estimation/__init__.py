@@ -11,6 +11,9 @@ light: imports only the standard library, ``contracts``, ``baselines`` and, belo
 :mod:`runtime.estimation.estimator`
     The delay-bank Kalman estimator (method, prior, health check: see its docstring); its report
     is :class:`runtime.core.estimate.Estimate`.
+:mod:`runtime.estimation.settings`
+    The estimator's tuning (:class:`~runtime.estimation.settings.EstimatorSettings`: units,
+    ranges, defaults) and the nominal patient and design box it defaults to.
 :mod:`runtime.estimation.sources`
     The estimated scheduling source and :func:`~runtime.estimation.sources.make_schedule` (the
     oracle and nominal sources and the protocol are :mod:`runtime.core.scheduling`).

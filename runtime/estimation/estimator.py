@@ -76,20 +76,12 @@ from __future__ import annotations
 
 import math
 
-from baselines.smith import INITIAL_SCHEDULE
+from contracts.checks import check_range
 from runtime.core.estimate import Estimate
 from runtime.estimation.bank import DelayModel, FilterSettings
-from runtime.estimation.checks import check_positive, check_range
 from runtime.estimation.gate import SampleGate
 from runtime.estimation.noise import WindowNoise
-
-#: the prior: the nominal patient the design and the PI were tuned for (K mmHg/(ml/h), T s, τ s)
-NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
-#: the default design box: (low, high) of K (mmHg/(ml/h)), T (s), τ (s)
-DESIGN_BOX: tuple[tuple[float, float], ...] = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
-#: the T-drift prior: T rises this many s per (ml/h)·s of infusion (the literature patient model's
-#: b_T, middle of its [1e-4, 3e-4] range; sim/patients/patient.py)
-T_DRIFT_PER_ML_H = 2e-4
+from runtime.estimation.settings import DEFAULT_SETTINGS, EstimatorSettings
 
 
 class DelayBankEstimator:
@@ -98,132 +90,61 @@ class DelayBankEstimator:
     Parameters
     ----------
     sample_period_s
-        Tick period (s), > 0 (10 Hz: 0.1).
-    window_s
-        Averaging window (s); a whole number of ticks, at least 2.
-    tau_range_s
-        (low, high) of the delay bank (s); members every ``window_s`` from low.
-    prior
-        (K mmHg/(ml/h), T s, τ s) reported until learned and on a rejected estimate.
-    prior_rel_std
-        Relative standard deviation of the prior's K and T, > 0.
-    q_a, q_b, q_c
-        Random-walk standard deviations per window of a (1), b (mmHg/(ml/h)) and c (mmHg), > 0.
-    r_mmhg
-        Floor of the standard deviation of a window's output error (mmHg), > 0; the filters use
-        the larger monitor noise the window means show (module docstring).
-    jump_sigma
-        Innovation (in standard deviations) above which it is taken as a baseline jump, > 0.
-    baseline_std_mmhg
-        Standard deviation of the baseline offset at a (re)start (mmHg), > 0.
-    reseed_nll
-        Log-likelihood lag behind the best model at which a model restarts from it, > 0.
-    min_age_s
-        Data (s) a model needs after a restart from the prior before it is reported, >= 0.
-    memory_s
-        Memory of the delay selection's log-likelihoods (s), > window_s.
-    learn_rel_std
-        K and T relative standard deviations below which the estimate is reported, > 0.
-    tau_prior_s
-        (mode s, standard deviation s) > 0 of the Gaussian prior on τ weighing the bank's
-        log-likelihoods (see the module docstring).
-    K_plausible, T_plausible_s
-        Plausible (low, high) of K (mmHg/(ml/h)) and T (s); outside, the estimate is rejected.
-    box
-        The design box ((K low, high), (T low, high) s, (τ low, high) s) for ``in_box``.
+        Tick period (s), > 0 (10 Hz: 0.1): the loop's, not a tuning.
+    settings
+        The tuning (:class:`~runtime.estimation.settings.EstimatorSettings`; units, ranges and
+        defaults there); its ``window_s`` must be a whole number (>= 2) of ``sample_period_s``.
     gate
         The sample gate (default: :class:`SampleGate` at ``sample_period_s``).
-    T_drift_per_ml_h
-        The T-drift prior: s of T per (ml/h)·s of delivered infusion, >= 0 (0: off; module
-        docstring).
     """
 
     def __init__(
         self,
         sample_period_s: float = 0.1,
-        window_s: float = 2.0,
-        tau_range_s: tuple[float, float] = (10.0, 46.0),
-        prior: tuple[float, float, float] = NOMINAL_PLANT,
-        prior_rel_std: float = 0.6,
-        q_a: float = 2e-5,
-        q_b: float = 2e-5,
-        q_c: float = 0.1,
-        r_mmhg: float = 0.05,
-        jump_sigma: float = 4.0,
-        baseline_std_mmhg: float = 2.0,
-        reseed_nll: float = 100.0,
-        min_age_s: float = 300.0,
-        memory_s: float = 200.0,
-        learn_rel_std: float = 0.5,
-        tau_prior_s: tuple[float, float] = (15.0, 10.0),
-        K_plausible: tuple[float, float] = (0.02, 5.0),
-        T_plausible_s: tuple[float, float] = (20.0, 1000.0),
-        box: tuple[tuple[float, float], ...] = DESIGN_BOX,
+        settings: EstimatorSettings = DEFAULT_SETTINGS,
         gate: SampleGate | None = None,
-        T_drift_per_ml_h: float = T_DRIFT_PER_ML_H,
     ) -> None:
-        check_positive(
-            sample_period_s=sample_period_s, window_s=window_s, prior_rel_std=prior_rel_std,
-            q_a=q_a, q_b=q_b, q_c=q_c, r_mmhg=r_mmhg, jump_sigma=jump_sigma,
-            baseline_std_mmhg=baseline_std_mmhg, reseed_nll=reseed_nll, learn_rel_std=learn_rel_std,
-        )  # fmt: skip
-        if not (math.isfinite(T_drift_per_ml_h) and T_drift_per_ml_h >= 0.0):
-            raise ValueError(f"T_drift_per_ml_h={T_drift_per_ml_h!r} must be finite and >= 0")
-        if not (math.isfinite(min_age_s) and min_age_s >= 0.0):
-            raise ValueError(f"min_age_s={min_age_s!r} must be finite and >= 0")
+        check_range("sample_period_s", sample_period_s, 0.0, lo_open=True, unit="s")
+        window_s, tau_range_s, prior = settings.window_s, settings.tau_range_s, settings.prior
+        T_plausible_s, rel_std = settings.T_plausible_s, settings.prior_rel_std
         n_win = round(window_s / sample_period_s)
         if n_win < 2 or abs(n_win * sample_period_s - window_s) > 1e-9 * window_s:
             raise ValueError(
                 f"window_s={window_s!r} must be a whole number (>= 2) of sample_period_s="
                 f"{sample_period_s!r}"
             )
-        if not (math.isfinite(memory_s) and memory_s > window_s):
-            raise ValueError(f"memory_s={memory_s!r} must be finite and > window_s={window_s!r}")
-        check_range("tau_range_s", *tau_range_s)
-        if len(tau_prior_s) != 2:
-            raise ValueError(f"tau_prior_s={tau_prior_s!r} must be (mode s, std s)")
-        check_positive(tau_prior_mode_s=tau_prior_s[0], tau_prior_std_s=tau_prior_s[1])
-        check_range("K_plausible", *K_plausible)
-        check_range("T_plausible_s", *T_plausible_s)
-        if len(prior) != 3:
-            raise ValueError(f"prior={prior!r} must be (K, T_s, tau_s)")
-        check_positive(prior_K=prior[0], prior_T_s=prior[1], prior_tau_s=prior[2])
-        if len(box) != 3:
-            raise ValueError(f"box={box!r} must be ((K lo, hi), (T lo, hi), (tau lo, hi))")
-        for name, (lo, hi) in zip(("box K", "box T_s", "box tau_s"), box, strict=True):
-            check_range(name, lo, hi)
         self.window_s = float(window_s)
         self._n_win = n_win
         d_lo = max(1, math.ceil(tau_range_s[0] / window_s - 1e-9))
         d_hi = max(d_lo + 2, math.floor(tau_range_s[1] / window_s + 1e-9))
         self.delays_s = tuple(d * self.window_s for d in range(d_lo, d_hi + 1))
         self.prior = (float(prior[0]), float(prior[1]), float(prior[2]))
-        settings = FilterSettings(
+        filters = FilterSettings(
             window_s=self.window_s,
             prior_K=self.prior[0],
             prior_T_s=self.prior[1],
-            prior_rel_std=prior_rel_std,
-            baseline_std_mmhg=baseline_std_mmhg,
-            q_a2=q_a * q_a,
-            q_b2=q_b * q_b,
-            q_c2=q_c * q_c,
-            jump2=jump_sigma * jump_sigma,
-            forget=math.exp(-window_s / memory_s),
+            prior_rel_std=rel_std,
+            baseline_std_mmhg=settings.baseline_std_mmhg,
+            q_a2=settings.q_a * settings.q_a,
+            q_b2=settings.q_b * settings.q_b,
+            q_c2=settings.q_c * settings.q_c,
+            jump2=settings.jump_sigma * settings.jump_sigma,
+            forget=math.exp(-window_s / settings.memory_s),
             # a kept within T in [T_lo / 2, 2 T_hi]: beyond the plausible range, so the check sees it
             a_lo=math.exp(-window_s / (T_plausible_s[0] * 0.5)),
             a_hi=math.exp(-window_s / (T_plausible_s[1] * 2.0)),
         )
-        self._bank = tuple(DelayModel(d, settings) for d in range(d_lo, d_hi + 1))
+        self._bank = tuple(DelayModel(d, filters) for d in range(d_lo, d_hi + 1))
         n = len(self._bank)
         self._per_tick = -(-n // n_win)
-        self._reseed = reseed_nll
-        self._min_age = round(min_age_s / window_s)
+        self._reseed = settings.reseed_nll
+        self._min_age = round(settings.min_age_s / window_s)
         self._tau_offset = 0.5 * window_s  # averaged MAP lags the window's end by half a window
         # the τ prior as −2 log-density per bank member, added to its log-likelihood when selecting
-        mode, std = tau_prior_s
+        mode, std = settings.tau_prior_s
         self._pen = [((d - self._tau_offset - mode) / std) ** 2 for d in self.delays_s]
-        self._learn = learn_rel_std
-        self._K_pl, self._T_pl, self.box = K_plausible, T_plausible_s, box
+        self._learn = settings.learn_rel_std
+        self._K_pl, self._T_pl, self.box = settings.K_plausible, T_plausible_s, settings.box
         self.gate = gate if gate is not None else SampleGate(sample_period_s)
         # decimation: sums of the open window; ring of closed windows' rates (preallocated)
         self._phase = 0
@@ -232,9 +153,10 @@ class DelayBankEstimator:
         self._uring = [math.nan] * (d_hi + 1)
         self._j = -1  # index of the newest closed window
         self._y_dev = math.nan  # newest window's ȳ − y_ref (mmHg)
-        self._drift = T_drift_per_ml_h * self.window_s  # s of T per ml/h of a window's rate
+        # s of T per ml/h of a window's rate
+        self._drift = settings.T_drift_per_ml_h * self.window_s
         self._dT = 0.0  # the newest window's expected rise of T (s)
-        self._noise = WindowNoise(r_mmhg, self.window_s)  # the filters' output-error variance
+        self._noise = WindowNoise(settings.r_mmhg, self.window_s)  # the output-error variance
         self._y_ref = math.nan
         self._next = n  # next model to update (n: none pending)
         self._w = [0.0] * n
@@ -243,7 +165,7 @@ class DelayBankEstimator:
         self._rejection = ""  # the last health-check rejection, until a mature model passes
         self.updates = 0  # filter updates done (all models)
         self._prior_estimate = Estimate(
-            *self.prior, prior_rel_std * self.prior[0], prior_rel_std * self.prior[1],
+            *self.prior, rel_std * self.prior[0], rel_std * self.prior[1],
             self.delays_s[0] - self._tau_offset, self.delays_s[-1] - self._tau_offset, 0.0, True,
             True, "learning", self._inside(*self.prior),
         )  # fmt: skip

@@ -23,7 +23,13 @@ from __future__ import annotations
 import math
 
 from runtime.core.estimate import Estimate
-from runtime.core.scheduling import NominalSchedule, OracleSchedule, Schedule, ScheduleSource
+from runtime.core.scheduling import (
+    NominalSchedule,
+    OracleSchedule,
+    Schedule,
+    ScheduleInput,
+    ScheduleSource,
+)
 from runtime.estimation.estimator import DelayBankEstimator
 
 SOURCES = ("oracle", "estimated", "nominal", "validated")
@@ -104,18 +110,9 @@ class EstimatedSchedule:
             return K * self._T_lo / T_s, self._T_lo
         return K, T_s
 
-    def update(
-        self,
-        map_mmhg: float,
-        quality: int,
-        delivered_ml_h: float,
-        device_K: float,
-        device_T_s: float,
-        device_tau_s: float,
-        device_valid: bool,
-    ) -> Schedule:
+    def update(self, inputs: ScheduleInput) -> Schedule:
         """Feed the estimator one tick and schedule on its report."""
-        est = self.estimator.update(map_mmhg, quality, delivered_ml_h)
+        est = self.estimator.update(inputs.map_mmhg, inputs.quality, inputs.delivered_ml_h)
         if est is not self._last or self._schedule is None:
             self._last = est
             K, T = self.keep_slope(*self.cautious(est))

@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import math
 
+from contracts.checks import check_range
 from runtime.core.estimate import Estimate
-from runtime.core.scheduling import Schedule
-from runtime.estimation.checks import check_positive
-from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT, DelayBankEstimator
+from runtime.core.scheduling import Schedule, ScheduleInput
+from runtime.estimation.estimator import DelayBankEstimator
+from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
 from runtime.estimation.validation import ModelBank
 from runtime.generated.lpv_map_controller import RATE_BOUNDS
 
@@ -83,9 +84,8 @@ class ValidatedSchedule:
         rate_fraction: float = 0.9,
         adapt_K: bool = False,
     ) -> None:
-        check_positive(sample_period_s=sample_period_s)
-        if not (math.isfinite(rate_fraction) and 0.0 < rate_fraction <= 1.0):
-            raise ValueError(f"rate_fraction={rate_fraction!r} must be in (0, 1]")
+        check_range("sample_period_s", sample_period_s, 0.0, lo_open=True, unit="s")
+        check_range("rate_fraction", rate_fraction, 0.0, 1.0, lo_open=True)
         if len(rate_bounds) != 3 or not all(math.isfinite(r) and r > 0.0 for r in rate_bounds):
             raise ValueError(f"rate_bounds={rate_bounds!r} must be 3 finite values > 0 (per s)")
         if len(box) != 3 or not all(math.isfinite(lo) and lo < hi for lo, hi in box):
@@ -105,18 +105,9 @@ class ValidatedSchedule:
         self._last: Estimate | None = None
         self._schedule: Schedule | None = None
 
-    def update(
-        self,
-        map_mmhg: float,
-        quality: int,
-        delivered_ml_h: float,
-        device_K: float,
-        device_T_s: float,
-        device_tau_s: float,
-        device_valid: bool,
-    ) -> Schedule:
+    def update(self, inputs: ScheduleInput) -> Schedule:
         """Feed the estimator and the bank one tick; move the schedule one slew step."""
-        est = self.estimator.update(map_mmhg, quality, delivered_ml_h)
+        est = self.estimator.update(inputs.map_mmhg, inputs.quality, inputs.delivered_ml_h)
         bank = self.bank
         closed = self.estimator.windows_closed
         if closed != self._windows:

@@ -28,16 +28,12 @@ from __future__ import annotations
 
 import math
 
+from contracts.checks import check_range
+
 #: default grid of the bank over the design box: K (mmHg/(ml/h)), T (s), τ (s)
 K_GRID = (0.25, 0.35, 0.45, 0.55, 0.7, 0.85, 1.0)
 T_GRID_S = (100.0, 150.0, 200.0)
 TAU_GRID_S = (15.0, 30.0, 45.0)
-
-
-def _check(name: str, value: float, lo: float, lo_open: bool = False) -> None:
-    ok = math.isfinite(value) and (value > lo if lo_open else value >= lo)
-    if not ok:
-        raise ValueError(f"{name}={value!r} must be finite and {'>' if lo_open else '>='} {lo}")
 
 
 class ModelBank:
@@ -79,22 +75,21 @@ class ModelBank:
         margin_sigma2: float = 20.0,
         near_sigma2: float = 1.0,
     ) -> None:
-        _check("window_s", window_s, 0.0, True)
+        check_range("window_s", window_s, 0.0, lo_open=True, unit="s")
         if not (isinstance(ticks_per_window, int) and ticks_per_window >= 1):
             raise ValueError(f"ticks_per_window={ticks_per_window!r} must be an integer >= 1")
-        _check("horizon_s", horizon_s, window_s)
-        _check("memory_s", memory_s, window_s, True)
-        if not (math.isfinite(margin_rel) and 0.0 < margin_rel < 1.0):
-            raise ValueError(f"margin_rel={margin_rel!r} must be in (0, 1)")
-        _check("margin_sigma2", margin_sigma2, 0.0, True)
-        _check("near_sigma2", near_sigma2, 0.0)
+        check_range("horizon_s", horizon_s, window_s, unit="s")
+        check_range("memory_s", memory_s, window_s, lo_open=True, unit="s")
+        check_range("margin_rel", margin_rel, 0.0, 1.0, lo_open=True, hi_open=True)
+        check_range("margin_sigma2", margin_sigma2, 0.0, lo_open=True)
+        check_range("near_sigma2", near_sigma2, 0.0)
         if len(nominal) != 3:
             raise ValueError(f"nominal={nominal!r} must be (K, T_s, tau_s)")
         for name, grid in (("K", (nominal[0], *K_grid)), ("T_s", (nominal[1], *T_grid_s))):
             for v in grid:
-                _check(f"{name} of the bank", v, 0.0, True)
+                check_range(f"{name} of the bank", v, 0.0, lo_open=True)
         for v in (nominal[2], *tau_grid_s):
-            _check("tau_s of the bank", v, 0.0)
+            check_range("tau_s of the bank", v, 0.0, unit="s")
         models = [tuple(float(v) for v in nominal)]
         models += [(k, t, d) for k in K_grid for t in T_grid_s for d in tau_grid_s]
         self.models: tuple[tuple[float, float, float], ...] = tuple(models)  # type: ignore[assignment]

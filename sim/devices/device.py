@@ -50,6 +50,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from contracts.checks import check_range
 from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
 from contracts.usage import UsageError, run_command
 from runtime.shell.interrupt import exit_code, signal_name, stop_requested
@@ -58,7 +59,6 @@ from sim.devices.device_options import (
     HANDSHAKE_TIMEOUT_S,
     LINK_TIMEOUT_S,
     RETRANSMIT_S,
-    check_range,
     device_parser,
     make_world,
 )
@@ -84,14 +84,18 @@ def main(command: str, argv: list[str]) -> int:
 
 def _main(command: str, argv: Sequence[str]) -> int:
     args = device_parser(command).parse_args(argv)
-    check_range("--rate", args.rate, 0.0, 1000.0, "Hz", lo_open=True)
+    usage = UsageError  # an option out of range is the user's error: exit 2, one line
+    check_range("--rate", args.rate, 0.0, 1000.0, lo_open=True, unit="Hz", error=usage)
     if args.duration is not None:
-        check_range("--duration", args.duration, 0.0, 30 * 24 * 3600.0, "s", lo_open=True)
-    check_range("--patient-seed", args.patient_seed, 0, 2**32 - 1, "", lo_open=False)
+        days30 = 30 * 24 * 3600.0
+        check_range("--duration", args.duration, 0.0, days30, lo_open=True, unit="s", error=usage)
+    check_range("--patient-seed", args.patient_seed, 0, 2**32 - 1, error=usage)
     for opt in ("retransmit", "link_timeout", "handshake_timeout"):
-        check_range(f"--{opt.replace('_', '-')}", getattr(args, opt), 0.0, 3600.0, "s", True)
+        name = f"--{opt.replace('_', '-')}"
+        check_range(name, getattr(args, opt), 0.0, 3600.0, lo_open=True, unit="s", error=usage)
     if args.pump_max_ml_h is not None:
-        check_range("--pump-max-ml-h", args.pump_max_ml_h, 0.0, 10000.0, "ml/h", lo_open=True)
+        pump = args.pump_max_ml_h
+        check_range("--pump-max-ml-h", pump, 0.0, 10000.0, lo_open=True, unit="ml/h", error=usage)
     faults = _parse_faults(args.fault)
     pin_thread(args.cpu)  # the lockstep ends on their CPUs (runtime.shell.placement)
     world = make_world(args, faults)

@@ -4,7 +4,6 @@ they describe."""
 from __future__ import annotations
 
 import argparse
-import math
 from dataclasses import replace
 from typing import Any
 
@@ -112,14 +111,6 @@ def device_parser(command: str) -> UsageParser:
     )
     add_patient_model_option(p)
     return p
-
-
-def check_range(name: str, value: float, lo: float, hi: float, unit: str, lo_open: bool) -> None:
-    """Raise :class:`UsageError` naming the option, value and range unless lo (<) <= value <= hi."""
-    ok = (value > lo if lo_open else value >= lo) and value <= hi and math.isfinite(value)
-    if not ok:
-        bracket = "(" if lo_open else "["
-        raise UsageError(f"{name}: value {value} outside {bracket}{lo}, {hi}] {unit}".rstrip())
 
 
 def make_world(args: argparse.Namespace, faults: tuple = ()) -> Any:

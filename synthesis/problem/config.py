@@ -16,12 +16,13 @@ with a 0.1 s/s bound is tracked late by the controller's delay line).
 
 from __future__ import annotations
 
-import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from contracts.checks import check_range
 from contracts.drug import DEFAULT_BINDING, DrugBinding
 from synthesis.families.registry import ControllerFamily
 from synthesis.problem.reference import ReferenceConfig
@@ -42,29 +43,19 @@ def field_error(source: str, fieldname: str, value: Any, allowed: str) -> Config
     return ConfigError(f"{source}: field '{fieldname}' = {value!r}: must be {allowed}")
 
 
-def _number(source: str, fieldname: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise field_error(source, fieldname, value, "a number")
-    v = float(value)
-    if not math.isfinite(v):
-        raise field_error(source, fieldname, value, "a finite number")
-    return v
+def field_check(source: str) -> Callable[..., float]:
+    """A range check for the fields of ``source``: ``check(fieldname, value, lo, hi, lo_open=False)``
+    returns ``value`` as a float in [lo, hi] (``(lo, hi]`` with ``lo_open``), else raises
+    :class:`ConfigError` ``<source>: field '<name>' = <value>: must be a finite number in [lo, hi]``
+    (:func:`contracts.checks.check_range`, with the file and field named)."""
 
+    def error(message: str) -> ConfigError:
+        return ConfigError(f"{source}: {message}")
 
-def check_range(source: str, fieldname: str, value: Any, lo: float, hi: float) -> float:
-    """``value`` as a float in [lo, hi]; :class:`ConfigError` naming the field otherwise."""
-    v = _number(source, fieldname, value)
-    if not lo <= v <= hi:
-        raise field_error(source, fieldname, value, f"in [{lo:g}, {hi:g}]")
-    return v
+    def check(fieldname: str, value: Any, lo: float, hi: float, lo_open: bool = False) -> float:
+        return check_range(f"field '{fieldname}'", value, lo, hi, lo_open=lo_open, error=error)
 
-
-def check_pos(source: str, fieldname: str, value: Any, hi: float) -> float:
-    """``value`` as a float in (0, hi]; :class:`ConfigError` naming the field otherwise."""
-    v = _number(source, fieldname, value)
-    if not 0.0 < v <= hi:
-        raise field_error(source, fieldname, value, f"in (0, {hi:g}]")
-    return v
+    return check
 
 
 def check_grid(source: str, fieldname: str, value: Any) -> tuple[int, int, int]:
@@ -251,8 +242,9 @@ class DesignConfig:
 
     def with_lambdas(self, lambda2: float, lambda3: float) -> DesignConfig:
         """Copy with other fixed (lambda2, lambda3)."""
-        check_range(self.source, "solver.lambda2", lambda2, 1e-4, 1e4)
-        check_range(self.source, "solver.lambda3", lambda3, 1e-4, 1e4)
+        check = field_check(self.source)
+        check("solver.lambda2", lambda2, 1e-4, 1e4)
+        check("solver.lambda3", lambda3, 1e-4, 1e4)
         return replace(self, solver=replace(self.solver, lambda2=lambda2, lambda3=lambda3))
 
     def to_dict(self) -> dict[str, Any]:

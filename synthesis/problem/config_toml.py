@@ -66,8 +66,7 @@ from synthesis.problem.config import (
     PerformanceShaping,
     SolverConfig,
     check_grid,
-    check_pos,
-    check_range,
+    field_check,
     field_error,
 )
 from synthesis.problem.reference import (
@@ -146,14 +145,15 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
     _merge_check_keys(source, table, default)
 
     box = np.zeros((3, 2))
+    check = field_check(source)
     for i, name in enumerate(PARAM_NAMES):
         f = f"box.{name}"
         val = _get(table, "box", name, default)
         if not isinstance(val, list | tuple) or len(val) != 2:
             raise field_error(source, f, val, "a list [lower, upper]")
         lo_ok, hi_ok = _BOX_RANGE[name]
-        lo = check_range(source, f, val[0], lo_ok, hi_ok)
-        hi = check_range(source, f, val[1], lo_ok, hi_ok)
+        lo = check(f, val[0], lo_ok, hi_ok)
+        hi = check(f, val[1], lo_ok, hi_ok)
         if not lo < hi:
             raise field_error(source, f, val, "a list [lower, upper] with lower < upper")
         box[i] = (lo, hi)
@@ -163,39 +163,35 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
     rates = np.zeros(3)
     for i, name in enumerate(RATE_NAMES):
         lo, hi = _RATE_RANGE[name]
-        rates[i] = check_range(source, f"rates.{name}", _get(table, "rates", name, default), lo, hi)
+        rates[i] = check(f"rates.{name}", _get(table, "rates", name, default), lo, hi)
 
-    omega = check_pos(source, "filter.omega", _get(table, "filter", "omega", default), 100.0)
-    lam = check_pos(source, "filter.lambda", _get(table, "filter", "lambda", default), 100.0)
-    phi = check_pos(source, "weights.phi", _get(table, "weights", "phi", default), 1e3)
-    xi = check_pos(source, "weights.xi", _get(table, "weights", "xi", default), 1e3)
-    eta = check_pos(source, "weights.eta_xe", _get(table, "weights", "eta_xe", default), 1e6)
+    omega = check("filter.omega", _get(table, "filter", "omega", default), 0.0, 100.0, lo_open=True)
+    lam = check("filter.lambda", _get(table, "filter", "lambda", default), 0.0, 100.0, lo_open=True)
+    phi = check("weights.phi", _get(table, "weights", "phi", default), 0.0, 1e3, lo_open=True)
+    xi = check("weights.xi", _get(table, "weights", "xi", default), 0.0, 1e3, lo_open=True)
+    eta = check("weights.eta_xe", _get(table, "weights", "eta_xe", default), 0.0, 1e6, lo_open=True)
     shaping = _parse_shaping(table, source)
-    pump = check_pos(
-        source, "pump.max_rate_ml_h", _get(table, "pump", "max_rate_ml_h", default), 1e4
+    pump = check(
+        "pump.max_rate_ml_h", _get(table, "pump", "max_rate_ml_h", default), 0.0, 1e4, lo_open=True
     )
     grid = check_grid(source, "grid.points", _get(table, "grid", "points", default))
 
-    l2 = check_range(source, "solver.lambda2", _get(table, "solver", "lambda2", default), 1e-4, 1e4)
-    l3 = check_range(source, "solver.lambda3", _get(table, "solver", "lambda3", default), 1e-4, 1e4)
-    backoff = check_range(
-        source, "solver.backoff", _get(table, "solver", "backoff", default), 0.0, 1.0
-    )
-    eps = check_range(
-        source, "solver.epsilon", _get(table, "solver", "epsilon", default), 0.0, 1e-2
-    )
+    l2 = check("solver.lambda2", _get(table, "solver", "lambda2", default), 1e-4, 1e4)
+    l3 = check("solver.lambda3", _get(table, "solver", "lambda3", default), 1e-4, 1e4)
+    backoff = check("solver.backoff", _get(table, "solver", "backoff", default), 0.0, 1.0)
+    eps = check("solver.epsilon", _get(table, "solver", "epsilon", default), 0.0, 1e-2)
     xy = _get(table, "solver", "xy_dependence", default)
     if xy not in ("constant", "x", "xy"):
         raise field_error(source, "solver.xy_dependence", xy, "one of 'constant', 'x', 'xy'")
-    ts = check_pos(
-        source, "solver.time_scale_s", _get(table, "solver", "time_scale_s", default), 1e4
-    )
-    mgw = check_range(
-        source,
-        "solver.mean_gamma_weight",
-        _get(table, "solver", "mean_gamma_weight", default),
+    ts = check(
+        "solver.time_scale_s",
+        _get(table, "solver", "time_scale_s", default),
         0.0,
-        1e3,
+        1e4,
+        lo_open=True,
+    )
+    mgw = check(
+        "solver.mean_gamma_weight", _get(table, "solver", "mean_gamma_weight", default), 0.0, 1e3
     )
     rt = _get(table, "solver", "rate_terms", default)
     if rt not in ("vertices", "bound"):
@@ -207,27 +203,22 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         val = _get(table, "line_search", key, default)
         if not isinstance(val, list | tuple) or not 1 <= len(val) <= 20:
             raise field_error(source, f, val, "a list of 1 to 20 numbers in [1e-4, 1e4]")
-        cands.append(tuple(check_range(source, f, v, 1e-4, 1e4) for v in val))
+        cands.append(tuple(check(f, v, 1e-4, 1e4) for v in val))
 
     enabled = _get(table, "reference", "enabled", default)
     if not isinstance(enabled, bool):
         raise field_error(source, "reference.enabled", enabled, "true or false")
     reference = ReferenceConfig(
         enabled=enabled,
-        lambda_s=check_range(
-            source,
-            "reference.lambda_s",
-            _get(table, "reference", "lambda_s", default),
-            *LAMBDA_RANGE_S,
+        lambda_s=check(
+            "reference.lambda_s", _get(table, "reference", "lambda_s", default), *LAMBDA_RANGE_S
         ),
-        pump_fraction=check_range(
-            source,
+        pump_fraction=check(
             "reference.pump_fraction",
             _get(table, "reference", "pump_fraction", default),
             *PUMP_FRACTION_RANGE,
         ),
-        k_min=check_range(
-            source,
+        k_min=check(
             "reference.k_min",
             _get(table, "reference", "k_min", default),
             K_MIN_RANGE[0],
@@ -283,11 +274,13 @@ def _parse_drug(table: dict[str, Any], source: str, default: dict[str, Any]) -> 
         raise field_error(
             source, "drug.name", name, f"1 to {MAX_DRUG_CHARS} lower-case ASCII characters"
         )
-    conc = check_pos(
-        source,
+    check = field_check(source)
+    conc = check(
         "drug.concentration_ug_ml",
         _get(table, "drug", "concentration_ug_ml", default),
+        0.0,
         MAX_CONCENTRATION_UG_ML,
+        lo_open=True,
     )
     return DrugBinding(name, conc)
 
@@ -315,8 +308,9 @@ def _parse_controller(table: dict[str, Any], source: str) -> ControllerFamily:
         raise field_error(
             source, "controller.loop_gain", None, f"given for {structure!r}, in ({lo:g}, {hi:g}]"
         )
+    check = field_check(source)
     return ControllerFamily(
-        structure, check_pos(source, "controller.loop_gain", sec["loop_gain"], hi)
+        structure, check("controller.loop_gain", sec["loop_gain"], 0.0, hi, lo_open=True)
     )
 
 
@@ -330,18 +324,19 @@ def _parse_shaping(table: dict[str, Any], source: str) -> PerformanceShaping | N
     mode = get("performance")
     if mode not in ("integral", "shaped"):
         raise field_error(source, "weights.performance", mode, "one of 'integral', 'shaped'")
-    wb = check_pos(source, "weights.e_crossover_rad_s", get("e_crossover_rad_s"), 10.0)
-    m = check_range(source, "weights.e_peak", get("e_peak"), 1.0, 100.0)
+    check = field_check(source)
+    wb = check("weights.e_crossover_rad_s", get("e_crossover_rad_s"), 0.0, 10.0, lo_open=True)
+    m = check("weights.e_peak", get("e_peak"), 1.0, 100.0)
     if m <= 1.0:
         raise field_error(
             source, "weights.e_peak", get("e_peak"), "in (1, 100] (|S| peaks above 1)"
         )
-    a = check_range(source, "weights.e_dc", get("e_dc"), 0.0, 1.0)
+    a = check("weights.e_dc", get("e_dc"), 0.0, 1.0)
     if a >= 1.0:
         raise field_error(source, "weights.e_dc", get("e_dc"), "in [0, 1) (|S(0)| below 1)")
-    wu = check_pos(source, "weights.u_crossover_rad_s", get("u_crossover_rad_s"), 100.0)
-    mu = check_pos(source, "weights.u_dc", get("u_dc"), 1e4)
-    eu = check_range(source, "weights.u_hf", get("u_hf"), 0.0, 1e4)
+    wu = check("weights.u_crossover_rad_s", get("u_crossover_rad_s"), 0.0, 100.0, lo_open=True)
+    mu = check("weights.u_dc", get("u_dc"), 0.0, 1e4, lo_open=True)
+    eu = check("weights.u_hf", get("u_hf"), 0.0, 1e4)
     if eu >= mu:
         raise field_error(
             source, "weights.u_hf", get("u_hf"), f"in [0, u_dc = {mu:g}) (W_u is a high-pass)"

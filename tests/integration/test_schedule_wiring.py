@@ -16,10 +16,10 @@ from contracts.metrics import step_metrics
 from link import DeviceSession, ManualClock, PtyPair, TickInputs, open_port
 from link.dialect import pressor as mavlink
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
-from runtime.core.scheduling import Schedule
+from runtime.core.scheduling import Schedule, ScheduleInput
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, State, supervisor_config_for
-from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT
+from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
 from runtime.estimation.sources import make_schedule
 from runtime.inputs.controller_loader import load_controller
 from runtime.session import run_runtime
@@ -48,8 +48,8 @@ class SpySchedule:
         self.schedule = Schedule(*values, "estimated", True, healthy, not healthy,
                                  "ok" if healthy else "diverged")  # fmt: skip
 
-    def update(self, map_mmhg, quality, delivered_ml_h, *device) -> Schedule:
-        self.fed.append((map_mmhg, quality, delivered_ml_h))
+    def update(self, inputs: ScheduleInput) -> Schedule:
+        self.fed.append((inputs.map_mmhg, inputs.quality, inputs.delivered_ml_h))
         return self.schedule
 
 

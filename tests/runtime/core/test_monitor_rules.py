@@ -154,11 +154,11 @@ class Recording:
     def __init__(self) -> None:
         self.seen: list[tuple[float, int]] = []
 
-    def update(self, map_mmhg, quality, delivered_ml_h, K, T_s, tau_s, valid):
+    def update(self, inputs):
         from runtime.core.scheduling import OracleSchedule
 
-        self.seen.append((map_mmhg, quality))
-        return OracleSchedule().update(map_mmhg, quality, delivered_ml_h, K, T_s, tau_s, valid)
+        self.seen.append((inputs.map_mmhg, inputs.quality))
+        return OracleSchedule().update(inputs)
 
 
 def held_inputs(k: int, map_mmhg: float, quality: int) -> TickInputs:

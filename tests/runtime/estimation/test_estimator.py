@@ -14,7 +14,8 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT, DelayBankEstimator
+from runtime.estimation.estimator import DelayBankEstimator
+from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT, EstimatorSettings
 
 TS = 0.1
 
@@ -185,10 +186,21 @@ def test_per_tick_work_allocates_nothing_that_grows():
 
 
 @pytest.mark.parametrize(
+    ("period_s", "settings", "match"),
+    [
+        (0.0, EstimatorSettings(), "sample_period_s"),
+        (0.1, EstimatorSettings(window_s=0.15), "whole number"),
+    ],
+)
+def test_constructor_rejects_a_window_that_is_not_whole_ticks(period_s, settings, match):
+    with pytest.raises(ValueError, match=match):
+        DelayBankEstimator(period_s, settings)
+
+
+@pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"sample_period_s": 0.0}, "sample_period_s"),
-        ({"window_s": 0.15}, "whole number"),
+        ({"window_s": 0.0}, "window_s"),
         ({"q_b": -1.0}, "q_b"),
         ({"r_mmhg": math.nan}, "r_mmhg"),
         ({"memory_s": 1.0}, "memory_s"),
@@ -202,9 +214,9 @@ def test_per_tick_work_allocates_nothing_that_grows():
         ({"T_drift_per_ml_h": math.inf}, "T_drift_per_ml_h"),
     ],
 )
-def test_constructor_rejects_bad_parameters_with_a_clear_error(kwargs, match):
+def test_settings_reject_bad_values_with_a_clear_error(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        DelayBankEstimator(**kwargs)
+        EstimatorSettings(**kwargs)
 
 
 @pytest.mark.parametrize(("K", "inside"), [(0.5, True), (0.2, False)])
@@ -222,15 +234,15 @@ def test_tau_prior_decides_only_where_the_data_carry_no_delay_information():
     u = staircase(11, 1200.0)  # steps: the delay is in the data
     y = fopdt_map(u, np.full(u.size, 0.5), 150.0, 25.0, 11)
     for prior in (low, high):
-        last_minute = run(DelayBankEstimator(TS, tau_prior_s=prior), y, u)[-600:]
+        last_minute = run(DelayBankEstimator(TS, EstimatorSettings(tau_prior_s=prior)), y, u)[-600:]
         # within 3 s of the truth whichever prior (15 s apart, both 13-15 s off); the 200 s
         # delay-selection memory lets a prior 15 s off pull by up to ~3 s during the holds
         assert all(abs(e.tau_s - 25.0) < 3.5 for e in last_minute)
     n = round(3600.0 / TS)
     ramp = 10.0 + 40.0 * np.arange(n) / n  # a ramp shows T + τ only: the prior decides
     y = fopdt_map(ramp, np.full(n, 0.5), 150.0, 25.0, 12)
-    a = run(DelayBankEstimator(TS, tau_prior_s=low), y, ramp)[-1]
-    b = run(DelayBankEstimator(TS, tau_prior_s=high), y, ramp)[-1]
+    a = run(DelayBankEstimator(TS, EstimatorSettings(tau_prior_s=low)), y, ramp)[-1]
+    b = run(DelayBankEstimator(TS, EstimatorSettings(tau_prior_s=high)), y, ramp)[-1]
     assert not a.from_prior and not b.from_prior
     assert b.tau_s - a.tau_s >= 5.0 and b.tau_lo_s - a.tau_lo_s >= 5.0
 
@@ -270,7 +282,9 @@ def test_without_the_T_drift_prior_a_settled_loop_keeps_the_start_up_lag():
     u = np.concatenate([staircase(5, 600.0), np.full(round(3000.0 / TS), 40.0)])
     y, T = rising_lag_map(u, 0.5, 2e-4, 20.0, 5)
     on = _second_half_T_error(run(DelayBankEstimator(TS), y, u), T)
-    off = _second_half_T_error(run(DelayBankEstimator(TS, T_drift_per_ml_h=0.0), y, u), T)
+    off = _second_half_T_error(
+        run(DelayBankEstimator(TS, EstimatorSettings(T_drift_per_ml_h=0.0)), y, u), T
+    )
     assert off > 0.15 and on < off / 5.0
 
 

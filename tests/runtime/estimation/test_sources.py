@@ -10,10 +10,14 @@ import pytest
 
 from contracts.faults import QUALITY_INVALID, QUALITY_WAVEFORM
 from runtime.core.estimate import Estimate
-from runtime.core.scheduling import NominalSchedule, OracleSchedule
-from runtime.estimation.estimator import NOMINAL_PLANT, DelayBankEstimator
+from runtime.core.scheduling import NominalSchedule, OracleSchedule, ScheduleInput
+from runtime.estimation.estimator import DelayBankEstimator
 from runtime.estimation.gate import SampleGate
+from runtime.estimation.settings import NOMINAL_PLANT, EstimatorSettings
 from runtime.estimation.sources import SOURCES, EstimatedSchedule, make_schedule
+
+#: MAP 60 mmHg, good quality, nothing delivered, no scheduling parameters from the device
+NO_DEVICE_AT_60 = ScheduleInput(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
 
 
 def test_gate_names_the_reason_of_each_rejection():
@@ -68,24 +72,26 @@ def test_gate_rejects_bad_parameters_with_a_clear_error(kwargs, match):
 
 def test_oracle_passes_the_device_values_and_flags_missing_ones():
     src = OracleSchedule()
-    s = src.update(70.0, 0, 20.0, 0.4, 120.0, 25.0, True)
+    s = src.update(ScheduleInput(70.0, 0, 20.0, 0.4, 120.0, 25.0, True))
     assert (s.K, s.T_s, s.tau_s, s.source, s.valid, s.reason) == (
         0.4, 120.0, 25.0, "oracle", True, "ok",
     )  # fmt: skip
     for args in ((0.4, 120.0, 25.0, False), (math.nan, 120.0, 25.0, True)):
-        s = src.update(70.0, 0, 20.0, *args)
+        s = src.update(ScheduleInput(70.0, 0, 20.0, *args))
         assert not s.valid and s.reason == "no device values"
         assert (s.K, s.T_s, s.tau_s)[1:] == args[1:3]  # passed through as sent, as before
 
 
 def test_nominal_is_the_prior_whatever_the_device_sends():
     src = NominalSchedule()
-    a = src.update(70.0, 0, 20.0, 0.4, 120.0, 25.0, True)
-    b = src.update(math.nan, 1, math.nan, math.nan, math.nan, math.nan, False)
+    a = src.update(ScheduleInput(70.0, 0, 20.0, 0.4, 120.0, 25.0, True))
+    b = src.update(ScheduleInput(math.nan, 1, math.nan, math.nan, math.nan, math.nan, False))
     assert a is b
     assert (a.K, a.T_s, a.tau_s) == NOMINAL_PLANT
     assert a.valid and a.from_prior and a.source == "nominal"
-    custom = NominalSchedule(0.3, 110.0, 20.0).update(70.0, 0, 20.0, 1.0, 1.0, 1.0, True)
+    custom = NominalSchedule(0.3, 110.0, 20.0).update(
+        ScheduleInput(70.0, 0, 20.0, 1.0, 1.0, 1.0, True)
+    )
     assert (custom.K, custom.T_s, custom.tau_s) == (0.3, 110.0, 20.0)
 
 
@@ -100,7 +106,7 @@ def test_nominal_rejects_bad_constants(args, match):
 
 def test_estimated_starts_on_the_low_gain_side_of_the_prior_and_ignores_the_device():
     src = EstimatedSchedule(sample_period_s=0.1)
-    s = src.update(60.0, 0, 0.0, 0.9, 180.0, 12.0, True)
+    s = src.update(ScheduleInput(60.0, 0, 0.0, 0.9, 180.0, 12.0, True))
     e = s.estimate
     assert e is not None and (e.K, e.T_s, e.tau_s) == NOMINAL_PLANT and e.confidence == 0.0
     # K 0.75 σ above the prior's 0.55, T 0.75 σ below 150 s but not below the box's 100 s
@@ -146,13 +152,15 @@ def test_keep_slope_moves_a_lag_below_the_box_onto_its_edge_at_the_same_K_over_T
 
 def test_a_prior_lag_below_the_box_is_scheduled_on_the_box_edge_with_the_sensitivity_raised():
     # prior T 60 s is below the design box (100-200 s): caution leaves it there, keep_slope moves it
-    est = DelayBankEstimator(0.1, prior=(0.3, 60.0, 20.0))
-    s = EstimatedSchedule(est).update(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
+    est = DelayBankEstimator(0.1, EstimatorSettings(prior=(0.3, 60.0, 20.0)))
+    s = EstimatedSchedule(est).update(NO_DEVICE_AT_60)
     cautious_K = 0.3 + 0.75 * 0.6 * 0.3
     assert s.from_prior and s.T_s == 100.0
     assert s.K == pytest.approx(cautious_K * 100.0 / 60.0)
-    off = EstimatedSchedule(DelayBankEstimator(0.1, prior=(0.3, 60.0, 20.0)), keep_slope=False)
-    s_off = off.update(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
+    off = EstimatedSchedule(
+        DelayBankEstimator(0.1, EstimatorSettings(prior=(0.3, 60.0, 20.0))), keep_slope=False
+    )
+    s_off = off.update(NO_DEVICE_AT_60)
     assert s_off.T_s == 60.0 and s_off.K == pytest.approx(cautious_K)
 
 
@@ -175,7 +183,9 @@ def test_estimated_schedules_on_the_estimate_once_learned():
         rate = 10.0 + 40.0 * ((k // 2000) % 2) + 15.0 * ((k // 3000) % 2)
         rates.append(rate)
         noise = 0.05 * math.sin(1.7 * k)  # deterministic jitter: not a flatline
-        s = src.update(55.0 + x + noise, 0, rates[k - 1] if k else 0.0, 9.0, 9.0, 9.0, True)
+        s = src.update(
+            ScheduleInput(55.0 + x + noise, 0, rates[k - 1] if k else 0.0, 9.0, 9.0, 9.0, True)
+        )
         x = d * x + (1.0 - d) * 0.5 * (rates[k - 200] if k >= 200 else 0.0)
     assert s is not None and not s.from_prior and s.reason == "ok" and s.healthy
     assert abs(s.K - 0.5) / 0.5 < 0.15 and abs(s.T_s - 120.0) / 120.0 < 0.25

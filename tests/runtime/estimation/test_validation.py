@@ -12,10 +12,10 @@ import pytest
 
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
-from runtime.core.scheduling import NominalSchedule
+from runtime.core.scheduling import NominalSchedule, ScheduleInput
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, supervisor_config_for
-from runtime.estimation.estimator import DESIGN_BOX, NOMINAL_PLANT
+from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
 from runtime.estimation.sources import SOURCES, make_schedule
 from runtime.estimation.validated import DESIGN_RATES, ValidatedSchedule
 from runtime.estimation.validation import ModelBank
@@ -31,7 +31,7 @@ def test_validated_is_opt_in_and_starts_on_the_nominal_patient_ignoring_the_devi
     assert "validated" in SOURCES and make_schedule("validated", TS).source == "validated"
     assert type(make_schedule("estimated", TS)).__name__ == "EstimatedSchedule"
     src = ValidatedSchedule(sample_period_s=TS)
-    s = src.update(60.0, 0, 0.0, 0.9, 180.0, 12.0, True)
+    s = src.update(ScheduleInput(60.0, 0, 0.0, 0.9, 180.0, 12.0, True))
     e = s.estimate
     assert e is not None and (e.K, e.T_s, e.tau_s) == NOMINAL_PLANT and e.confidence == 0.0
     assert (s.K, s.T_s, s.tau_s) == NOMINAL_PLANT
@@ -133,8 +133,8 @@ def test_validated_slews_T_and_tau_at_nine_tenths_of_the_certified_rates_and_hol
     sched = []
     for k in range(9000):
         rates.append(10.0 + 30.0 * ((k // 2000) % 2))
-        s = src.update(55.0 + x + rng.gauss(0.0, 0.1), 0, rates[k - 1] if k else 0.0, *(9.0,) * 3,
-                       True)  # fmt: skip
+        y = 55.0 + x + rng.gauss(0.0, 0.1)
+        s = src.update(ScheduleInput(y, 0, rates[k - 1] if k else 0.0, 9.0, 9.0, 9.0, True))
         sched.append((s.K, s.T_s, s.tau_s))
         x = a * x + (1.0 - a) * 0.85 * (rates[k - 150] if k >= 150 else 0.0)
     assert src.bank.target[1:] == (100.0, 15.0)

@@ -321,8 +321,9 @@ def test_device_defaults_announce_the_shipped_designs_syringe_and_the_scenarios_
 def test_device_pump_maximum_outside_the_pumps_range_exits_2_with_one_line(capsys):
     rc = device_main("device", ["--port", "x", "--no-signing", "--pump-max-ml-h", "0"])
     [line] = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
     assert (
-        rc == 2 and line == "pressor device: --pump-max-ml-h: value 0.0 outside (0.0, 10000.0] ml/h"
+        line == "pressor device: --pump-max-ml-h = 0.0: must be a finite number in (0, 10000] ml/h"
     )
 
 
