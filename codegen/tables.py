@@ -1,8 +1,8 @@
 """Tabulation grid for run-time interpolation, chosen and proven stable.
 
 Multilinear interpolation of controller matrices tabulated at a coarse grid can destabilise loops
-that the exactly reconstructed controller keeps stable (issue 4 measured 82 of 158 frozen loops
-unstable for one 3x3x3 design). So the tabulation grid is chosen over the design box,
+that the exactly reconstructed controller keeps stable (docs/notes/benchmarks.md, "Design
+measurements"). So the tabulation grid is chosen over the design box,
 independent of the synthesis grid (the artifact reconstructs the controller at any rho), refined
 until every check passes:
 

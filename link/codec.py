@@ -31,9 +31,8 @@ else from the session's run clock (seeded keys: signed runs are byte-identical).
 
 Hot path. Messages without arrays or strings (all but the hello) are packed by
 :meth:`FrameCodec.pack_fields` and decoded into plain field tuples: byte-identical to pymavlink's
-``pack``/``decode`` (a test compares them) but without its per-frame header and message objects.
-Measured on the development VM, signed: packing a tick's 4 device frames 12 µs (pymavlink:
-27 µs); decoding them and packing the command 25 µs (51 µs).
+``pack``/``decode`` (a test compares them) but without its per-frame header and message objects,
+at about half pymavlink's cost (docs/notes/benchmarks.md, "Design measurements").
 """
 
 from __future__ import annotations

@@ -12,9 +12,9 @@ port - offer ``read_some(timeout_s)``, which returns everything available in one
 follower (a real tty device) it waits for the first byte with the tty's own timer (``VMIN=0,
 VTIME=1``: one blocking syscall, no ``select``, no ``FIONREAD`` ioctl) when the wait is at least
 :data:`VTIME_S`; shorter waits, and the pty leader (whose termios calls act on the follower, so it
-has no timer of its own), use one ``select`` first. Measured on the 2-vCPU development VM: a
-``FIONREAD`` right after the peer's write waits for the kernel's flip-buffer work (~100 µs), a
-blocking read does not; pyserial's ``read`` adds ~20 µs of Python per call.
+has no timer of its own), use one ``select`` first. A ``FIONREAD`` right after the peer's write
+waits for the kernel's flip-buffer work, a blocking read does not, and pyserial's ``read`` adds
+Python per call (figures: docs/notes/benchmarks.md, "Design measurements").
 """
 
 from __future__ import annotations

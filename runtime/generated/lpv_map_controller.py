@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  d60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b
-Content hash:     dc7331a5a4eb6aa17c12ee9c4d1862a2a11109b8e4381e41d76e7669509b3ef9
+Content hash:     732d3a179d1795260a4b3b48284bb9df3c37c6ea3f3aeb382c0a0e98f76f1361
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '079cc5f12d75cf01c94aabd1a45ae217a798232fcb4bf123492bd5f45a19b4ad'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '40a16b15fb5f1f177ecf311312a51827640323c1fba612026be6f88f605cd402'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'd60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b'
-CONTENT_HASH = 'dc7331a5a4eb6aa17c12ee9c4d1862a2a11109b8e4381e41d76e7669509b3ef9'
+CONTENT_HASH = '732d3a179d1795260a4b3b48284bb9df3c37c6ea3f3aeb382c0a0e98f76f1361'
 TABLES_SHA256 = 'e736ddebfe5179dfdbc6981025cbb0e5ef7298da5c7e699a452a7017523f1499'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -2,10 +2,9 @@
 
 Why. Every lockstep tick crosses the pty twice, and each crossing wakes a task that was sleeping
 (the pty's flush worker, then the reader). On a host whose idle CPUs halt (a VM guest with
-halt-polling off, or a laptop in a deep C-state), waking a halted CPU costs tens of µs per hop.
-Measured on the development VM (``cpuidle`` driver ``haltpoll``, ``guest_halt_poll_ns=0``): a
-bare two-process pty round trip takes 50-100 µs without a request and 11-16 µs with the request at
-0 µs, and ``pressor sil`` runs 1.5-2.2x faster (``benchmarks/sil.py`` prints both). Real-time
+halt-polling off, or a laptop in a deep C-state), waking a halted CPU costs tens of µs per hop
+(figures: docs/notes/benchmarks.md, "Design measurements"; ``benchmarks/sil.py`` prints both
+ways). Real-time
 control stacks do the same (cyclictest, EtherCAT masters, ros2_control's realtime guides): while
 the file descriptor is open the kernel keeps every CPU out of idle states slower than the
 request; closing it (or the process ending) withdraws the request.

@@ -26,8 +26,8 @@ Real time (``--realtime``)
     link silence are wall-clock (real watchdogs), and lateness and skipped periods are counted.
 
 Execution time = wall time from release (sample decoded, or deadline reached) to the command
-written; recording comes after. Real-time ticks run slower than lockstep ones (LPV p50 ~180 µs
-against ~36 µs: after 100 ms asleep the caches are cold). A stop signal
+written; recording comes after. Real-time ticks run slower than lockstep ones: after a period
+asleep the caches are cold (figures: docs/notes/benchmarks.md, "Design measurements"). A stop signal
 (:mod:`runtime.shell.interrupt`) ends either loop at a tick boundary after a safe-rate command.
 """
 

@@ -5,10 +5,9 @@ The ``pressor`` dispatcher (:mod:`pressor.cli`) calls :func:`single_blas_thread`
 call from inside the command would come too late and silently do nothing.
 
 The synthesis and verification work on many small dense matrices (eigenvalues of 100-250 square
-generators, 6-22 square LMI blocks); OpenBLAS' thread pool does not speed those up and, on a
-loaded machine, its waiting threads make them many times slower. Measured with ``pressor synth``
-of the default design on a shared 2-core machine (load ~13): the 125 frozen-delay root
-computations took 57 s with OpenBLAS' default threads and ~2 s with one thread. Clarabel's
+generators, 6-22 square LMI blocks); OpenBLAS' thread pool does not speed those up and its
+waiting threads make them many times slower (docs/notes/benchmarks.md, "Design measurements").
+Clarabel's
 sparse factorisation keeps its own threads. An explicit ``OPENBLAS_NUM_THREADS`` is respected.
 """
 

@@ -40,7 +40,7 @@ time-varying ρ (for each *frozen* ρ the congruence is still exact). Three opti
   465 s, slower than the PI's 418.8 s); ξ (0.015–0.12), φ, η and λ did not speed it up (φ only
   scales γ) — the paper's claim (< 1 %, < 200 s) is not reproduced by a verified design.
 * ``"constant"`` — X and Y constant: rigorous, no better than "x" here.
-* ``"xy"`` — both in the basis (the paper; round 1's default): γ ≈ 5, nominal step 0.4 % /
+* ``"xy"`` — both in the basis (as in the paper): γ ≈ 5, nominal step 0.4 % /
   ≈ 227 s. What it carries: at every synthesis node the frozen closed loop satisfies the
   delay-dependent L2-gain LMI; the rate-bounded claim between nodes does **not** follow, and the
   independent analysis LMI on the 5×5×5 grid fails for it (best common margin −0.0013, 104/125
