@@ -63,9 +63,8 @@ def conditioning_transform(p_phys: Array, system: DelaySystem, time_scale_s: flo
     """Whitening by a known Lyapunov matrix, then a diagonal power-of-two balancing of the system.
 
     ``T = P^(-1/2) D`` with D from ``scipy.linalg.matrix_balance`` of ``|ts T0^-1 A T0| +
-    |ts T0^-1 Ad T0|`` (T0 = P^(-1/2)). Measured on the shipped design (27 corner/centre points, P
-    quadratic): the default diagonal balancing gave a bogus "optimal" (re-check margin -64),
-    whitening alone a Clarabel NumericalError, whitening + balancing a certificate.
+    |ts T0^-1 Ad T0|`` (T0 = P^(-1/2)). Whitening and balancing are both needed: on the shipped
+    design either alone fails (docs/notes/benchmarks.md, "Design measurements").
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """Scaling of the synthesis problem: time by t_s (the nominal delay), x_e and y accordingly, ρ to [−1, 1].
 
-Unscaled, Clarabel returns NumericalError even on analysis problems (measured earlier); with the
-scaling below solves reach "optimal". With t = t_s·t̂, x = Sx x̂, y = Sy ŷ (u_a, w, z unscaled,
+Unscaled, Clarabel returns NumericalError even on analysis problems; with the scaling below
+solves reach "optimal". With t = t_s·t̂, x = Sx x̂, y = Sy ŷ (u_a, w, z unscaled,
 so the L2 gain is unchanged)::
 
     Â = t_s Sx⁻¹ A Sx,  Âd = t_s Sx⁻¹ Ad Sx,  B̂1 = t_s Sx⁻¹ B1,  B̂2 = t_s Sx⁻¹ B2,

@@ -41,13 +41,11 @@ Choices (this module is independent of the synthesis LMI in :mod:`synthesis.fami
 * ``taubar`` is the largest delay of the box (``tau_max_s``) at every point, as in the paper.
 * Numerics: time is scaled by ``time_scale_s`` and the states by a constant diagonal
   balancing of the centre system (powers of two); both leave the L2 gain unchanged.
-* Build and solve (measured on the shipped design, 125 points x 8 rate vertices = 1000 LMIs of
-  size 15, 190 variables): each LMI's exact affine map is assembled densely a few points at a time
+* Build and solve: each LMI's exact affine map is assembled densely a few points at a time
   (structural zeros stay exact) straight into Clarabel's PSD-triangle order, and Clarabel is
   called on that conic data directly (:mod:`synthesis.solver.conic`, which also reports every
-  iteration). Going through cvxpy instead (one batched PSD constraint over a 10.7 M-nonzero
-  full-matrix map, all 1000 LMIs) took 53 s of ``pressor synth``'s verification and most of its
-  2.5 GB peak memory.
+  iteration); going through cvxpy instead (one batched PSD constraint over a full-matrix map) costs
+  far more time and memory (docs/notes/benchmarks.md, "Design measurements").
 * ``working_set=k``: the LMI (all rate vertices) is imposed only at k points spread over the grid
   (farthest-point order from the centre); every point and vertex is then re-checked and up to k
   failing points are added, until the re-check passes or every point is imposed. Clarabel's cost

@@ -54,7 +54,7 @@ class SmithLPV:
     ----------
     loop_gain
         Proportional loop gain ``K·Kc = T/λ`` (dimensionless), > 0; the closed-loop time
-        constant is λ = T / loop_gain (s). Measured on the nominal plant: 1.5 -> λ = 100 s,
+        constant is λ = T / loop_gain (s); on the nominal plant (T = 150 s): 1.5 -> λ = 100 s,
         2 -> 75 s, 3 -> 50 s, 5 -> 30 s.
     omega, lambda_
         The input filter ``u = omega/(s + lambda_) u_a`` of the plant model (1/s), > 0.
