@@ -19,8 +19,8 @@ its square, so c absorbs it rather than a, b).
 Each model keeps an exponentially forgotten negative log-likelihood of its innovations (memory
 ``memory_s``, default 200 s); the best model (log-likelihood plus the τ prior's −2 log-density,
 below) gives K = b/(1 − a) and T = −Δ/ln a, and τ is refined between bank members by a parabola
-through those sums, minus half a window (the averaged MAP lags the window's end by Δ/2; measured
-bias on synthetic data). Models that fall more than ``reseed_nll`` behind the best, or fail the
+through those sums, minus half a window (the averaged MAP lags the window's end by Δ/2, which
+biases τ on synthetic data). Models that fall more than ``reseed_nll`` behind the best, or fail the
 health check, restart from the best healthy model's θ, covariance and simulation (only the delay
 then differs, so the comparison of delays stays fair). Uncertainty: K and T standard deviations
 from the filter covariance (first order); τ an interval holding ~90 % of the bank's posterior

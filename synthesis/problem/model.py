@@ -43,12 +43,10 @@ Performance output (``weights.performance``):
 
   ξ u_a stays as a third output row (it keeps D12 of full column rank when ε_u > 0).
 
-  Measured on the shipped box and rates (3×3×3, "x", λ = (1, 0.5), M = 2, ω_u = 0.05 rad/s,
-  M_u = 20, ξ = 0.02; γ, nominal +20 mmHg step overshoot / 2 % settling): ω_b = 0.001 rad/s →
-  γ 1.04, 0 % / 1468 s; 0.002 → 1.51, 0 % / 1004 s; 0.004 → 2.42, 0.02 % / 725 s; 0.008 → 4.26,
-  0.47 % / 572 s. The certified bandwidth ω_b/γ levels off near 0.002 rad/s: the bound is set at
-  K_min and DC, by the integral loop gain K·k_I ≈ 0.0024 1/s the certificate allows there (the
-  frozen loops' worst |W_e S| sits at ω → 0 on the K = 0.25 face), so a speed demand only raises γ.
+  The certified bandwidth ω_b/γ levels off (figures: docs/notes/benchmarks.md, "Design
+  measurements"): the bound is set at K_min and DC, by the integral loop gain K·k_I the certificate
+  allows there (the frozen loops' worst |W_e S| sits at ω → 0 on the K = 0.25 face), so a speed
+  demand only raises γ.
 """
 
 from __future__ import annotations
