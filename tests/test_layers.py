@@ -137,15 +137,9 @@ def package_modules(package: str) -> list[Path]:
 
 
 def imported_top_levels(path: Path) -> set[str]:
-    """Top-level names of every absolute import in ``path``, at any depth of the syntax tree."""
-    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
-    names: set[str] = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            names.update(alias.name.split(".")[0] for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            names.add(node.module.split(".")[0])
-    return names
+    """Top-level names of every absolute import in ``path``, at any depth of the syntax tree
+    (``if TYPE_CHECKING:`` imports included: a package may not even name what it must not load)."""
+    return {module.split(".")[0] for module in imported_modules(path)}
 
 
 def violations(package: str) -> list[str]:
@@ -183,19 +177,15 @@ def is_type_checking_block(node: ast.AST) -> bool:
     return isinstance(node, ast.If) and ast.unparse(node.test).split(".")[-1] == "TYPE_CHECKING"
 
 
-def run_time_imports(path: Path, package: str) -> set[str]:
-    """Dotted modules of ``package`` that ``path`` imports at run time, at any depth
-    (function-local too).
-
-    Imports under ``if TYPE_CHECKING:`` are left out: they only name a type for the annotations
-    (this is how synthesis's registry and reconstruction name types from above without loading
-    them). ``from package import x`` counts as ``package.x``.
-    """
+def imported_modules(path: Path, run_time_only: bool = False) -> set[str]:
+    """Dotted names of every absolute import in ``path``, at any depth (function-local too);
+    ``from a.b import c`` counts as ``a.b.c``. With ``run_time_only``, imports under
+    ``if TYPE_CHECKING:`` are left out: they only name a type for the annotations."""
     tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
     type_only = {
         id(inner)
         for node in ast.walk(tree)
-        if is_type_checking_block(node)
+        if run_time_only and is_type_checking_block(node)
         for stmt in node.body
         for inner in ast.walk(stmt)
     }
@@ -204,11 +194,17 @@ def run_time_imports(path: Path, package: str) -> set[str]:
         if id(node) in type_only:
             continue
         if isinstance(node, ast.Import):
-            found.update(a.name for a in node.names if a.name.split(".")[0] == package)
+            found.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            if node.module.split(".")[0] == package:
-                found.update(f"{node.module}.{a.name}" for a in node.names)
+            found.update(f"{node.module}.{alias.name}" for alias in node.names)
     return found
+
+
+def run_time_imports(path: Path, package: str) -> set[str]:
+    """Dotted modules of ``package`` that ``path`` imports at run time (:func:`imported_modules`;
+    this is how synthesis's registry and reconstruction name types from above without loading
+    them). ``from package import x`` counts as ``package.x``."""
+    return {m for m in imported_modules(path, run_time_only=True) if m.split(".")[0] == package}
 
 
 def inner_violations(package: str) -> list[str]:
