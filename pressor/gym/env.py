@@ -30,7 +30,7 @@ from gymnasium import spaces
 
 from contracts.faults import QUALITY_HELD, QUALITY_INVALID, FaultSpec, parse_fault
 from pressor.api import _scenario
-from pressor.gym.reward import MapReward, Ticks
+from pressor.gym.reward import COLUMNS, MapReward, Ticks
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import supervisor_config_for
@@ -39,9 +39,6 @@ from sim.scenarios.scenario import Scenario
 from sim.world import World
 
 __all__ = ["AgentController", "MapEnv"]
-
-_FLOATS = ("t_s", "map_mmhg", "map_true_mmhg", "target_mmhg", "command_ml_h", "rate_ml_h")
-_INTS = ("quality", "alarms", "state", "faults")
 
 
 class _Status:
@@ -210,10 +207,13 @@ class MapEnv(gymnasium.Env):
         self.world = world
         self.core = ClosedLoopCore(self.agent, Supervisor(config))
         self._status = None  # no pump status before the first tick
-        n = self.n_ticks
-        self._rec = {k: np.zeros(n, np.float64) for k in (*_FLOATS, "delivered_ml_h")}
-        self._rec |= {k: np.zeros(n, np.int64) for k in _INTS}
-        self._rec["t_s"] = np.arange(n, dtype=np.float64) * self.period_s  # as Trajectory.t_s
+        n, period = self.n_ticks, self.period_s
+        # the episode's record: a list per column, filled tick by tick (a list store costs a
+        # quarter of a numpy one); a new record per episode, so earlier Ticks stay valid
+        self._rec = {
+            name: [0.0 if dtype is np.float64 else 0] * n for name, dtype in COLUMNS.items()
+        }
+        self._rec["t_s"] = [k * period for k in range(n)]  # as Trajectory.t_s
         obs = world.observe()
         m, q = self._sample(obs.map_mmhg, obs.quality)
         held = q | QUALITY_HELD  # before tick 0: tick 0's sample, held (sample-and-hold)
@@ -250,7 +250,7 @@ class MapEnv(gymnasium.Env):
         true_map, step = world.true_map_mmhg, core.step
         maps, qualities = self._map, self._quality
         status = self._status
-        faults = 0  # the step's fault bits, OR-ed here (a numpy reduce costs more than 10 ORs)
+        faults = 0  # the step's fault bits, OR-ed here (cheaper than a reduce afterwards)
         obs = observe()
         for k in range(k0, k1):
             rec = step(obs, obs.sim_time_s, status, CLEAN_LINK)
@@ -298,22 +298,7 @@ class MapEnv(gymnasium.Env):
         return self._slice(0, self.world.tick)
 
     def _slice(self, a: int, b: int) -> Ticks:
-        r = self._rec
-        return Ticks(
-            r["t_s"][a:b],
-            r["map_mmhg"][a:b],
-            r["quality"][a:b],
-            r["map_true_mmhg"][a:b],
-            r["target_mmhg"][a:b],
-            r["command_ml_h"][a:b],
-            r["rate_ml_h"][a:b],
-            r["delivered_ml_h"][a:b],
-            r["alarms"][a:b],
-            r["state"][a:b],
-            r["faults"][a:b],
-            self.period_s,
-            self.max_rate_ml_h,
-        )
+        return Ticks.of_record(self._rec, a, b, self.period_s, self.max_rate_ml_h)
 
     @staticmethod
     def _sample(map_mmhg: float, quality: int) -> tuple[float, int]:

@@ -21,19 +21,40 @@ hour at the pump's limit 0.1·3600 = 360.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any
 
 import numpy as np
 
-__all__ = ["MapReward", "Ticks"]
+__all__ = ["COLUMNS", "MapReward", "Ticks"]
 
 
-class Ticks(NamedTuple):
+#: the per-tick columns of :class:`Ticks`, in order, with their dtypes
+COLUMNS: dict[str, type] = {
+    "t_s": np.float64,
+    "map_mmhg": np.float64,
+    "quality": np.int64,
+    "map_true_mmhg": np.float64,
+    "target_mmhg": np.float64,
+    "command_ml_h": np.float64,
+    "rate_ml_h": np.float64,
+    "delivered_ml_h": np.float64,
+    "alarms": np.int64,
+    "state": np.int64,
+    "faults": np.int64,
+}
+
+
+class Ticks:
     """Control ticks of the loop, oldest first: one environment step's, or a whole episode's.
 
-    Every array has one entry per tick k (sampled at the tick, the command held over it), with the
-    names and units of :class:`sim.episode.Trajectory`.
+    Every column is a numpy array with one entry per tick k (sampled at the tick, the command held
+    over it), with the names and units of :class:`sim.episode.Trajectory`. Build one from arrays
+    (``Ticks(t_s=..., ..., period_s=..., max_rate_ml_h=...)``); the environment builds its own
+    from its record with :meth:`of_record`, and then makes each array only when it is read (most
+    steps' rewards read three of the eleven). :meth:`values` gives a column as a Python list, the
+    fast way for a reward written in plain Python.
 
     Attributes
     ----------
@@ -63,6 +84,8 @@ class Ticks(NamedTuple):
         The pump's limit (ml/h).
     """
 
+    __slots__ = ("_arrays", "_record", "_a", "_b", "period_s", "max_rate_ml_h")
+
     t_s: np.ndarray
     map_mmhg: np.ndarray
     quality: np.ndarray
@@ -74,8 +97,78 @@ class Ticks(NamedTuple):
     alarms: np.ndarray
     state: np.ndarray
     faults: np.ndarray
-    period_s: float
-    max_rate_ml_h: float
+
+    def __init__(
+        self,
+        t_s: np.ndarray,
+        map_mmhg: np.ndarray,
+        quality: np.ndarray,
+        map_true_mmhg: np.ndarray,
+        target_mmhg: np.ndarray,
+        command_ml_h: np.ndarray,
+        rate_ml_h: np.ndarray,
+        delivered_ml_h: np.ndarray,
+        alarms: np.ndarray,
+        state: np.ndarray,
+        faults: np.ndarray,
+        period_s: float,
+        max_rate_ml_h: float,
+    ) -> None:
+        columns = (t_s, map_mmhg, quality, map_true_mmhg, target_mmhg, command_ml_h, rate_ml_h)
+        columns += (delivered_ml_h, alarms, state, faults)
+        self._arrays = {
+            name: np.asarray(column, dtype)
+            for (name, dtype), column in zip(COLUMNS.items(), columns, strict=True)
+        }
+        n = {len(a) for a in self._arrays.values()}
+        if len(n) != 1:
+            raise ValueError(f"Ticks: the columns have different lengths {sorted(n)}")
+        self._record: Mapping[str, Sequence[Any]] | None = None
+        self._a = self._b = 0
+        self.period_s = float(period_s)
+        self.max_rate_ml_h = float(max_rate_ml_h)
+
+    @classmethod
+    def of_record(
+        cls,
+        record: Mapping[str, Sequence[Any]],
+        a: int,
+        b: int,
+        period_s: float,
+        max_rate_ml_h: float,
+    ) -> Ticks:
+        """Ticks ``a`` to ``b - 1`` of ``record`` (a sequence per :data:`COLUMNS` name); the
+        record's entries in that range must not change afterwards (arrays are made when read)."""
+        ticks = cls.__new__(cls)
+        ticks._arrays = {}
+        ticks._record = record
+        ticks._a, ticks._b = a, b
+        ticks.period_s = period_s
+        ticks.max_rate_ml_h = max_rate_ml_h
+        return ticks
+
+    def __len__(self) -> int:
+        return self._b - self._a if self._record is not None else len(self._arrays["t_s"])
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        # reached for the columns (annotations only, no class attributes): made once, when read
+        if name not in COLUMNS:
+            raise AttributeError(f"Ticks has no attribute {name!r}")
+        array = self._arrays.get(name)
+        if array is None:
+            record = self._record
+            assert record is not None  # built from arrays: every column is in _arrays
+            array = self._arrays[name] = np.array(record[name][self._a : self._b], COLUMNS[name])
+        return array
+
+    def values(self, name: str) -> list[Any]:
+        """The column ``name`` (one of :data:`COLUMNS`) as a Python list."""
+        if name not in COLUMNS:
+            raise KeyError(f"Ticks has no column {name!r}: allowed {', '.join(COLUMNS)}")
+        record = self._record
+        if record is None or name in self._arrays:
+            return getattr(self, name).tolist()
+        return list(record[name][self._a : self._b])
 
 
 @dataclass(frozen=True)
@@ -114,14 +207,16 @@ class MapReward:
         in_band = 0.0
         below = 0.0
         above = 0.0
-        for e in (ticks.map_true_mmhg - ticks.target_mmhg).tolist():
+        true_map, target = ticks.values("map_true_mmhg"), ticks.values("target_mmhg")
+        for m, t in zip(true_map, target, strict=True):
+            e = m - t
             if -b <= e <= b:
                 in_band += 1.0
             elif e < -b:
                 below += -e - b
             elif e > b:
                 above += e - b
-        drug = sum(ticks.rate_ml_h.tolist()) / ticks.max_rate_ml_h
+        drug = sum(ticks.values("rate_ml_h")) / ticks.max_rate_ml_h
         return {
             "in_band": self.in_band * ts * in_band,
             "hypotension": -self.hypotension * ts * below,

@@ -18,6 +18,7 @@ from contracts.faults import QUALITY_HELD, QUALITY_INVALID
 from contracts.metrics import run_metrics
 from pressor import api
 from pressor.gym import MapEnv, MapReward, Ticks
+from pressor.gym.reward import COLUMNS
 from runtime.core.supervisor_config import Fault, State
 from sim.patients.cohort import cohort_seeds
 from sim.trials.trial import run_patient, scenario_events
@@ -179,6 +180,36 @@ def test_default_reward_terms_follow_the_documented_formula():
     assert reward(ticks) == pytest.approx(sum(terms.values()))
     weighted = MapReward(in_band=0.0, hypotension=1.0, overshoot=0.0, drug=0.0)
     assert weighted(ticks) == pytest.approx(-0.5 * 4.0)
+
+
+def test_a_steps_ticks_are_the_episodes_ticks_of_that_step_and_stay_valid_after_reset():
+    env = MapEnv("paper-tracking", ticks_per_action=10, duration_s=3.0)
+    env.reset(seed=2)
+    env.step(np.array([12.0], np.float32))
+    env.step(np.array([30.0], np.float32))
+    second = env.ticks
+    assert len(second) == 10 and second.values("command_ml_h") == [30.0] * 10
+    episode = env.episode()
+    for name in COLUMNS:
+        column = getattr(second, name)
+        assert column.dtype == COLUMNS[name], name
+        assert column.tobytes() == getattr(episode, name)[10:20].tobytes(), name
+        assert second.values(name) == column.tolist(), name
+    made = second.map_true_mmhg
+    env.reset(seed=3)
+    env.step(np.array([1.0], np.float32))
+    assert second.map_true_mmhg is made and second.values("command_ml_h") == [30.0] * 10
+    with pytest.raises(AttributeError, match="no attribute 'volume'"):
+        second.volume  # noqa: B018
+    with pytest.raises(KeyError, match="allowed t_s, map_mmhg"):
+        second.values("volume")
+
+
+def test_ticks_built_from_arrays_refuse_columns_of_different_lengths():
+    columns = {name: np.zeros(3, dtype) for name, dtype in COLUMNS.items()}
+    columns["rate_ml_h"] = np.zeros(2)
+    with pytest.raises(ValueError, match=r"different lengths \[2, 3\]"):
+        Ticks(**columns, period_s=0.1, max_rate_ml_h=120.0)
 
 
 def test_the_env_reports_the_default_reward_terms_and_a_callable_replaces_the_reward():
