@@ -88,6 +88,7 @@ from synthesis.certificates.jensen.lmi_map import (
 )
 from synthesis.certificates.state_transform import transform_of
 from synthesis.certificates.working_set import first_points, grow_working_set
+from synthesis.problem.basis import basis_terms, term_parameters
 from synthesis.problem.closed_loop import DelaySystem
 from synthesis.solver.conic import solve_conic, svec_eye, unsvec
 
@@ -184,14 +185,7 @@ def analyse(
             for sig in itertools.product((-1.0, 1.0), repeat=len(moving))
         ]
     ).reshape(-1, s)
-    # P(rho) = P0 + sum_i rho_i P_i1 (+ 1/2 sum_i rho_i^2 P_i2): value and d/drho_i weights
-    p_terms: list = [(lambda r: np.ones(r.shape[0]), None)]
-    if p_dependence != "constant":
-        p_terms += [(lambda r, i=i: r[:, i], (i, lambda r: np.ones(r.shape[0]))) for i in range(s)]
-    if p_dependence == "quadratic":
-        p_terms += [
-            (lambda r, i=i: 0.5 * r[:, i] ** 2, (i, lambda r, i=i: r[:, i])) for i in range(s)
-        ]
+    w_p, dw_p = basis_terms(rho_hat, p_dependence)
     sym, ns = sym_index(n)
     pr = AnalysisProblem(
         a=np.stack([ts * txi @ q.A @ tx for q in systems]),
@@ -200,12 +194,13 @@ def analyse(
         c=np.stack([q.C @ tx for q in systems]),
         cd=np.stack([q.Cd @ tx for q in systems]),
         d=np.stack([q.D for q in systems]),
-        rho_hat=rho_hat,
+        w_p=w_p,
+        dw_p=dw_p,
+        p_params=term_parameters(p_dependence, range(s)),
         vertices=vertices,
         rate_s=rate * ts,
         dtau_rate=rate * dtau,
         tbar=tau_max / ts,
-        p_terms=p_terms,
         sym=sym,
         ns=ns,
     )
