@@ -15,11 +15,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from synthesis.problem.basis import P_DEPENDENCES
 from synthesis.problem.closed_loop import DelaySystem
 
 __all__ = ["P_DEPENDENCES", "AnalysisResult", "checked_inputs"]
-
-P_DEPENDENCES = ("constant", "affine", "quadratic")
 
 Array = NDArray[np.float64]
 

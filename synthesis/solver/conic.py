@@ -89,6 +89,15 @@ class ConicSolution:
     kkt_method: str = str(DEFAULT_KKT_CHAIN[0])
     fallbacks: tuple[str, ...] = ()
 
+    @property
+    def notes(self) -> list[str]:
+        """What a report records about this solve: each KKT fallback, then Clarabel's own status
+        when the solve ended in a solver error."""
+        out = [f"KKT fallback: {f}, then {self.kkt_method}" for f in self.fallbacks]
+        if self.status == "solver_error":
+            out.append(f"Clarabel ended {self.clarabel_status}")
+        return out
+
 
 def svec_rows(size: int) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Row-major indices (r * size + c, r >= c) of a ``size x size`` matrix in Clarabel's PSD

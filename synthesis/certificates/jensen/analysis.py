@@ -87,7 +87,15 @@ from synthesis.certificates.jensen.lmi_map import (
     sym_index,
 )
 from synthesis.certificates.state_transform import transform_of
-from synthesis.certificates.working_set import first_points, grow_working_set
+from synthesis.certificates.working_set import (
+    BackOff,
+    Formulation,
+    Solution,
+    Steps,
+    first_points,
+    solve_and_recheck,
+)
+from synthesis.problem.basis import basis_terms, term_parameters
 from synthesis.problem.closed_loop import DelaySystem
 from synthesis.solver.conic import solve_conic, svec_eye, unsvec
 
@@ -184,14 +192,7 @@ def analyse(
             for sig in itertools.product((-1.0, 1.0), repeat=len(moving))
         ]
     ).reshape(-1, s)
-    # P(rho) = P0 + sum_i rho_i P_i1 (+ 1/2 sum_i rho_i^2 P_i2): value and d/drho_i weights
-    p_terms: list = [(lambda r: np.ones(r.shape[0]), None)]
-    if p_dependence != "constant":
-        p_terms += [(lambda r, i=i: r[:, i], (i, lambda r: np.ones(r.shape[0]))) for i in range(s)]
-    if p_dependence == "quadratic":
-        p_terms += [
-            (lambda r, i=i: 0.5 * r[:, i] ** 2, (i, lambda r, i=i: r[:, i])) for i in range(s)
-        ]
+    w_p, dw_p = basis_terms(rho_hat, p_dependence)
     sym, ns = sym_index(n)
     pr = AnalysisProblem(
         a=np.stack([ts * txi @ q.A @ tx for q in systems]),
@@ -200,12 +201,13 @@ def analyse(
         c=np.stack([q.C @ tx for q in systems]),
         cd=np.stack([q.Cd @ tx for q in systems]),
         d=np.stack([q.D for q in systems]),
-        rho_hat=rho_hat,
+        w_p=w_p,
+        dw_p=dw_p,
+        p_params=term_parameters(p_dependence, range(s)),
         vertices=vertices,
         rate_s=rate * ts,
         dtau_rate=rate * dtau,
         tbar=tau_max / ts,
-        p_terms=p_terms,
         sym=sym,
         ns=ns,
     )
@@ -295,75 +297,59 @@ def analyse(
             progress,
             label,
         )
-        notes.extend(f"KKT fallback: {f}, then {sol.kkt_method}" for f in sol.fallbacks)
-        if sol.status == "solver_error":
-            notes.append(f"Clarabel ended {sol.clarabel_status}")
+        notes.extend(sol.notes)
         t_val = float(sol.x[it]) if sol.x is not None and with_t else 0.0
         return sol.status, None if sol.x is None else sol.x[:nvar], t_val
 
-    def _round(points: NDArray[np.int64], bound: bool) -> tuple[str, Array | None]:
-        if gamma_cap is not None:
+    def _formulation(bound: bool) -> Formulation:
+        def cap_solve(pts: NDArray[np.int64]) -> tuple[str, Array | None]:
             # feasibility form: gamma bounded, maximise a common strictness margin t (<= 1);
             # measured more robust than minimising gamma when the points differ widely in scale
-            status, xv, t_val = _solve(points, "cap", bound)
+            status, xv, t_val = _solve(pts, "cap", bound)
             if xv is not None:
                 notes.append(
                     f"feasibility form: gamma <= {float(gamma_cap):.4g}, margin t = {t_val:.3g}"
                 )
             return status, xv
-        status, xv, _ = _solve(points, "min", bound)
-        if backoff > 0.0 and xv is not None and not _recheck(xv)[0]:
-            # second solve: gamma fixed a little above the optimum, maximise the strictness
-            # margin; this moves the certificate off the boundary where the tolerances live
+
+        def back_off(pts: NDArray[np.int64], xv: Array) -> tuple[str, Array | None, str]:
+            # gamma fixed a little above the optimum, maximise the strictness margin; this moves
+            # the certificate off the boundary where the tolerances live
             mu_b = (1 + backoff) * float(xv[var_g])
             if progress:
                 progress(f"analysis LMI: back-off solve at gamma = {_gam(mu_b):.4g}")
-            status2, xb, t_val = _solve(points, "backoff", bound, mu_b)
-            if xb is None:
-                notes.append(f"back-off solve ended {status2}; kept the first solution")
-            else:
-                status, xv = status2, xb
-                notes.append(
-                    f"back-off: gamma {_gam(mu_b / (1 + backoff)):.6g} -> "
-                    f"{_gam(mu_b):.6g}, common margin t = {t_val:.3g}"
-                )
-        return status, xv
+            status, xb, t_val = _solve(pts, "backoff", bound, mu_b)
+            return (
+                status,
+                xb,
+                f"back-off: gamma {_gam(mu_b / (1 + backoff)):.6g} -> "
+                f"{_gam(mu_b):.6g}, common margin t = {t_val:.3g}",
+            )
 
-    certified = False
-    for bound in (True, False) if rate_bound else (False,):
-        status, xv, points, (certified, margins, p_min) = grow_working_set(
-            points,
-            working_set,
-            lambda pts, bound=bound: _round(pts, bound),
-            _recheck,
-            notes,
-            progress,
-            nv,
+        backs_off = gamma_cap is None and backoff > 0.0
+        return Formulation(
+            cap_solve if gamma_cap is not None else lambda pts: _solve(pts, "min", bound)[:2],
+            back_off=BackOff(lambda _pts, xv: not _recheck(xv)[0], back_off) if backs_off else None,
+            if_not_certified=_vertex_form_next if bound else None,
+            note_if_certified=(
+                "solved in the rate-bound form, re-checked at every rate vertex" if bound else None
+            ),
         )
-        if certified:
-            break
-        if bound:  # the sufficient rate-bound form did not certify: the vertex form decides
-            notes.append(f"rate-bound form not certified ({status}); solved the vertex form")
-            if progress:
-                progress("analysis LMI: rate-bound form not certified; solving every rate vertex")
-    if rate_bound and certified and bound:
-        notes.append("solved in the rate-bound form, re-checked at every rate vertex")
-    elapsed = time.perf_counter() - t_start
-    if xv is None:
-        nan = np.full(m, np.nan)
-        return AnalysisResult(False, status, None, nan, nan, kk, elapsed, p_dependence, notes)
-    if working_set is not None:
-        notes.append(f"working set: LMI imposed at {len(points)} of {m} points")
-    p0m = xv[sym]  # P0 (the first basis term); sym maps (c, d) and (d, c) to the entry
-    return AnalysisResult(
-        certified,
-        status,
-        _gam(float(xv[var_g])),
-        margins,
-        p_min,
-        kk,
-        elapsed,
-        p_dependence,
-        notes,
-        txi.T @ p0m @ txi,
+
+    def _vertex_form_next(status: str) -> None:
+        # the sufficient rate-bound form did not certify: the vertex form decides
+        notes.append(f"rate-bound form not certified ({status}); solved the vertex form")
+        if progress:
+            progress("analysis LMI: rate-bound form not certified; solving every rate vertex")
+
+    def _solution(xv: Array) -> Solution:
+        p0m = xv[sym]  # P0 (the first basis term); sym maps (c, d) and (d, c) to the entry
+        return _gam(float(xv[var_g])), txi.T @ p0m @ txi, None
+
+    steps = Steps(
+        [_formulation(bound) for bound in ((True, False) if rate_bound else (False,))],
+        _recheck,
+        _solution,
+        nv,
     )
+    return solve_and_recheck(steps, points, working_set, m, p_dependence, t_start, notes, progress)

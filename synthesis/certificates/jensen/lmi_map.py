@@ -121,12 +121,13 @@ class AnalysisProblem:
     c: Array
     cd: Array
     d: Array
-    rho_hat: Array  # (m, s)
+    w_p: Array  # (m, n_p) P basis weights at every point (synthesis.problem.basis)
+    dw_p: Array  # (m, n_p, s) their derivatives in rho_hat
+    p_params: tuple[int | None, ...]  # the parameter each P basis term depends on
     vertices: Array  # (nv, s) rate signs
     rate_s: Array  # (s,) |d rho_hat / d t_hat|
     dtau_rate: Array  # (s,) rate * d tau / d rho_hat (s/s)
     tbar: float
-    p_terms: list  # [(weight(rho), (i, d weight / d rho_i) or None)]
     sym: NDArray[np.int64]
     ns: int
 
@@ -140,7 +141,7 @@ class AnalysisProblem:
 
     @property
     def off_q(self) -> int:
-        return len(self.p_terms) * self.ns
+        return self.w_p.shape[1] * self.ns
 
     @property
     def var_g(self) -> int:
@@ -170,9 +171,8 @@ def lmi_map(
     base = _Assembler(npt, size, pr.nvar)
     eye = np.broadcast_to(np.eye(n), (npt, n, n))
     ak, adk, bk, ck, cdk, dk = (v[points] for v in (pr.a, pr.ad, pr.b, pr.c, pr.cd, pr.d))
-    rho_p = pr.rho_hat[points]
-    for j, (wfun, _dfun) in enumerate(pr.p_terms):
-        w = wfun(rho_p)
+    for j in range(pr.w_p.shape[1]):
+        w = pr.w_p[points, j]
         base.add_mvn(eye, ak, j * ns, sym, r1, r1, w)  # P A
         base.add_mvn(np.swapaxes(ak, 1, 2), eye, j * ns, sym, r1, r1, w)  # A' P
         base.add_mvn(eye, adk, j * ns, sym, r1, r2, w)  # P Ad
@@ -198,12 +198,11 @@ def lmi_map(
     # then each point's copy per rate vertex gets dP/dt and the dtau/dt part of -(1 - dtau) Q
     asm = base.repeated(nv)
     sig = np.tile(pr.vertices, (npt, 1))  # (K, s), point-major
-    rho_k = np.repeat(rho_p, nv, axis=0)
     eye = np.broadcast_to(np.eye(n), (npt * nv, n, n))
-    for j, (_wfun, dfun) in enumerate(pr.p_terms):
-        if dfun is not None:  # dP/dt = sum_i (d P / d rho_i) * rho_i-dot at this rate vertex
-            i, dw = dfun
-            asm.add_mvn(eye, eye, j * ns, sym, r1, r1, dw(rho_k) * sig[:, i] * pr.rate_s[i])
+    for j, i in enumerate(pr.p_params):
+        if i is not None:  # dP/dt = sum_i (d P / d rho_i) * rho_i-dot at this rate vertex
+            dw = np.repeat(pr.dw_p[points, j, i], nv)
+            asm.add_mvn(eye, eye, j * ns, sym, r1, r1, dw * sig[:, i] * pr.rate_s[i])
     asm.add_mvn(eye, eye, off_q, sym, r2, r2, sig @ pr.dtau_rate)  # dtau/dt (s/s, scale-free)
     return asm.svec()
 
@@ -221,8 +220,8 @@ def bound_parts(
     them): ``svec(LMI_p) = F [x; Z] + f0`` and ``svec(Z_{p,i} -/+ nu_i dP_i) = G [x; Z]`` (>= 0).
     """
     n, ns, nvar, npt = pr.n, pr.ns, pr.nvar, len(points)
-    terms = [(j, d) for j, (_w, d) in enumerate(pr.p_terms) if d is not None]
-    moving = sorted({i for _j, (i, _dw) in terms if pr.rate_s[i] > 0})
+    terms = [(j, i) for j, i in enumerate(pr.p_params) if i is not None]
+    moving = sorted({i for _j, i in terms if pr.rate_s[i] > 0})
     nmov = len(moving)
     nz = npt * nmov * ns
     size, nsv, nsn = pr.size, pr.size * (pr.size + 1) // 2, n * (n + 1) // 2
@@ -241,11 +240,11 @@ def bound_parts(
     nmat = npt * nmov * 2
     asm = _Assembler(nmat, n, nvar)
     eye = np.broadcast_to(np.eye(n), (nmat, n, n))
-    rho_m = np.repeat(pr.rho_hat[points], nmov * 2, axis=0)
     par = np.tile(np.repeat(np.array(moving), 2), npt)
     sign = np.tile([1.0, -1.0], npt * nmov)
-    for j, (i, dw) in terms:
-        scale = np.where(par == i, -sign * pr.rate_s[i] * dw(rho_m), 0.0)
+    for j, i in terms:
+        dw = np.repeat(pr.dw_p[points, j, i], nmov * 2)
+        scale = np.where(par == i, -sign * pr.rate_s[i] * dw, 0.0)
         asm.add_mvn(eye, eye, j * ns, pr.sym, 0, 0, scale)
     g_x, _ = asm.svec()
     idn, wn = svec_rows(n)
@@ -260,11 +259,11 @@ def bound_parts(
 
 def p_map(pr: AnalysisProblem) -> sp.csr_matrix:
     """svec of P(rho_k) at every point (P(rho) = sum_j w_j(rho) P_j), then Q, R: ``F x``."""
-    m, n = pr.rho_hat.shape[0], pr.n
+    m, n = pr.w_p.shape[0], pr.n
     pasm = _Assembler(m + 2, n, pr.nvar)
     eye = np.broadcast_to(np.eye(n), (m + 2, n, n))
-    for j, (wfun, _d) in enumerate(pr.p_terms):
-        pasm.add_mvn(eye, eye, j * pr.ns, pr.sym, 0, 0, np.r_[wfun(pr.rho_hat), 0.0, 0.0])
+    for j in range(pr.w_p.shape[1]):
+        pasm.add_mvn(eye, eye, j * pr.ns, pr.sym, 0, 0, np.r_[pr.w_p[:, j], 0.0, 0.0])
     pasm.add_mvn(eye, eye, pr.off_q, pr.sym, 0, 0, np.r_[np.zeros(m), 1.0, 0.0])
     pasm.add_mvn(eye, eye, pr.off_q + pr.ns, pr.sym, 0, 0, np.r_[np.zeros(m), 0.0, 1.0])
     return pasm.svec()[0]

@@ -90,7 +90,14 @@ from synthesis.certificates.interface import AnalysisResult, checked_inputs
 from synthesis.certificates.wirtinger.conic import build_conic, vertices_of
 from synthesis.certificates.wirtinger.k_scaling import KScaling
 from synthesis.certificates.wirtinger.lmi import WirtingerData, prepare, sym, vertex_lmis
-from synthesis.certificates.working_set import first_points, grow_working_set
+from synthesis.certificates.working_set import (
+    BackOff,
+    Formulation,
+    Solution,
+    Steps,
+    first_points,
+    solve_and_recheck,
+)
 from synthesis.problem.closed_loop import DelaySystem
 from synthesis.solver.conic import solve_conic
 
@@ -171,7 +178,7 @@ def analyse_wirtinger(
     m = rho_hat.shape[0]
     points = first_points(rho_hat, working_set)
     verts = vertices_of(data)
-    nv, kk = len(verts), m * len(verts)
+    nv = len(verts)
     n, n2, ns, ns2, nvar = data.n, 2 * data.n, data.ns, data.ns2, data.nvar
     off_s = data.n_p * ns2
     notes: list[str] = []
@@ -185,34 +192,10 @@ def analyse_wirtinger(
         if progress:
             progress(f"{label}: solving {n_psd} PSD blocks, {ncol} variables with Clarabel")
         sol = solve_conic(q, a, b, cones, opts, progress, label)
-        notes.extend(f"KKT fallback: {f}, then {sol.kkt_method}" for f in sol.fallbacks)
-        if sol.status == "solver_error":
-            notes.append(f"Clarabel ended {sol.clarabel_status}")
+        notes.extend(sol.notes)
         if sol.x is not None and cap is not None:
             notes.append(f"feasibility form: gamma <= {cap:.4g}, margin t = {sol.x[-1]:.3g}")
         return sol.status, None if sol.x is None else sol.x[:nvar]
-
-    def solve(pts: NDArray[np.int64]) -> tuple[str, Array | None]:
-        if gamma_cap is not None:
-            return solve_once(pts, float(gamma_cap))
-        status, xv = solve_once(pts, None)
-        if xv is None or backoff <= 0.0:
-            return status, xv
-        _, margins, p_min = recheck(xv)
-        if np.all(margins[pts] > recheck_tol[0]) and np.all(p_min > 0) and _sr_positive(data, xv):
-            return status, xv
-        # the optimum sits on the boundary (in the bound form the slack cones Z_i >= +/- M_i
-        # too; S or R may end singular): back off gamma by a few percent and maximise the
-        # common margin instead
-        cap = float(np.sqrt(max(float(xv[-1]), 0.0))) * (1.0 + backoff)
-        if progress:
-            progress(f"Wirtinger LMI: back-off solve at gamma = {cap:.4g}")
-        status2, xb = solve_once(pts, cap)
-        if xb is None:
-            notes.append(f"back-off solve ended {status2}; kept the first solution")
-            return status, xv
-        notes.append(f"back-off: gamma {cap / (1.0 + backoff):.6g} -> {cap:.6g}")
-        return status2, xb
 
     recheck_tol = [0.0]  # the last re-check's strictness tolerance (scaled to the LMI's size)
 
@@ -220,51 +203,57 @@ def analyse_wirtinger(
         certified, margins, p_min, recheck_tol[0] = _recheck(data, xv)
         return certified, margins, p_min
 
-    status, xv, points, (certified, margins, p_min) = grow_working_set(
-        points,
-        working_set,
-        solve,
-        recheck,
-        notes,
-        progress,
-        nv,
-        stop_if_imposed_fails=gamma_cap is not None,
-    )
-    elapsed = time.perf_counter() - t_start
-    if xv is None:
-        nan = np.full(m, np.nan)
-        return AnalysisResult(False, status, None, nan, nan, kk, elapsed, p_dependence, notes)
-    if working_set is not None:
-        notes.append(f"working set: LMI imposed at {len(points)} of {m} points")
+    def off_boundary(pts: NDArray[np.int64], xv: Array) -> bool:
+        _, margins, p_min = recheck(xv)
+        return not (
+            np.all(margins[pts] > recheck_tol[0]) and np.all(p_min > 0) and _sr_positive(data, xv)
+        )
+
+    def back_off(pts: NDArray[np.int64], xv: Array) -> tuple[str, Array | None, str]:
+        # the optimum sits on the boundary (in the bound form the slack cones Z_i >= +/- M_i
+        # too; S or R may end singular): back off gamma by a few percent and maximise the
+        # common margin instead
+        cap = float(np.sqrt(max(float(xv[-1]), 0.0))) * (1.0 + backoff)
+        if progress:
+            progress(f"Wirtinger LMI: back-off solve at gamma = {cap:.4g}")
+        status, xb = solve_once(pts, cap)
+        return status, xb, f"back-off: gamma {cap / (1.0 + backoff):.6g} -> {cap:.6g}"
+
+    def solution(xv: Array) -> Solution:
+        gamma = float(np.sqrt(max(float(xv[-1]), 0.0)))
+        g = max(gamma, 1e-300)
+        certificate = {
+            "P": sym(xv[:off_s].reshape(data.n_p, ns2), n2) / g,
+            "S": sym(xv[off_s : off_s + ns], n) / g,
+            "R": sym(xv[off_s + ns : off_s + 2 * ns], n) / g,
+            "transform": data.tx,
+            "time_scale_s": data.time_scale_s,
+        }
+        if k_scaling is not None:
+            certificate["k_scaled_states"] = tuple(k_scaling.states)
+        p0 = sym(xv[:ns2], n2)[:n, :n]
+        return gamma, data.txi.T @ p0 @ data.txi, certificate
+
+    closing_notes: list[str] = []
     if rate_form == "bound":
-        notes.append("rate-bound form (one LMI per point), re-checked at every rate vertex")
+        closing_notes.append("rate-bound form (one LMI per point), re-checked at every rate vertex")
     if k_scaling is not None:
-        notes.append(f"K-scaled coordinates: states {tuple(k_scaling.states)} times K")
-    gamma = float(np.sqrt(max(float(xv[-1]), 0.0)))
-    g = max(gamma, 1e-300)
-    certificate = {
-        "P": sym(xv[:off_s].reshape(data.n_p, ns2), n2) / g,
-        "S": sym(xv[off_s : off_s + ns], n) / g,
-        "R": sym(xv[off_s + ns : off_s + 2 * ns], n) / g,
-        "transform": data.tx,
-        "time_scale_s": data.time_scale_s,
-    }
-    if k_scaling is not None:
-        certificate["k_scaled_states"] = tuple(k_scaling.states)
-    p0 = sym(xv[:ns2], n2)[:n, :n]
-    return AnalysisResult(
-        certified,
-        status,
-        gamma,
-        margins,
-        p_min,
-        kk,
-        elapsed,
-        p_dependence,
-        notes,
-        data.txi.T @ p0 @ data.txi,
-        certificate,
+        closing_notes.append(f"K-scaled coordinates: states {tuple(k_scaling.states)} times K")
+    cap = None if gamma_cap is None else float(gamma_cap)
+    formulation = Formulation(
+        lambda pts: solve_once(pts, cap),
+        back_off=BackOff(off_boundary, back_off) if cap is None and backoff > 0.0 else None,
     )
+    steps = Steps(
+        [formulation],
+        recheck,
+        solution,
+        nv,
+        # with a fixed gamma cap a larger set of points cannot pass when a subset fails
+        stop_if_imposed_fails=cap is not None,
+        closing_notes=tuple(closing_notes),
+    )
+    return solve_and_recheck(steps, points, working_set, m, p_dependence, t_start, notes, progress)
 
 
 def _recheck(data: WirtingerData, xv: Array) -> tuple[bool, Array, Array, float]:

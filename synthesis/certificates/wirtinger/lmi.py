@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from synthesis.certificates.state_transform import transform_of
 from synthesis.certificates.wirtinger.k_scaling import KScaling, k_scaled_system, k_terms
+from synthesis.problem.basis import basis_terms
 from synthesis.problem.closed_loop import DelaySystem
 from synthesis.solver.conic import svec_rows
 
@@ -76,20 +77,6 @@ def sym(vec: Array, n: int) -> Array:
     out[..., iu[0], iu[1]] = vec
     out[..., iu[1], iu[0]] = vec
     return out
-
-
-def _p_basis(rho_hat: Array, p_dependence: str, p_params: Sequence[int]) -> tuple[Array, Array]:
-    """Weights (m, n_p) of the P basis and their derivatives (m, n_p, s) in rho_hat: 1, then
-    rho_i (affine), then rho_i^2 / 2 (quadratic), for i in ``p_params``."""
-    m, s = rho_hat.shape
-    w, dw = [np.ones(m)], [np.zeros((m, s))]
-    for power in (1, 2)[: {"constant": 0, "affine": 1, "quadratic": 2}[p_dependence]]:
-        for i in p_params:
-            d = np.zeros((m, s))
-            d[:, i] = rho_hat[:, i] ** (power - 1)
-            w.append(rho_hat[:, i] ** power / power)
-            dw.append(d)
-    return np.stack(w, axis=1), np.stack(dw, axis=1)
 
 
 @dataclass(frozen=True)
@@ -201,7 +188,7 @@ def prepare(
     g0[:, :n, :] = ga
     g0[:, n:, :n] = np.eye(n)
     g0[:, n:, n : 2 * n] = -np.eye(n)
-    w_p, dw_p = _p_basis(rho_hat, p_dependence, p_params)
+    w_p, dw_p = basis_terms(rho_hat, p_dependence, p_params)
     moving = tuple(
         i
         for i in range(rho_hat.shape[1])
