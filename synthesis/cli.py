@@ -30,7 +30,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from contracts.usage import UsageError, UsageParser, run_command
+from plumbing.usage import UsageError, UsageParser, run_command
 from synthesis.families.registry import SynthRequest, family_named, structures
 from synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31
 Artifact sha256:  114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd
-Content hash:     4b4f10fd526c19f7d601699171c89be0428b6152e4baa4dd944efee884564600
+Content hash:     63af88ff6768af64920a5703f5f27b800b4be273592c266a7c479ac87fcecc1c
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '52e40f85bf2fce013ef73d4b20b2b83b7fc2e78b1c2ded2766fa101fce0ca23c'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '84fad72befe76aa905ac37713d3b1dcb79e9f8640faa6529f2484740c3b397c1'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = '114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd'
-CONTENT_HASH = '4b4f10fd526c19f7d601699171c89be0428b6152e4baa4dd944efee884564600'
+CONTENT_HASH = '63af88ff6768af64920a5703f5f27b800b4be273592c266a7c479ac87fcecc1c'
 TABLES_SHA256 = '0d1ccefeea03128a1d935e8d7cc8d5bfdac89085e3823c267c71c6c1312a5ffb'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -26,7 +26,7 @@ from typing import Any
 
 from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
 from contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS
-from contracts.usage import UsageError
+from plumbing.usage import UsageError
 
 #: MAP targets the runtime accepts (mmHg), from any source
 TARGET_MIN_MMHG = 50.0
@@ -195,7 +195,7 @@ def clinician_input(args: argparse.Namespace) -> ClinicianInput:
 
     Raises
     ------
-    contracts.usage.UsageError
+    plumbing.usage.UsageError
         Both ``--target-mmhg`` and ``--target-file``; ``--target-stdin`` without a starting
         target; a target file that cannot be read or holds no valid target.
     """

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.drug import DrugBinding, dose_ug_kg_min, dose_ug_min
-from contracts.usage import UsageError
+from plumbing.usage import UsageError
 from runtime.inputs.clinician import ClinicianInput, argtype, number_in
 from runtime.inputs.drug_library import (
     WEIGHT_MAX_KG,
@@ -85,7 +85,7 @@ def bind_syringe(
 
     Raises
     ------
-    contracts.usage.UsageError
+    plumbing.usage.UsageError
         One line naming both values (the option's and the design's or the library's).
     """
     where = f"the loaded design (--controller {controller}) is for {design.describe()}"

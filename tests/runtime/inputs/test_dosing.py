@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from contracts.drug import DEFAULT_BINDING, DrugBinding, binding_of, dose_ug_kg_min, dose_ug_min
-from contracts.usage import UsageError
+from plumbing.usage import UsageError
 from runtime.core.dose_guard import DOSE_HARD_LIMIT, DOSE_HOUR_LIMIT, DOSE_SOFT_LIMIT, DoseGuard
 from runtime.core.supervisor import Supervisor, SupervisorInput
 from runtime.core.supervisor_config import Fault, State, SupervisorConfig
