@@ -23,6 +23,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from contracts.checks import allowed_range
 from contracts.drug import DrugBinding, dose_ug_kg_min, dose_ug_min
 from plumbing.usage import UsageError
 from runtime.inputs.clinician import ClinicianInput, argtype, number_in
@@ -119,8 +120,8 @@ def bind_syringe(
     weight = clinician.weight_kg
     if entry.per_kg and weight is None:
         raise UsageError(
-            f"--weight-kg: required: the drug library doses {design.name} in ug/kg/min (allowed"
-            f" [{WEIGHT_MIN_KG:g}, {WEIGHT_MAX_KG:g}] kg)"
+            f"--weight-kg: required: the drug library doses {design.name} in ug/kg/min (a weight"
+            f" {allowed_range(WEIGHT_MIN_KG, WEIGHT_MAX_KG, unit='kg')})"
         )
     return dataclasses.replace(
         clinician,
