@@ -91,8 +91,8 @@ def unstable_root_count(lags: dict[int, Matrix], radius: float = 1.0) -> int:
     argument principle. The circle is sampled uniformly (>= 4 points per unit of polynomial degree)
     and then refined *adaptively*: only the arcs whose phase step is >= pi/4 are bisected, until no
     step is. Roots close to the circle (the slow patient and integrator modes, |w| ~ 1 - 1e-4) need
-    a fine sampling only near theta = 0, so this costs ~10-60 ms where uniform refinement of the
-    whole circle took ~0.5 s.
+    a fine sampling only near theta = 0, so refining only the bad arcs is much cheaper than refining
+    the whole circle (docs/notes/benchmarks.md, "Design measurements").
     """
     ns = next(iter(lags.values())).shape[0]
     degree = ns * (max(lags) + 1)
