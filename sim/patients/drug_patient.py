@@ -124,5 +124,5 @@ class DrugPatient:
         raise NotImplementedError
 
     def max_delta_map_mmhg(self, max_rate_ml_h: float) -> float:
-        """Largest steady-state ΔMAP (mmHg) over [0, ``max_rate_ml_h``] ml/h (rises with the rate)."""
+        """Largest steady-state ΔMAP (mmHg) over [0, ``max_rate_ml_h``] ml/h (it rises with R)."""
         return self.steady_state_delta_mmhg(max_rate_ml_h)

@@ -140,7 +140,7 @@ def _march(
     steps: int,
     drive: Callable[[int, Vector], Vector],
 ) -> NDArray[np.float64]:
-    """States x_0 = 0 .. x_steps of the delay system from rest, the delayed state read from the buffer.
+    """States x_0 = 0 .. x_steps of the delay system from rest, delayed states read from the buffer.
 
     Over step k the delayed state is the linear interpolation between the buffered x_{k-lag} and
     x_{k-lag+1} (zero before t = 0); ``drive(k, Phi x_k)`` adds the inputs' contribution.
