@@ -44,7 +44,7 @@ import sys
 
 import numpy as np
 
-from contracts.parallel import run_ordered
+from plumbing.parallel import run_ordered
 from runtime.core.scheduling import OracleSchedule, Schedule, ScheduleInput
 from runtime.estimation.sources import EstimatedSchedule
 from runtime.inputs.controller_loader import load_controller

@@ -11,7 +11,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from contracts.usage import UsageError, UsageParser, run_command
+from plumbing.usage import UsageError, UsageParser, run_command
 
 
 def _parser() -> UsageParser:

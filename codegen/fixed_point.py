@@ -40,6 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from synthesis.verification.discrete_step import sampled_fopdt
+
 __all__ = [
     "E_LIM_MMHG",
     "FixedPointPlan",
@@ -73,7 +75,9 @@ def signal_peaks(
     The tables' corner nodes are the box corners; the centre uses the node nearest the centre.
     Scenario: target +``step_mmhg`` at t = 0, back down at ``duration_s``/2; the pump clamps to
     [0, max_rate_ml_h] with the generated step's anti-windup (controller update frozen while the
-    command is pinned at a limit and its increment pushes further into it).
+    command is pinned at a limit and its increment pushes further into it). The patient is the
+    first-order-plus-delay model sampled exactly
+    (:func:`synthesis.verification.discrete_step.sampled_fopdt`).
     """
     nk_, nt_, na_ = tables.shape[:3]
     idx = [(i, j, k) for i in (0, nk_ - 1) for j in (0, nt_ - 1) for k in (0, na_ - 1)]
@@ -88,10 +92,12 @@ def signal_peaks(
     d = rhos[:, 2] / ts
     n = np.floor(d).astype(int)
     f = d - n
-    a = np.exp(-ts / rhos[:, 1])
-    b0 = rhos[:, 0] * (1 - np.exp(-(1 - f) * ts / rhos[:, 1]))
-    b1 = rhos[:, 0] * np.exp(-(1 - f) * ts / rhos[:, 1]) * (1 - np.exp(-f * ts / rhos[:, 1]))
-    nbuf = int(n.max()) + 3
+    plants = [sampled_fopdt(*rho, ts) for rho in rhos]
+    a = np.array([p.a for p in plants])
+    b_new = np.array([p.b_new for p in plants])  # weight of c_{k-W}
+    b_old = np.array([p.b_old for p in plants])  # weight of c_{k-W-1}
+    w = np.array([p.whole for p in plants])
+    nbuf = int(max(n.max(), w.max())) + 3
     steps = int(round(duration_s / ts))
     xbuf = np.zeros((nbuf, b, nk))
     cbuf = np.zeros((nbuf, b))
@@ -116,7 +122,7 @@ def signal_peaks(
         z[upd, nk + 1] += dz[upd, nk + 1]
         z[:, nk] = np.clip(un, 0.0, max_rate_ml_h)
         cbuf[h] = z[:, nk]
-        dmap = a * dmap + b0 * cbuf[(h - n) % nbuf, ar] + b1 * cbuf[(h - n - 1) % nbuf, ar]
+        dmap = a * dmap + b_new * cbuf[(h - w) % nbuf, ar] + b_old * cbuf[(h - w - 1) % nbuf, ar]
         np.maximum(peaks, np.max(np.abs(z), axis=0), out=peaks)
     return peaks
 

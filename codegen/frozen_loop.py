@@ -9,7 +9,9 @@ cannot be stepped over unnoticed.
 
 The loop is the FOPDT patient K/(T s + 1) e^(-tau s) under ZOH with the discrete controller
 reading its delayed state from a shift buffer, exactly what the generated step does
-(:func:`frozen_loop_matrices`); :func:`unstable_root_count` counts its unstable roots.
+(:func:`frozen_loop_matrices`; the patient's sampling is the one the synthesis-side discrete step
+uses, :func:`synthesis.verification.discrete_step.sampled_fopdt`); :func:`unstable_root_count`
+counts its unstable roots.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+
+from synthesis.verification.discrete_step import sampled_fopdt
 
 __all__ = ["frozen_loop_matrices", "unstable_root_count"]
 
@@ -52,13 +56,13 @@ def frozen_loop_matrices(
     d = tau / ts
     if d < 1.0:
         raise ValueError(f"tau={tau} s shorter than one sample period {ts} s")
+    # The controller reads its buffer at D = tau/Ts split as the generated step splits it; the
+    # patient's delay is split by sampled_fopdt, which takes a hair below a whole sample as whole.
     n_lag = int(math.floor(d))
     f = d - n_lag
     ns = nz + 1
     mz, md, me = m[:, :nz], m[:, nz : nz + nk], m[:, nz + nk]
-    a = math.exp(-ts / T)
-    b0 = K * (1.0 - math.exp(-(1.0 - f) * ts / T))  # weight of c_{k-N}
-    b1 = K * math.exp(-(1.0 - f) * ts / T) * (1.0 - math.exp(-f * ts / T))  # c_{k-N-1}
+    plant = sampled_fopdt(K, T, tau, ts)  # MAP_{k+1} = a MAP_k + b_new c_{k-W} + b_old c_{k-W-1}
     iu = 1 + nk  # index of u inside s
     lags: dict[int, Matrix] = {}
 
@@ -68,12 +72,12 @@ def frozen_loop_matrices(
         return lags[j]
 
     a0 = lag(0)
-    a0[0, 0] = a
+    a0[0, 0] = plant.a
     a0[1:, 0] = -me
     a0[1:, 1:] = np.eye(nz) + mz
-    # c_{k-N} = u(z_{k-N+1}): lag N-1; c_{k-N-1} = u(z_{k-N}): lag N.
-    lag(n_lag - 1)[0, iu] += b0
-    lag(n_lag)[0, iu] += b1
+    # c_{k-W} = u(z_{k-W+1}): lag W-1; c_{k-W-1} = u(z_{k-W}): lag W.
+    lag(plant.whole - 1)[0, iu] += plant.b_new
+    lag(plant.whole)[0, iu] += plant.b_old
     lag(n_lag)[1:, 1 : 1 + nk] += (1.0 - f) * md
     if f > 0.0:
         lag(n_lag + 1)[1:, 1 : 1 + nk] += f * md
@@ -87,8 +91,8 @@ def unstable_root_count(lags: dict[int, Matrix], radius: float = 1.0) -> int:
     argument principle. The circle is sampled uniformly (>= 4 points per unit of polynomial degree)
     and then refined *adaptively*: only the arcs whose phase step is >= pi/4 are bisected, until no
     step is. Roots close to the circle (the slow patient and integrator modes, |w| ~ 1 - 1e-4) need
-    a fine sampling only near theta = 0, so this costs ~10-60 ms where uniform refinement of the
-    whole circle took ~0.5 s.
+    a fine sampling only near theta = 0, so refining only the bad arcs is much cheaper than refining
+    the whole circle (docs/notes/benchmarks.md, "Design measurements").
     """
     ns = next(iter(lags.values())).shape[0]
     degree = ns * (max(lags) + 1)

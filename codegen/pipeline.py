@@ -22,7 +22,7 @@ from codegen.discretise import ContinuousController
 from codegen.fixed_point import FixedPointPlan, make_plan
 from codegen.tables import TabulationProof, choose_grid
 from contracts.drug import DEFAULT_BINDING, DrugBinding
-from contracts.files import write_atomic
+from plumbing.files import write_atomic
 
 __all__ = [
     "BUDGETS",

@@ -31,7 +31,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import BinaryIO
 
-from contracts.files import AtomicFile
+from plumbing.files import AtomicFile
 
 _TS = struct.Struct(">Q")
 

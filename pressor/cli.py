@@ -8,7 +8,7 @@ serial or rerun.
 
 A stage CLI module exposes ``main(command: str, argv: list[str]) -> int`` and parses ``argv`` itself.
 Exit codes: 0 success, 1 the run completed but a check failed, 2 bad usage or bad input
-(:mod:`contracts.usage`).
+(:mod:`plumbing.usage`).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import importlib
 import sys
 from importlib.metadata import version
 
-from contracts.usage import USAGE_EXIT, usage_exit
+from plumbing.usage import USAGE_EXIT, usage_exit
 
 #: subcommand -> (module that serves it, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {

@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.drug import DEFAULT_BINDING, DrugBinding
-from contracts.usage import USAGE_EXIT, UsageError, UsageParser
+from plumbing.usage import USAGE_EXIT, UsageError, UsageParser
 from runtime.inputs.config import (
     ORACLE_DEFAULT_WHY,
     RunConfig,
@@ -150,7 +150,7 @@ def sil_parser() -> UsageParser:
 
 def sil_config(argv: Sequence[str]) -> SilConfig:
     """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
-    disturbance events (raises :class:`contracts.usage.UsageError`)."""
+    disturbance events (raises :class:`plumbing.usage.UsageError`)."""
     from contracts.drug import binding_of
     from runtime.inputs.config import load_controller
     from sim.patients.patient_model import PatientModelError, check_model_for_scenario

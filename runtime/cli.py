@@ -33,7 +33,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from contracts.usage import UsageError, UsageParser, usage_exit
+from plumbing.usage import UsageError, UsageParser, usage_exit
 from runtime.inputs.clinician import add_clinician_options, clinician_input
 from runtime.inputs.config import (
     DEFAULT_RATE_HZ,

@@ -3,7 +3,7 @@
 :func:`run_runtime` is the runtime end of ``pressor run`` (a port it opened) and of ``pressor sil``
 (the leader of the pty whose follower the device process opened). Its outputs (``.rrd``,
 ``.tlog``) are written to hidden temporary names and moved into place only when the run succeeds
-(:mod:`contracts.files`): a failed run leaves earlier files untouched. :func:`run_guarded` gives
+(:mod:`plumbing.files`): a failed run leaves earlier files untouched. :func:`run_guarded` gives
 both commands their exit codes.
 """
 
@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from contracts.usage import USAGE_EXIT, run_command
+from plumbing.usage import USAGE_EXIT, run_command
 from runtime.inputs.clinician import ClinicianInput, check_device_hello, check_link_hello
 from runtime.inputs.config import RunConfig, load_controller
 from runtime.inputs.controller_loader import controller_name
@@ -368,7 +368,7 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
     or the controller raised under ``pressor sil``
     (:class:`runtime.core.closed_loop.ControllerError`; ``pressor run`` holds instead,
     :mod:`runtime.core.supervisor`) (one line on stderr); 2 bad usage or input
-    (:func:`contracts.usage.run_command`), or the device's hello refused (:class:`link.Refusal`: one
+    (:func:`plumbing.usage.run_command`), or the device's hello refused (:class:`link.Refusal`: one
     line, the device was told); 130 / 143 stopped by SIGINT / SIGTERM
     (:mod:`runtime.shell.interrupt`: the run stops at a tick boundary, commands the safe rate, and
     keeps its outputs).

@@ -20,7 +20,7 @@ more than the metrics' band (:func:`contracts.metrics.reachable_band_mmhg`: the 
 the run's step, 2 % of it noise-free or 5 mmHg noisy; 5 mmHg without a step).
 
 :func:`finish` prints the summary and writes the ``--summary`` and ``--timing`` files atomically
-(:mod:`contracts.files`): a failed run leaves earlier files untouched.
+(:mod:`plumbing.files`): a failed run leaves earlier files untouched.
 """
 
 from __future__ import annotations
@@ -33,9 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from contracts.files import write_atomic
 from contracts.metrics import reachable_band_mmhg, run_metrics
 from link.counters import DROP_CAUSES
+from plumbing.files import write_atomic
 from runtime.inputs.clinician import describe_target
 from runtime.inputs.config import RunConfig
 from runtime.shell.trajectory import held_delivered_ml_h

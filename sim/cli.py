@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from contracts.usage import UsageError, UsageParser, run_command, usage_exit
+from plumbing.usage import UsageError, UsageParser, run_command, usage_exit
 from sim.patients.patient_model import add_patient_model_option
 
 
@@ -167,8 +167,8 @@ def _trial(argv: Sequence[str]) -> int:
     if not 0.05 <= args.sensitivity <= 20.0:
         p.error(f"field '--sensitivity' = {args.sensitivity} outside [0.05, 20] (dimensionless)")
 
-    from contracts.files import write_atomic
-    from contracts.parallel import BackendError
+    from plumbing.files import write_atomic
+    from plumbing.parallel import BackendError
     from runtime.core.closed_loop import ControllerError
     from runtime.inputs.controller_loader import ControllerSpecError, load_controller
     from runtime.inputs.controller_plugin import split_controller_list

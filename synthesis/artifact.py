@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from contracts.drug import DEFAULT_BINDING, DrugBinding
-from contracts.files import AtomicFile
+from plumbing.files import AtomicFile
 from synthesis.families.registry import ControllerFamily
 from synthesis.problem.config import ModelConfig
 from synthesis.problem.model import dims

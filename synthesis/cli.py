@@ -30,7 +30,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from contracts.usage import UsageError, UsageParser, run_command
+from contracts.checks import check_range
+from plumbing.usage import UsageError, UsageParser, run_command
 from synthesis.families.registry import SynthRequest, family_named, structures
 from synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
@@ -165,10 +166,9 @@ def _synth_with(args: argparse.Namespace) -> int:
                 cfg.solver.lambda3 if args.lambda3 is None else args.lambda3,
             )
         if args.backoff is not None:
-            if not 0.0 <= args.backoff <= 1.0:
-                raise UsageError(
-                    f"--backoff: field 'solver.backoff' = {args.backoff!r}: must be in [0, 1]"
-                )
+            check_range(
+                "--backoff: field 'solver.backoff'", args.backoff, 0.0, 1.0, error=UsageError
+            )
             cfg = replace(cfg, solver=replace(cfg.solver, backoff=args.backoff))
     except ConfigError as exc:
         raise UsageError(str(exc)) from None

@@ -26,7 +26,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from contracts.usage import UsageError, UsageParser, run_command
+from plumbing.usage import UsageError, UsageParser, run_command
 from synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 DEFAULT_ARTIFACT = Path(__file__).resolve().parent / "data" / "default_design.npz"

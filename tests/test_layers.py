@@ -19,20 +19,22 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: package -> the project packages it may import (besides itself)
 ALLOWED: dict[str, frozenset[str]] = {
+    "plumbing": frozenset(),
     "contracts": frozenset(),
     "baselines": frozenset({"contracts"}),
-    "link": frozenset({"contracts"}),
-    "synthesis": frozenset({"contracts", "baselines"}),
-    "codegen": frozenset({"contracts", "synthesis"}),
-    "runtime": frozenset({"contracts", "baselines", "link"}),
-    "sim": frozenset({"contracts", "baselines", "link", "runtime"}),
+    "link": frozenset({"plumbing", "contracts"}),
+    "synthesis": frozenset({"plumbing", "contracts", "baselines"}),
+    "codegen": frozenset({"plumbing", "contracts", "synthesis"}),
+    "runtime": frozenset({"plumbing", "contracts", "baselines", "link"}),
+    "sim": frozenset({"plumbing", "contracts", "baselines", "link", "runtime"}),
     "pressor": frozenset(
-        {"contracts", "baselines", "link", "synthesis", "codegen", "runtime", "sim"}
+        {"plumbing", "contracts", "baselines", "link", "synthesis", "codegen", "runtime", "sim"}
     ),
 }
 
 #: third-party packages a package must never load (the bedside runtime has no solver)
 FORBIDDEN_THIRD_PARTY: dict[str, frozenset[str]] = {
+    "plumbing": frozenset({"cvxpy", "clarabel", "scipy", "numpy", "serial", "pymavlink", "rerun"}),
     "contracts": frozenset({"cvxpy", "clarabel", "scipy", "serial", "pymavlink", "rerun"}),
     "baselines": frozenset({"cvxpy", "clarabel", "scipy", "numpy", "serial", "pymavlink", "rerun"}),
     "runtime": frozenset({"cvxpy", "clarabel", "scipy"}),

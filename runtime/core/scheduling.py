@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
 from baselines.smith import INITIAL_SCHEDULE
+from contracts.checks import check_range
 from runtime.core.estimate import Estimate
 
 #: the nominal patient (K mmHg/(ml/h), T s, τ s): the same constants as the estimator's prior
@@ -146,14 +147,10 @@ class NominalSchedule:
         T_s: float = NOMINAL_PLANT[1],
         tau_s: float = NOMINAL_PLANT[2],
     ) -> None:
-        if not (math.isfinite(K) and K > 0.0):
-            raise ValueError(f"K={K!r} mmHg/(ml/h) must be finite and > 0")
-        if not (math.isfinite(T_s) and T_s > 0.0):
-            raise ValueError(f"T_s={T_s!r} s must be finite and > 0")
-        if not (math.isfinite(tau_s) and tau_s >= 0.0):
-            raise ValueError(f"tau_s={tau_s!r} s must be finite and >= 0")
-        self._schedule = Schedule(float(K), float(T_s), float(tau_s), "nominal", True, True, True,
-                                  "prior")  # fmt: skip
+        K = check_range("K", K, 0.0, lo_open=True, unit="mmHg/(ml/h)")
+        T_s = check_range("T_s", T_s, 0.0, lo_open=True, unit="s")
+        tau_s = check_range("tau_s", tau_s, 0.0, unit="s")
+        self._schedule = Schedule(K, T_s, tau_s, "nominal", True, True, True, "prior")
 
     def update(self, inputs: ScheduleInput) -> Schedule:
         """The constant values (the same object every tick)."""

@@ -24,9 +24,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from contracts.checks import allowed_range, check_range
 from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
 from contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS
-from contracts.usage import UsageError
+from plumbing.usage import UsageError
 
 #: MAP targets the runtime accepts (mmHg), from any source
 TARGET_MIN_MMHG = 50.0
@@ -83,15 +84,14 @@ class ClinicianInput:
 
 def number_in(text: str, lo: float, hi: float, unit: str, *, lo_open: bool = False) -> float:
     """The number ``text`` holds if it lies in [lo, hi] (``lo_open``: (lo, hi]) ``unit``;
-    ``ValueError`` naming the text and the allowed range otherwise (NaN included)."""
-    allowed = f"allowed {'(' if lo_open else '['}{lo:g}, {hi:g}] {unit}"
+    ``ValueError`` naming the text, its value and the allowed range otherwise (NaN included;
+    :func:`contracts.checks.check_range`)."""
     try:
         value = float(text)
     except ValueError:
-        raise ValueError(f"{text.strip()!r}: not a number ({allowed})") from None
-    if not ((lo < value) if lo_open else (lo <= value)) or not value <= hi:
-        raise ValueError(f"{text.strip()!r}: {allowed}")
-    return value
+        allowed = allowed_range(lo, hi, lo_open=lo_open, unit=unit)
+        raise ValueError(f"{text.strip()!r}: must be a finite number {allowed}") from None
+    return check_range(repr(text.strip()), value, lo, hi, lo_open=lo_open, unit=unit)
 
 
 def split_ack(text: str) -> tuple[str, bool]:
@@ -195,7 +195,7 @@ def clinician_input(args: argparse.Namespace) -> ClinicianInput:
 
     Raises
     ------
-    contracts.usage.UsageError
+    plumbing.usage.UsageError
         Both ``--target-mmhg`` and ``--target-file``; ``--target-stdin`` without a starting
         target; a target file that cannot be read or holds no valid target.
     """

@@ -3,7 +3,7 @@
 ``pressor run`` and ``pressor sil`` share the runtime's options (:func:`add_run_options`); the
 parsed namespace becomes a frozen :class:`RunConfig` in :func:`run_config`, which checks every
 value before anything starts (output directories, the controller, the fault specs). A bad value
-raises :class:`contracts.usage.UsageError` naming the option, the value and the allowed range;
+raises :class:`plumbing.usage.UsageError` naming the option, the value and the allowed range;
 past this boundary the run code trusts its configuration.
 """
 
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from contracts.faults import FaultSpec, FaultSpecError, parse_faults
-from contracts.usage import UsageError
+from plumbing.usage import UsageError
 from runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S
 from runtime.estimation.sources import SOURCES
 from runtime.inputs.clinician import ClinicianInput
@@ -255,7 +255,7 @@ def run_config(
 
     Raises
     ------
-    contracts.usage.UsageError
+    plumbing.usage.UsageError
         A value out of range, an output directory that does not exist, a controller that does
         not load, a bad fault spec.
     """

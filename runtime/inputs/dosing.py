@@ -23,8 +23,9 @@ import math
 from pathlib import Path
 from typing import Any
 
+from contracts.checks import allowed_range
 from contracts.drug import DrugBinding, dose_ug_kg_min, dose_ug_min
-from contracts.usage import UsageError
+from plumbing.usage import UsageError
 from runtime.inputs.clinician import ClinicianInput, argtype, number_in
 from runtime.inputs.drug_library import (
     WEIGHT_MAX_KG,
@@ -85,7 +86,7 @@ def bind_syringe(
 
     Raises
     ------
-    contracts.usage.UsageError
+    plumbing.usage.UsageError
         One line naming both values (the option's and the design's or the library's).
     """
     where = f"the loaded design (--controller {controller}) is for {design.describe()}"
@@ -119,8 +120,8 @@ def bind_syringe(
     weight = clinician.weight_kg
     if entry.per_kg and weight is None:
         raise UsageError(
-            f"--weight-kg: required: the drug library doses {design.name} in ug/kg/min (allowed"
-            f" [{WEIGHT_MIN_KG:g}, {WEIGHT_MAX_KG:g}] kg)"
+            f"--weight-kg: required: the drug library doses {design.name} in ug/kg/min (a weight"
+            f" {allowed_range(WEIGHT_MIN_KG, WEIGHT_MAX_KG, unit='kg')})"
         )
     return dataclasses.replace(
         clinician,

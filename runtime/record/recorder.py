@@ -35,7 +35,7 @@ import numpy as np
 import rerun as rr
 
 from contracts.controller import Controller
-from contracts.files import AtomicFile
+from plumbing.files import AtomicFile
 from runtime.core.closed_loop import TickRecord
 from runtime.core.supervisor_config import sched_limits_of
 from runtime.record.blueprint import (

@@ -52,7 +52,7 @@ from typing import Any
 
 from contracts.checks import check_range
 from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
-from contracts.usage import UsageError, run_command
+from plumbing.usage import UsageError, run_command
 from runtime.shell.interrupt import exit_code, signal_name, stop_requested
 from runtime.shell.placement import pin_thread
 from sim.devices.device_options import (

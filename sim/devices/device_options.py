@@ -8,7 +8,7 @@ from dataclasses import replace
 from typing import Any
 
 from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
-from contracts.usage import UsageError, UsageParser
+from plumbing.usage import UsageError, UsageParser
 from runtime.inputs.clinician import argtype, parse_concentration, parse_drug
 from runtime.shell.placement import parse_cpu
 from sim.patients.patient_model import add_patient_model_option

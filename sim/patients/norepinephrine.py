@@ -62,8 +62,7 @@ from typing import ClassVar
 import numpy as np
 from scipy.linalg import expm
 
-from sim.patients.cohort import patient_rng
-from sim.patients.patient import VariableDelayBuffer
+from sim.patients.drug_patient import DrugPatient, draw_constants
 
 #: syringe concentration (µg/ml) the model's ml/h count: 4 mg in 250 ml (docs/DRUGS.md)
 CONCENTRATION_UG_ML = 16.0
@@ -158,17 +157,10 @@ class NorepinephrineParams:
 def draw_params(patient_seed: int) -> NorepinephrineParams:
     """The patient of ``patient_seed``: stream 0 of :func:`sim.patients.cohort.patient_rng` draws
     the :data:`RANGES` in their order, uniformly, ``v_l`` and ``ec50_ng_ml`` log-uniformly."""
-    rng = patient_rng(patient_seed, 0)
-    values = {}
-    for name, (lo, hi) in RANGES.items():
-        if name in LOG_UNIFORM:
-            values[name] = float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
-        else:
-            values[name] = float(rng.uniform(lo, hi))
-    return NorepinephrineParams(**values)
+    return NorepinephrineParams(**draw_constants(patient_seed, RANGES, LOG_UNIFORM))
 
 
-class Norepinephrine1C:
+class Norepinephrine1C(DrugPatient):
     """The ``norepinephrine`` patient (module docstring), stepped every ``step_s`` s.
 
     Parameters
@@ -184,6 +176,7 @@ class Norepinephrine1C:
         Time (s), plasma and effect-site levels (ng/ml), F (mmHg).
     """
 
+    model_name = "norepinephrine"
     coefficient_units: ClassVar[Mapping[str, str]] = {
         "baseline_mmhg": "mmHg",
         "line_delay_s": "s",
@@ -200,12 +193,8 @@ class Norepinephrine1C:
     }
 
     def __init__(self, params: NorepinephrineParams, step_s: float) -> None:
-        if not 0.0 < step_s <= 10.0:
-            raise ValueError(f"norepinephrine step_s={step_s!r} outside (0, 10] s")
-        p = self.params = params
-        self.h = float(step_s)
-        self.conc_ug_ml = CONCENTRATION_UG_ML
-        self._buffer = VariableDelayBuffer(self.h, p.delay_s)
+        super().__init__(params, step_s, CONCENTRATION_UG_ML, 60.0 / params.counter_rate_per_min)
+        p = params
         kel = p.clearance_l_min / p.v_l / 60.0  # 1/s
         ke0 = 1.0 / p.effect_tau_s  # 1/s
         m = np.zeros((3, 3))
@@ -214,14 +203,10 @@ class Norepinephrine1C:
         e = expm(m * self.h)
         self._ad = tuple(tuple(float(v) for v in row[:2]) for row in e[:2])
         self._bd = tuple(float(v) for v in e[:2, 2])
-        self._counter_tau_s = 60.0 / p.counter_rate_per_min
-        self._counter_decay = math.exp(-self.h / self._counter_tau_s)
         self._dc_ng_ml = self.conc_ug_ml / (60.0 * p.clearance_l_min)
         self._t_app_s = 60.0 * p.v_l / p.clearance_l_min + p.effect_tau_s
         self._h_endo = self.hill_mmhg(p.endogenous_ng_ml)
-        self.time_s = 0.0
         self.plasma_ng_ml = self.ce_ng_ml = p.endogenous_ng_ml
-        self.counter_mmhg = 0.0
 
     @classmethod
     def from_seed(cls, patient_seed: int, step_s: float) -> Norepinephrine1C:
@@ -242,11 +227,9 @@ class Norepinephrine1C:
 
     def step(self, rate_ml_h: float) -> None:
         """Advance one internal step with the pump delivering ``rate_ml_h`` (ml/h, mean)."""
-        buf = self._buffer
-        buf.push(rate_ml_h)
-        d = self.params.delay_s
         u_ug_s = (
-            buf.delayed_mean(d, d) * self.conc_ug_ml / 3600.0 + self.params.endogenous_ug_min / 60.0
+            self._delayed_rate_ml_h(rate_ml_h) * self.conc_ug_ml / 3600.0
+            + self.params.endogenous_ug_min / 60.0
         )
         (a00, a01), (a10, a11) = self._ad
         b0, b1 = self._bd
@@ -254,26 +237,7 @@ class Norepinephrine1C:
         e0 = self.effect_mmhg(x1)
         self.plasma_ng_ml = a00 * x0 + a01 * x1 + b0 * u_ug_s
         self.ce_ng_ml = a10 * x0 + a11 * x1 + b1 * u_ug_s
-        e1 = self.effect_mmhg(self.ce_ng_ml)
-        q, g = self._counter_decay, self.params.counter_gain
-        ramp = 1.0 - self._counter_tau_s * (1.0 - q) / self.h  # weight of the effect's change
-        self.counter_mmhg = q * self.counter_mmhg + g * (e0 * (1.0 - q) + (e1 - e0) * ramp)
-        self.time_s = buf.n * self.h
-
-    @property
-    def baseline_mmhg(self) -> float:
-        """MAP without drug (mmHg)."""
-        return self.params.baseline_mmhg
-
-    @property
-    def delta_map_mmhg(self) -> float:
-        """The drug's MAP change now (mmHg): E − F."""
-        return self.effect_mmhg(self.ce_ng_ml) - self.counter_mmhg
-
-    @property
-    def map_mmhg(self) -> float:
-        """MAP now (mmHg), without the scenario's disturbances."""
-        return self.params.baseline_mmhg + self.delta_map_mmhg
+        self._regulate(e0, self.effect_mmhg(self.ce_ng_ml))
 
     @property
     def K(self) -> float:
@@ -286,21 +250,8 @@ class Norepinephrine1C:
         """Apparent lag (s): 60·V/CL + 1/ke0."""
         return self._t_app_s
 
-    @property
-    def tau_s(self) -> float:
-        """Transport delay (s): line dead space + effect lag."""
-        return self.params.delay_s
-
-    def coefficients(self) -> dict[str, float]:
-        """The patient's constants, JSON-ready."""
-        return {k: float(v) for k, v in asdict(self.params).items()}
-
     def steady_state_delta_mmhg(self, rate_ml_h: float) -> float:
         """ΔMAP (mmHg) after an endless infusion at ``rate_ml_h`` (ml/h): (1 − g)·E(Css)."""
         p = self.params
         css = p.endogenous_ng_ml + rate_ml_h * self._dc_ng_ml
         return (1.0 - p.counter_gain) * self.effect_mmhg(css)
-
-    def max_delta_map_mmhg(self, max_rate_ml_h: float) -> float:
-        """Largest steady-state ΔMAP (mmHg) over [0, ``max_rate_ml_h``] ml/h (rises with rate)."""
-        return self.steady_state_delta_mmhg(max_rate_ml_h)

@@ -62,8 +62,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from contracts.controller import DESIGN_CONCENTRATION_UG_ML
-from sim.patients.cohort import patient_rng
-from sim.patients.patient import VariableDelayBuffer
+from sim.patients.drug_patient import DrugPatient, draw_constants
 
 #: the label's 70 kg two-compartment model (FDA NDA 203826): V1 (l), k10, k12, k21 (1/min)
 LABEL_V1_L = 20.4
@@ -126,17 +125,10 @@ class PhenylephrineParams:
 def draw_params(patient_seed: int) -> PhenylephrineParams:
     """The patient of ``patient_seed``: stream 0 of :func:`sim.patients.cohort.patient_rng` draws
     the :data:`RANGES` in their order, uniformly, the rate constants log-uniformly."""
-    rng = patient_rng(patient_seed, 0)
-    values = {}
-    for name, (lo, hi) in RANGES.items():
-        if name in LOG_UNIFORM:
-            values[name] = float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
-        else:
-            values[name] = float(rng.uniform(lo, hi))
-    return PhenylephrineParams(**values)
+    return PhenylephrineParams(**draw_constants(patient_seed, RANGES, LOG_UNIFORM))
 
 
-class Phenylephrine2C:
+class Phenylephrine2C(DrugPatient):
     """The ``phenylephrine-2c`` patient (module docstring), stepped every ``step_s`` s.
 
     Parameters
@@ -152,6 +144,7 @@ class Phenylephrine2C:
         Time (s), central and peripheral amounts (µg), effect-site level (ng/ml), F (mmHg).
     """
 
+    model_name = "phenylephrine-2c"
     coefficient_units: ClassVar[Mapping[str, str]] = {
         "baseline_mmhg": "mmHg",
         "delay_s": "s",
@@ -167,12 +160,8 @@ class Phenylephrine2C:
     }
 
     def __init__(self, params: PhenylephrineParams, step_s: float) -> None:
-        if not 0.0 < step_s <= 10.0:
-            raise ValueError(f"phenylephrine-2c step_s={step_s!r} outside (0, 10] s")
-        p = self.params = params
-        self.h = float(step_s)
-        self.conc_ug_ml = DESIGN_CONCENTRATION_UG_ML
-        self._buffer = VariableDelayBuffer(self.h, p.delay_s)
+        super().__init__(params, step_s, DESIGN_CONCENTRATION_UG_ML, params.counter_tau_s)
+        p = params
         k10, k12, k21, ke0 = (
             x / 60.0 for x in (p.k10_per_min, p.k12_per_min, p.k21_per_min, p.ke0_per_min)
         )  # 1/s
@@ -182,11 +171,9 @@ class Phenylephrine2C:
         e = expm(m * self.h)
         self._ad = tuple(tuple(float(v) for v in row[:3]) for row in e[:3])
         self._bd = tuple(float(v) for v in e[:3, 3])
-        self._counter_decay = math.exp(-self.h / p.counter_tau_s)
         self._fast_dc_ng_ml = self.conc_ug_ml / (60.0 * p.v1_l * (p.k10_per_min + p.k12_per_min))
         self._t_app_s = 60.0 / (p.k10_per_min + p.k12_per_min) + 60.0 / p.ke0_per_min
-        self.time_s = 0.0
-        self.a1_ug = self.a2_ug = self.ce_ng_ml = self.counter_mmhg = 0.0
+        self.a1_ug = self.a2_ug = self.ce_ng_ml = 0.0
 
     @classmethod
     def from_seed(cls, patient_seed: int, step_s: float) -> Phenylephrine2C:
@@ -200,10 +187,7 @@ class Phenylephrine2C:
 
     def step(self, rate_ml_h: float) -> None:
         """Advance one internal step with the pump delivering ``rate_ml_h`` (ml/h, mean)."""
-        buf = self._buffer
-        buf.push(rate_ml_h)
-        d = self.params.delay_s
-        u_ug_s = buf.delayed_mean(d, d) * self.conc_ug_ml / 3600.0
+        u_ug_s = self._delayed_rate_ml_h(rate_ml_h) * self.conc_ug_ml / 3600.0
         (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = self._ad
         b0, b1, b2 = self._bd
         x0, x1, x2 = self.a1_ug, self.a2_ug, self.ce_ng_ml
@@ -211,33 +195,12 @@ class Phenylephrine2C:
         self.a1_ug = a00 * x0 + a01 * x1 + a02 * x2 + b0 * u_ug_s
         self.a2_ug = a10 * x0 + a11 * x1 + a12 * x2 + b1 * u_ug_s
         self.ce_ng_ml = a20 * x0 + a21 * x1 + a22 * x2 + b2 * u_ug_s
-        e1 = self.effect_mmhg(self.ce_ng_ml)
-        p, q = self.params, self._counter_decay
-        ramp = 1.0 - p.counter_tau_s * (1.0 - q) / self.h  # weight of the effect's change
-        self.counter_mmhg = q * self.counter_mmhg + p.counter_gain * (
-            e0 * (1.0 - q) + (e1 - e0) * ramp
-        )
-        self.time_s = buf.n * self.h
+        self._regulate(e0, self.effect_mmhg(self.ce_ng_ml))
 
     @property
     def plasma_ng_ml(self) -> float:
         """Plasma level C1 = A1/V1 now (ng/ml)."""
         return self.a1_ug / self.params.v1_l
-
-    @property
-    def baseline_mmhg(self) -> float:
-        """MAP without drug (mmHg)."""
-        return self.params.baseline_mmhg
-
-    @property
-    def delta_map_mmhg(self) -> float:
-        """The drug's MAP change now (mmHg): E − F."""
-        return self.effect_mmhg(self.ce_ng_ml) - self.counter_mmhg
-
-    @property
-    def map_mmhg(self) -> float:
-        """MAP now (mmHg), without the scenario's disturbances."""
-        return self.params.baseline_mmhg + self.delta_map_mmhg
 
     @property
     def K(self) -> float:
@@ -250,21 +213,8 @@ class Phenylephrine2C:
         """Apparent lag (s): 60/(k10 + k12) + 60/ke0."""
         return self._t_app_s
 
-    @property
-    def tau_s(self) -> float:
-        """Transport delay (s)."""
-        return self.params.delay_s
-
-    def coefficients(self) -> dict[str, float]:
-        """The patient's constants, JSON-ready."""
-        return {k: float(v) for k, v in asdict(self.params).items()}
-
     def steady_state_delta_mmhg(self, rate_ml_h: float) -> float:
         """ΔMAP (mmHg) after an endless infusion at ``rate_ml_h`` (ml/h): (1 − g)·E(Css)."""
         p = self.params
         css = rate_ml_h * self.conc_ug_ml / (60.0 * p.clearance_l_min)
         return (1.0 - p.counter_gain) * self.effect_mmhg(css)
-
-    def max_delta_map_mmhg(self, max_rate_ml_h: float) -> float:
-        """Largest steady-state ΔMAP (mmHg) over [0, ``max_rate_ml_h``] ml/h (rises with the rate)."""
-        return self.steady_state_delta_mmhg(max_rate_ml_h)

@@ -25,10 +25,10 @@ unwrapped model's, byte for byte. f must lie in :data:`SENSITIVITY_RANGE`.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import ClassVar
 
+from contracts.checks import check_range
 from sim.patients.patient_model import PatientModel, PatientModelError
 
 #: allowed sensitivity factors (dimensionless, inclusive)
@@ -49,13 +49,15 @@ def check_factor(factor: object, where: str = "sensitivity") -> float:
         range.
     """
     lo, hi = SENSITIVITY_RANGE
-    ok = isinstance(factor, (int, float)) and not isinstance(factor, bool)
-    if not ok or not math.isfinite(factor) or not lo <= factor <= hi:  # type: ignore[arg-type]
-        raise PatientModelError(
-            f"{where} = {factor!r}: the sensitivity factor must be a number in [{lo:g}, {hi:g}]"
-            " (dimensionless; 1 = the model as drawn)"
-        )
-    return float(factor)  # type: ignore[arg-type]
+    return check_range(
+        where,
+        factor,
+        lo,
+        hi,
+        error=lambda msg: PatientModelError(
+            f"{msg} (the sensitivity factor, dimensionless; 1 = the model as drawn)"
+        ),
+    )
 
 
 def split_spec(spec: str) -> tuple[str, float | None]:

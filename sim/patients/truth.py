@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from contracts.files import write_atomic
+from plumbing.files import write_atomic
 
 
 class TruthLog:

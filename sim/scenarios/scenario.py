@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from contracts.checks import allowed_range, check_range
 from contracts.faults import FaultSpec, FaultSpecError, parse_fault_table
 from sim.devices.pump import PumpConfig
 from sim.devices.sensor import ARTIFACT_KINDS, Artifact, SensorConfig
@@ -135,16 +136,18 @@ class _Reader:
         self.used.add(key)
         if key not in self.table:
             if default is _REQUIRED:
-                raise self.fail(key, "missing", f"required, in [{lo}, {hi}] {unit}")
+                allowed = allowed_range(lo, hi, lo_open=lo_open, unit=unit)
+                raise self.fail(key, "missing", f"required, a finite number {allowed}")
             return default
-        v = self.table[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(key, v, f"must be a number in [{lo}, {hi}] {unit}")
-        bad_lo = v <= lo if lo_open else v < lo
-        if not math.isfinite(v) or bad_lo or v > hi:
-            bracket = "(" if lo_open else "["
-            raise self.fail(key, v, f"outside {bracket}{lo}, {hi}] {unit}")
-        return float(v)
+        return check_range(
+            f"{self.file}: field '{self.prefix}{key}'",
+            self.table[key],
+            lo,
+            hi,
+            lo_open=lo_open,
+            unit=unit,
+            error=ScenarioError,
+        )
 
     def text(
         self, key: str, choices: tuple[str, ...] | None = None, default: Any = _REQUIRED

@@ -28,7 +28,7 @@ from typing import Any
 import matplotlib
 import numpy as np
 
-from contracts.files import write_atomic
+from plumbing.files import write_atomic
 from sim.trials.paired import stat_cells
 from sim.trials.trial import controller_dir_name
 

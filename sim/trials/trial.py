@@ -39,7 +39,6 @@ from typing import Any
 
 import numpy as np
 
-from contracts.files import write_atomic
 from contracts.metrics import (
     EVENT_KINDS,
     EVENT_METRICS,
@@ -49,7 +48,8 @@ from contracts.metrics import (
     event_labels,
     run_metrics,
 )
-from contracts.parallel import run_ordered
+from plumbing.files import write_atomic
+from plumbing.parallel import run_ordered
 from runtime.core.closed_loop import ControllerError
 from runtime.estimation.sources import make_schedule
 from runtime.inputs.controller_loader import load_controller
@@ -213,7 +213,7 @@ def run_trial(
         Called with (done, total) after each patient.
     scheduler
         Address of a Dask scheduler (``tcp://HOST:PORT``) to run the patients on instead of local
-        processes (:mod:`contracts.parallel`); does not change the results.
+        processes (:mod:`plumbing.parallel`); does not change the results.
     schedule
         The scheduling source (``oracle``, ``estimated``, ``nominal``, ``validated``;
         :func:`run_patient`).

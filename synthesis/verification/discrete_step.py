@@ -11,23 +11,64 @@ with the MAP ``baseline_mmhg + y`` and the target ``baseline_mmhg + step_mmhg`` 
 the plant's own K, T, τ. Its command is clamped to [0, ``max_rate_ml_h``] as the runtime's
 supervisor clamps it, so the pump limit is part of the response. The scheduled Smith baseline
 (:mod:`synthesis.verification.smith_baseline`) and ``pressor verify --controller`` (a plugin) both
-run here.
+run here, and the code generator's frozen-loop checks (:mod:`codegen.frozen_loop`,
+:func:`codegen.fixed_point.signal_peaks`) sample the same plant through :func:`sampled_fopdt`.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from contracts.controller import Controller
 from synthesis.verification.step_response import StepResponse
 
-__all__ = ["StepFailed", "discrete_step_response"]
+__all__ = ["SampledFopdt", "StepFailed", "discrete_step_response", "sampled_fopdt"]
 
 
 class StepFailed(ValueError):
     """The controller returned a non-finite command during the step (names the time, s)."""
+
+
+@dataclass(frozen=True)
+class SampledFopdt:
+    """The plant ``T dy/dt = −y + K u(t − τ)`` sampled exactly under a zero-order hold.
+
+    ``y_k+1 = a y_k + b_new u_k−whole + b_old u_k−whole−1`` with τ = (whole + frac)·Ts.
+    """
+
+    a: float
+    b_new: float
+    b_old: float
+    whole: int
+    frac: float
+
+
+def sampled_fopdt(k: float, t_s: float, tau_s: float, sample_period_s: float) -> SampledFopdt:
+    """The exact zero-order-hold discretisation of the first-order-plus-delay plant.
+
+    Parameters
+    ----------
+    k, t_s, tau_s
+        K (mmHg/(ml/h)), T (s, > 0), τ (s, ≥ 0).
+    sample_period_s
+        The hold period Ts (s, > 0).
+
+    Returns
+    -------
+    SampledFopdt
+        Its coefficients; a delay within 1e-9 samples below a whole number of samples counts as
+        that whole number (an exact multiple of Ts must not lose a tick to rounding).
+    """
+    ts = float(sample_period_s)
+    lags = tau_s / ts
+    whole = math.floor(lags + 1e-9)
+    frac = max(lags - whole, 0.0)
+    a = math.exp(-ts / t_s)
+    late = math.exp(-(1.0 - frac) * ts / t_s)  # decay left after the new input starts
+    return SampledFopdt(a, k * (1.0 - late), k * (late - a), whole, frac)
 
 
 def discrete_step_response(
@@ -75,12 +116,8 @@ def discrete_step_response(
         raise ValueError(f"t_end_s={t_end_s!r} must be > 0 s")
     ts = float(controller.sample_period_s)
     high = float(controller.max_rate_ml_h)
-    lags = tau_s / ts
-    whole = math.floor(lags + 1e-9)  # an exact multiple of Ts must not lose a tick to rounding
-    frac = max(lags - whole, 0.0)
-    a = math.exp(-ts / t_s)
-    late = math.exp(-(1.0 - frac) * ts / t_s)  # decay left after the new input starts
-    b_new, b_old = k * (1.0 - late), k * (late - a)
+    plant = sampled_fopdt(k, t_s, tau_s, ts)
+    a, b_new, b_old, whole = plant.a, plant.b_new, plant.b_old, plant.whole
     steps = math.ceil(t_end_s / ts - 1e-9)
     y = np.zeros(steps + 1)
     u = np.zeros(steps + 1)

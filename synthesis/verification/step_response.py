@@ -106,21 +106,57 @@ def loop_from_closed_loop(cl: DelaySystem, map_index: int = 0, u_index: int = 1)
     return StepLoop(cl.A, cl.Ad, cl.B[:, 0].copy(), np.zeros(n), c_map, c_u, 0.0, cl.tau)
 
 
-def _discretise(
-    a: NDArray[np.float64],
-    ad: NDArray[np.float64],
-    b: NDArray[np.float64],
-    h: float,
+def _one_step_maps(
+    a: NDArray[np.float64], ad: NDArray[np.float64], b: NDArray[np.float64], h: float, slope: bool
 ) -> tuple[NDArray[np.float64], ...]:
-    """Exact one-step maps for dx/dt = A x + Ad (p + s q) + B v, p, q, v constant over the step."""
+    """Exact one-step maps for ``dx/dt = A x + Ad (p + s q) + B (v + s dv)`` over one step h.
+
+    p, q, v (and dv) are constant over the step. Returns (Phi, G_p, G_q, G_v), plus G_dv when
+    ``slope`` (a first-order hold of the inputs); without it the inputs are held constant (dv = 0)
+    and the augmented matrix leaves the dv block out.
+    """
     n, m = a.shape[0], b.shape[1]
-    big = np.zeros((3 * n + m, 3 * n + m))
+    size = 3 * n + (2 * m if slope else m)
+    big = np.zeros((size, size))
     big[:n, :n] = a
     big[:n, n : 2 * n] = ad  # delayed state p(s) = p0 + s q
     big[n : 2 * n, 2 * n : 3 * n] = np.eye(n)  # dp/ds = q
-    big[:n, 3 * n :] = b
+    big[:n, 3 * n : 3 * n + m] = b
+    if slope:
+        big[3 * n : 3 * n + m, 3 * n + m :] = np.eye(m)  # dv/ds = dv
     e = scipy.linalg.expm(big * h)
-    return e[:n, :n], e[:n, n : 2 * n], e[:n, 2 * n : 3 * n], e[:n, 3 * n :]
+    maps = [e[:n, :n], e[:n, n : 2 * n], e[:n, 2 * n : 3 * n], e[:n, 3 * n : 3 * n + m]]
+    if slope:
+        maps.append(e[:n, 3 * n + m :])
+    return tuple(maps)
+
+
+def _march(
+    phi: NDArray[np.float64],
+    g_p: NDArray[np.float64],
+    g_q: NDArray[np.float64],
+    h: float,
+    lag: int,
+    steps: int,
+    drive: Callable[[int, Vector], Vector],
+) -> NDArray[np.float64]:
+    """States x_0 = 0 .. x_steps of the delay system from rest, delayed states read from the buffer.
+
+    Over step k the delayed state is the linear interpolation between the buffered x_{k-lag} and
+    x_{k-lag+1} (zero before t = 0); ``drive(k, Phi x_k)`` adds the inputs' contribution.
+    """
+    g_q = g_q / h  # q = (x_{k-lag+1} - x_{k-lag}) / h
+    g_p = g_p - g_q  # collect x_{k-lag} terms
+    x = np.zeros((steps + 1, phi.shape[0]))
+    for k in range(steps):
+        nxt = drive(k, phi @ x[k])
+        j = k - lag
+        if lag and j + 1 >= 0:  # the history before t = 0 is rest (zero)
+            nxt += g_q @ x[j + 1]
+            if j >= 0:
+                nxt += g_p @ x[j]
+        x[k + 1] = nxt
+    return x
 
 
 def _time_grid(
@@ -172,48 +208,16 @@ def simulate_step(
         Samples every h on [0, t_end].
     """
     lag, h, steps, a, ad = _time_grid(loop, step_mmhg, t_end_s, h_max_s)
-    n = a.shape[0]
     b = np.column_stack([loop.b_r, loop.bd_r])
-    phi, g_p, g_q, g_w = _discretise(a, ad, b, h)
-    g_q = g_q / h  # q = (x_{k-lag+1} - x_{k-lag}) / h
-    g_p = g_p - g_q  # collect x_{k-lag} terms
-    x = np.zeros((steps + 1, n))
+    phi, g_p, g_q, g_w = _one_step_maps(a, ad, b, h, slope=False)
     w_before = g_w @ np.array([step_mmhg, 0.0])  # r(t - tau) still zero while t < tau
     w_after = g_w @ np.array([step_mmhg, step_mmhg])
-    for k in range(steps):
-        nxt = phi @ x[k] + (w_after if k >= lag else w_before)
-        j = k - lag
-        if lag and j + 1 >= 0:  # the history before t = 0 is rest (zero)
-            nxt += g_q @ x[j + 1]
-            if j >= 0:
-                nxt += g_p @ x[j]
-        x[k + 1] = nxt
+    x = _march(phi, g_p, g_q, h, lag, steps, lambda k, y: y + (w_after if k >= lag else w_before))
     t = np.arange(steps + 1) * h
     r = np.full(steps + 1, float(step_mmhg))
     map_mmhg = x @ np.asarray(loop.c_map, dtype=float)
     infusion = x @ np.asarray(loop.c_u, dtype=float) + loop.d_u * r
     return StepResponse(t, map_mmhg, r, infusion, float(step_mmhg))
-
-
-def _discretise_foh(
-    a: NDArray[np.float64], ad: NDArray[np.float64], b: NDArray[np.float64], h: float
-) -> tuple[NDArray[np.float64], ...]:
-    """Exact one-step maps for dx/dt = A x + Ad (p + s q) + B (v + s dv), p, q, v, dv constant."""
-    n, m = a.shape[0], b.shape[1]
-    big = np.zeros((3 * n + 2 * m, 3 * n + 2 * m))
-    big[:n, :n] = a
-    big[:n, n : 2 * n] = ad
-    big[n : 2 * n, 2 * n : 3 * n] = np.eye(n)
-    big[:n, 3 * n : 3 * n + m] = b
-    big[3 * n : 3 * n + m, 3 * n + m :] = np.eye(m)
-    e = scipy.linalg.expm(big * h)
-    return (
-        e[:n, :n],
-        e[:n, n : 2 * n],
-        e[:n, 2 * n : 3 * n],
-        e[:n, 3 * n : 3 * n + m],
-        e[:n, 3 * n + m :],
-    )
 
 
 def simulate_prefiltered_step(
@@ -242,25 +246,14 @@ def simulate_prefiltered_step(
         As :func:`simulate_step`.
     """
     lag, h, steps, a, ad = _time_grid(loop, step_mmhg, t_end_s, h_max_s)
-    n = a.shape[0]
     t = np.arange(steps + 1) * h
     u_ff, r_m = reference(t)
     u_ff_d, r_m_d = reference(t - float(loop.tau_s))
     v = np.column_stack([r_m, r_m_d, u_ff_d])  # inputs on the grid, first-order hold between
     b = np.column_stack([loop.b_r, loop.bd_r, np.asarray(b_ff, dtype=float)])
-    phi, g_p, g_q, g_v, g_dv = _discretise_foh(a, ad, b, h)
-    g_q = g_q / h
-    g_p = g_p - g_q
+    phi, g_p, g_q, g_v, g_dv = _one_step_maps(a, ad, b, h, slope=True)
     g_dv = g_dv / h
-    x = np.zeros((steps + 1, n))
-    for k in range(steps):
-        nxt = phi @ x[k] + g_v @ v[k] + g_dv @ (v[k + 1] - v[k])
-        j = k - lag
-        if lag and j + 1 >= 0:
-            nxt += g_q @ x[j + 1]
-            if j >= 0:
-                nxt += g_p @ x[j]
-        x[k + 1] = nxt
+    x = _march(phi, g_p, g_q, h, lag, steps, lambda k, y: y + g_v @ v[k] + g_dv @ (v[k + 1] - v[k]))
     target = np.full(steps + 1, float(step_mmhg))
     map_mmhg = x @ np.asarray(loop.c_map, dtype=float)
     infusion = x @ np.asarray(loop.c_u, dtype=float) + loop.d_u * r_m + u_ff

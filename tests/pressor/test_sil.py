@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from contracts.usage import UsageError
+from plumbing.usage import UsageError
 from pressor.sil import device_command, sil_config
 from sim.scenarios.scenario import SCENARIO_DIR, load_scenario
 

@@ -35,7 +35,9 @@ def test_unknown_option_exits_2():
 
 def test_backoff_out_of_range_exits_2(tmp_path, capsys):
     assert cli.main("synth", ["--backoff", "3", "--out", str(tmp_path / "a.npz")]) == 2
-    assert "solver.backoff" in capsys.readouterr().err
+    assert "--backoff: field 'solver.backoff' = 3.0: must be a finite number in [0, 1]" in (
+        capsys.readouterr().err
+    )
 
 
 def test_tiny_theorem3_synthesis_writes_exactly_the_requested_artifact(tmp_path, capsys):

@@ -64,12 +64,11 @@ Progress = Callable[[str], None]
 P_DEPENDENCE = "quadratic"
 #: strictness of the design's minimum-γ solve (every LMI <= -ε I, P, S, R >= ε I, scaled units):
 #: large enough that the optimum passes the floating-point re-check at once, so the back-off solve
-#: (the fallback) is not needed (measured, loop gain 3: ε 1e-6 -> γ 7.285 fails the re-check and
-#: the back-off solve ends at 7.431, two solves; ε 1e-3 -> γ 7.357 certified in one solve)
+#: (the fallback) is not needed (docs/notes/benchmarks.md, "Design measurements")
 DESIGN_EPSILON = 1e-3
 #: Clarabel settings of the capped (feasibility) solve: maximising the common margin t to 1e-8
 #: only sharpens t and iterative refinement of each KKT solve only sharpens the iterate; the
-#: verdict is the re-check (measured 3x3x3: 44 -> 40 iterations, ~25 % less wall, t 0.114 both)
+#: verdict is the re-check, so both are relaxed (docs/notes/benchmarks.md, "Design measurements")
 FEASIBILITY_SOLVER_OPTIONS: dict[str, Any] = {
     "tol_gap_abs": 1e-4,
     "tol_gap_rel": 1e-4,

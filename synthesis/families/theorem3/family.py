@@ -101,15 +101,15 @@ class Theorem3Family:
 
         Raises
         ------
-        contracts.usage.UsageError
+        plumbing.usage.UsageError
             If the line search's Dask scheduler cannot be used.
         """
         from synthesis.families.theorem3.synthesize import SynthesisError, synthesize
 
         extra: dict[str, Any] = {}
         if request.lambda_search:
-            from contracts.parallel import BackendError
-            from contracts.usage import UsageError
+            from plumbing.parallel import BackendError
+            from plumbing.usage import UsageError
             from synthesis.families.theorem3.line_search import search
 
             try:

@@ -97,7 +97,11 @@ def test_nominal_is_the_prior_whatever_the_device_sends():
 
 @pytest.mark.parametrize(
     ("args", "match"),
-    [((0.0, 150.0, 40.0), "K="), ((0.5, math.inf, 40.0), "T_s="), ((0.5, 150.0, -1.0), "tau_s=")],
+    [
+        ((0.0, 150.0, 40.0), "K = 0.0: .* > 0 mmHg"),
+        ((0.5, math.inf, 40.0), "T_s = inf: .* > 0 s"),
+        ((0.5, 150.0, -1.0), "tau_s = -1.0: .* >= 0 s"),
+    ],
 )
 def test_nominal_rejects_bad_constants(args, match):
     with pytest.raises(ValueError, match=match):

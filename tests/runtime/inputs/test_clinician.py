@@ -184,10 +184,19 @@ def test_a_phenylephrine_design_refuses_another_drug_or_syringe_telling_the_devi
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--target-mmhg", "130"], "--target-mmhg '130': allowed [50, 120] mmHg"),
-        (["--target-mmhg", "nan"], "--target-mmhg 'nan': allowed [50, 120] mmHg"),
+        (
+            ["--target-mmhg", "130"],
+            "--target-mmhg '130' = 130.0: must be a finite number in [50, 120] mmHg",
+        ),
+        (
+            ["--target-mmhg", "nan"],
+            "--target-mmhg 'nan' = nan: must be a finite number in [50, 120] mmHg",
+        ),
         (["--target-stdin"], "--target-stdin: needs a starting target"),
-        (["--concentration-ug-ml", "0"], "--concentration-ug-ml '0': allowed (0, 100000] ug/ml"),
+        (
+            ["--concentration-ug-ml", "0"],
+            "--concentration-ug-ml '0' = 0.0: must be a finite number in (0, 100000] ug/ml",
+        ),
         (["--target-mmhg", "70", "--target-file", "t"], "--target-mmhg and --target-file"),
         (
             ["--drug", "norepinephrine"],
@@ -199,8 +208,11 @@ def test_a_phenylephrine_design_refuses_another_drug_or_syringe_telling_the_devi
             "--concentration-ug-ml 200: the loaded design (--controller lpv) is for phenylephrine"
             " at 100 ug/ml; its gains count ml/h of that syringe",
         ),
-        (["--weight-kg", "29"], "--weight-kg '29': allowed [30, 250] kg"),
-        (["--weight-kg", "inf"], "--weight-kg 'inf': allowed [30, 250] kg"),
+        (["--weight-kg", "29"], "--weight-kg '29' = 29.0: must be a finite number in [30, 250] kg"),
+        (
+            ["--weight-kg", "inf"],
+            "--weight-kg 'inf' = inf: must be a finite number in [30, 250] kg",
+        ),
     ],
 )
 def test_bad_clinician_options_exit_2_with_one_line_naming_the_range(tmp_path, args, message):
@@ -215,7 +227,7 @@ def test_a_target_file_without_a_valid_target_at_start_exits_2(tmp_path):
     proc = pressor("run", "--port", "x", "--target-file", str(tmp_path / "t"), cwd=tmp_path)
     assert proc.returncode == 2
     assert proc.stderr.strip() == (
-        f"pressor run: --target-file {tmp_path / 't'}: '200': allowed [50, 120] mmHg"
+        f"pressor run: --target-file {tmp_path / 't'}: '200' = 200.0: must be a finite number in [50, 120] mmHg"
     )
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from contracts.usage import UsageError, UsageParser
+from plumbing.usage import UsageError, UsageParser
 from runtime.inputs.config import RunConfig, add_run_options, run_config
 
 

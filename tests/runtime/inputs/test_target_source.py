@@ -68,9 +68,9 @@ def test_stdin_lines_change_the_target_at_the_next_tick_and_bad_ones_are_refused
     assert src.refused == 2
     lines = err.getvalue().splitlines()
     assert lines == [
-        "pressor run: target from stdin refused: 'abc': not a number (allowed [50, 120] mmHg);"
+        "pressor run: target from stdin refused: 'abc': must be a finite number in [50, 120] mmHg;"
         " keeping 90 mmHg",
-        "pressor run: target from stdin refused: '130': allowed [50, 120] mmHg; keeping 90 mmHg",
+        "pressor run: target from stdin refused: '130' = 130.0: must be a finite number in [50, 120] mmHg; keeping 90 mmHg",
     ]
     assert log.events[0][:2] == (
         0,

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from contracts.usage import UsageError, UsageParser
+from plumbing.usage import UsageError, UsageParser
 from runtime.inputs.config import add_run_options
 from runtime.shell.cpu_latency import QOS_DEVICE, CpuLatencyRequest
 from tests.support.sil_helpers import pressor

@@ -9,7 +9,7 @@ import threading
 
 import pytest
 
-from contracts.usage import UsageError
+from plumbing.usage import UsageError
 from pressor.sil import sil_parser
 from runtime.shell.placement import Pinned, lockstep_cpus, parse_cpu
 from sim.devices.device import main as device_main

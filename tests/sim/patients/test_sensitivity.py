@@ -102,7 +102,7 @@ def test_the_spec_form_loads_any_model_scaled_with_the_factor_and_its_unit():
 def test_the_range_ends_are_accepted_and_anything_outside_is_refused_naming_value_and_range():
     assert (check_factor(0.05), check_factor(20)) == (0.05, 20.0)
     for bad in (0.049, 20.01, 0.0, -1.0, math.nan, math.inf, True, "2"):
-        with pytest.raises(PatientModelError, match=r"must be a number in \[0.05, 20\]"):
+        with pytest.raises(PatientModelError, match=r"must be a finite number in \[0.05, 20\]"):
             check_factor(bad)
     with pytest.raises(PatientModelError, match=r"sensitivity = 'abc'.*\[0.05, 20\]"):
         load_patient_model("paper@sensitivity=abc")

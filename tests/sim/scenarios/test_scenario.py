@@ -50,24 +50,28 @@ def test_minimal_file_gets_defaults(tmp_path):
         (
             ("duration_s = 600.0", "duration_s = -5.0"),
             "duration_s",
-            "-5.0 outside [1.0, 604800.0] s",
+            "= -5.0: must be a finite number in [1, 604800] s",
         ),
         (('mode = "nonlinear"', 'mode = "zombie"'), "patient.mode", "must be one of"),
-        (("step_mmhg = 20.0", 'step_mmhg = "20"'), "target.step_mmhg", "must be a number"),
+        (
+            ("step_mmhg = 20.0", 'step_mmhg = "20"'),
+            "target.step_mmhg",
+            "= '20': must be a finite number",
+        ),
         (
             ("step_mmhg = 20.0", "step_mmhg = 20.0\nstep_time_s = 900.0"),
             "target.step_time_s",
-            "outside",
+            "= 900.0: must be a finite number in [0, ",
         ),
         (
             ("[target]", "[pump]\nmax_rate_ml_h = 0.0\n[target]"),
             "pump.max_rate_ml_h",
-            "(0.0, 10000.0] ml/h",
+            "= 0.0: must be a finite number in (0, 10000] ml/h",
         ),
         (
             ("[target]", "[sensor]\nnoise_std_mmhg = 500\n[target]"),
             "sensor.noise_std_mmhg",
-            "outside",
+            "= 500: must be a finite number in [0, ",
         ),
         (("[target]", "[pump]\nspeed = 3\n[target]"), "pump.speed", "unknown field"),
         (('mode = "nonlinear"', 'mode = "frozen"\nK = 0.5'), "patient.T_s", "required"),
@@ -88,7 +92,8 @@ def test_bad_disturbance_and_artifact_entries_are_named_by_index(tmp_path):
         + '[[disturbances]]\nkind = "hemorrhage"\nstart_s = 1.0\nramp_s = 1.0\ndepth_mmhg = 500.0\n'
     )
     with pytest.raises(
-        ScenarioError, match=r"field 'disturbances\[0\]\.depth_mmhg' = 500.0 outside"
+        ScenarioError,
+        match=r"field 'disturbances\[0\]\.depth_mmhg' = 500.0: must be a finite number in \[0, ",
     ):
         load_scenario_file(_write(tmp_path, text))
     text = GOOD + '[[sensor.artifacts]]\nkind = "sparkle"\nstart_s = 1.0\nduration_s = 1.0\n'

@@ -1,4 +1,4 @@
-"""Cohort trials on a real Dask cluster on localhost give the local run's bytes (contracts.parallel)."""
+"""Cohort trials on a real Dask cluster on localhost give the local run's bytes (plumbing.parallel)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from contracts.parallel import BackendError, run_ordered
+from plumbing.parallel import BackendError, run_ordered
 from sim.cli import main
 
 distributed = pytest.importorskip("distributed")
@@ -120,7 +120,7 @@ def test_a_worker_killed_mid_trial_costs_only_a_retry_not_the_records(tmp_path, 
 def test_an_unreachable_scheduler_is_one_line_naming_the_address_and_exit_2(
     tmp_path, scenario, capsys, monkeypatch
 ):
-    monkeypatch.setattr("contracts.parallel.DASK_CONNECT_TIMEOUT_S", 1.0)  # nothing listens on :9
+    monkeypatch.setattr("plumbing.parallel.DASK_CONNECT_TIMEOUT_S", 1.0)  # nothing listens on :9
     argv = ["--controller", "pi", "--patients", "2", "--scenario", str(scenario)]
     rc = main("trial", [*argv, "--scheduler", "tcp://127.0.0.1:9", "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err.strip().splitlines()
