@@ -23,6 +23,7 @@ from codegen.fixed_point import FixedPointPlan, make_plan
 from codegen.tables import TabulationProof, choose_grid
 from contracts.drug import DEFAULT_BINDING, DrugBinding
 from plumbing.files import write_atomic
+from synthesis.artifact import default_artifact_path
 
 __all__ = [
     "BUDGETS",
@@ -39,7 +40,7 @@ __all__ = [
 
 MODULE_NAME = "lpv_map_controller"
 REPO_ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_ARTIFACT = REPO_ROOT / "synthesis" / "data" / "default_design.npz"
+DEFAULT_ARTIFACT = default_artifact_path()
 SAMPLE_PERIOD_S = 0.1
 #: Interpolation error bound enforced at every cell midpoint / random point (row-wise relative).
 #: 0.02 was not enough for the shipped (Y-constant) design: its slow controller modes (-0.007 1/s)

@@ -368,7 +368,8 @@ def load_artifact(path: str | Path) -> ControllerArtifact:
 
 
 def default_artifact_path() -> Path:
-    """Path of the shipped default design artifact."""
+    """Absolute path of the shipped default design artifact (``synthesis/data/default_design.npz``):
+    the one place that names it."""
     from importlib import resources
 
-    return Path(str(resources.files("synthesis") / "data" / "default_design.npz"))
+    return Path(str(resources.files("synthesis") / "data" / "default_design.npz")).resolve()

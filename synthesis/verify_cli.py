@@ -27,9 +27,10 @@ from pathlib import Path
 from typing import Any
 
 from plumbing.usage import UsageError, UsageParser, run_command
+from synthesis.artifact import default_artifact_path
 from synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
-DEFAULT_ARTIFACT = Path(__file__).resolve().parent / "data" / "default_design.npz"
+DEFAULT_ARTIFACT = default_artifact_path()
 #: the loop period (s) a plugin is loaded at: the runtime's default 10 Hz
 PLUGIN_PERIOD_S = 0.1
 

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  d60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b
-Content hash:     ffe2e575f5e8bfb1ad491871f1b6b98bf800c0f7cc9f31ac556f0a540e9e3cc0
+Content hash:     928e25175b8c1d74fda655e377e2d2750421aead0c7a385b15bdf036fb9e1946
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'b0672e6673dbcd5737cbb61c771867fd58cc30d7f6a1cf9af47e2369dbfc2231'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '0f6ed150ff64d4caf49f660ded3a3813288b49809051afc6d77614ebbeac49c0'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'd60d44c5902d56dd85908ccecacab2b614f275157962f94074e1c372cb506d2b'
-CONTENT_HASH = 'ffe2e575f5e8bfb1ad491871f1b6b98bf800c0f7cc9f31ac556f0a540e9e3cc0'
+CONTENT_HASH = '928e25175b8c1d74fda655e377e2d2750421aead0c7a385b15bdf036fb9e1946'
 TABLES_SHA256 = 'e736ddebfe5179dfdbc6981025cbb0e5ef7298da5c7e699a452a7017523f1499'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31
 Artifact sha256:  114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd
-Content hash:     5881ae4625f70dfb035a61bff1b12fa9d87061e5e59d1144244ed74c8e5a2677
+Content hash:     a5ef3f68537024bd96891c1a6668b95930bf62afa6aa14b6cec2655d40235d2a
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '7cef5dcc8aff134efee3838e1b8031038dbe2770c6cb4fc0a1b3162af886eee7'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'f075972add7cd9c646a120643b4690609b22ff0bbb5d8c182c2bf3f9aa130fae'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = '114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd'
-CONTENT_HASH = '5881ae4625f70dfb035a61bff1b12fa9d87061e5e59d1144244ed74c8e5a2677'
+CONTENT_HASH = 'a5ef3f68537024bd96891c1a6668b95930bf62afa6aa14b6cec2655d40235d2a'
 TABLES_SHA256 = '0d1ccefeea03128a1d935e8d7cc8d5bfdac89085e3823c267c71c6c1312a5ffb'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
