@@ -17,8 +17,8 @@ schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
 arrival (%), SCHED_RATE / SCHED_OUT_OF_BOX ticks, HOLD or FAILSAFE ticks; then per model the
-figures of issue 25 (LPV/PI, LPV/Smith, validated/nominal medians over reachable patients,
-overshoot median and p90). ``pressor run`` over a pty (``benchmarks/independent_patients.py``) is
+summary figures (LPV/PI, LPV/Smith, validated/nominal medians over reachable patients, overshoot
+median and p90). ``pressor run`` over a pty (``benchmarks/independent_patients.py``) is
 the reference for the two-compartment model; this harness is for sweeps (about 3 s per run).
 """
 
