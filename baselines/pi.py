@@ -19,6 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from contracts.checks import check_range
+
 KP_ML_H_PER_MMHG = 3.0
 KI_ML_H_PER_MMHG_S = 0.017
 
@@ -31,10 +33,8 @@ def check_period_and_limit(sample_period_s: float, max_rate_ml_h: float) -> None
     ValueError
         Naming the argument, its value and the allowed range.
     """
-    if not 0.0 < sample_period_s <= 10.0:
-        raise ValueError(f"sample_period_s={sample_period_s!r} outside (0, 10] s")
-    if not 0.0 < max_rate_ml_h <= 10000.0:
-        raise ValueError(f"max_rate_ml_h={max_rate_ml_h!r} outside (0, 10000] ml/h")
+    check_range("sample_period_s", sample_period_s, 0.0, 10.0, lo_open=True, unit="s")
+    check_range("max_rate_ml_h", max_rate_ml_h, 0.0, 10000.0, lo_open=True, unit="ml/h")
 
 
 @dataclass

@@ -56,6 +56,7 @@ import math
 from dataclasses import dataclass
 
 from baselines.pi import check_period_and_limit
+from contracts.checks import check_range
 
 LAMBDA_DEFAULT_S = 30.0
 LAMBDA_MIN_S = 5.0
@@ -119,12 +120,8 @@ class SmithController:
         tau_max_s: float = TAU_MAX_DEFAULT_S,
     ) -> None:
         check_period_and_limit(sample_period_s, max_rate_ml_h)
-        if not LAMBDA_MIN_S <= lambda_s <= LAMBDA_MAX_S:
-            raise ValueError(
-                f"lambda_s={lambda_s!r} outside [{LAMBDA_MIN_S:g}, {LAMBDA_MAX_S:g}] s"
-            )
-        if not 0.0 <= tau_max_s <= 600.0:
-            raise ValueError(f"tau_max_s={tau_max_s!r} outside [0, 600] s")
+        check_range("lambda_s", lambda_s, LAMBDA_MIN_S, LAMBDA_MAX_S, unit="s")
+        check_range("tau_max_s", tau_max_s, 0.0, 600.0, unit="s")
         self.sample_period_s = float(sample_period_s)
         self.max_rate_ml_h = float(max_rate_ml_h)
         self.lambda_s = float(lambda_s)

@@ -7,6 +7,7 @@ open or closed ends and its unit::
 
     q_b = -1.0: must be a finite number > 0
     --pump-max-ml-h = 0.0: must be a finite number in (0, 10000] ml/h
+    --patients = 0: must be an integer in [1, 100000]
 
 Callers keep their own context by the name they pass (``"field 'solver.lambda2'"``) and the error
 they raise (``error=lambda msg: ConfigError(f"{source}: {msg}")``).
@@ -18,7 +19,7 @@ import math
 import numbers
 from collections.abc import Callable
 
-__all__ = ["allowed_range", "check_range"]
+__all__ = ["allowed_range", "check_int_range", "check_range"]
 
 
 def _num(x: float) -> str:
@@ -100,3 +101,35 @@ def check_range(
         allowed = allowed_range(lo, hi, lo_open=lo_open, hi_open=hi_open, unit=unit)
         raise error(f"{name} = {value!r}: must be a finite number {allowed}".rstrip())
     return v
+
+
+def check_int_range(
+    name: str,
+    value: object,
+    lo: int,
+    hi: int,
+    *,
+    unit: str = "",
+    error: Callable[[str], Exception] = ValueError,
+) -> int:
+    """``value`` if it is an integer (not a bool) in [``lo``, ``hi``] (exact: seeds reach 2**63).
+
+    Parameters
+    ----------
+    name, error
+        As for :func:`check_range`.
+    value
+        The value to check.
+    lo, hi
+        The closed range.
+    unit
+        Appended to the range in the message when given.
+
+    Raises
+    ------
+    Exception
+        ``error("<name> = <value!r>: must be an integer in [lo, hi]")`` otherwise.
+    """
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool) and lo <= value <= hi:
+        return int(value)
+    raise error(f"{name} = {value!r}: must be an integer {allowed_range(lo, hi, unit=unit)}")

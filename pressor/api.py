@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from contracts.checks import check_int_range, check_range
 from runtime.core.supervisor_config import ALARM_FAULTS, State
 from runtime.estimation.sources import SOURCES
 from runtime.inputs.controller_loader import load_controller
@@ -228,8 +229,7 @@ def controller_spec(controller: str | type, args: Mapping[str, Any] | None = Non
 def _scenario(scenario: str | Path | Scenario, duration_s: float | None) -> Scenario:
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     if duration_s is not None:
-        if not 1.0 <= duration_s <= 7 * 86400.0:
-            raise ValueError(f"duration_s = {duration_s!r}: allowed [1, 604800] s")
+        check_range("duration_s", duration_s, 1.0, 7 * 86400.0, unit="s")
         sc = dataclasses.replace(sc, duration_s=float(duration_s))
     return sc
 
@@ -244,8 +244,7 @@ def _checked(
     patient_model: str,
 ) -> tuple[str, Scenario, float]:
     """(spec, scenario, period s) after the checks ``pressor trial`` makes before it runs."""
-    if not 0.1 <= rate_hz <= 1000.0:
-        raise ValueError(f"rate_hz = {rate_hz!r}: allowed [0.1, 1000] Hz")
+    check_range("rate_hz", rate_hz, 0.1, 1000.0, unit="Hz")
     if schedule not in SOURCES:
         raise ValueError(f"schedule = {schedule!r}: allowed {', '.join(SOURCES)}")
     spec = controller_spec(controller, controller_args)
@@ -359,8 +358,7 @@ def trial(
         ("seed", seed, 0, 9_000_000_000_000),
         ("jobs", jobs, 1, 64),
     ):
-        if not lo <= value <= hi:
-            raise ValueError(f"{name} = {value!r}: allowed [{lo}, {hi}]")
+        check_int_range(name, value, lo, hi)
     patient_model = with_sensitivity(patient_model, sensitivity)
     spec, sc, period_s = _checked(
         controller, controller_args, scenario, duration_s, rate_hz, schedule, patient_model

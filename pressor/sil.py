@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from contracts.checks import check_int_range
 from contracts.drug import DEFAULT_BINDING, DrugBinding
 from plumbing.usage import USAGE_EXIT, UsageError, UsageParser
 from runtime.inputs.config import (
@@ -108,9 +109,7 @@ def _seed(text: str) -> int:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"--patient-seed {text!r}: not an integer") from None
-    if not 0 <= value < 2**32:
-        raise argparse.ArgumentTypeError(f"--patient-seed {text!r}: allowed [0, 2**32)")
-    return value
+    return check_int_range("--patient-seed", value, 0, 2**32 - 1, error=argparse.ArgumentTypeError)
 
 
 def sil_parser() -> UsageParser:

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from contracts.checks import check_int_range, check_range
 from plumbing.usage import UsageError, UsageParser, run_command, usage_exit
 from sim.patients.patient_model import add_patient_model_option
 
@@ -156,16 +157,14 @@ def _trial(argv: Sequence[str]) -> int:
     )
     p.add_argument("--out", required=True, type=Path, help="output directory")
     args = p.parse_args(argv)
-    if not 1 <= args.patients <= 100000:
-        p.error(f"field '--patients' = {args.patients} outside [1, 100000]")
-    if not 0 <= args.seed <= 9_000_000_000_000:
-        p.error(f"field '--seed' = {args.seed} outside [0, 9000000000000]")
-    if not 1 <= args.jobs <= 64:
-        p.error(f"field '--jobs' = {args.jobs} outside [1, 64]")
-    if not 0.1 <= args.rate <= 1000.0:
-        p.error(f"field '--rate' = {args.rate} outside [0.1, 1000] Hz")
-    if not 0.05 <= args.sensitivity <= 20.0:
-        p.error(f"field '--sensitivity' = {args.sensitivity} outside [0.05, 20] (dimensionless)")
+    try:
+        check_int_range("--patients", args.patients, 1, 100000)
+        check_int_range("--seed", args.seed, 0, 9_000_000_000_000)
+        check_int_range("--jobs", args.jobs, 1, 64)
+        check_range("--rate", args.rate, 0.1, 1000.0, unit="Hz")
+        check_range("--sensitivity", args.sensitivity, 0.05, 20.0, unit="(dimensionless)")
+    except ValueError as e:
+        p.error(str(e))
 
     from plumbing.files import write_atomic
     from plumbing.parallel import BackendError

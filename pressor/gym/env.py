@@ -28,6 +28,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from contracts.checks import check_int_range, check_range
 from contracts.faults import QUALITY_HELD, QUALITY_INVALID, FaultSpec, parse_fault
 from pressor.api import _scenario
 from pressor.gym.reward import COLUMNS, MapReward, Ticks
@@ -136,10 +137,8 @@ class MapEnv(gymnasium.Env):
     ) -> None:
         if render_mode is not None:
             raise ValueError(f"render_mode = {render_mode!r}: allowed None")
-        if not (isinstance(ticks_per_action, int) and 1 <= ticks_per_action <= 10000):
-            raise ValueError(f"ticks_per_action = {ticks_per_action!r}: allowed [1, 10000]")
-        if not 0.1 <= rate_hz <= 1000.0:
-            raise ValueError(f"rate_hz = {rate_hz!r}: allowed [0.1, 1000] Hz")
+        check_int_range("ticks_per_action", ticks_per_action, 1, 10000)
+        check_range("rate_hz", rate_hz, 0.1, 1000.0, unit="Hz")
         self.scenario = _scenario(scenario, duration_s)
         check_model_for_scenario(
             patient_model, self.scenario.name, self.scenario.frozen is not None
@@ -191,8 +190,7 @@ class MapEnv(gymnasium.Env):
             patient_seed = int(seed)
         else:
             patient_seed = int(self.np_random.integers(0, 2**62))
-        if not 0 <= patient_seed < 2**63:
-            raise ValueError(f"patient_seed = {patient_seed!r}: allowed [0, 2**63)")
+        check_int_range("patient_seed", patient_seed, 0, 2**63 - 1)
         self.patient_seed = patient_seed
         world = World(
             self.scenario,

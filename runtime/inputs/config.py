@@ -10,12 +10,12 @@ past this boundary the run code trusts its configuration.
 from __future__ import annotations
 
 import argparse
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from contracts.checks import check_range
 from contracts.faults import FaultSpec, FaultSpecError, parse_faults
 from plumbing.usage import UsageError
 from runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S
@@ -124,9 +124,7 @@ def positive(name: str, high: float) -> Callable[[str], float]:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} {text!r}: not a number") from None
-        if not (math.isfinite(value) and 0.0 < value <= high):
-            raise argparse.ArgumentTypeError(f"{name} {text!r}: allowed (0, {high:g}]")
-        return value
+        return check_range(name, value, 0.0, high, lo_open=True, error=argparse.ArgumentTypeError)
 
     return parse
 

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
+from contracts.checks import check_int_range
 from contracts.controller import Controller
 from plumbing.files import AtomicFile
 from runtime.core.closed_loop import TickRecord
@@ -110,8 +111,7 @@ class Recorder:
     def __init__(
         self, path: str | Path, run_label: str, chunk_ticks: int = 4096, dose_view: bool = False
     ) -> None:
-        if not 16 <= chunk_ticks <= 1_000_000:
-            raise ValueError(f"chunk_ticks={chunk_ticks!r} outside [16, 1000000]")
+        check_int_range("chunk_ticks", chunk_ticks, 16, 1_000_000)
         self.path = Path(path)
         if not self.path.parent.is_dir():
             raise FileNotFoundError(f"{self.path}: directory {self.path.parent} does not exist")

@@ -27,6 +27,8 @@ from __future__ import annotations
 import math
 import time
 
+from contracts.checks import check_range
+
 perf_counter_s = time.perf_counter
 
 
@@ -77,8 +79,7 @@ class MonotonicClock:
     """
 
     def __init__(self, spin_s: float = 2e-4) -> None:
-        if not 0.0 <= spin_s <= 0.01:
-            raise ValueError(f"spin_s={spin_s!r} outside [0, 0.01] s")
+        check_range("spin_s", spin_s, 0.0, 0.01, unit="s")
         self._spin_s = float(spin_s)
         self._origin_s = time.perf_counter()
 

@@ -18,6 +18,8 @@ from __future__ import annotations
 import os
 import struct
 
+from contracts.checks import check_int_range
+
 #: the PM QoS device of the CPU wake-up latency (µs, a native int32)
 QOS_DEVICE = "/dev/cpu_dma_latency"
 #: largest request accepted (µs); the kernel's own default is 2e9
@@ -44,10 +46,8 @@ class CpuLatencyRequest:
     """
 
     def __init__(self, latency_us: int | None, device: str = QOS_DEVICE) -> None:
-        if latency_us is not None and not 0 <= latency_us <= MAX_LATENCY_US:
-            raise ValueError(
-                f"cpu wake-up latency: {latency_us} µs outside [0, {MAX_LATENCY_US}] µs"
-            )
+        if latency_us is not None:
+            check_int_range("cpu wake-up latency", latency_us, 0, MAX_LATENCY_US, unit="µs")
         self.latency_us = latency_us
         self.device = device
         self.held = False

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from contracts.checks import allowed_range, check_range
+from contracts.checks import allowed_range, check_int_range, check_range
 
 
 @pytest.mark.parametrize(
@@ -48,3 +48,17 @@ def test_the_caller_picks_the_error_and_adds_its_context():
 
     with pytest.raises(FieldError, match=r"^a\.toml: field 'x' = 2\.0: must be .* in \[0, 1\]$"):
         check_range("field 'x'", 2.0, 0.0, 1.0, error=lambda m: FieldError(f"a.toml: {m}"))
+
+
+def test_an_integer_range_is_exact_at_2_63_and_refuses_floats_and_bools():
+    top = 2**63 - 1
+    assert check_int_range("seed", top, 0, top) == top  # a float check would round it to 2**63
+    with pytest.raises(ValueError, match=r"^seed = 9223372036854775808: must be an integer in "):
+        check_int_range("seed", top + 1, 0, top)
+    for bad in (3.0, True, "3", None):
+        with pytest.raises(ValueError, match=r"must be an integer in \[1, 5\]$"):
+            check_int_range("--jobs", bad, 1, 5)
+    with pytest.raises(
+        KeyError, match=r"--patients = 0: must be an integer in \[1, 100\] patients"
+    ):
+        check_int_range("--patients", 0, 1, 100, unit="patients", error=KeyError)

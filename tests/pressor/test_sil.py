@@ -58,8 +58,8 @@ def test_default_recording_name_names_controller_scenario_and_seed():
     [
         (["--scenario", "no-such"], "'no-such' must be one of"),
         (["--link", "/dev/ttyS9"], "--link /dev/ttyS9"),
-        (["--patient-seed", "-1"], "--patient-seed '-1': allowed [0, 2**32)"),
-        (["--duration", "0"], "--duration '0': allowed (0, 604800]"),
+        (["--patient-seed", "-1"], "--patient-seed = -1: must be an integer in [0, 4294967295]"),
+        (["--duration", "0"], "--duration = 0.0: must be a finite number in (0, 604800]"),
         (["--patient-model", "nope"], "--patient-model 'nope': unknown model; one of paper,"),
         (["--patient-model", "sim.devices.pump:Pump"], "class 'Pump' of module 'sim.devices.pump'"),
         (["--scenario", "nominal-step", "--patient-model", "pkpd"], "fixes a frozen first-order"),

@@ -38,9 +38,9 @@ def test_options_become_a_frozen_config_with_defaults_and_units(tmp_path: Path):
 @pytest.mark.parametrize(
     ("argv", "ticks", "needles"),
     [
-        (["--rate", "0"], 0, ["--rate", "'0'", "(0, 1000]"]),
-        (["--rate", "2000"], 0, ["--rate", "'2000'", "(0, 1000]"]),
-        (["--stall-timeout", "nan"], 0, ["--stall-timeout", "'nan'", "(0, 3600]"]),
+        (["--rate", "0"], 0, ["--rate", "= 0.0:", "(0, 1000]"]),
+        (["--rate", "2000"], 0, ["--rate", "= 2000.0:", "(0, 1000]"]),
+        (["--stall-timeout", "nan"], 0, ["--stall-timeout", "= nan:", "(0, 3600]"]),
         (["--controller", "pi"], -1, ["--ticks -1", ">= 0"]),
         (["--controller", "pi", "--rrd", "run.txt"], 0, ["--rrd run.txt", ".rrd"]),
         (
@@ -55,7 +55,7 @@ def test_options_become_a_frozen_config_with_defaults_and_units(tmp_path: Path):
             0,
             ["--sample-age-limit-s 0.05", "[1/--rate = 0.1, 60] s"],
         ),
-        (["--sample-age-limit-s", "61"], 0, ["--sample-age-limit-s", "'61'", "(0, 60]"]),
+        (["--sample-age-limit-s", "61"], 0, ["--sample-age-limit-s", "= 61.0:", "(0, 60]"]),
     ],
 )
 def test_a_bad_value_is_one_usage_error_naming_option_value_and_range(argv, ticks, needles):

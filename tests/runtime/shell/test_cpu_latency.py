@@ -45,7 +45,7 @@ def test_no_request_touches_nothing(tmp_path):
 
 @pytest.mark.parametrize("bad", [-1, 1_000_001])
 def test_latency_outside_range_is_refused(bad):
-    with pytest.raises(ValueError, match=r"outside \[0, 1000000\]"):
+    with pytest.raises(ValueError, match=r"must be an integer in \[0, 1000000\] µs"):
         CpuLatencyRequest(bad)
 
 

@@ -162,7 +162,7 @@ def test_trial_refuses_a_sensitivity_outside_its_range_with_exit_2(
     argv = ["--patients", "1", "--scenario", str(short_scenario), "--sensitivity", value]
     assert main("trial", [*argv, "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert f"'--sensitivity' = {float(value)} outside [0.05, 20]" in err
+    assert f"--sensitivity = {float(value)}: must be a finite number in [0.05, 20]" in err
     assert not (tmp_path / "o").exists()
 
 

@@ -88,7 +88,7 @@ def test_trial_records_and_csv_carry_step_window_and_disturbance_fields(
 def test_trial_rejects_bad_inputs_with_exit_2_and_one_line(tmp_path, short_scenario, capsys):
     base = ["--seed", "1", "--out", str(tmp_path / "x")]
     assert main("trial", base + ["--patients", "0", "--scenario", str(short_scenario)]) == 2
-    assert "'--patients' = 0 outside [1, 100000]" in capsys.readouterr().err
+    assert "--patients = 0: must be an integer in [1, 100000]" in capsys.readouterr().err
     assert main("trial", base + ["--scenario", "no-such-scenario"]) == 2
     assert "must be one of" in capsys.readouterr().err
     bad = tmp_path / "nope.py"
