@@ -238,21 +238,25 @@ class ProtocolDevice:
             self._flush()
             resend_at = time.monotonic() + self.cfg.retransmit_s
             while self.log.runtime_hello is None and time.monotonic() < resend_at:
-                for m in self._receive(resend_at - time.monotonic()):
+                msgs = self._receive(resend_at - time.monotonic())
+                for i, m in enumerate(msgs):
                     if m.get_type() == "PRESSOR_HELLO":
-                        self._check_runtime_hello(m)
+                        self._check_runtime_hello(m, msgs[i + 1 :])
                         self.log.runtime_hello = m
                     self._handle(m)
         self.t_start = time.monotonic()
 
-    def _check_runtime_hello(self, m: Any) -> None:
+    def _check_runtime_hello(self, m: Any, read_with_it: list[Any]) -> None:
         """A runtime hello of another role or protocol version ends the run; a runtime that
-        refuses this device's hello sends its refusal right after its hello: wait 2 s for it."""
+        refuses this device's hello sends its refusal right after its hello: in the same read
+        (``read_with_it``, the frames after the hello) or within 2 s."""
         if (
             m.role == self.d.PRESSOR_ROLE_RUNTIME
             and m.protocol_version == self.cfg.protocol_version
         ):
             return
+        for later in read_with_it:
+            self._handle(later)  # raises LinkDown on the refusal
         until = time.monotonic() + 2.0
         while time.monotonic() < until:
             for later in self._receive(until - time.monotonic()):
