@@ -53,3 +53,25 @@ def short_scenario(tmp_path: Path) -> Path:
     path = tmp_path / "short.toml"
     path.write_text(SHORT_SCENARIO_TOML)
     return path
+
+
+#: a 4-minute paper-tracking (a +20 mmHg step, no disturbance) for trial plumbing tests
+SHORT_TRACKING_TOML = """
+name = "short-tracking"
+description = "4 min paper-tracking for tests"
+duration_s = 240.0
+[patient]
+mode = "nonlinear"
+[target]
+step_mmhg = 20.0
+[sensor]
+noise_std_mmhg = 0.1
+"""
+
+
+@pytest.fixture
+def short_tracking_scenario(tmp_path: Path) -> Path:
+    """The path of :data:`SHORT_TRACKING_TOML` written to a scenario file."""
+    path = tmp_path / "short-tracking.toml"
+    path.write_text(SHORT_TRACKING_TOML)
+    return path

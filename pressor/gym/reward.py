@@ -21,7 +21,7 @@ hour at the pump's limit 0.1·3600 = 360.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -114,8 +114,10 @@ class Ticks:
         period_s: float,
         max_rate_ml_h: float,
     ) -> None:
-        columns = (t_s, map_mmhg, quality, map_true_mmhg, target_mmhg, command_ml_h, rate_ml_h)
-        columns += (delivered_ml_h, alarms, state, faults)
+        columns = (
+            t_s, map_mmhg, quality, map_true_mmhg, target_mmhg, command_ml_h, rate_ml_h,
+            delivered_ml_h, alarms, state, faults,
+        )  # fmt: skip
         self._arrays = {
             name: np.asarray(column, dtype)
             for (name, dtype), column in zip(COLUMNS.items(), columns, strict=True)
@@ -123,7 +125,7 @@ class Ticks:
         n = {len(a) for a in self._arrays.values()}
         if len(n) != 1:
             raise ValueError(f"Ticks: the columns have different lengths {sorted(n)}")
-        self._record: Mapping[str, Sequence[Any]] | None = None
+        self._record: Mapping[str, list[Any]] | None = None
         self._a = self._b = 0
         self.period_s = float(period_s)
         self.max_rate_ml_h = float(max_rate_ml_h)
@@ -131,13 +133,13 @@ class Ticks:
     @classmethod
     def of_record(
         cls,
-        record: Mapping[str, Sequence[Any]],
+        record: Mapping[str, list[Any]],
         a: int,
         b: int,
         period_s: float,
         max_rate_ml_h: float,
     ) -> Ticks:
-        """Ticks ``a`` to ``b - 1`` of ``record`` (a sequence per :data:`COLUMNS` name); the
+        """Ticks ``a`` to ``b - 1`` of ``record`` (a list per :data:`COLUMNS` name); the
         record's entries in that range must not change afterwards (arrays are made when read)."""
         ticks = cls.__new__(cls)
         ticks._arrays = {}
@@ -168,7 +170,7 @@ class Ticks:
         record = self._record
         if record is None or name in self._arrays:
             return getattr(self, name).tolist()
-        return list(record[name][self._a : self._b])
+        return record[name][self._a : self._b]  # a list slice is already a copy
 
 
 @dataclass(frozen=True)

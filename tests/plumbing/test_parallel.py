@@ -13,18 +13,6 @@ from sim.cli import main
 
 distributed = pytest.importorskip("distributed")
 
-SHORT = """
-name = "short-tracking"
-description = "4 min paper-tracking for the scale-out tests"
-duration_s = 240.0
-[patient]
-mode = "nonlinear"
-[target]
-step_mmhg = 20.0
-[sensor]
-noise_std_mmhg = 0.1
-"""
-
 FILES = ("patients.json", "patients.csv", "summary.json")
 
 
@@ -38,10 +26,8 @@ def cluster():
 
 
 @pytest.fixture()
-def scenario(tmp_path: Path) -> Path:
-    path = tmp_path / "short.toml"
-    path.write_text(SHORT)
-    return path
+def scenario(short_tracking_scenario: Path) -> Path:
+    return short_tracking_scenario
 
 
 def _trial(out: Path, scenario: Path, *extra: str) -> Path:

@@ -234,31 +234,18 @@ def _obs(world: World) -> tuple[float, ...]:
     return (obs.sim_time_s, obs.map_mmhg, obs.target_mmhg, obs.K, obs.T_s, obs.tau_s)
 
 
-SHORT = """
-name = "short-tracking"
-description = "4 min paper-tracking for the patient model tests"
-duration_s = 240.0
-[patient]
-mode = "nonlinear"
-[target]
-step_mmhg = 20.0
-[sensor]
-noise_std_mmhg = 0.1
-"""
-
-
-def _trial(tmp_path: Path, name: str, *extra: str) -> Path:
-    scenario = tmp_path / "short.toml"
-    scenario.write_text(SHORT)
+def _trial(tmp_path: Path, scenario: Path, name: str, *extra: str) -> Path:
     out = tmp_path / name
     argv = ["--controller", "pi", "--patients", "3", "--seed", "4", "--scenario", str(scenario)]
     assert main("trial", [*argv, *extra, "--out", str(out)]) == 0
     return out
 
 
-def test_a_plugin_model_runs_a_trial_whose_records_and_summary_name_it(tmp_path: Path) -> None:
-    one = _trial(tmp_path, "one", "--patient-model", PLUGIN)
-    two = _trial(tmp_path, "two", "--patient-model", PLUGIN, "--jobs", "2")
+def test_a_plugin_model_runs_a_trial_whose_records_and_summary_name_it(
+    tmp_path: Path, short_tracking_scenario: Path
+) -> None:
+    one = _trial(tmp_path, short_tracking_scenario, "one", "--patient-model", PLUGIN)
+    two = _trial(tmp_path, short_tracking_scenario, "two", "--patient-model", PLUGIN, "--jobs", "2")
     for f in ("patients.json", "patients.csv", "summary.json"):
         assert (one / f).read_bytes() == (two / f).read_bytes(), f
     summary = json.loads((one / "summary.json").read_text())
