@@ -13,7 +13,11 @@ runtime's own closed-loop core (:class:`runtime.core.closed_loop.ClosedLoopCore`
 scheduling source, controller), in process, without a link: a 0.3 mmHg Gaussian monitor at 10 Hz
 (seeded) and a pump that delivers the command within [0, 120] ml/h. Runs per patient: the LPV with
 the ``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-in ``validated``
-schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
+schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``. ``lpv-truth``
+(not in the default runs) schedules on each patient's apparent FOPDT (:func:`apparent_fopdt`)
+clamped to the controller's box: the bound of any scheduling source that reports K, T, τ, on a
+patient no such model describes. ``--lpv PATH`` runs every LPV label on another generated module
+(a design with a wider box or another prefilter, ``benchmarks/designs/``).
 
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
 arrival (%), SCHED_RATE / SCHED_OUT_OF_BOX ticks, HOLD or FAILSAFE ticks; then per model the
@@ -36,7 +40,7 @@ from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
 from runtime.core.scheduling import ScheduleInput
 from runtime.core.supervisor import Supervisor
-from runtime.core.supervisor_config import Fault, State, supervisor_config_for
+from runtime.core.supervisor_config import Fault, State, sched_limits_of, supervisor_config_for
 from runtime.estimation.sources import EstimatedSchedule, make_schedule
 from runtime.estimation.validated import ValidatedSchedule
 from runtime.estimation.validation import ModelBank
@@ -59,6 +63,7 @@ RUNS = {
     "lpv-estimated": ("lpv", "estimated"),
     "lpv-fit-hold": ("lpv", "fit-hold"),
     "lpv-fit-slew": ("lpv", "fit-slew"),
+    "lpv-truth": ("lpv", "truth"),
     "pi": ("pi", "nominal"),
     "smith": ("smith", "estimated"),
     "smith-validated": ("smith", "validated"),
@@ -98,12 +103,31 @@ class LimitedFit:
         return replace(s, K=self.rho[0], T_s=self.rho[1], tau_s=self.rho[2])
 
 
-def make_source(source: str) -> Any:
-    """The scheduling source ``source`` (a name of ``make_schedule``, ``fixed:K/T/tau`` or an
+def apparent_fopdt(params: Any, target_mmhg: float) -> tuple[float, float, float]:
+    """The FOPDT a perfect identification would report for an :mod:`sim.patients.pkpd` patient
+    held at ``target_mmhg``: K the secant sensitivity (target − baseline) / the steady infusion
+    that holds the target (mmHg/(ml/h)), T the plasma's fast time constant V1/(CL + Q) plus the
+    effect-site lag (s), τ the transport delay (s). The pump's limit when the target is out of
+    reach."""
+    patient = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=False)
+    need = patient.steady_state_rate_ml_h(target_mmhg, PUMP_MAX_ML_H) or PUMP_MAX_ML_H
+    K = (target_mmhg - params.baseline_mmhg) / max(need, 1e-6)
+    T = 60.0 * params.v1_l / (params.cl_l_min + params.q_l_min) + params.effect_lag_s
+    return K, T, params.delay_s
+
+
+def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = ()) -> Any:
+    """The scheduling source ``source`` (a name of ``make_schedule``, ``fixed:K/T/tau``,
+    ``truth``: the patient's ``truth`` K, T, τ clamped to ``controller``'s box, or an
     experiment: ``fit-hold``, ``fit-slew``)."""
-    if source.startswith("fixed:"):
+    if source.startswith("fixed:") or source == "truth":
         from runtime.core.scheduling import NominalSchedule
 
+        if source == "truth":
+            box = sched_limits_of(controller)[0]
+            return NominalSchedule(
+                *(min(max(v, lo), hi) for v, (lo, hi) in zip(truth, box, strict=True))
+            )
         return NominalSchedule(*(float(v) for v in source[6:].split("/")))
     if source in ("fit-hold", "fit-slew"):
         return LimitedFit(source == "fit-hold")
@@ -125,12 +149,13 @@ def _kwargs(text: str) -> dict[str, Any]:
 
 def run_one(
     patient: IndependentPatient, spec: str, source: str, target_mmhg: float, duration_s: float,
-    seed: int, events: list[tuple[str, float]],
+    seed: int, events: list[tuple[str, float]], truth: tuple[float, ...] = (),
 ) -> dict[str, Any]:  # fmt: skip
-    """One closed-loop run in process; the run's metrics and its supervisor counts."""
+    """One closed-loop run in process; the run's metrics and its supervisor counts (``truth``:
+    the patient's apparent K, T, τ for the ``truth`` source)."""
     controller = load_controller(spec, TS_S)
     supervisor = Supervisor(supervisor_config_for(controller, NOISE_MMHG))
-    core = ClosedLoopCore(controller, supervisor, make_source(source))
+    core = ClosedLoopCore(controller, supervisor, make_source(source, controller, truth))
     rng = random.Random(seed)
     n = round(duration_s / TS_S)
     true_map, rates, k_sched = [0.0] * n, [0.0] * n, [0.0] * n
@@ -171,6 +196,7 @@ def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dic
     import sim.trials.trial as trial
 
     trial.make_schedule = lambda name, ts: make_source(name)  # type: ignore[assignment]
+    source = "oracle" if source == "truth" else source  # the cohort's truth is the device's
     rec, traj = trial._simulate_patient(scenario, spec, patient_seed, TS_S, source)
     faults = traj.faults
     return {
@@ -219,12 +245,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--runs", default=",".join(RUNS), help="comma-separated of " + ", ".join(RUNS))
     p.add_argument("--sched", default="", help="ValidatedSchedule kwargs: key=value;...")
     p.add_argument("--bank", default="", help="ModelBank kwargs: key=value;...")
+    p.add_argument(
+        "--lpv",
+        default="lpv",
+        help="the LPV labels' controller: lpv or a generated module's path (default: lpv)",
+    )
     args = p.parse_args(argv)
     VARIANT["sched"], VARIANT["bank"] = _kwargs(args.sched), _kwargs(args.bank)
     labels = args.runs.split(",")
     for lab in labels:
         if lab.startswith("fixed:"):
             RUNS[lab] = ("lpv", lab)
+    for lab, (spec, src) in RUNS.items():
+        if spec == "lpv":
+            RUNS[lab] = (args.lpv, src)
     models = ("two-compartment", "one-compartment") if args.model == "both" else (args.model,)
     if args.scenario:
         from sim.patients.cohort import cohort_seeds
@@ -252,7 +286,8 @@ def main(argv: list[str] | None = None) -> int:
                 else:
                     disturb = model == "two-compartment"
                     pt = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=disturb)
-                    r = run_one(pt, spec, src, target, dur, args.seed * 1000 + i, events)
+                    truth = apparent_fopdt(params, target) if src == "truth" else ()
+                    r = run_one(pt, spec, src, target, dur, args.seed * 1000 + i, events, truth)
                 res[lab].append(r)
                 line.append(
                     f"{lab} {r['iae']:6.0f} os {r['os']:5.1f} band {r['band'] or 0:5.1f}"
@@ -278,6 +313,7 @@ def main(argv: list[str] | None = None) -> int:
                 f" HOLD/FAILSAFE total {sum(r['HOLD/FAILSAFE'] for r in res[lab])}"
             )
         for a, b in (("lpv-validated", "pi"), ("lpv-nominal", "pi"), ("lpv-estimated", "pi"),
+                     ("lpv-truth", "pi"), ("lpv-truth", "smith"), ("lpv-truth", "lpv-nominal"),
                      ("lpv-validated", "smith-validated"), ("lpv-validated", "lpv-nominal"),
                      ("lpv-estimated", "lpv-nominal")):  # fmt: skip
             if a in res and b in res:
