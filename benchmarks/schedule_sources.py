@@ -14,7 +14,7 @@ scheduling source, controller), in process, without a link: a 0.3 mmHg Gaussian 
 (seeded) and a pump that delivers the command within [0, 120] ml/h. Runs per patient: the LPV with
 the ``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-in ``validated``
 schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``. ``lpv-truth``
-(not in the default runs) schedules on each patient's apparent FOPDT (:func:`apparent_fopdt`)
+schedules on each patient's apparent FOPDT (:func:`apparent_fopdt`)
 clamped to the controller's box: the bound of any scheduling source that reports K, T, τ, on a
 patient no such model describes. ``--lpv PATH`` runs every LPV label on another generated module
 (a design with a wider box or another prefilter, ``benchmarks/designs/``).
