@@ -17,10 +17,11 @@ schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 (not in the default runs) schedules on each patient's apparent FOPDT (:func:`apparent_fopdt`)
 clamped to the controller's box: the bound of any scheduling source that reports K, T, τ, on a
 patient no such model describes. ``--lpv PATH`` runs every LPV label on another generated module
-(a design with a wider box or another prefilter, ``benchmarks/designs/``). ``lpv-gate-early`` and
-``lpv-gate-late`` (not in the default runs) are :class:`GatedFit`: the fit's schedule only while
-its held-out predictions beat the nominal model's; ``lpv-gate:key=value:...`` any other setting of
-it. ``--json PATH`` also writes the per-patient figures.
+(a design with a wider box or another prefilter, ``benchmarks/designs/``). ``lpv-gate-early``,
+``lpv-gate-late``, ``lpv-gate-revoke`` and ``lpv-gate-kstart`` (not in the default runs) are
+:class:`GatedFit`: the fit's schedule only while its held-out predictions beat the nominal model's
+(figures in ``docs/ESTIMATION.md``, "A held-out gate on the fit"); ``lpv-gate:key=value:...`` any
+other setting of it. ``--json PATH`` also writes the per-patient figures.
 
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
 arrival (%), SCHED_RATE / SCHED_OUT_OF_BOX ticks, HOLD or FAILSAFE ticks; then per model the
@@ -70,6 +71,10 @@ RUNS = {
     # held-out-validated fit (GatedFit): decided early on a T-100-ish start, or late from nominal
     "lpv-gate-early": ("lpv", "gate:start=1:H=4:L=4:min=4:zero=0.5:s0=0.55/120/40:latch=1:H2=60"),
     "lpv-gate-late": ("lpv", "gate:H=4:L=4:min=4:zero=0.5"),
+    # the same, and an adopted fit revoked for good when its 60 s changes, fully held out, do
+    # not beat the nominal model's; and the early decision from a K-only cautious start
+    "lpv-gate-revoke": ("lpv", "gate:H=4:L=4:min=4:zero=0.5:H2=60"),
+    "lpv-gate-kstart": ("lpv", "gate:start=1:H=4:L=4:min=4:zero=0.5:s0=0.65/150/40:latch=1:H2=60"),
     "pi": ("pi", "nominal"),
     "smith": ("smith", "estimated"),
     "smith-validated": ("smith", "validated"),
