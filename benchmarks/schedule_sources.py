@@ -144,8 +144,12 @@ class GatedFit:
     s, rel / sig relative and statistical margins (sig in variances of a window-mean difference),
     mem score memory s, adopt: "follow" (the fit's cautious schedule as ``estimated``), "konly"
     (the fit's K, validated's T, tau), drop: "refute" (drop only when nominal beats the fit by the
-    margins), "half" (drop when the fit no longer beats nominal by half the margins), "never".
-    ref: "nominal" or "bank" (score against the validated bank's adopted model).
+    margins), "half" (drop when the fit no longer beats nominal by half the margins), "never";
+    min s of scores before a decision; zero f: also S_fit < f x the sum of the squared changes;
+    start 1: the fit's schedule (``s0`` K/T/tau while it reports its prior) until one decision;
+    latch 1: no adoption after that decision rejects; H2 s: revoke an adopted fit for good when
+    its fully held-out H2-second changes do not beat the nominal model's; trust 1: adopt at the
+    learn time with no test (a timing experiment). "konly" was not measured.
     """
 
     source = "estimated"
@@ -185,7 +189,6 @@ class GatedFit:
         self.rho = list(self.val._rho)
         self.step_ = tuple(0.9 * r * TS_S for r in (2e-4, 0.06, 0.1))
         self.var2 = math.nan
-        self.trace: list[tuple[float, bool]] = []
 
     def _window(self) -> None:
         y, u, var = self.est.last_window()
