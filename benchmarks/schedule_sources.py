@@ -17,7 +17,11 @@ schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 schedules on each patient's apparent FOPDT (:func:`apparent_fopdt`)
 clamped to the controller's box: the bound of any scheduling source that reports K, T, τ, on a
 patient no such model describes. ``--lpv PATH`` runs every LPV label on another generated module
-(a design with a wider box or another prefilter, ``benchmarks/designs/``).
+(a design with a wider box or another prefilter, ``benchmarks/designs/``). ``lpv-gate-early``,
+``lpv-gate-late``, ``lpv-gate-revoke`` and ``lpv-gate-kstart`` (not in the default runs) are
+:class:`GatedFit`: the fit's schedule only while its held-out predictions beat the nominal model's
+(figures in ``docs/ESTIMATION.md``, "A held-out gate on the fit"); ``lpv-gate:key=value:...`` any
+other setting of it. ``--json PATH`` also writes the per-patient figures.
 
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
 arrival (%), SCHED_RATE / SCHED_OUT_OF_BOX ticks, HOLD or FAILSAFE ticks; then per model the
@@ -64,6 +68,13 @@ RUNS = {
     "lpv-fit-hold": ("lpv", "fit-hold"),
     "lpv-fit-slew": ("lpv", "fit-slew"),
     "lpv-truth": ("lpv", "truth"),
+    # held-out-validated fit (GatedFit): decided early on a T-100-ish start, or late from nominal
+    "lpv-gate-early": ("lpv", "gate:start=1:H=4:L=4:min=4:zero=0.5:s0=0.55/120/40:latch=1:H2=60"),
+    "lpv-gate-late": ("lpv", "gate:H=4:L=4:min=4:zero=0.5"),
+    # the same, and an adopted fit revoked for good when its 60 s changes, fully held out, do
+    # not beat the nominal model's; and the early decision from a K-only cautious start
+    "lpv-gate-revoke": ("lpv", "gate:H=4:L=4:min=4:zero=0.5:H2=60"),
+    "lpv-gate-kstart": ("lpv", "gate:start=1:H=4:L=4:min=4:zero=0.5:s0=0.65/150/40:latch=1:H2=60"),
     "pi": ("pi", "nominal"),
     "smith": ("smith", "estimated"),
     "smith-validated": ("smith", "validated"),
@@ -103,6 +114,194 @@ class LimitedFit:
         return replace(s, K=self.rho[0], T_s=self.rho[1], tau_s=self.rho[2])
 
 
+class _Sim:
+    """One fixed FOPDT model simulated from the delivered rate's window means (``ModelBank``'s
+    recursion), from the first window on."""
+
+    def __init__(self, K: float, T: float, tau: float, W: float, u: list[float]) -> None:
+        self.a = math.exp(-W / T)
+        self.b = K * (1.0 - self.a)
+        self.d = max(1, round(tau / W))
+        self.x: list[float] = []
+        for _j in range(len(u)):
+            self.add(u)
+        self.params = (K, T, tau)
+
+    def add(self, u: list[float]) -> None:
+        j = len(self.x)
+        ud = u[j - self.d] if j >= self.d else 0.0
+        self.x.append(self.a * (self.x[-1] if self.x else 0.0) + self.b * ud)
+
+
+class GatedFit:
+    """Experiment: the ``estimated`` source's schedule only while the fit's held-out predictions of
+    the MAP's H-second changes beat the nominal model's by margins (prequential: the error at
+    window j is the one of the newest snapshot of the fit taken at least ``L`` windows before j,
+    simulated from the delivered rate alone, so with L >= H both ends of the change are held out
+    for it); otherwise the ``validated`` source's schedule (reached at 0.9x the certified rates).
+
+    Keywords (label ``lpv-gate:key=value:...``): H horizon s, L lag s (default H), P snapshot period
+    s, rel / sig relative and statistical margins (sig in variances of a window-mean difference),
+    mem score memory s, adopt: "follow" (the fit's cautious schedule as ``estimated``), "konly"
+    (the fit's K, validated's T, tau), drop: "refute" (drop only when nominal beats the fit by the
+    margins), "half" (drop when the fit no longer beats nominal by half the margins), "never";
+    min s of scores before a decision; zero f: also S_fit < f x the sum of the squared changes;
+    start 1: the fit's schedule (``s0`` K/T/tau while it reports its prior) until one decision;
+    latch 1: no adoption after that decision rejects; H2 s: revoke an adopted fit for good when
+    its fully held-out H2-second changes do not beat the nominal model's; trust 1: adopt at the
+    learn time with no test (a timing experiment). "konly" was not measured.
+    """
+
+    source = "estimated"
+
+    def __init__(self, **kw: Any) -> None:
+        self.val = ValidatedSchedule(sample_period_s=TS_S)
+        self.est = self.val.estimator
+        self.fit = EstimatedSchedule(estimator=self.est)
+        W = self.W = self.est.window_s
+        self.H = max(1, round(kw.get("H", 20.0) / W))
+        self.L = max(1, round(kw.get("L", kw.get("H", 20.0)) / W))
+        self.P = max(1, round(kw.get("P", 10.0) / W))
+        self.rel, self.sig = kw.get("rel", 0.25), kw.get("sig", 20.0)
+        self.forget = math.exp(-W / kw.get("mem", 600.0))
+        self.adopt_mode, self.drop_mode = kw.get("adopt", "follow"), kw.get("drop", "refute")
+        self.min_n = max(1, round(kw.get("min", 10.0) / W))
+        self.zero = kw.get("zero", 0.0)  # also S_fit < zero * sum of dy^2 (0: off)
+        self.start_fit = bool(kw.get("start", 0.0))  # the fit's schedule until the first decision
+        self.decided = False
+        self.trust = bool(kw.get("trust", 0.0))
+        self.latch = bool(kw.get("latch", 0.0))  # one decision: never adopt after a rejection
+        self.H2 = round(kw.get("H2", 0.0) / W)  # revocation horizon (0: off), fully held out
+        self.S2f = self.S2n = 0.0
+        self.n2 = 0
+        self.revoked = False
+        s0 = kw.get("s0", "")  # start=1: the schedule while the fit reports its prior, K/T/tau
+        self.s0 = tuple(float(v) for v in s0.split("/")) if s0 else None
+        self.S_zero = 0.0
+        self.u: list[float] = []
+        self.y: list[float] = []
+        self.nom = _Sim(*self.val._rho, W, self.u)
+        self.snaps: list[tuple[int, _Sim]] = []
+        self.S_fit = self.S_nom = 0.0
+        self.n = 0
+        self.adopted = False
+        self.ever = False
+        self.rho = list(self.val._rho)
+        self.step_ = tuple(0.9 * r * TS_S for r in (2e-4, 0.06, 0.1))
+        self.var2 = math.nan
+
+    def _window(self) -> None:
+        y, u, var = self.est.last_window()
+        self.u.append(u if u == u else 0.0)
+        self.y.append(y)
+        self.var2 = 2.0 * var
+        j = len(self.u) - 1
+        self.nom.add(self.u)
+        for _, sm in self.snaps:
+            sm.add(self.u)
+        e = self.est.estimate
+        if self.trust and not e.from_prior and not self.ever:
+            self.adopted = self.ever = self.decided = True  # timing experiment: no test
+        if not e.from_prior and (not self.snaps or j - self.snaps[-1][0] >= self.P):
+            self.snaps.append((j, _Sim(e.K, e.T_s, e.tau_s, self.W, self.u)))
+        # the newest snapshot at least L windows old scores window j
+        use = None
+        for c, sm in self.snaps:
+            if c <= j - self.L:
+                use = sm
+        # keep only what can still be used
+        keep = max(self.L, self.H2)
+        while len(self.snaps) > 1 and self.snaps[1][0] <= j - keep:
+            self.snaps.pop(0)
+        self._revoke(j, y)
+        H = self.H
+        if use is None or j < H or y != y or self.y[j - H] != self.y[j - H]:
+            return
+        dy = y - self.y[j - H]
+        ef = dy - (use.x[j] - use.x[j - H])
+        en = dy - (self.nom.x[j] - self.nom.x[j - H])
+        f = self.forget
+        self.S_fit = f * self.S_fit + ef * ef
+        self.S_nom = f * self.S_nom + en * en
+        self.S_zero = f * self.S_zero + dy * dy
+        self.n += 1
+        if self.n < self.min_n:
+            return
+        if not self.decided:
+            self.decided = True
+            if self.start_fit:
+                self.adopted = True  # as the fit so far: the drop rule below decides
+                if not self._good(1.0):
+                    self.adopted = False
+                    self.rho = [self.val._rho[0], self.val._rho[1], self.val._rho[2]]
+                return
+        if not self.adopted:
+            if not self.revoked and not (self.latch and self.decided) and self._good(1.0):
+                self.adopted = self.ever = True
+        elif self.drop_mode == "refute":
+            if self._beats(self.S_nom, self.S_fit, 1.0):
+                self.adopted = False
+        elif self.drop_mode == "half":
+            if not self._beats(self.S_fit, self.S_nom, 0.5):
+                self.adopted = False
+
+    def _revoke(self, j: int, y: float) -> None:
+        """Long horizon, fully held out: the newest snapshot at least H2 windows old predicts the
+        change over the last H2 windows; revoke (for good) when it does not beat nominal."""
+        H2 = self.H2
+        if not H2 or not self.adopted or j < H2 or y != y or self.y[j - H2] != self.y[j - H2]:
+            return
+        use = None
+        for c, sm in self.snaps:
+            if c <= j - H2:
+                use = sm
+        if use is None:
+            return
+        dy = y - self.y[j - H2]
+        ef = dy - (use.x[j] - use.x[j - H2])
+        en = dy - (self.nom.x[j] - self.nom.x[j - H2])
+        f = self.forget
+        self.S2f = f * self.S2f + ef * ef
+        self.S2n = f * self.S2n + en * en
+        self.n2 += 1
+        if self.n2 >= self.min_n and not self._beats(self.S2f, self.S2n, 1.0):
+            self.adopted, self.revoked = False, True
+            self.rho = [self.val._rho[0], self.val._rho[1], self.val._rho[2]]
+
+    def _good(self, scale: float) -> bool:
+        ok = self._beats(self.S_fit, self.S_nom, scale)
+        return ok and (not self.zero or self.S_fit < self.zero * self.S_zero)
+
+    def _beats(self, s: float, ref: float, scale: float) -> bool:
+        return s < (1.0 - self.rel * scale) * ref and ref - s >= scale * self.sig * self.var2
+
+    def update(self, inputs: ScheduleInput) -> Any:
+        from dataclasses import replace
+
+        vs = self.val.update(inputs)
+        if self.est.windows_closed != len(self.u):
+            self._window()
+        e = self.est.estimate
+        if self.start_fit and not self.decided:
+            K, T = self.fit.keep_slope(*self.fit.cautious(e))
+            if e.from_prior and self.s0:
+                K, T = self.s0[:2]
+            self.rho = [K, T, e.tau_s]
+            return replace(vs, K=K, T_s=T, tau_s=e.tau_s)
+        if self.adopted and not e.from_prior:
+            K, T = self.fit.keep_slope(*self.fit.cautious(e))
+            goal = [K, T, e.tau_s]
+            if self.adopt_mode == "konly":
+                goal[1:] = [vs.T_s, vs.tau_s]
+            self.rho = goal
+            return replace(vs, K=K, T_s=goal[1], tau_s=goal[2])
+        goal = [vs.K, vs.T_s, vs.tau_s]
+        for i in range(3):
+            d = goal[i] - self.rho[i]
+            self.rho[i] += max(-self.step_[i], min(self.step_[i], d))
+        return replace(vs, K=self.rho[0], T_s=self.rho[1], tau_s=self.rho[2])
+
+
 def apparent_fopdt(params: Any, target_mmhg: float) -> tuple[float, float, float]:
     """The FOPDT a perfect identification would report for an :mod:`sim.patients.pkpd` patient
     held at ``target_mmhg``: K the secant sensitivity (target − baseline) / the steady infusion
@@ -131,6 +330,12 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
         return NominalSchedule(*(float(v) for v in source[6:].split("/")))
     if source in ("fit-hold", "fit-slew"):
         return LimitedFit(source == "fit-hold")
+    if source.startswith("gate"):
+        kw = {}
+        for item in source.split(":")[1:]:
+            key, _, value = item.partition("=")
+            kw[key] = value if key in ("adopt", "drop", "ref", "s0") else float(value)
+        return GatedFit(**kw)
     if source == "validated" and (VARIANT["sched"] or VARIANT["bank"]):
         kw = dict(VARIANT["sched"])
         start = kw.get("start", (0.55, 150.0, 40.0))
@@ -243,6 +448,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--patients", type=int, default=10)
     p.add_argument("--seed", type=int, default=2026)
     p.add_argument("--runs", default=",".join(RUNS), help="comma-separated of " + ", ".join(RUNS))
+    p.add_argument("--json", default="", help="also write the per-patient results to this file")
     p.add_argument("--sched", default="", help="ValidatedSchedule kwargs: key=value;...")
     p.add_argument("--bank", default="", help="ModelBank kwargs: key=value;...")
     p.add_argument(
@@ -256,6 +462,8 @@ def main(argv: list[str] | None = None) -> int:
     for lab in labels:
         if lab.startswith("fixed:"):
             RUNS[lab] = ("lpv", lab)
+        if lab.startswith("lpv-gate:"):
+            RUNS[lab] = ("lpv", lab[4:])
     for lab, (spec, src) in RUNS.items():
         if spec == "lpv":
             RUNS[lab] = (args.lpv, src)
@@ -299,6 +507,11 @@ def main(argv: list[str] | None = None) -> int:
             print(" | ".join(line), flush=True)
         idx = [i for i, ok in enumerate(reach) if ok]
         print(f"  reachable: {len(idx)} of {len(reach)}")
+        if args.json:
+            import json
+
+            with open(args.json, "w") as fh:
+                json.dump({"reach": reach, "res": res}, fh)
 
         def ratio(a: str, b: str, res: Any = res, idx: list[int] = idx) -> list[float]:
             return [res[a][i]["iae"] / res[b][i]["iae"] for i in idx]
@@ -315,7 +528,9 @@ def main(argv: list[str] | None = None) -> int:
         for a, b in (("lpv-validated", "pi"), ("lpv-nominal", "pi"), ("lpv-estimated", "pi"),
                      ("lpv-truth", "pi"), ("lpv-truth", "smith"), ("lpv-truth", "lpv-nominal"),
                      ("lpv-validated", "smith-validated"), ("lpv-validated", "lpv-nominal"),
-                     ("lpv-estimated", "lpv-nominal")):  # fmt: skip
+                     ("lpv-estimated", "lpv-nominal"),
+                     *((lab, ref) for lab in labels if lab.startswith("lpv-gate")
+                       for ref in ("lpv-nominal", "pi"))):  # fmt: skip
             if a in res and b in res:
                 r = ratio(a, b)
                 print(
