@@ -13,15 +13,17 @@ runtime's own closed-loop core (:class:`runtime.core.closed_loop.ClosedLoopCore`
 scheduling source, controller), in process, without a link: a 0.3 mmHg Gaussian monitor at 10 Hz
 (seeded) and a pump that delivers the command within [0, 120] ml/h. Runs per patient: the LPV with
 the ``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-in ``validated``
-schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``. ``lpv-truth``
-schedules on each patient's apparent FOPDT (:func:`apparent_fopdt`)
-clamped to the controller's box: the bound of any scheduling source that reports K, T, τ, on a
-patient no such model describes. ``--lpv PATH`` runs every LPV label on another generated module
-(a design with a wider box or another prefilter, ``benchmarks/designs/``). ``lpv-gate-early``,
-``lpv-gate-late``, ``lpv-gate-revoke`` and ``lpv-gate-kstart`` (not in the default runs) are
-:class:`GatedFit`: the fit's schedule only while its held-out predictions beat the nominal model's
-(figures in ``docs/ESTIMATION.md``, "A held-out gate on the fit"); ``lpv-gate:key=value:...`` any
-other setting of it. ``--json PATH`` also writes the per-patient figures.
+schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
+
+Experiments, run when named in ``--runs``: ``lpv-fit-hold`` / ``lpv-fit-slew``
+(:class:`LimitedFit`); ``lpv-truth``, each patient's apparent FOPDT (:func:`apparent_fopdt`)
+clamped to the controller's box, the bound of any source that reports K, T, τ on a patient no
+such model describes; ``lpv-gate-early``, ``lpv-gate-late``, ``lpv-gate-revoke`` and
+``lpv-gate-kstart`` (:class:`GatedFit`: the fit's schedule only while its held-out predictions beat
+the nominal model's; ``lpv-gate:key=value:...`` any other setting of it). Figures in
+``docs/ESTIMATION.md`` ("The frontier on patients outside the model class", "A held-out gate on the
+fit"). ``--lpv PATH`` runs every LPV label on another generated module (a design with a wider box
+or another prefilter, ``benchmarks/designs/``); ``--json PATH`` also writes the per-patient figures.
 
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
 arrival (%), SCHED_RATE / SCHED_OUT_OF_BOX ticks, HOLD or FAILSAFE ticks; then per model the
@@ -79,6 +81,8 @@ RUNS = {
     "smith": ("smith", "estimated"),
     "smith-validated": ("smith", "validated"),
 }
+#: the labels run when ``--runs`` is not given (the others are experiments)
+DEFAULT_RUNS = ("lpv-nominal", "lpv-estimated", "lpv-validated", "pi", "smith", "smith-validated")
 
 
 #: keyword arguments of the ``validated`` source and of its bank (``--sched``, ``--bank``)
@@ -142,14 +146,14 @@ class GatedFit:
 
     Keywords (label ``lpv-gate:key=value:...``): H horizon s, L lag s (default H), P snapshot period
     s, rel / sig relative and statistical margins (sig in variances of a window-mean difference),
-    mem score memory s, adopt: "follow" (the fit's cautious schedule as ``estimated``), "konly"
-    (the fit's K, validated's T, tau), drop: "refute" (drop only when nominal beats the fit by the
+    mem score memory s, drop: "refute" (drop only when nominal beats the fit by the
     margins), "half" (drop when the fit no longer beats nominal by half the margins), "never";
     min s of scores before a decision; zero f: also S_fit < f x the sum of the squared changes;
     start 1: the fit's schedule (``s0`` K/T/tau while it reports its prior) until one decision;
     latch 1: no adoption after that decision rejects; H2 s: revoke an adopted fit for good when
     its fully held-out H2-second changes do not beat the nominal model's; trust 1: adopt at the
-    learn time with no test (a timing experiment). "konly" was not measured.
+    learn time with no test (a timing experiment). An adopted fit is scheduled as ``estimated``
+    schedules it (cautiously).
     """
 
     source = "estimated"
@@ -164,7 +168,7 @@ class GatedFit:
         self.P = max(1, round(kw.get("P", 10.0) / W))
         self.rel, self.sig = kw.get("rel", 0.25), kw.get("sig", 20.0)
         self.forget = math.exp(-W / kw.get("mem", 600.0))
-        self.adopt_mode, self.drop_mode = kw.get("adopt", "follow"), kw.get("drop", "refute")
+        self.drop_mode = kw.get("drop", "refute")
         self.min_n = max(1, round(kw.get("min", 10.0) / W))
         self.zero = kw.get("zero", 0.0)  # also S_fit < zero * sum of dy^2 (0: off)
         self.start_fit = bool(kw.get("start", 0.0))  # the fit's schedule until the first decision
@@ -290,11 +294,8 @@ class GatedFit:
             return replace(vs, K=K, T_s=T, tau_s=e.tau_s)
         if self.adopted and not e.from_prior:
             K, T = self.fit.keep_slope(*self.fit.cautious(e))
-            goal = [K, T, e.tau_s]
-            if self.adopt_mode == "konly":
-                goal[1:] = [vs.T_s, vs.tau_s]
-            self.rho = goal
-            return replace(vs, K=K, T_s=goal[1], tau_s=goal[2])
+            self.rho = [K, T, e.tau_s]
+            return replace(vs, K=K, T_s=T, tau_s=e.tau_s)
         goal = [vs.K, vs.T_s, vs.tau_s]
         for i in range(3):
             d = goal[i] - self.rho[i]
@@ -334,7 +335,7 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
         kw = {}
         for item in source.split(":")[1:]:
             key, _, value = item.partition("=")
-            kw[key] = value if key in ("adopt", "drop", "ref", "s0") else float(value)
+            kw[key] = value if key in ("drop", "s0") else float(value)
         return GatedFit(**kw)
     if source == "validated" and (VARIANT["sched"] or VARIANT["bank"]):
         kw = dict(VARIANT["sched"])
@@ -447,7 +448,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenario", default="", help="the project's cohort in this scenario instead")
     p.add_argument("--patients", type=int, default=10)
     p.add_argument("--seed", type=int, default=2026)
-    p.add_argument("--runs", default=",".join(RUNS), help="comma-separated of " + ", ".join(RUNS))
+    p.add_argument(
+        "--runs",
+        default=",".join(DEFAULT_RUNS),
+        help=f"comma-separated of {', '.join(RUNS)} (default: {','.join(DEFAULT_RUNS)})",
+    )
     p.add_argument("--json", default="", help="also write the per-patient results to this file")
     p.add_argument("--sched", default="", help="ValidatedSchedule kwargs: key=value;...")
     p.add_argument("--bank", default="", help="ModelBank kwargs: key=value;...")
