@@ -208,22 +208,15 @@ class GatedFit:
             self.adopted = self.ever = self.decided = True  # timing experiment: no test
         if not e.from_prior and (not self.snaps or j - self.snaps[-1][0] >= self.P):
             self.snaps.append((j, _Sim(e.K, e.T_s, e.tau_s, self.W, self.u)))
-        # the newest snapshot at least L windows old scores window j
-        use = None
-        for c, sm in self.snaps:
-            if c <= j - self.L:
-                use = sm
         # keep only what can still be used
         keep = max(self.L, self.H2)
         while len(self.snaps) > 1 and self.snaps[1][0] <= j - keep:
             self.snaps.pop(0)
-        self._revoke(j, y)
-        H = self.H
-        if use is None or j < H or y != y or self.y[j - H] != self.y[j - H]:
+        self._revoke(j)
+        errors = self._errors(j, self.L, self.H)
+        if errors is None:
             return
-        dy = y - self.y[j - H]
-        ef = dy - (use.x[j] - use.x[j - H])
-        en = dy - (self.nom.x[j] - self.nom.x[j - H])
+        dy, ef, en = errors
         f = self.forget
         self.S_fit = f * self.S_fit + ef * ef
         self.S_nom = f * self.S_nom + en * en
@@ -249,21 +242,32 @@ class GatedFit:
             if not self._beats(self.S_fit, self.S_nom, 0.5):
                 self.adopted = False
 
-    def _revoke(self, j: int, y: float) -> None:
-        """Long horizon, fully held out: the newest snapshot at least H2 windows old predicts the
-        change over the last H2 windows; revoke (for good) when it does not beat nominal."""
-        H2 = self.H2
-        if not H2 or not self.adopted or j < H2 or y != y or self.y[j - H2] != self.y[j - H2]:
-            return
+    def _errors(self, j: int, lag: int, horizon: int) -> tuple[float, float, float] | None:
+        """(the MAP's change over ``horizon`` windows to window j, the error of the newest snapshot
+        at least ``lag`` windows old predicting it, the nominal model's error); None when there is
+        no such snapshot or sample."""
+        y = self.y
+        if j < horizon or y[j] != y[j] or y[j - horizon] != y[j - horizon]:
+            return None
         use = None
         for c, sm in self.snaps:
-            if c <= j - H2:
+            if c <= j - lag:
                 use = sm
         if use is None:
+            return None
+        dy = y[j] - y[j - horizon]
+        ef = dy - (use.x[j] - use.x[j - horizon])
+        return dy, ef, dy - (self.nom.x[j] - self.nom.x[j - horizon])
+
+    def _revoke(self, j: int) -> None:
+        """Long horizon, fully held out: the newest snapshot at least H2 windows old predicts the
+        change over the last H2 windows; revoke (for good) when it does not beat nominal."""
+        if not self.H2 or not self.adopted:
             return
-        dy = y - self.y[j - H2]
-        ef = dy - (use.x[j] - use.x[j - H2])
-        en = dy - (self.nom.x[j] - self.nom.x[j - H2])
+        errors = self._errors(j, self.H2, self.H2)
+        if errors is None:
+            return
+        _, ef, en = errors
         f = self.forget
         self.S2f = f * self.S2f + ef * ef
         self.S2n = f * self.S2n + en * en
