@@ -287,7 +287,7 @@ CATALOGUE: dict[str, FaultKind] = {
             "sched-out-of-box",
             "sched",
             "K reported outside the design box",
-            (Param("K", 2.0, -10.0, 10.0, "reported K (mmHg/(ml/h))"),),
+            (Param("K", 5.0, -10.0, 10.0, "reported K (mmHg/(ml/h))"),),
             20.0,
             ("SCHED_OUT_OF_BOX",),
             1,

@@ -12,10 +12,12 @@ from dataclasses import dataclass
 
 from baselines.smith import INITIAL_SCHEDULE
 from contracts.checks import check_range
+from runtime.generated.lpv_map_controller import GRID_HI, GRID_LO
 
 __all__ = [
     "DEFAULT_SETTINGS",
     "DESIGN_BOX",
+    "ESTIMATE_BOX",
     "NOMINAL_PLANT",
     "T_DRIFT_PER_ML_H",
     "EstimatorSettings",
@@ -23,8 +25,18 @@ __all__ = [
 
 #: the prior: the nominal patient the design and the PI were tuned for (K mmHg/(ml/h), T s, τ s)
 NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
-#: the default design box: (low, high) of K (mmHg/(ml/h)), T (s), τ (s)
-DESIGN_BOX: tuple[tuple[float, float], ...] = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
+#: the shipped design's certified box, read from its generated module: (low, high) of K
+#: (mmHg/(ml/h)), T (s), τ (s)
+DESIGN_BOX: tuple[tuple[float, float], ...] = tuple(
+    (float(lo), float(hi)) for lo, hi in zip(GRID_LO, GRID_HI, strict=True)
+)
+#: the estimator's range (the default ``EstimatorSettings.box``): (low, high) of K (mmHg/(ml/h)),
+#: T (s), τ (s). Its estimates' ``in_box`` and the estimated source's caution (which stops at its K
+#: high and T low edges) refer to it; it clamps nothing (the controller clamps to its box). It is
+#: the box the estimator was tuned in, narrower in K and T than the certified box: widened to it,
+#: the estimated schedule measured worse on both independent models (docs/ESTIMATION.md, "The
+#: estimator's range and the certified box").
+ESTIMATE_BOX: tuple[tuple[float, float], ...] = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
 #: the T-drift prior: T rises this many s per (ml/h)·s of infusion (the literature patient model's
 #: b_T, middle of its [1e-4, 3e-4] range; sim/patients/patient.py)
 T_DRIFT_PER_ML_H = 2e-4
@@ -71,8 +83,9 @@ class EstimatorSettings:
     T_plausible_s
         Plausible (low, high) of T (s), 0 < low < high; outside, the estimate is rejected.
     box
-        The design box ((K low, high) mmHg/(ml/h), (T low, high) s, (τ low, high) s), each
-        0 < low < high, for the estimate's ``in_box``.
+        The estimator's range ((K low, high) mmHg/(ml/h), (T low, high) s, (τ low, high) s), each
+        0 < low < high, for the estimate's ``in_box`` (default :data:`ESTIMATE_BOX`, inside the
+        certified :data:`DESIGN_BOX`).
     T_drift_per_ml_h
         The T-drift prior: s of T per (ml/h)·s of delivered infusion, finite and >= 0 (0: off).
 
@@ -100,7 +113,7 @@ class EstimatorSettings:
     tau_prior_s: tuple[float, float] = (15.0, 10.0)
     K_plausible: tuple[float, float] = (0.02, 5.0)
     T_plausible_s: tuple[float, float] = (20.0, 1000.0)
-    box: tuple[tuple[float, float], ...] = DESIGN_BOX
+    box: tuple[tuple[float, float], ...] = ESTIMATE_BOX
     T_drift_per_ml_h: float = T_DRIFT_PER_ML_H
 
     def __post_init__(self) -> None:

@@ -37,9 +37,9 @@ def test_apparent_fopdt_is_the_secant_gain_to_the_target_and_the_two_fast_lags(q
 
 
 def test_truth_source_holds_the_patients_values_clamped_to_the_controllers_box():
-    source = make_source("truth", load_controller("lpv"), (1.1, 360.0, 20.0))
+    source = make_source("truth", load_controller("lpv"), (3.5, 450.0, 20.0))
     s = source.update(ScheduleInput(60.0, 0, 0.0, 0.5, 120.0, 30.0, True))
-    assert (s.K, s.T_s, s.tau_s) == (1.0, 200.0, 20.0)  # the shipped box: K <= 1, T <= 200 s
+    assert (s.K, s.T_s, s.tau_s) == (3.0, 400.0, 20.0)  # the shipped box: K <= 3, T <= 400 s
 
 
 def test_not_shipped_designs_widen_the_box_and_keep_the_shipped_law():
@@ -52,6 +52,7 @@ def test_not_shipped_designs_widen_the_box_and_keep_the_shipped_law():
             [100.0, 400.0],
             shipped.model.box[2].tolist(),
         ]
-        assert cfg.model.rate_bounds.tolist() == shipped.model.rate_bounds.tolist()
+        # the K rate of the box they were measured with, the other rates the shipped ones
+        assert cfg.model.rate_bounds.tolist() == [2e-4, *shipped.model.rate_bounds.tolist()[1:]]
         assert cfg.controller == shipped.controller
         assert cfg.reference.lambda_s == lam

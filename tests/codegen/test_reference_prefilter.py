@@ -283,7 +283,7 @@ def _default_table() -> dict:
         ("enabled", "yes", "reference.enabled"),
         ("lambda_s", 0.0, "reference.lambda_s"),
         ("pump_fraction", 1.5, "reference.pump_fraction"),
-        ("k_min", 2.0, "reference.k_min"),
+        ("k_min", 3.5, "reference.k_min"),  # above the box's K 3
         ("shape", 1.0, "reference.shape"),
     ],
 )

@@ -15,7 +15,14 @@ import numpy as np
 import pytest
 
 from runtime.estimation.estimator import DelayBankEstimator
-from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT, EstimatorSettings
+from runtime.estimation.settings import (
+    DEFAULT_SETTINGS,
+    DESIGN_BOX,
+    ESTIMATE_BOX,
+    NOMINAL_PLANT,
+    EstimatorSettings,
+)
+from runtime.generated import lpv_map_controller as shipped
 
 TS = 0.1
 
@@ -220,12 +227,19 @@ def test_settings_reject_bad_values_with_a_clear_error(kwargs, match):
 
 
 @pytest.mark.parametrize(("K", "inside"), [(0.5, True), (0.2, False)])
-def test_estimate_says_whether_it_lies_in_the_design_box(K, inside):
+def test_estimate_says_whether_it_lies_in_its_range(K, inside):
     u = staircase(10, 2400.0)
     estimates = run(DelayBankEstimator(TS), fopdt_map(u, np.full(u.size, K), 150.0, 30.0, 10), u)
     last = estimates[-1]
     assert not last.from_prior and abs(last.K - K) / K < 0.15
     assert last.in_box is inside
+
+
+def test_design_box_is_the_generated_modules_and_the_estimators_range_lies_inside_it():
+    assert DESIGN_BOX == tuple(zip(shipped.GRID_LO, shipped.GRID_HI, strict=True))
+    assert DEFAULT_SETTINGS.box == ESTIMATE_BOX
+    for (lo, hi), (box_lo, box_hi) in zip(ESTIMATE_BOX, DESIGN_BOX, strict=True):
+        assert box_lo <= lo < hi <= box_hi
 
 
 def test_tau_prior_decides_only_where_the_data_carry_no_delay_information():

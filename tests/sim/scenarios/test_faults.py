@@ -77,7 +77,7 @@ def test_pump_mismatch_and_ignore_change_delivery_not_the_command():
 def test_sched_faults_rewrite_what_the_device_reports():
     _, clean, _ = run([], n=80)
     _, o, _ = run(["sched-out-of-box:1,1", "sched-jump:3,1,amplitude=0.1", "sched-missing:5,1"], 80)
-    assert all(x.K == 2.0 for x in o[10:20])
+    assert all(x.K == 5.0 for x in o[10:20])  # the default reported K, outside the box
     dk = [o[k].K - clean[k].K for k in range(30, 40)]
     assert np.allclose(dk, [0.1, -0.1] * 5, atol=1e-6)
     assert all(math.isnan(x.K) and not x.sched_valid for x in o[50:60])
