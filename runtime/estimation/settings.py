@@ -12,11 +12,12 @@ from dataclasses import dataclass
 
 from baselines.smith import INITIAL_SCHEDULE
 from contracts.checks import check_range
-from runtime.generated.lpv_map_controller import GRID_HI, GRID_LO
+from runtime.generated import lpv_map_controller as shipped
 
 __all__ = [
     "DEFAULT_SETTINGS",
     "DESIGN_BOX",
+    "DESIGN_RATES",
     "ESTIMATE_BOX",
     "NOMINAL_PLANT",
     "T_DRIFT_PER_ML_H",
@@ -25,11 +26,14 @@ __all__ = [
 
 #: the prior: the nominal patient the design and the PI were tuned for (K mmHg/(ml/h), T s, τ s)
 NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
-#: the shipped design's certified box, read from its generated module: (low, high) of K
-#: (mmHg/(ml/h)), T (s), τ (s)
+#: the shipped design's certified box, (low, high) of K (mmHg/(ml/h)), T (s), τ (s), and rate
+#: bounds (K mmHg/(ml/h) per s, T s per s, τ s per s), read from its generated module (as
+#: runtime.core.supervisor_config.sched_limits_of does for any controller; estimation stays free
+#: of that module's numpy)
 DESIGN_BOX: tuple[tuple[float, float], ...] = tuple(
-    (float(lo), float(hi)) for lo, hi in zip(GRID_LO, GRID_HI, strict=True)
+    (float(lo), float(hi)) for lo, hi in zip(shipped.GRID_LO, shipped.GRID_HI, strict=True)
 )
+DESIGN_RATES: tuple[float, float, float] = tuple(float(r) for r in shipped.RATE_BOUNDS)  # type: ignore[assignment]
 #: the estimator's range (the default ``EstimatorSettings.box``): (low, high) of K (mmHg/(ml/h)),
 #: T (s), τ (s). Its estimates' ``in_box`` and the estimated source's caution (which stops at its K
 #: high and T low edges) refer to it; it clamps nothing (the controller clamps to its box). It is

@@ -17,15 +17,10 @@ from contracts.checks import check_range
 from runtime.core.estimate import Estimate
 from runtime.core.scheduling import Schedule, ScheduleInput
 from runtime.estimation.estimator import DelayBankEstimator
-from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
+from runtime.estimation.settings import DESIGN_BOX, DESIGN_RATES, NOMINAL_PLANT
 from runtime.estimation.validation import ModelBank
-from runtime.generated.lpv_map_controller import RATE_BOUNDS
 
 __all__ = ["DESIGN_RATES", "ValidatedSchedule"]
-
-#: the shipped design's certified rates, read from its generated module (K mmHg/(ml/h) per s,
-#: T s per s, τ s per s)
-DESIGN_RATES: tuple[float, float, float] = tuple(float(r) for r in RATE_BOUNDS)  # type: ignore[assignment]
 
 
 class ValidatedSchedule:
