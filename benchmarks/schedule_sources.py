@@ -16,10 +16,10 @@ the ``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-
 schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 
 Experiments, run when named in ``--runs``: ``lpv-fit-hold`` / ``lpv-fit-slew``
-(:class:`LimitedFit`); ``lpv-truth``, each patient's apparent FOPDT (:func:`apparent_fopdt`)
+(:class:`benchmarks.schedule_experiments.LimitedFit`); ``lpv-truth``, each patient's apparent FOPDT (:func:`apparent_fopdt`)
 clamped to the controller's box, the bound of any source that reports K, T, τ on a patient no
 such model describes; ``lpv-gate-early``, ``lpv-gate-late``, ``lpv-gate-revoke`` and
-``lpv-gate-kstart`` (:class:`GatedFit`: the fit's schedule only while its held-out predictions beat
+``lpv-gate-kstart`` (:class:`benchmarks.schedule_experiments.GatedFit`: the fit's schedule only while its held-out predictions beat
 the nominal model's; ``lpv-gate:key=value:...`` any other setting of it). Figures in
 ``docs/ESTIMATION.md`` ("The frontier on patients outside the model class", "A held-out gate on the
 fit"). ``--lpv PATH`` runs every LPV label on another generated module (a design with a wider box
@@ -41,13 +41,13 @@ import statistics
 import sys
 from typing import Any
 
+from benchmarks.schedule_experiments import GatedFit, LimitedFit
 from contracts.metrics import run_metrics
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
-from runtime.core.scheduling import ScheduleInput
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, State, sched_limits_of, supervisor_config_for
-from runtime.estimation.sources import EstimatedSchedule, make_schedule
+from runtime.estimation.sources import make_schedule
 from runtime.estimation.validated import ValidatedSchedule
 from runtime.estimation.validation import ModelBank
 from runtime.inputs.controller_loader import load_controller
@@ -81,235 +81,12 @@ RUNS = {
     "smith": ("smith", "estimated"),
     "smith-validated": ("smith", "validated"),
 }
-#: the box ((K mmHg/(ml/h)), (T s), (τ s)) and rates (per s) the experiments' own slew limits use:
-#: the shipped design's when their figures were measured (before the box became K 0.15-3,
-#: T 100-400 s, K rate 6e-4), kept so that those figures reproduce
-EXPERIMENT_BOX = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
-EXPERIMENT_RATES = (2e-4, 0.06, 0.1)
 #: the labels run when ``--runs`` is not given (the others are experiments)
 DEFAULT_RUNS = ("lpv-nominal", "lpv-estimated", "lpv-validated", "pi", "smith", "smith-validated")
 
 
 #: keyword arguments of the ``validated`` source and of its bank (``--sched``, ``--bank``)
 VARIANT: dict[str, dict[str, Any]] = {"sched": {}, "bank": {}}
-
-
-class LimitedFit:
-    """Experiment: the ``estimated`` source's schedule, box-clamped; one jump at the first learned
-    estimate, then slewed at 0.9x the certified rates (``hold``: frozen after the jump)."""
-
-    source = "estimated"
-
-    def __init__(self, hold: bool) -> None:
-        self.fit = EstimatedSchedule(sample_period_s=TS_S)
-        self.hold, self.jumped, self.rho = hold, False, None
-        self.box = EXPERIMENT_BOX
-        self.step_ = tuple(0.9 * r * TS_S for r in EXPERIMENT_RATES)
-
-    def update(self, inputs: ScheduleInput) -> Any:
-        s = self.fit.update(inputs)
-        goal = [
-            min(max(v, lo), hi) for v, (lo, hi) in zip((s.K, s.T_s, s.tau_s), self.box, strict=True)
-        ]
-        if self.rho is None or (not self.jumped and not s.from_prior):
-            self.jumped = self.rho is not None
-            self.rho = goal
-        elif not (self.jumped and self.hold):
-            for i in range(3):
-                d = goal[i] - self.rho[i]
-                self.rho[i] += max(-self.step_[i], min(self.step_[i], d))
-        from dataclasses import replace
-
-        return replace(s, K=self.rho[0], T_s=self.rho[1], tau_s=self.rho[2])
-
-
-class _Sim:
-    """One fixed FOPDT model simulated from the delivered rate's window means (``ModelBank``'s
-    recursion), from the first window on."""
-
-    def __init__(self, K: float, T: float, tau: float, W: float, u: list[float]) -> None:
-        self.a = math.exp(-W / T)
-        self.b = K * (1.0 - self.a)
-        self.d = max(1, round(tau / W))
-        self.x: list[float] = []
-        for _j in range(len(u)):
-            self.add(u)
-        self.params = (K, T, tau)
-
-    def add(self, u: list[float]) -> None:
-        j = len(self.x)
-        ud = u[j - self.d] if j >= self.d else 0.0
-        self.x.append(self.a * (self.x[-1] if self.x else 0.0) + self.b * ud)
-
-
-class GatedFit:
-    """Experiment: the ``estimated`` source's schedule only while the fit's held-out predictions of
-    the MAP's H-second changes beat the nominal model's by margins (prequential: the error at
-    window j is the one of the newest snapshot of the fit taken at least ``L`` windows before j,
-    simulated from the delivered rate alone, so with L >= H both ends of the change are held out
-    for it); otherwise the ``validated`` source's schedule (reached at 0.9x the certified rates).
-
-    Keywords (label ``lpv-gate:key=value:...``): H horizon s, L lag s (default H), P snapshot period
-    s, rel / sig relative and statistical margins (sig in variances of a window-mean difference),
-    mem score memory s, drop: "refute" (drop only when nominal beats the fit by the
-    margins), "half" (drop when the fit no longer beats nominal by half the margins), "never";
-    min s of scores before a decision; zero f: also S_fit < f x the sum of the squared changes;
-    start 1: the fit's schedule (``s0`` K/T/tau while it reports its prior) until one decision;
-    latch 1: no adoption after that decision rejects; H2 s: revoke an adopted fit for good when
-    its fully held-out H2-second changes do not beat the nominal model's; trust 1: adopt at the
-    learn time with no test (a timing experiment). An adopted fit is scheduled as ``estimated``
-    schedules it (cautiously).
-    """
-
-    source = "estimated"
-
-    def __init__(self, **kw: Any) -> None:
-        self.val = ValidatedSchedule(sample_period_s=TS_S)
-        self.est = self.val.estimator
-        self.fit = EstimatedSchedule(estimator=self.est)
-        W = self.W = self.est.window_s
-        self.H = max(1, round(kw.get("H", 20.0) / W))
-        self.L = max(1, round(kw.get("L", kw.get("H", 20.0)) / W))
-        self.P = max(1, round(kw.get("P", 10.0) / W))
-        self.rel, self.sig = kw.get("rel", 0.25), kw.get("sig", 20.0)
-        self.forget = math.exp(-W / kw.get("mem", 600.0))
-        self.drop_mode = kw.get("drop", "refute")
-        self.min_n = max(1, round(kw.get("min", 10.0) / W))
-        self.zero = kw.get("zero", 0.0)  # also S_fit < zero * sum of dy^2 (0: off)
-        self.start_fit = bool(kw.get("start", 0.0))  # the fit's schedule until the first decision
-        self.decided = False
-        self.trust = bool(kw.get("trust", 0.0))
-        self.latch = bool(kw.get("latch", 0.0))  # one decision: never adopt after a rejection
-        self.H2 = round(kw.get("H2", 0.0) / W)  # revocation horizon (0: off), fully held out
-        self.S2f = self.S2n = 0.0
-        self.n2 = 0
-        self.revoked = False
-        s0 = kw.get("s0", "")  # start=1: the schedule while the fit reports its prior, K/T/tau
-        self.s0 = tuple(float(v) for v in s0.split("/")) if s0 else None
-        self.S_zero = 0.0
-        self.u: list[float] = []
-        self.y: list[float] = []
-        self.nom = _Sim(*self.val._rho, W, self.u)
-        self.snaps: list[tuple[int, _Sim]] = []
-        self.S_fit = self.S_nom = 0.0
-        self.n = 0
-        self.adopted = False
-        self.ever = False
-        self.rho = list(self.val._rho)
-        self.step_ = tuple(0.9 * r * TS_S for r in EXPERIMENT_RATES)
-        self.var2 = math.nan
-
-    def _window(self) -> None:
-        y, u, var = self.est.last_window()
-        self.u.append(u if u == u else 0.0)
-        self.y.append(y)
-        self.var2 = 2.0 * var
-        j = len(self.u) - 1
-        self.nom.add(self.u)
-        for _, sm in self.snaps:
-            sm.add(self.u)
-        e = self.est.estimate
-        if self.trust and not e.from_prior and not self.ever:
-            self.adopted = self.ever = self.decided = True  # timing experiment: no test
-        if not e.from_prior and (not self.snaps or j - self.snaps[-1][0] >= self.P):
-            self.snaps.append((j, _Sim(e.K, e.T_s, e.tau_s, self.W, self.u)))
-        # keep only what can still be used
-        keep = max(self.L, self.H2)
-        while len(self.snaps) > 1 and self.snaps[1][0] <= j - keep:
-            self.snaps.pop(0)
-        self._revoke(j)
-        errors = self._errors(j, self.L, self.H)
-        if errors is None:
-            return
-        dy, ef, en = errors
-        f = self.forget
-        self.S_fit = f * self.S_fit + ef * ef
-        self.S_nom = f * self.S_nom + en * en
-        self.S_zero = f * self.S_zero + dy * dy
-        self.n += 1
-        if self.n < self.min_n:
-            return
-        if not self.decided:
-            self.decided = True
-            if self.start_fit:
-                self.adopted = True  # as the fit so far: the drop rule below decides
-                if not self._good(1.0):
-                    self.adopted = False
-                    self.rho = [self.val._rho[0], self.val._rho[1], self.val._rho[2]]
-                return
-        if not self.adopted:
-            if not self.revoked and not (self.latch and self.decided) and self._good(1.0):
-                self.adopted = self.ever = True
-        elif self.drop_mode == "refute":
-            if self._beats(self.S_nom, self.S_fit, 1.0):
-                self.adopted = False
-        elif self.drop_mode == "half":
-            if not self._beats(self.S_fit, self.S_nom, 0.5):
-                self.adopted = False
-
-    def _errors(self, j: int, lag: int, horizon: int) -> tuple[float, float, float] | None:
-        """(the MAP's change over ``horizon`` windows to window j, the error of the newest snapshot
-        at least ``lag`` windows old predicting it, the nominal model's error); None when there is
-        no such snapshot or sample."""
-        y = self.y
-        if j < horizon or y[j] != y[j] or y[j - horizon] != y[j - horizon]:
-            return None
-        use = None
-        for c, sm in self.snaps:
-            if c <= j - lag:
-                use = sm
-        if use is None:
-            return None
-        dy = y[j] - y[j - horizon]
-        ef = dy - (use.x[j] - use.x[j - horizon])
-        return dy, ef, dy - (self.nom.x[j] - self.nom.x[j - horizon])
-
-    def _revoke(self, j: int) -> None:
-        """Long horizon, fully held out: the newest snapshot at least H2 windows old predicts the
-        change over the last H2 windows; revoke (for good) when it does not beat nominal."""
-        if not self.H2 or not self.adopted:
-            return
-        errors = self._errors(j, self.H2, self.H2)
-        if errors is None:
-            return
-        _, ef, en = errors
-        f = self.forget
-        self.S2f = f * self.S2f + ef * ef
-        self.S2n = f * self.S2n + en * en
-        self.n2 += 1
-        if self.n2 >= self.min_n and not self._beats(self.S2f, self.S2n, 1.0):
-            self.adopted, self.revoked = False, True
-            self.rho = [self.val._rho[0], self.val._rho[1], self.val._rho[2]]
-
-    def _good(self, scale: float) -> bool:
-        ok = self._beats(self.S_fit, self.S_nom, scale)
-        return ok and (not self.zero or self.S_fit < self.zero * self.S_zero)
-
-    def _beats(self, s: float, ref: float, scale: float) -> bool:
-        return s < (1.0 - self.rel * scale) * ref and ref - s >= scale * self.sig * self.var2
-
-    def update(self, inputs: ScheduleInput) -> Any:
-        from dataclasses import replace
-
-        vs = self.val.update(inputs)
-        if self.est.windows_closed != len(self.u):
-            self._window()
-        e = self.est.estimate
-        if self.start_fit and not self.decided:
-            K, T = self.fit.keep_slope(*self.fit.cautious(e))
-            if e.from_prior and self.s0:
-                K, T = self.s0[:2]
-            self.rho = [K, T, e.tau_s]
-            return replace(vs, K=K, T_s=T, tau_s=e.tau_s)
-        if self.adopted and not e.from_prior:
-            K, T = self.fit.keep_slope(*self.fit.cautious(e))
-            self.rho = [K, T, e.tau_s]
-            return replace(vs, K=K, T_s=T, tau_s=e.tau_s)
-        goal = [vs.K, vs.T_s, vs.tau_s]
-        for i in range(3):
-            d = goal[i] - self.rho[i]
-            self.rho[i] += max(-self.step_[i], min(self.step_[i], d))
-        return replace(vs, K=self.rho[0], T_s=self.rho[1], tau_s=self.rho[2])
 
 
 def apparent_fopdt(params: Any, target_mmhg: float) -> tuple[float, float, float]:
@@ -339,13 +116,13 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
             )
         return NominalSchedule(*(float(v) for v in source[6:].split("/")))
     if source in ("fit-hold", "fit-slew"):
-        return LimitedFit(source == "fit-hold")
+        return LimitedFit(source == "fit-hold", TS_S)
     if source.startswith("gate"):
         kw = {}
         for item in source.split(":")[1:]:
             key, _, value = item.partition("=")
             kw[key] = value if key in ("drop", "s0") else float(value)
-        return GatedFit(**kw)
+        return GatedFit(TS_S, **kw)
     if source == "validated" and (VARIANT["sched"] or VARIANT["bank"]):
         kw = dict(VARIANT["sched"])
         start = kw.get("start", (0.55, 150.0, 40.0))
