@@ -76,7 +76,13 @@ from synthesis.problem.reference import (
     ReferenceConfig,
 )
 
-__all__ = ["SHAPING_DEFAULTS", "default_config_path", "load_config", "parse_config"]
+__all__ = [
+    "SHAPING_DEFAULTS",
+    "default_config_path",
+    "load_config",
+    "parse_config",
+    "theorem3_config_path",
+]
 
 PARAM_NAMES = ("K", "T_s", "tau_s")
 RATE_NAMES = ("K_per_s", "T_s_per_s", "tau_s_per_s")
@@ -101,6 +107,11 @@ SHAPING_DEFAULTS: dict[str, Any] = {
 def default_config_path() -> Path:
     """Path of the shipped default design TOML."""
     return Path(str(resources.files("synthesis") / "data" / "default_design.toml"))
+
+
+def theorem3_config_path() -> Path:
+    """Path of the Theorem-3 design TOML (the paper's synthesis on the box it solves on)."""
+    return default_config_path().with_name("theorem3_design.toml")
 
 
 def _get(table: dict[str, Any], section: str, key: str, default: dict[str, Any]) -> Any:

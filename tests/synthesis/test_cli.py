@@ -8,7 +8,7 @@ import pytest
 
 from synthesis import cli
 from synthesis.artifact import load_artifact
-from synthesis.problem.config_toml import default_config_path
+from synthesis.problem.config_toml import theorem3_config_path
 
 
 def test_bad_config_value_exits_2_with_one_line_naming_file_and_field(tmp_path, capsys):
@@ -46,7 +46,7 @@ def test_backoff_out_of_range_exits_2(tmp_path, capsys):
 def test_tiny_theorem3_synthesis_writes_exactly_the_requested_artifact(tmp_path, capsys):
     out = tmp_path / "deep" / "tiny.npz"
     cfg = tmp_path / "theorem3.toml"
-    shutil.copy(default_config_path().with_name("theorem3_design.toml"), cfg)
+    shutil.copy(theorem3_config_path(), cfg)
     argv = ["--config", str(cfg), "--grid", "2,2,2", "--out", str(out), "--no-verify"]
     code = cli.main("synth", argv)
     captured = capsys.readouterr()

@@ -8,14 +8,14 @@ import pytest
 
 from synthesis.families.theorem3 import lmi
 from synthesis.families.theorem3.synthesize import synthesize
-from synthesis.problem.config_toml import default_config_path, load_config
+from synthesis.problem.config_toml import load_config, theorem3_config_path
 from synthesis.problem.reconstruct import controller_at, scaling_of
 from synthesis.research import theorem3_certificate
 
 
 @pytest.fixture(scope="module")
 def design():
-    cfg = load_config(default_config_path().with_name("theorem3_design.toml")).with_grid((2, 2, 2))
+    cfg = load_config(theorem3_config_path()).with_grid((2, 2, 2))
     res = synthesize(cfg)
     assert res.artifact is not None
     return cfg, res.artifact

@@ -7,12 +7,12 @@ from dataclasses import replace
 import numpy as np
 
 from synthesis.families.theorem3 import lmi
-from synthesis.problem.config_toml import default_config_path, load_config
+from synthesis.problem.config_toml import load_config, theorem3_config_path
 from synthesis.research import theorem3_certificate
 
 
 def _cfg(**solver):
-    cfg = load_config(default_config_path().with_name("theorem3_design.toml")).with_grid((2, 2, 2))
+    cfg = load_config(theorem3_config_path()).with_grid((2, 2, 2))
     return replace(cfg, solver=replace(cfg.solver, **solver))
 
 

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from synthesis.families.theorem3 import lmi, lmi_solve
-from synthesis.problem.config_toml import default_config_path, load_config
+from synthesis.problem.config_toml import load_config, theorem3_config_path
 from synthesis.research import naive_lmi
 
 
 def _cfg():
-    return load_config(default_config_path().with_name("theorem3_design.toml")).with_grid((2, 2, 2))
+    return load_config(theorem3_config_path()).with_grid((2, 2, 2))
 
 
 def test_tiny_solve_is_optimal_and_every_lmi_holds_at_the_solution():
