@@ -2,16 +2,35 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
 import pytest
 
+from plumbing.native_build import CACHE_ENV
 from tests.support.protocol_device import build_dialect
 from tests.support.sil_helpers import bridged_ttys
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session", autouse=True)
+def native_cache() -> Iterator[Path]:
+    """Compiled twins (plumbing.native_build) go to a directory of this test session, not the
+    user's cache; subprocesses the tests start inherit it."""
+    path = Path(tempfile.mkdtemp(prefix="pressor-native-"))
+    old = os.environ.get(CACHE_ENV)
+    os.environ[CACHE_ENV] = str(path)
+    yield path
+    if old is None:
+        os.environ.pop(CACHE_ENV, None)
+    else:
+        os.environ[CACHE_ENV] = old
+    shutil.rmtree(path, ignore_errors=True)
 
 
 @pytest.fixture

@@ -54,6 +54,7 @@ from runtime.core.closed_loop import ControllerError
 from runtime.estimation.sources import make_schedule
 from runtime.inputs.controller_loader import load_controller
 from sim.episode import Trajectory, simulate
+from sim.native.controller import native_twin
 from sim.patients.cohort import cohort_seeds
 from sim.patients.patient_model import DEFAULT_PATIENT_MODEL, load_patient_model
 from sim.scenarios.scenario import Scenario
@@ -119,7 +120,7 @@ def _simulate_patient(
     patient_model: str = DEFAULT_PATIENT_MODEL,
 ) -> tuple[dict[str, Any], Trajectory]:
     world = World(scenario, patient_seed, sample_period_s, patient_model=patient_model)
-    controller = load_controller(controller_spec, sample_period_s)
+    controller = native_twin(load_controller(controller_spec, sample_period_s))
     try:
         traj = simulate(world, controller, schedule=make_schedule(schedule, sample_period_s))
     except ControllerError as exc:  # name the patient too (the message crosses processes)

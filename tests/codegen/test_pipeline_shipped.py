@@ -29,6 +29,8 @@ from tests.support.codegen_helpers import (
 )
 
 COMMITTED = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
+#: the double-precision C twin the in-process simulator steps (sim.native.controller)
+COMMITTED_C = [COMMITTED.with_suffix(".h"), COMMITTED.with_suffix(".c")]
 pytestmark = pytest.mark.skipif(not pl.DEFAULT_ARTIFACT.is_file(), reason="no shipped design")
 
 
@@ -68,6 +70,13 @@ def test_committed_module_is_current_for_shipped_artifact_and_codegen_sources():
     assert pl.recorded_hash(COMMITTED) == pl.content_hash(design.sha256, "python", "q31", 0.1)
 
 
+def test_committed_c_twin_is_current_for_shipped_artifact_and_codegen_sources():
+    design = pl.load_design(pl.DEFAULT_ARTIFACT)
+    for path in COMMITTED_C:
+        assert f"Artifact sha256:  {design.sha256}" in path.read_text(encoding="utf-8")
+        assert pl.recorded_hash(path) == pl.content_hash(design.sha256, "c-float", "q31", 0.1)
+
+
 def test_committed_module_self_hash_matches_its_text():
     text = COMMITTED.read_text(encoding="utf-8")
     assert module_sha256(text) == module_text_sha256(text)
@@ -82,6 +91,8 @@ def test_regenerating_default_module_gives_identical_bytes(tmp_path):
     mtime = paths[0].stat().st_mtime_ns
     _, skipped_again = pl.generate(pl.DEFAULT_ARTIFACT, "python", tmp_path)
     assert skipped_again and paths[0].stat().st_mtime_ns == mtime
+    c_paths, _ = pl.generate(pl.DEFAULT_ARTIFACT, "c", tmp_path, c_float=True)
+    assert [p.read_bytes() for p in c_paths] == [p.read_bytes() for p in COMMITTED_C]
 
 
 def test_loader_accepts_intact_module_and_checks_artifact_sha():

@@ -1,0 +1,142 @@
+"""Compile a C source into a cached shared library, for optional compiled kernels of simulations.
+
+The in-process simulator can run some of its pure arithmetic as compiled C instead of Python (the
+shipped LPV controller's double-precision C twin: :mod:`sim.trials.native_controller`). Such a
+kernel must give the same IEEE double results as the Python it stands in for, so the flags are
+fixed: ``-O2 -ffp-contract=off -fno-fast-math -fexcess-precision=standard`` (no fused multiply-add,
+no reassociation; every intermediate rounded to double), ``-std=c99``. Nothing here is needed: when
+no C compiler works, :func:`shared_library` says why and the caller keeps its Python path.
+
+Libraries are cached per user, keyed by the sha256 of the source, the flags and the compiler's
+version line, under ``$PRESSOR_CACHE_DIR`` or ``$XDG_CACHE_HOME/pressor/native`` (default
+``~/.cache/pressor/native``). A library is written to a temporary sibling and moved into place, so
+concurrent processes (a Dask cluster, ``--jobs``) and interrupted builds never leave a half-written
+library under a final name.
+
+``PRESSOR_NATIVE``: ``auto`` (default) uses a compiled kernel where a compiler works; ``off`` never
+compiles (every simulation runs its Python path: the same bytes, more slowly).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+from plumbing.files import AtomicFile
+
+#: the compiler flags; a change here is a new cache key
+FLAGS = (
+    "-std=c99",
+    "-O2",
+    "-ffp-contract=off",
+    "-fno-fast-math",
+    "-fexcess-precision=standard",
+    "-fPIC",
+    "-shared",
+)
+NATIVE_ENV = "PRESSOR_NATIVE"
+NATIVE_MODES = ("auto", "off")
+CACHE_ENV = "PRESSOR_CACHE_DIR"
+
+
+@dataclass(frozen=True)
+class Build:
+    """The outcome of :func:`shared_library`: the library's path, or ``None`` and why not."""
+
+    path: Path | None
+    reason: str
+
+
+def native_mode() -> str:
+    """``PRESSOR_NATIVE`` (``auto`` when unset).
+
+    Raises
+    ------
+    ValueError
+        A value other than ``auto`` or ``off`` (naming the variable, the value and the choices).
+    """
+    mode = os.environ.get(NATIVE_ENV, "auto").strip().lower() or "auto"
+    if mode not in NATIVE_MODES:
+        raise ValueError(
+            f"environment variable {NATIVE_ENV}={mode!r}: expected one of {', '.join(NATIVE_MODES)}"
+        )
+    return mode
+
+
+def cache_dir() -> Path:
+    """Where compiled libraries are kept (see the module docstring)."""
+    explicit = os.environ.get(CACHE_ENV)
+    if explicit:
+        return Path(explicit)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg) if xdg else Path.home() / ".cache"
+    return base / "pressor" / "native"
+
+
+def _compiler() -> str | None:
+    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def _version_line(cc: str) -> str:
+    try:
+        out = subprocess.run(
+            [cc, "--version"], capture_output=True, text=True, timeout=30, check=False
+        ).stdout
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return out.splitlines()[0] if out else ""
+
+
+def shared_library(source: Path, name: str) -> Build:
+    """The shared library compiled from the C file ``source`` (its headers beside it).
+
+    ``name`` (letters, digits, ``_``) prefixes the cached file. Compiles once per source, flags and
+    compiler; later calls return the cached library.
+
+    Returns
+    -------
+    Build
+        ``path`` the library, or ``None`` with ``reason``: ``PRESSOR_NATIVE=off``, no compiler on
+        ``PATH``, an unwritable cache directory, or the compiler's error (its last line).
+    """
+    if native_mode() == "off":
+        return Build(None, f"{NATIVE_ENV}=off")
+    cc = _compiler()
+    if cc is None:
+        return Build(None, "no C compiler (cc, gcc or clang) on PATH")
+    text = Path(source).read_bytes()
+    key = hashlib.sha256(
+        b"\0".join((text, " ".join(FLAGS).encode(), _version_line(cc).encode()))
+    ).hexdigest()[:20]
+    target = cache_dir() / f"{name}-{key}.so"
+    if target.is_file():
+        return Build(target, "cached")
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with AtomicFile(target) as out:
+            proc = subprocess.run(
+                [cc, *FLAGS, "-o", str(out.tmp), str(source)],
+                capture_output=True,
+                text=True,
+                timeout=300,
+                check=False,
+            )
+            if proc.returncode != 0:
+                last = (proc.stderr.strip().splitlines() or ["(no message)"])[-1]
+                raise _CompileError(f"{Path(cc).name} failed on {source}: {last}")
+    except _CompileError as exc:
+        return Build(None, str(exc))
+    except (OSError, subprocess.SubprocessError) as exc:
+        return Build(None, f"cannot build in {target.parent}: {exc}")
+    return Build(target, "compiled")
+
+
+class _CompileError(Exception):
+    pass
