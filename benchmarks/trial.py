@@ -3,7 +3,8 @@
 Runs the in-process closed loop (World + the runtime's core, 10 Hz) on one core for a few patients
 of a scenario and prints the figure, measured in CPU time so that other load on the machine does not
 count. The LPV runs on its estimated schedule by default (how it is meant to run); every other
-controller on the oracle, ``pressor trial``'s default. Usage::
+controller on the oracle, ``pressor trial``'s default. It says whether the compiled twins
+(:mod:`sim.native`) ran; ``PRESSOR_NATIVE=off`` measures the Python alone. Usage::
 
     python -m benchmarks.trial [--scenario paper-disturbance] [--controller pi] [--patients 5]
         [--schedule oracle|estimated|nominal|validated] [--patient-model paper]
@@ -15,6 +16,9 @@ import argparse
 import time
 
 from runtime.estimation.sources import SOURCES
+from sim.native import controller as native_controller
+from sim.native import estimator as native_estimator
+from sim.native import patient as native_patient
 from sim.patients.cohort import cohort_seeds
 from sim.patients.patient_model import DEFAULT_PATIENT_MODEL
 from sim.scenarios.scenario import load_scenario
@@ -41,7 +45,7 @@ def main() -> None:
     def run(seed: int) -> None:
         run_patient(scenario, args.controller, seed, 0.1, schedule, args.patient_model)
 
-    run(seeds[0])  # warm-up (imports, caches)
+    run(seeds[0])  # warm-up (imports, caches, compiling the twins once)
     t0 = time.process_time()
     w0 = time.perf_counter()
     for s in seeds:
@@ -58,6 +62,13 @@ def main() -> None:
         f"throughput: {hours / (cpu / 60.0):.1f} patient-hours per wall minute per core (cpu time)"
     )
     print(f"            {hours / (wall / 60.0):.1f} patient-hours per wall minute (this process)")
+    twins = {"controller": native_controller.last_reason, "patient": native_patient.last_reason}
+    if schedule == "estimated":  # the only source with an estimator that has a twin
+        twins["estimator"] = native_estimator.last_reason
+    print(
+        "compiled twins: "
+        + ", ".join(f"{part} {'yes' if not why else f'no ({why})'}" for part, why in twins.items())
+    )
 
 
 if __name__ == "__main__":

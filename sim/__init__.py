@@ -11,7 +11,8 @@ device process alone, :mod:`sim.devices.device`). Where each part is, bottom to 
 - :mod:`sim.patients`: the patient models, the ``PatientModel`` plugin protocol, seeded cohorts;
 - :mod:`sim.devices`: pump and monitor, and the device process over the link (above the world);
 - :mod:`sim.native`: compiled twins of pure arithmetic that trials use where a C compiler works
-  (the LPV step; same bytes as the Python, ``PRESSOR_NATIVE=off`` to run without);
+  (the LPV step, the estimator, the paper patient; the same bytes as the Python,
+  ``PRESSOR_NATIVE=off`` to run without);
 - :mod:`sim.scenarios`: the named scenario TOMLs, their loader, disturbances and faults;
 - :mod:`sim.world`: the one simulated world, stepped tick by tick (patient + pump + monitor);
 - :mod:`sim.episode`: one patient's run in process (world + the runtime's closed-loop core);

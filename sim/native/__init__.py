@@ -1,7 +1,14 @@
 """Compiled twins of the simulation's pure arithmetic, used in process when a C compiler works.
 
+- :mod:`sim.native.controller`: the shipped LPV module's double-precision C twin (committed beside
+  it by ``pressor codegen``);
+- :mod:`sim.native.estimator`: the online estimator (sample gate, window noise, delay bank,
+  selection), ``delay_bank.c``;
+- :mod:`sim.native.patient`: the paper's nonlinear patient, ``paper_patient.c``.
+
 Each twin gives the same IEEE double results as the Python it stands in for (checked bit for bit
-in the tests), so a trial's records are the same bytes with or without it
-(:mod:`plumbing.native_build`: flags, cache, ``PRESSOR_NATIVE=off``). The bedside runtime never
-uses them: ``pressor run`` steps the hash-checked Python module.
+in ``tests/sim/native``), so a trial's records are the same bytes with or without them; they only
+make a cohort faster (docs/notes/benchmarks.md, "Trial throughput"). Flags, the per-user cache and
+``PRESSOR_NATIVE=off``: :mod:`plumbing.native_build`. The bedside runtime never uses them:
+``pressor run`` steps the hash-checked Python module and the Python estimator.
 """

@@ -55,6 +55,8 @@ from runtime.estimation.sources import make_schedule
 from runtime.inputs.controller_loader import load_controller
 from sim.episode import Trajectory, simulate
 from sim.native.controller import native_twin
+from sim.native.estimator import native_schedule
+from sim.native.patient import native_patient
 from sim.patients.cohort import cohort_seeds
 from sim.patients.patient_model import DEFAULT_PATIENT_MODEL, load_patient_model
 from sim.scenarios.scenario import Scenario
@@ -120,9 +122,11 @@ def _simulate_patient(
     patient_model: str = DEFAULT_PATIENT_MODEL,
 ) -> tuple[dict[str, Any], Trajectory]:
     world = World(scenario, patient_seed, sample_period_s, patient_model=patient_model)
+    world.patient = native_patient(world.patient)  # before its first step
     controller = native_twin(load_controller(controller_spec, sample_period_s))
     try:
-        traj = simulate(world, controller, schedule=make_schedule(schedule, sample_period_s))
+        source = native_schedule(make_schedule(schedule, sample_period_s))
+        traj = simulate(world, controller, schedule=source)
     except ControllerError as exc:  # name the patient too (the message crosses processes)
         raise ControllerError(
             f"--controller {controller_spec!r}, patient seed {patient_seed}: {exc}"
