@@ -100,14 +100,14 @@ RUNTIME_ALLOWED: dict[str, frozenset[str]] = {
 
 #: part of sim -> the parts of sim it may import (besides itself): patients and the two devices
 #: (pump, monitor) at the bottom, scenarios on them, the world on all three, one patient's episode
-#: on the world, trials and the cli on top; the compiled twins (``native``) at the bottom, used by
-#: trials. The device process is its own part of ``devices``
+#: on the world, trials and the cli on top; the compiled twins (``native``) on the patients, used
+#: by trials. The device process is its own part of ``devices``
 #: (``devices.device``, ``devices.device_options``): it runs the world, which runs the pump.
 SIM_ALLOWED: dict[str, frozenset[str]] = {
     "__init__": frozenset(),
     "patients": frozenset(),
     "devices": frozenset(),
-    "native": frozenset(),
+    "native": frozenset({"patients"}),
     "scenarios": frozenset({"patients", "devices"}),
     "world": frozenset({"patients", "devices", "scenarios"}),
     "episode": frozenset({"world"}),
