@@ -4,17 +4,23 @@ Runs the in-process closed loop (World + the runtime's core, 10 Hz) on one core 
 of a scenario and prints the figure, measured in CPU time so that other load on the machine does not
 count. The LPV runs on its estimated schedule by default (how it is meant to run); every other
 controller on the oracle, ``pressor trial``'s default. It says whether the compiled twins
-(:mod:`sim.native`) ran; ``PRESSOR_NATIVE=off`` measures the Python alone. Usage::
+(:mod:`sim.native`) ran; ``PRESSOR_NATIVE=off`` measures the Python alone, and ``--vs-python``
+measures both in the same run, each patient once with the twins and once without, alternating (a
+shared host's speed drifts by ±15 % between runs; the ratio of the paired times does not).
+Usage::
 
     python -m benchmarks.trial [--scenario paper-disturbance] [--controller pi] [--patients 5]
-        [--schedule oracle|estimated|nominal|validated] [--patient-model paper]
+        [--schedule oracle|estimated|nominal|validated] [--patient-model paper] [--vs-python]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import statistics
 import time
 
+from plumbing.native_build import NATIVE_ENV
 from runtime.estimation.sources import SOURCES
 from sim.native import controller as native_controller
 from sim.native import estimator as native_estimator
@@ -37,7 +43,15 @@ def main() -> None:
         help="scheduling source (default: estimated for lpv, else oracle)",
     )
     p.add_argument("--patient-model", default=DEFAULT_PATIENT_MODEL)
+    p.add_argument(
+        "--vs-python",
+        action="store_true",
+        help="also run every patient without the compiled twins, alternating, and print the ratio",
+    )
     args = p.parse_args()
+    if args.vs_python:
+        compare(args)
+        return
     schedule = args.schedule or ("estimated" if args.controller == "lpv" else "oracle")
     scenario = load_scenario(args.scenario)
     seeds = cohort_seeds(1, args.patients)
@@ -69,6 +83,27 @@ def main() -> None:
         "compiled twins: "
         + ", ".join(f"{part} {'yes' if not why else f'no ({why})'}" for part, why in twins.items())
     )
+
+
+def compare(args: argparse.Namespace) -> None:
+    """Each patient with the twins and without, alternating; median patient-h per CPU minute."""
+    schedule = args.schedule or ("estimated" if args.controller == "lpv" else "oracle")
+    scenario = load_scenario(args.scenario)
+    hours = scenario.duration_s / 3600.0
+    rates: dict[str, list[float]] = {"auto": [], "off": []}
+    for i, seed in enumerate(cohort_seeds(1, args.patients)):
+        for mode in ("auto", "off") if i % 2 == 0 else ("off", "auto"):
+            os.environ[NATIVE_ENV] = mode
+            t0 = time.process_time()
+            run_patient(scenario, args.controller, seed, 0.1, schedule, args.patient_model)
+            rates[mode].append(hours / ((time.process_time() - t0) / 60.0))
+    for mode, label in (("auto", "compiled twins"), ("off", "Python alone")):
+        print(
+            f"{label:>15}: median {statistics.median(rates[mode][1:]):.1f} patient-h per CPU minute"
+        )
+    pairs = [a / b for a, b in zip(rates["auto"][1:], rates["off"][1:], strict=True)]
+    print(f"{'ratio':>15}: median {statistics.median(pairs):.2f} (patient by patient; the first"
+          " patient is the warm-up, not counted)")  # fmt: skip
 
 
 if __name__ == "__main__":

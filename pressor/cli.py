@@ -44,9 +44,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 
 #: the offline commands whose many small dense problems (delay-system eigenvalues, LMI blocks) run
-#: fastest on one OpenBLAS thread; the pin must come before numpy's import, which importing their
-#: stage module already triggers (:mod:`synthesis.solver.blas_threads`)
-ONE_BLAS_THREAD = frozenset({"synth", "verify"})
+#: fastest on one OpenBLAS thread, and the cohort trial, whose patients make a few tiny BLAS calls
+#: each after which OpenBLAS' idle threads spin on another core (≈ 13 % more CPU time per patient,
+#: docs/notes/benchmarks.md, "Trial throughput"); its worker processes inherit the pin. The pin must
+#: come before numpy's import, which importing the command's module already triggers
+#: (:mod:`synthesis.solver.blas_threads`)
+ONE_BLAS_THREAD = frozenset({"synth", "verify", "trial"})
 
 
 def _usage() -> str:

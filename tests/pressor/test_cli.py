@@ -63,9 +63,9 @@ print(seen)
 
 @pytest.mark.parametrize(
     "argv",
-    [["synth", "--help"], ["verify", "--controller", "x:Y"]],
+    [["synth", "--help"], ["verify", "--controller", "x:Y"], ["trial", "--help"]],
 )
-def test_the_synthesis_commands_pin_openblas_to_one_thread_before_numpy_loads(argv, tmp_path):
+def test_synthesis_and_trial_commands_pin_openblas_to_one_thread_before_numpy_loads(argv, tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     proc = subprocess.run(
         [sys.executable, "-c", SPY_ON_NUMPY, *argv],
