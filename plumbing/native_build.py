@@ -19,6 +19,7 @@ compiles (every simulation runs its Python path: the same bytes, more slowly).
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import shutil
@@ -140,3 +141,22 @@ def shared_library(source: Path, name: str) -> Build:
 
 class _CompileError(Exception):
     pass
+
+
+def load_library(source: Path, name: str) -> ctypes.CDLL | str:
+    """:func:`shared_library` loaded with ctypes, or the reason (a ``str``) why there is none.
+
+    A cached library that does not load (damaged outside pressor: pressor itself only ever moves
+    complete files into the cache) is removed and built again once.
+    """
+    for attempt in (1, 2):
+        build = shared_library(source, name)
+        if build.path is None:
+            return build.reason
+        try:
+            return ctypes.CDLL(str(build.path))
+        except OSError as exc:
+            if attempt == 2 or build.reason != "cached":
+                return f"cannot load {build.path}: {exc}"
+            build.path.unlink(missing_ok=True)
+    raise AssertionError("unreachable")

@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from plumbing.native_build import NATIVE_ENV, Build, native_mode, shared_library
+from plumbing.native_build import NATIVE_ENV, load_library, native_mode
 
 _ARTIFACT = re.compile(r'#define LPVMAP_ARTIFACT_SHA256 "([0-9a-f]{64})"')
 #: why the last :func:`native_twin` call gave no twin ("" when it gave one)
@@ -85,10 +85,9 @@ def _twin_class(base: type) -> type | str:
         return f"{source.name} was generated from another artifact than its Python module"
     if "Mode: float (double)" not in header.read_text(encoding="utf-8"):
         return f"{source.name} is not the double-precision twin"
-    build: Build = shared_library(source, "lpvmap")
-    if build.path is None:
-        return build.reason
-    lib = ctypes.CDLL(str(build.path))
+    lib = load_library(source, "lpvmap")
+    if isinstance(lib, str):
+        return lib
     lib.lpvmap_step.restype = ctypes.c_double
     lib.lpvmap_step.argtypes = [ctypes.c_void_p] + [ctypes.c_double] * 5
     lib.lpvmap_reset.argtypes = [ctypes.c_void_p]
@@ -122,7 +121,6 @@ def _twin_class(base: type) -> type | str:
 
     NativeController.__module__ = base.__module__
     NativeController.__qualname__ = f"{base.__qualname__}(native)"
-    NativeController.library = build.path
     return NativeController
 
 

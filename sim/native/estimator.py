@@ -16,7 +16,7 @@ import functools
 import math
 from pathlib import Path
 
-from plumbing.native_build import NATIVE_ENV, native_mode, shared_library
+from plumbing.native_build import NATIVE_ENV, load_library, native_mode
 from runtime.core.estimate import Estimate
 from runtime.core.scheduling import ScheduleSource
 from runtime.estimation.estimator import DelayBankEstimator
@@ -112,10 +112,9 @@ class _Bank(ctypes.Structure):
 
 @functools.cache
 def _library() -> ctypes.CDLL | str:
-    build = shared_library(SOURCE, "delay_bank")
-    if build.path is None:
-        return build.reason
-    lib = ctypes.CDLL(str(build.path))
+    lib = load_library(SOURCE, "delay_bank")
+    if isinstance(lib, str):
+        return lib
     lib.db_state_size.restype = ctypes.c_uint32
     if lib.db_state_size() != ctypes.sizeof(_Bank):
         return f"{SOURCE.name}: state layout differs from the one this wrapper knows"

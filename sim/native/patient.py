@@ -15,7 +15,7 @@ import functools
 import operator
 from pathlib import Path
 
-from plumbing.native_build import NATIVE_ENV, native_mode, shared_library
+from plumbing.native_build import NATIVE_ENV, load_library, native_mode
 from sim.patients import patient as pp
 from sim.patients.patient import Patient, PatientParams
 
@@ -48,10 +48,9 @@ class _State(ctypes.Structure):
 
 @functools.cache
 def _library() -> ctypes.CDLL | str:
-    build = shared_library(SOURCE, "paper_patient")
-    if build.path is None:
-        return build.reason
-    lib = ctypes.CDLL(str(build.path))
+    lib = load_library(SOURCE, "paper_patient")
+    if isinstance(lib, str):
+        return lib
     lib.pp_state_size.restype = ctypes.c_uint32
     if lib.pp_state_size() != ctypes.sizeof(_State):
         return f"{SOURCE.name}: state layout differs from the one this wrapper knows"

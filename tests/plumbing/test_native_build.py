@@ -82,3 +82,22 @@ def test_cache_dir_follows_the_variables(monkeypatch, tmp_path):
     assert nb.cache_dir() == tmp_path / "pressor" / "native"
     monkeypatch.setenv(nb.CACHE_ENV, str(tmp_path / "x"))
     assert nb.cache_dir() == tmp_path / "x"
+
+
+@needs_cc
+def test_a_damaged_cached_library_is_built_again_and_loads(cache, tmp_path):
+    src = tmp_path / "k.c"
+    src.write_text(SOURCE)
+    path = nb.shared_library(src, "k").path
+    path.write_bytes(b"not a shared object")
+    lib = nb.load_library(src, "k")
+    assert not isinstance(lib, str), lib
+    lib.twice.restype, lib.twice.argtypes = ctypes.c_double, [ctypes.c_double]
+    assert lib.twice(4.0) == 8.0 and path.read_bytes() != b"not a shared object"
+
+
+def test_load_library_gives_the_reason_when_there_is_no_library(cache, tmp_path, monkeypatch):
+    src = tmp_path / "k.c"
+    src.write_text(SOURCE)
+    monkeypatch.setenv(nb.NATIVE_ENV, "off")
+    assert nb.load_library(src, "k") == "PRESSOR_NATIVE=off"
