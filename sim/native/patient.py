@@ -5,7 +5,9 @@ operation for operation; :class:`NativePatient` is the same patient (its paramet
 reachability; its MAP, K, T, τ read from the C state), stepped by one ctypes call (≈ 1 µs instead
 of ≈ 4 µs of Python). :func:`native_patient` returns the patient unchanged where there is no twin
 (``PRESSOR_NATIVE=off``, no C compiler, a frozen patient, another patient model, one already
-stepped, an internal step so short that the delay buffer would not fit).
+stepped, an internal step so short that the delay buffer would not fit); a patient of the
+responsiveness sweep (:class:`~sim.patients.sensitivity.SensitivityScaled`) gets the twin inside
+its wrapper.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 from plumbing.native_build import NATIVE_ENV, load_library, native_mode
 from sim.patients import patient as pp
 from sim.patients.patient import Patient, PatientParams
+from sim.patients.sensitivity import SensitivityScaled
 
 SOURCE = Path(__file__).with_name("paper_patient.c")
 MAX_RING = 8192
@@ -108,6 +111,9 @@ def native_patient(patient: object) -> object:
     global last_reason
     if native_mode() == "off":
         last_reason = f"{NATIVE_ENV}=off"
+        return patient
+    if isinstance(patient, SensitivityScaled):  # the sweep's wrapper: the twin goes inside it
+        patient.inner = native_patient(patient.inner)  # type: ignore[assignment]
         return patient
     if type(patient) is not Patient or patient.frozen:
         last_reason = "only the paper's nonlinear patient has a compiled twin"

@@ -1,5 +1,6 @@
 """sim.native.controller: the shipped LPV module's compiled C twin is the Python float step, bit for
-bit, and a trial gives the same record and trajectory with it as without it."""
+bit; and a trial gives the same record and trajectory with all the twins (controller, estimator,
+patient, also inside the responsiveness sweep's wrapper) as without them."""
 
 from __future__ import annotations
 
@@ -18,6 +19,8 @@ from runtime.inputs.controller_loader import (
     load_generated_module,
 )
 from sim.native import controller as nc
+from sim.native import estimator as ne
+from sim.native import patient as npt
 from sim.native.controller import native_twin
 from sim.scenarios.scenario import load_scenario
 from sim.trials import trial
@@ -70,16 +73,20 @@ def test_twin_declares_the_modules_box_rates_drug_and_period():
     assert (twin.sample_period_s, twin.max_rate_ml_h) == (py.sample_period_s, py.max_rate_ml_h)
 
 
-@pytest.mark.parametrize("schedule", ["estimated", "oracle"])
-def test_trial_record_and_trajectory_are_the_same_bytes_with_and_without_the_twin(
-    monkeypatch, schedule
+@pytest.mark.parametrize(
+    ("schedule", "model"),
+    [("estimated", "paper"), ("oracle", "paper"), ("estimated", "paper@sensitivity=5")],
+)
+def test_trial_record_and_trajectory_are_the_same_bytes_with_and_without_the_twins(
+    monkeypatch, schedule, model
 ):
     sc = load_scenario("paper-disturbance")
     runs = {}
     for mode in ("off", "auto"):
         monkeypatch.setenv(nb.NATIVE_ENV, mode)
-        runs[mode] = trial._simulate_patient(sc, "lpv", 4242, 0.1, schedule)
-    assert nc.last_reason == ""
+        runs[mode] = trial._simulate_patient(sc, "lpv", 4242, 0.1, schedule, model)
+    assert nc.last_reason == npt.last_reason == ""
+    assert ne.last_reason == "" or schedule != "estimated"
     (rec_py, traj_py), (rec_c, traj_c) = runs["off"], runs["auto"]
     assert json.dumps(rec_py) == json.dumps(rec_c)
     for field in ("rate_ml_h", "map_true_mmhg", "sched_K", "sched_T_s", "sched_tau_s"):
