@@ -1,14 +1,13 @@
 """Compile a C source into a cached shared library, for optional compiled kernels of simulations.
 
 The in-process simulator can run some of its pure arithmetic as compiled C instead of Python (the
-shipped LPV controller's double-precision C twin: :mod:`sim.trials.native_controller`). Such a
-kernel must give the same IEEE double results as the Python it stands in for, so the flags are
+LPV controller's C twin, the estimator, the paper patient: :mod:`sim.native`). Such a kernel must give the same IEEE double results as the Python it stands in for, so the flags are
 fixed: ``-O2 -ffp-contract=off -fno-fast-math -fexcess-precision=standard`` (no fused multiply-add,
 no reassociation; every intermediate rounded to double), ``-std=c99``. Nothing here is needed: when
 no C compiler works, :func:`shared_library` says why and the caller keeps its Python path.
 
-Libraries are cached per user, keyed by the sha256 of the source, the flags and the compiler's
-version line, under ``$PRESSOR_CACHE_DIR`` or ``$XDG_CACHE_HOME/pressor/native`` (default
+Libraries are cached per user, keyed by the sha256 of the source (and its header), the flags and
+the compiler's version line, under ``$PRESSOR_CACHE_DIR`` or ``$XDG_CACHE_HOME/pressor/native`` (default
 ``~/.cache/pressor/native``). A library is written to a temporary sibling and moved into place, so
 concurrent processes (a Dask cluster, ``--jobs``) and interrupted builds never leave a half-written
 library under a final name.
@@ -96,10 +95,10 @@ def _version_line(cc: str) -> str:
 
 
 def shared_library(source: Path, name: str) -> Build:
-    """The shared library compiled from the C file ``source`` (its headers beside it).
+    """The shared library compiled from the C file ``source`` (and its header ``source.h``, if any).
 
-    ``name`` (letters, digits, ``_``) prefixes the cached file. Compiles once per source, flags and
-    compiler; later calls return the cached library.
+    ``name`` (letters, digits, ``_``) prefixes the cached file. Compiles once per source and header
+    text, flags and compiler; later calls return the cached library.
 
     Returns
     -------
@@ -112,9 +111,10 @@ def shared_library(source: Path, name: str) -> Build:
     cc = _compiler()
     if cc is None:
         return Build(None, "no C compiler (cc, gcc or clang) on PATH")
-    text = Path(source).read_bytes()
+    header = Path(source).with_suffix(".h")  # a twin's own header is part of what it compiles
+    parts = [Path(source).read_bytes(), header.read_bytes() if header.is_file() else b""]
     key = hashlib.sha256(
-        b"\0".join((text, " ".join(FLAGS).encode(), _version_line(cc).encode()))
+        b"\0".join((*parts, " ".join(FLAGS).encode(), _version_line(cc).encode()))
     ).hexdigest()[:20]
     target = cache_dir() / f"{name}-{key}.so"
     if target.is_file():
