@@ -1,14 +1,15 @@
 """Compile a C source into a cached shared library, for optional compiled kernels of simulations.
 
 The in-process simulator can run some of its pure arithmetic as compiled C instead of Python (the
-LPV controller's C twin, the estimator, the paper patient: :mod:`sim.native`). Such a kernel must give the same IEEE double results as the Python it stands in for, so the flags are
-fixed: ``-O2 -ffp-contract=off -fno-fast-math -fexcess-precision=standard`` (no fused multiply-add,
-no reassociation; every intermediate rounded to double), ``-std=c99``. Nothing here is needed: when
+LPV controller's C twin, the estimator, the paper patient: :mod:`sim.native`). Such a kernel must
+give the same IEEE double results as the Python it stands in for, so the flags are fixed:
+``-O2 -ffp-contract=off -fno-fast-math -fexcess-precision=standard`` (no fused multiply-add, no
+reassociation; every intermediate rounded to double), ``-std=c99``. Nothing here is needed: when
 no C compiler works, :func:`shared_library` says why and the caller keeps its Python path.
 
 Libraries are cached per user, keyed by the sha256 of the source (and its header), the flags and
-the compiler's version line, under ``$PRESSOR_CACHE_DIR`` or ``$XDG_CACHE_HOME/pressor/native`` (default
-``~/.cache/pressor/native``). A library is written to a temporary sibling and moved into place, so
+the compiler's version line, under ``$PRESSOR_CACHE_DIR`` or ``$XDG_CACHE_HOME/pressor/native``
+(default ``~/.cache/pressor/native``). A library is written to a temporary sibling and moved into place, so
 concurrent processes (a Dask cluster, ``--jobs``) and interrupted builds never leave a half-written
 library under a final name.
 
