@@ -161,3 +161,19 @@ def load_library(source: Path, name: str) -> ctypes.CDLL | str:
                 return f"cannot load {build.path}: {exc}"
             build.path.unlink(missing_ok=True)
     raise AssertionError("unreachable")
+
+
+def load_twin(
+    source: Path, name: str, state_size_symbol: str, state: type[ctypes.Structure]
+) -> ctypes.CDLL | str:
+    """:func:`load_library`, refused unless the library's ``state_size_symbol()`` (a C function
+    returning ``sizeof`` of its state, ``uint32_t``) equals ``ctypes.sizeof(state)``: the wrapper's
+    mirror of the C state must have the C's layout."""
+    lib = load_library(source, name)
+    if isinstance(lib, str):
+        return lib
+    size = getattr(lib, state_size_symbol)
+    size.restype = ctypes.c_uint32
+    if size() != ctypes.sizeof(state):
+        return f"{Path(source).name}: state layout differs from the one this wrapper knows"
+    return lib

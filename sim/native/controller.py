@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from plumbing.native_build import NATIVE_ENV, load_library, native_mode
+from plumbing.native_build import NATIVE_ENV, load_twin, native_mode
 
 _ARTIFACT = re.compile(r'#define LPVMAP_ARTIFACT_SHA256 "([0-9a-f]{64})"')
 #: why the last :func:`native_twin` call gave no twin ("" when it gave one)
@@ -85,16 +85,13 @@ def _twin_class(base: type) -> type | str:
         return f"{source.name} was generated from another artifact than its Python module"
     if "Mode: float (double)" not in header.read_text(encoding="utf-8"):
         return f"{source.name} is not the double-precision twin"
-    lib = load_library(source, "lpvmap")
+    state_type = _state_struct(int(module.N_K), int(module.DELAY_BUFFER_LEN))
+    lib = load_twin(source, "lpvmap", "lpvmap_state_size", state_type)
     if isinstance(lib, str):
         return lib
     lib.lpvmap_step.restype = ctypes.c_double
     lib.lpvmap_step.argtypes = [ctypes.c_void_p] + [ctypes.c_double] * 5
     lib.lpvmap_reset.argtypes = [ctypes.c_void_p]
-    lib.lpvmap_state_size.restype = ctypes.c_uint32
-    state_type = _state_struct(int(module.N_K), int(module.DELAY_BUFFER_LEN))
-    if ctypes.sizeof(state_type) != lib.lpvmap_state_size():
-        return f"{source.name}: state layout differs from the one this wrapper knows"
 
     class NativeController(base):  # type: ignore[misc, valid-type]
         """The generated controller with its step compiled (see :mod:`sim.native.controller`)."""

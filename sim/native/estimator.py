@@ -16,7 +16,7 @@ import functools
 import math
 from pathlib import Path
 
-from plumbing.native_build import NATIVE_ENV, load_library, native_mode
+from plumbing.native_build import NATIVE_ENV, load_twin, native_mode
 from runtime.core.estimate import Estimate
 from runtime.core.scheduling import ScheduleSource
 from runtime.estimation.estimator import DelayBankEstimator
@@ -112,12 +112,9 @@ class _Bank(ctypes.Structure):
 
 @functools.cache
 def _library() -> ctypes.CDLL | str:
-    lib = load_library(SOURCE, "delay_bank")
+    lib = load_twin(SOURCE, "delay_bank", "db_state_size", _Bank)
     if isinstance(lib, str):
         return lib
-    lib.db_state_size.restype = ctypes.c_uint32
-    if lib.db_state_size() != ctypes.sizeof(_Bank):
-        return f"{SOURCE.name}: state layout differs from the one this wrapper knows"
     lib.db_init.argtypes = [ctypes.c_void_p]
     lib.db_update.restype = ctypes.c_int32
     lib.db_update.argtypes = [ctypes.c_void_p, _d, _i64, _d]

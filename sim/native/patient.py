@@ -17,7 +17,7 @@ import functools
 import operator
 from pathlib import Path
 
-from plumbing.native_build import NATIVE_ENV, load_library, native_mode
+from plumbing.native_build import NATIVE_ENV, load_twin, native_mode
 from sim.patients import patient as pp
 from sim.patients.patient import Patient, PatientParams
 from sim.patients.sensitivity import SensitivityScaled
@@ -51,12 +51,9 @@ class _State(ctypes.Structure):
 
 @functools.cache
 def _library() -> ctypes.CDLL | str:
-    lib = load_library(SOURCE, "paper_patient")
+    lib = load_twin(SOURCE, "paper_patient", "pp_state_size", _State)
     if isinstance(lib, str):
         return lib
-    lib.pp_state_size.restype = ctypes.c_uint32
-    if lib.pp_state_size() != ctypes.sizeof(_State):
-        return f"{SOURCE.name}: state layout differs from the one this wrapper knows"
     lib.pp_step.restype = ctypes.c_int32
     lib.pp_step.argtypes = [ctypes.c_void_p, _d]
     return lib
