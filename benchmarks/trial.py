@@ -19,6 +19,7 @@ import argparse
 import os
 import statistics
 import time
+from collections.abc import Callable
 
 from plumbing.native_build import NATIVE_ENV
 from runtime.estimation.sources import SOURCES
@@ -49,9 +50,6 @@ def main() -> None:
         help="also run every patient without the compiled twins, alternating, and print the ratio",
     )
     args = p.parse_args()
-    if args.vs_python:
-        compare(args)
-        return
     schedule = args.schedule or ("estimated" if args.controller == "lpv" else "oracle")
     scenario = load_scenario(args.scenario)
     seeds = cohort_seeds(1, args.patients)
@@ -59,6 +57,9 @@ def main() -> None:
     def run(seed: int) -> None:
         run_patient(scenario, args.controller, seed, 0.1, schedule, args.patient_model)
 
+    if args.vs_python:
+        compare(run, seeds, scenario.duration_s / 3600.0)
+        return
     run(seeds[0])  # warm-up (imports, caches, compiling the twins once)
     t0 = time.process_time()
     w0 = time.perf_counter()
@@ -85,17 +86,15 @@ def main() -> None:
     )
 
 
-def compare(args: argparse.Namespace) -> None:
-    """Each patient with the twins and without, alternating; median patient-h per CPU minute."""
-    schedule = args.schedule or ("estimated" if args.controller == "lpv" else "oracle")
-    scenario = load_scenario(args.scenario)
-    hours = scenario.duration_s / 3600.0
+def compare(run: Callable[[int], None], seeds: list[int], hours: float) -> None:
+    """Each patient (``hours`` patient-hours) with the twins and without, alternating; median
+    patient-h per CPU minute."""
     rates: dict[str, list[float]] = {"auto": [], "off": []}
-    for i, seed in enumerate(cohort_seeds(1, args.patients)):
+    for i, seed in enumerate(seeds):
         for mode in ("auto", "off") if i % 2 == 0 else ("off", "auto"):
             os.environ[NATIVE_ENV] = mode
             t0 = time.process_time()
-            run_patient(scenario, args.controller, seed, 0.1, schedule, args.patient_model)
+            run(seed)
             rates[mode].append(hours / ((time.process_time() - t0) / 60.0))
     for mode, label in (("auto", "compiled twins"), ("off", "Python alone")):
         print(

@@ -78,7 +78,8 @@ def cache_dir() -> Path:
     return base / "pressor" / "native"
 
 
-def _compiler() -> str | None:
+def compiler() -> str | None:
+    """The C compiler builds use: ``$CC``, else ``cc``, ``gcc`` or ``clang`` on ``PATH`` (None)."""
     for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
         if name and shutil.which(name):
             return shutil.which(name)
@@ -109,7 +110,7 @@ def shared_library(source: Path, name: str) -> Build:
     """
     if native_mode() == "off":
         return Build(None, f"{NATIVE_ENV}=off")
-    cc = _compiler()
+    cc = compiler()
     if cc is None:
         return Build(None, "no C compiler (cc, gcc or clang) on PATH")
     header = Path(source).with_suffix(".h")  # a twin's own header is part of what it compiles
@@ -150,17 +151,16 @@ def load_library(source: Path, name: str) -> ctypes.CDLL | str:
     A cached library that does not load (damaged outside pressor: pressor itself only ever moves
     complete files into the cache) is removed and built again once.
     """
-    for attempt in (1, 2):
-        build = shared_library(source, name)
-        if build.path is None:
-            return build.reason
-        try:
-            return ctypes.CDLL(str(build.path))
-        except OSError as exc:
-            if attempt == 2 or build.reason != "cached":
-                return f"cannot load {build.path}: {exc}"
-            build.path.unlink(missing_ok=True)
-    raise AssertionError("unreachable")
+    build = shared_library(source, name)
+    if build.path is None:
+        return build.reason
+    try:
+        return ctypes.CDLL(str(build.path))
+    except OSError as exc:
+        if build.reason != "cached":  # just compiled: building again would not help
+            return f"cannot load {build.path}: {exc}"
+    build.path.unlink(missing_ok=True)
+    return load_library(source, name)  # compiles afresh, so this recursion ends
 
 
 def load_twin(

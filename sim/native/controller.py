@@ -80,10 +80,11 @@ def _twin_class(base: type) -> type | str:
     header = source.with_suffix(".h")
     if not source.is_file() or not header.is_file():
         return f"no C twin beside {Path(getattr(module, '__file__', '?')).name}"
-    m = _ARTIFACT.search(header.read_text(encoding="utf-8"))
+    text = header.read_text(encoding="utf-8")
+    m = _ARTIFACT.search(text)
     if m is None or m.group(1) != getattr(module, "ARTIFACT_SHA256", None):
         return f"{source.name} was generated from another artifact than its Python module"
-    if "Mode: float (double)" not in header.read_text(encoding="utf-8"):
+    if "Mode: float (double)" not in text:
         return f"{source.name} is not the double-precision twin"
     state_type = _state_struct(int(module.N_K), int(module.DELAY_BUFFER_LEN))
     lib = load_twin(source, "lpvmap", "lpvmap_state_size", state_type)

@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import ctypes
-import shutil
 
 import pytest
 
 from plumbing import native_build as nb
 
-needs_cc = pytest.mark.skipif(
-    not any(shutil.which(c) for c in ("cc", "gcc", "clang")), reason="no C compiler"
-)
+needs_cc = pytest.mark.skipif(nb.compiler() is None, reason="no C compiler")
 SOURCE = "double twice(double x) { return 2.0 * x; }\n"
 
 

@@ -26,9 +26,7 @@ from sim.scenarios.scenario import load_scenario
 from sim.trials import trial
 from tests.support.codegen_helpers import random_inputs
 
-pytestmark = pytest.mark.skipif(
-    not any(shutil.which(c) for c in ("cc", "gcc", "clang")), reason="no C compiler"
-)
+pytestmark = pytest.mark.skipif(nb.compiler() is None, reason="no C compiler")
 
 
 @pytest.fixture(autouse=True)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import random
-import shutil
 
 import pytest
 
@@ -17,9 +16,7 @@ from runtime.estimation.sources import EstimatedSchedule, make_schedule
 from sim.native import estimator as ne
 from sim.native.estimator import NativeDelayBankEstimator, native_estimator, native_schedule
 
-pytestmark = pytest.mark.skipif(
-    not any(shutil.which(c) for c in ("cc", "gcc", "clang")), reason="no C compiler"
-)
+pytestmark = pytest.mark.skipif(nb.compiler() is None, reason="no C compiler")
 
 
 @pytest.fixture(autouse=True)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import random
-import shutil
 
 import pytest
 
@@ -15,9 +14,7 @@ from sim.native.patient import NativePatient, native_patient
 from sim.patients.patient import FrozenParams, Patient
 from sim.patients.phenylephrine import Phenylephrine2C
 
-pytestmark = pytest.mark.skipif(
-    not any(shutil.which(c) for c in ("cc", "gcc", "clang")), reason="no C compiler"
-)
+pytestmark = pytest.mark.skipif(nb.compiler() is None, reason="no C compiler")
 
 
 @pytest.fixture(autouse=True)
