@@ -18,7 +18,8 @@ schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 Experiments, run when named in ``--runs``: ``lpv-fit-hold`` / ``lpv-fit-slew``
 (:class:`benchmarks.schedule_experiments.LimitedFit`); ``lpv-truth``, each patient's apparent FOPDT (:func:`apparent_fopdt`)
 clamped to the controller's box, the bound of any source that reports K, T, τ on a patient no
-such model describes; ``lpv-gate-early``, ``lpv-gate-late``, ``lpv-gate-revoke`` and
+such model describes; ``lpv-stepfit``, each patient's least-squares FOPDT of a 10 min open-loop step
+(:mod:`benchmarks.step_fit`: the higher-order lags in τ), clamped to the box alike; ``lpv-gate-early``, ``lpv-gate-late``, ``lpv-gate-revoke`` and
 ``lpv-gate-kstart`` (:class:`benchmarks.schedule_experiments.GatedFit`: the fit's schedule only while its held-out predictions beat
 the nominal model's; ``lpv-gate:key=value:...`` any other setting of it). Figures in
 ``docs/ESTIMATION.md`` ("The frontier on patients outside the model class", "A held-out gate on the
@@ -42,6 +43,7 @@ import sys
 from typing import Any
 
 from benchmarks.schedule_experiments import GatedFit, LimitedFit
+from benchmarks.step_fit import step_response_fit
 from contracts.metrics import run_metrics
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
@@ -70,6 +72,7 @@ RUNS = {
     "lpv-fit-hold": ("lpv", "fit-hold"),
     "lpv-fit-slew": ("lpv", "fit-slew"),
     "lpv-truth": ("lpv", "truth"),
+    "lpv-stepfit": ("lpv", "stepfit"),
     # held-out-validated fit (GatedFit): decided early on a T-100-ish start, or late from nominal
     "lpv-gate-early": ("lpv", "gate:start=1:H=4:L=4:min=4:zero=0.5:s0=0.55/120/40:latch=1:H2=60"),
     "lpv-gate-late": ("lpv", "gate:H=4:L=4:min=4:zero=0.5"),
@@ -104,12 +107,12 @@ def apparent_fopdt(params: Any, target_mmhg: float) -> tuple[float, float, float
 
 def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = ()) -> Any:
     """The scheduling source ``source`` (a name of ``make_schedule``, ``fixed:K/T/tau``,
-    ``truth``: the patient's ``truth`` K, T, τ clamped to ``controller``'s box, or an
-    experiment: ``fit-hold``, ``fit-slew``)."""
-    if source.startswith("fixed:") or source == "truth":
+    ``truth`` or ``stepfit``: the patient's ``truth`` K, T, τ clamped to ``controller``'s box, or
+    an experiment: ``fit-hold``, ``fit-slew``)."""
+    if source.startswith("fixed:") or source in ("truth", "stepfit"):
         from runtime.core.scheduling import NominalSchedule
 
-        if source == "truth":
+        if source in ("truth", "stepfit"):
             box = sched_limits_of(controller)[0]
             return NominalSchedule(
                 *(min(max(v, lo), hi) for v, (lo, hi) in zip(truth, box, strict=True))
@@ -188,6 +191,8 @@ def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dic
     import sim.trials.trial as trial
 
     trial.make_schedule = lambda name, ts: make_source(name)  # type: ignore[assignment]
+    if source == "stepfit":
+        raise ValueError("stepfit runs on the independent models only (the cohort has the oracle)")
     source = "oracle" if source == "truth" else source  # the cohort's truth is the device's
     rec, traj = trial._simulate_patient(scenario, spec, patient_seed, TS_S, source)
     faults = traj.faults
@@ -202,6 +207,15 @@ def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dic
         "SCHED_OUT_OF_BOX": int(((faults & int(Fault.SCHED_OUT_OF_BOX)) != 0).sum()),
         "HOLD/FAILSAFE": int(((traj.state == State.HOLD) | (traj.state == State.FAILSAFE)).sum()),
     }
+
+
+def _truth(source: str, params: Any, target_mmhg: float) -> tuple[float, ...]:
+    """The K, T, τ a ``truth`` or ``stepfit`` run schedules on; () for any other source."""
+    if source == "truth":
+        return apparent_fopdt(params, target_mmhg)
+    if source == "stepfit":
+        return step_response_fit(params, target_mmhg, TS_S, CONCENTRATION_UG_ML, PUMP_MAX_ML_H)
+    return ()
 
 
 def cohort(model: str, seed: int, n: int) -> list[tuple[IndependentPatient, float, float, list]]:
@@ -285,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
                 else:
                     disturb = model == "two-compartment"
                     pt = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=disturb)
-                    truth = apparent_fopdt(params, target) if src == "truth" else ()
+                    truth = _truth(src, params, target)
                     r = run_one(pt, spec, src, target, dur, args.seed * 1000 + i, events, truth)
                 res[lab].append(r)
                 line.append(
@@ -318,6 +332,7 @@ def main(argv: list[str] | None = None) -> int:
             )
         for a, b in (("lpv-validated", "pi"), ("lpv-nominal", "pi"), ("lpv-estimated", "pi"),
                      ("lpv-truth", "pi"), ("lpv-truth", "smith"), ("lpv-truth", "lpv-nominal"),
+                     ("lpv-stepfit", "pi"), ("lpv-stepfit", "smith"),
                      ("lpv-validated", "smith-validated"), ("lpv-validated", "lpv-nominal"),
                      ("lpv-estimated", "lpv-nominal"),
                      *((lab, ref) for lab in labels if lab.startswith("lpv-gate")

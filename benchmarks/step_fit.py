@@ -1,0 +1,86 @@
+"""A least-squares first-order-plus-delay fit of an open-loop step response (a benchmark's bound).
+
+What an offline identification would hand the LPV on a patient of higher order than its design
+model: the K, T, τ whose step response is closest (least squares) to the patient's own over a
+window. Unlike :func:`benchmarks.schedule_sources.apparent_fopdt` (K the steady secant gain, T the
+sum of the two fast lags, τ the line delay alone), the fit puts the effect-site and plasma lags that
+a first-order model cannot carry into τ, and K is the gain reached within the window, so the creep
+after it does not count. ``lpv-stepfit`` of :mod:`benchmarks.schedule_sources` schedules on it.
+
+Units: t in s, MAP changes in mmHg, rates in ml/h, K in mmHg/(ml/h).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.patients.pkpd import IndependentPatient, PatientParams
+
+#: the fit's search grid: τ in s, T in s (K is solved in closed form at each grid point)
+TAU_GRID_S = np.arange(0.0, 240.0 + 1e-9, 2.0)
+T_GRID_S = np.arange(20.0, 1000.0 + 1e-9, 10.0)
+#: the open-loop step's length (s): 10 min, the first part of the plasma's creep included
+WINDOW_S = 600.0
+
+
+def fit_fopdt(
+    t_s: np.ndarray,
+    delta_map_mmhg: np.ndarray,
+    rate_ml_h: float,
+    tau_grid_s: np.ndarray = TAU_GRID_S,
+    T_grid_s: np.ndarray = T_GRID_S,
+) -> tuple[float, float, float]:
+    """The (K, T s, τ s) minimising Σ (Δy(t) − K·u·(1 − e^(−(t − τ)/T))⁺)² over the grids.
+
+    Parameters
+    ----------
+    t_s, delta_map_mmhg
+        Sample times (s, from the step) and the MAP's change from its pre-step value (mmHg).
+    rate_ml_h
+        The step's rate (ml/h), > 0.
+    tau_grid_s, T_grid_s
+        Candidate delays (s, >= 0) and lags (s, > 0).
+
+    Returns
+    -------
+    tuple of float
+        K (mmHg/(ml/h)), T (s), τ (s) of the best grid point (K exact for that τ, T).
+    """
+    if not rate_ml_h > 0.0:
+        raise ValueError(f"rate_ml_h={rate_ml_h!r} must be > 0")
+    t = np.asarray(t_s, dtype=float)
+    y = np.asarray(delta_map_mmhg, dtype=float)
+    best = (np.inf, 0.0, 0.0, 0.0)
+    for tau in tau_grid_s:
+        s = np.clip(t - tau, 0.0, None)[:, None]
+        phi = 1.0 - np.exp(-s / np.asarray(T_grid_s)[None, :])  # one column per T
+        pp = np.einsum("ij,ij->j", phi, phi)
+        py = phi.T @ y
+        gain = np.divide(py, pp, out=np.zeros_like(py), where=pp > 0.0)
+        sse = y @ y - gain * py  # the residual at the closed-form gain
+        j = int(np.argmin(sse))
+        if sse[j] < best[0]:
+            best = (float(sse[j]), float(gain[j]) / rate_ml_h, float(T_grid_s[j]), float(tau))
+    return best[1], best[2], best[3]
+
+
+def step_response_fit(
+    params: PatientParams,
+    target_mmhg: float,
+    step_s: float,
+    concentration_ug_ml: float,
+    max_rate_ml_h: float,
+    window_s: float = WINDOW_S,
+) -> tuple[float, float, float]:
+    """:func:`fit_fopdt` of the patient's noise-free open-loop response, disturbances off, to the
+    rate that holds ``target_mmhg`` at steady state (the pump's limit when out of reach), over
+    ``window_s`` s sampled every ``step_s`` s."""
+    patient = IndependentPatient(params, step_s, concentration_ug_ml, disturbances=False)
+    rate = patient.steady_state_rate_ml_h(target_mmhg, max_rate_ml_h) or max_rate_ml_h
+    y0 = patient.map_mmhg
+    n = round(window_s / step_s)
+    dy = np.empty(n)
+    for k in range(n):
+        dy[k] = patient.map_mmhg - y0
+        patient.step(rate)
+    return fit_fopdt(np.arange(n) * step_s, dy, rate)
