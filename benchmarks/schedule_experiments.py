@@ -4,6 +4,10 @@
 :class:`LimitedFit` (``lpv-fit-hold`` / ``lpv-fit-slew``) box-clamps the ``estimated`` source's
 schedule, jumps once and then slews; :class:`GatedFit` (``lpv-gate-*``) schedules on the fit only
 while its held-out predictions beat the nominal model's ("A held-out gate on the fit").
+:class:`BatchFit` (``batchfit:...``) holds a start schedule, fits a first-order-plus-delay model to
+the closed-loop data by batch least squares once, and holds the fit; :func:`wide_estimate`
+(``estwide:...``) is the ``estimated`` source on an estimator whose delay range reaches a wider
+box ("The frontier, revisited").
 """
 
 from __future__ import annotations
@@ -12,11 +16,23 @@ import math
 from dataclasses import replace
 from typing import Any
 
-from runtime.core.scheduling import ScheduleInput
+import numpy as np
+
+from runtime.core.scheduling import Schedule, ScheduleInput
+from runtime.estimation.estimator import DelayBankEstimator
+from runtime.estimation.settings import EstimatorSettings
 from runtime.estimation.sources import EstimatedSchedule
 from runtime.estimation.validated import ValidatedSchedule
 
-__all__ = ["EXPERIMENT_BOX", "EXPERIMENT_RATES", "GatedFit", "LimitedFit"]
+__all__ = [
+    "EXPERIMENT_BOX",
+    "EXPERIMENT_RATES",
+    "BatchFit",
+    "GatedFit",
+    "LimitedFit",
+    "fit_closed_loop",
+    "wide_estimate",
+]
 
 #: the box ((K mmHg/(ml/h)), (T s), (τ s)) and rates (per s) the experiments' own slew limits use:
 #: the shipped design's when their figures were measured (before the box became K 0.15-3,
@@ -237,3 +253,90 @@ class GatedFit:
             d = goal[i] - self.rho[i]
             self.rho[i] += max(-self.step_[i], min(self.step_[i], d))
         return replace(vs, K=self.rho[0], T_s=self.rho[1], tau_s=self.rho[2])
+
+
+#: :func:`fit_closed_loop`'s grids: delays (s, whole seconds) and lags (s)
+BATCH_TAU_S = np.arange(0, 201, 2)
+BATCH_T_S = np.arange(20.0, 1001.0, 20.0)
+
+
+def fit_closed_loop(map_mmhg: np.ndarray, rate_ml_h: np.ndarray) -> tuple[float, float, float]:
+    """Least-squares (K, T s, τ s) of MAP = β + K·x, x the unit-gain first-order-plus-delay response
+    to the delivered rate, over the grids (β and K in closed form; samples 1 s apart). K > 0 only;
+    (nan, nan, nan) when no grid point gives one."""
+    y = np.asarray(map_mmhg, dtype=float)
+    u = np.asarray(rate_ml_h, dtype=float)
+    n, a = y.size, np.exp(-1.0 / BATCH_T_S)
+    yc = y - y.mean()
+    best: tuple[float, tuple[float, float, float]] = (np.inf, (math.nan,) * 3)
+    for tau in BATCH_TAU_S:
+        ud = np.concatenate([np.zeros(tau), u[: n - tau]]) if tau else u
+        x, xs = np.empty((n, BATCH_T_S.size)), np.zeros(BATCH_T_S.size)
+        for k in range(n):
+            x[k] = xs
+            xs = a * xs + (1.0 - a) * ud[k]
+        xc = x - x.mean(axis=0)
+        pp, py = np.einsum("ij,ij->j", xc, xc), xc.T @ yc
+        gain = np.divide(py, pp, out=np.zeros_like(py), where=pp > 0.0)
+        sse = np.where(gain > 0.0, yc @ yc - gain * py, np.inf)
+        j = int(np.argmin(sse))
+        if sse[j] < best[0]:
+            best = (float(sse[j]), (float(gain[j]), float(BATCH_T_S[j]), float(tau)))
+    return best[1]
+
+
+class BatchFit:
+    """Experiment: hold ``start`` (K, T s, τ s) for ``decide_s`` s, then fit the closed-loop data
+    seen so far (:func:`fit_closed_loop`, 1 s means of the MAP and the delivered rate) once and
+    hold that fit, clamped to ``box``, for the rest of the run (one jump)."""
+
+    source = "estimated"
+
+    def __init__(
+        self,
+        box: tuple[tuple[float, float], ...],
+        start: tuple[float, float, float],
+        decide_s: float,
+        sample_period_s: float,
+    ) -> None:
+        self.box, self.per_s = box, round(1.0 / sample_period_s)
+        self.decide = round(decide_s / sample_period_s)
+        self.k, self.y, self.u = 0, [], []
+        self.sum_y = self.sum_u = 0.0
+        self.n_y = 0
+        self.schedule = Schedule(*start, "estimated", True, True, True, "learning")
+
+    def update(self, inputs: ScheduleInput) -> Schedule:
+        if inputs.map_mmhg == inputs.map_mmhg:  # a NaN sample adds nothing
+            self.sum_y += inputs.map_mmhg
+            self.n_y += 1
+        self.sum_u += inputs.delivered_ml_h
+        self.k += 1
+        if self.k % self.per_s == 0:
+            last = self.y[-1] if self.y else math.nan
+            self.y.append(self.sum_y / self.n_y if self.n_y else last)
+            self.u.append(self.sum_u / self.per_s)
+            self.sum_y = self.sum_u = 0.0
+            self.n_y = 0
+        if self.k == self.decide:
+            fit = fit_closed_loop(np.array(self.y), np.array(self.u))
+            if fit[0] == fit[0]:
+                rho = (min(max(v, lo), hi) for v, (lo, hi) in zip(fit, self.box, strict=True))
+                self.schedule = Schedule(*rho, "estimated", True, True, False, "ok")
+        return self.schedule
+
+
+def wide_estimate(
+    box: tuple[tuple[float, float], ...],
+    prior: tuple[float, float, float],
+    tau_prior_s: tuple[float, float],
+    caution_sigma: float,
+    sample_period_s: float,
+) -> EstimatedSchedule:
+    """Experiment: the ``estimated`` source on a :class:`DelayBankEstimator` whose delay range,
+    prior and estimate box are ``box``'s (a design with a wider delay box), with the τ prior
+    ``tau_prior_s`` (mode s, std s) and the caution ``caution_sigma``."""
+    settings = EstimatorSettings(tau_range_s=box[2], box=box, prior=prior, tau_prior_s=tau_prior_s)
+    return EstimatedSchedule(
+        DelayBankEstimator(sample_period_s, settings), caution_sigma=caution_sigma
+    )

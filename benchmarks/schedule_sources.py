@@ -15,16 +15,25 @@ scheduling source, controller), in process, without a link: a 0.3 mmHg Gaussian 
 the ``nominal``, the ``estimated`` (the default of ``pressor run``) and the opt-in ``validated``
 schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 
-Experiments, run when named in ``--runs``: ``lpv-fit-hold`` / ``lpv-fit-slew``
-(:class:`benchmarks.schedule_experiments.LimitedFit`); ``lpv-truth``, each patient's apparent FOPDT (:func:`apparent_fopdt`)
-clamped to the controller's box, the bound of any source that reports K, T, τ on a patient no
-such model describes; ``lpv-stepfit``, each patient's least-squares FOPDT of a 10 min open-loop step
-(:mod:`benchmarks.step_fit`: the higher-order lags in τ), clamped to the box alike; ``lpv-gate-early``, ``lpv-gate-late``, ``lpv-gate-revoke`` and
-``lpv-gate-kstart`` (:class:`benchmarks.schedule_experiments.GatedFit`: the fit's schedule only while its held-out predictions beat
-the nominal model's; ``lpv-gate:key=value:...`` any other setting of it). Figures in
-``docs/ESTIMATION.md`` ("The frontier on patients outside the model class", "A held-out gate on the
-fit"). ``--lpv PATH`` runs every LPV label on another generated module (a design with a wider box
-or another prefilter, ``benchmarks/designs/``); ``--json PATH`` also writes the per-patient figures.
+Experiments, run when named in ``--runs``:
+
+* ``lpv-fit-hold`` / ``lpv-fit-slew`` (:class:`benchmarks.schedule_experiments.LimitedFit`);
+* ``lpv-truth``, each patient's apparent FOPDT (:func:`apparent_fopdt`) clamped to the controller's
+  box;
+* ``lpv-stepfit``, each patient's least-squares FOPDT of a 10 min open-loop step
+  (:mod:`benchmarks.step_fit`: the higher-order lags in τ), clamped to the box alike;
+* ``lpv-gate-early``, ``lpv-gate-late``, ``lpv-gate-revoke``, ``lpv-gate-kstart``
+  (:class:`benchmarks.schedule_experiments.GatedFit`: the fit's schedule only while its held-out
+  predictions beat the nominal model's; ``lpv-gate:key=value:...`` any other setting of it);
+* ``lpv-batchfit:start=K/T/tau:decide=S`` (:class:`benchmarks.schedule_experiments.BatchFit`: the
+  start schedule for S s, then one batch least-squares fit of the closed-loop data, held);
+* ``lpv-estwide:start=K/T/tau:tau_prior=MODE/STD:caution=Z`` (the ``estimated`` source with its
+  delay range, prior and box those of the ``--lpv`` design).
+
+Figures in ``docs/ESTIMATION.md`` ("The frontier on patients outside the model class", "A held-out
+gate on the fit", "The frontier, revisited"). ``--lpv PATH`` runs every LPV label on another
+generated module (a design with a wider box or another prefilter, ``benchmarks/designs/``);
+``--json PATH`` also writes the per-patient figures.
 
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
 arrival (%), SCHED_RATE / SCHED_OUT_OF_BOX ticks, HOLD or FAILSAFE ticks; then per model the
@@ -42,14 +51,14 @@ import statistics
 import sys
 from typing import Any
 
-from benchmarks.schedule_experiments import GatedFit, LimitedFit
+from benchmarks.schedule_experiments import BatchFit, GatedFit, LimitedFit, wide_estimate
 from benchmarks.step_fit import step_response_fit
 from contracts.metrics import run_metrics
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, State, sched_limits_of, supervisor_config_for
-from runtime.estimation.sources import make_schedule
+from runtime.estimation.sources import CAUTION_SIGMA, make_schedule
 from runtime.estimation.validated import ValidatedSchedule
 from runtime.estimation.validation import ModelBank
 from runtime.inputs.controller_loader import load_controller
@@ -120,6 +129,15 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
         return NominalSchedule(*(float(v) for v in source[6:].split("/")))
     if source in ("fit-hold", "fit-slew"):
         return LimitedFit(source == "fit-hold", TS_S)
+    if source.startswith(("batchfit", "estwide")):
+        kw = dict(item.partition("=")[::2] for item in source.split(":")[1:])
+        box = sched_limits_of(controller)[0]
+        start = tuple(float(v) for v in kw.get("start", "0.55/150/40").split("/"))
+        if source.startswith("batchfit"):
+            return BatchFit(box, start, float(kw.get("decide", "180")), TS_S)
+        tau_prior = tuple(float(v) for v in kw.get("tau_prior", "40/20").split("/"))
+        caution = float(kw.get("caution", CAUTION_SIGMA))
+        return wide_estimate(box, start, tau_prior, caution, TS_S)
     if source.startswith("gate"):
         kw = {}
         for item in source.split(":")[1:]:
@@ -267,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
     for lab in labels:
         if lab.startswith("fixed:"):
             RUNS[lab] = ("lpv", lab)
-        if lab.startswith("lpv-gate:"):
+        if lab.startswith(("lpv-gate:", "lpv-batchfit", "lpv-estwide")):
             RUNS[lab] = ("lpv", lab[4:])
     for lab, (spec, src) in RUNS.items():
         if spec == "lpv":
@@ -335,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
                      ("lpv-stepfit", "pi"), ("lpv-stepfit", "smith"),
                      ("lpv-validated", "smith-validated"), ("lpv-validated", "lpv-nominal"),
                      ("lpv-estimated", "lpv-nominal"),
-                     *((lab, ref) for lab in labels if lab.startswith("lpv-gate")
+                     *((lab, ref) for lab in labels if lab.startswith(("lpv-gate", "lpv-batchfit", "lpv-estwide"))
                        for ref in ("lpv-nominal", "pi"))):  # fmt: skip
             if a in res and b in res:
                 r = ratio(a, b)
