@@ -10,8 +10,10 @@ frontier, revisited"). To measure what such a box would be worth before a certif
 runs codegen's own stages (:func:`codegen.pipeline.tabulate`, ``quantise``, ``emit``) on the
 closed-form law ``SmithLPV(loop_gain, Ω, Λ).at(ρ)`` of the config, with no analysis at all. The
 module's "Generated with" line starts with ``UNCERTIFIED`` and its ``ARTIFACT_SHA256`` is the
-sha256 of the config file (there is no artifact). Benchmarks load it by path; nothing in the
-runtime points to it, and it must never drive a pump.
+sha256 of the config file (there is no artifact). The runtime's loader refuses such a module
+(:data:`runtime.inputs.controller_loader.UNCERTIFIED_MARK`) unless the caller passes
+``allow_uncertified=True``, which only :mod:`benchmarks.schedule_sources` does: it must never drive
+a pump.
 """
 
 from __future__ import annotations
@@ -23,11 +25,18 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.pipeline import MODULE_NAME, LoadedDesign, emit, quantise, tabulate
+from codegen.pipeline import MODULE_NAME, REPO_ROOT, LoadedDesign, emit, quantise, tabulate
 from plumbing.files import write_atomic
+from runtime.inputs.controller_loader import UNCERTIFIED_MARK
 from synthesis.families.smith.law import SmithLPV
 from synthesis.problem.config_toml import load_config
 from synthesis.problem.reconstruct import DelayedController
+
+
+def _shown(path: Path) -> str:
+    """``path`` as codegen's generation command shows a file: repository-relative when inside."""
+    path = path.resolve()
+    return path.relative_to(REPO_ROOT).as_posix() if path.is_relative_to(REPO_ROOT) else path.name
 
 
 def uncertified_design(config_path: Path) -> LoadedDesign:
@@ -54,7 +63,8 @@ def uncertified_design(config_path: Path) -> LoadedDesign:
     ref = cfg.reference
     return LoadedDesign(
         sha256=hashlib.sha256(config_path.read_bytes()).hexdigest(),
-        display_path=f"UNCERTIFIED {config_path.as_posix()}",
+        # the generation command becomes "pressor codegen UNCERTIFIED <config> ...": the mark
+        display_path=UNCERTIFIED_MARK.removeprefix("pressor codegen ") + _shown(config_path),
         controller_fn=controller_at,
         box=np.asarray(model.box, dtype=float),
         rate_bounds=np.asarray(model.rate_bounds, dtype=float),

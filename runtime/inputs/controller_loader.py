@@ -164,8 +164,16 @@ def load_generated_module(path: Path, artifact_sha256: str | None = None) -> Mod
     return module
 
 
+#: how a research build of a law no certificate covers marks its generation command
+#: (``benchmarks/uncertified_module.py``)
+UNCERTIFIED_MARK = "pressor codegen UNCERTIFIED "
+
+
 def load_controller(
-    spec: str, sample_period_s: float = 0.1, artifact_sha256: str | None = None
+    spec: str,
+    sample_period_s: float = 0.1,
+    artifact_sha256: str | None = None,
+    allow_uncertified: bool = False,
 ) -> Controller:
     """Return a fresh controller for ``spec``.
 
@@ -181,12 +189,15 @@ def load_controller(
         Loop period (s). A generated module is discretised for one period; a mismatch is an error.
     artifact_sha256
         Optional sha256 of the artifact the module must have been generated from.
+    allow_uncertified
+        Accept a research build whose ``GENERATION_COMMAND`` starts with :data:`UNCERTIFIED_MARK`
+        (a law on a box no certificate covers; benchmarks only). False everywhere else.
 
     Raises
     ------
     ControllerSpecError
-        Unknown spec, missing, tampered or broken module, artifact mismatch, or a sample-period
-        mismatch.
+        Unknown spec, missing, tampered or broken module, artifact mismatch, a sample-period
+        mismatch, or an uncertified research build without ``allow_uncertified``.
     """
     if spec == "pi":
         return PIController(sample_period_s=sample_period_s)
@@ -205,6 +216,12 @@ def load_controller(
             " 'pressor.controllers' entry point (runtime.inputs.controller_plugin)"
         )
     module = load_generated_module(path, artifact_sha256)
+    if str(getattr(module, "GENERATION_COMMAND", "")).startswith(UNCERTIFIED_MARK):
+        if not allow_uncertified:
+            raise ControllerSpecError(
+                f"{path}: field 'GENERATION_COMMAND' marks an UNCERTIFIED research build (no"
+                " certificate covers its box); only the benchmarks may run it"
+            )
     controller = module.Controller()
     period = float(getattr(controller, "sample_period_s", float("nan")))
     if abs(period - sample_period_s) > 1e-12:

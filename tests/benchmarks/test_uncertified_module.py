@@ -1,5 +1,5 @@
 """The research build of the shipped law on boxes no certificate covers (benchmarks/uncertified_module.py,
-benchmarks/designs/wide_delay.toml, delay70.toml)."""
+benchmarks/designs/wide_delay.toml, delay60.toml)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 from benchmarks.uncertified_module import uncertified_design
+from codegen.pipeline import command_line
+from runtime.inputs.controller_loader import UNCERTIFIED_MARK
 from synthesis.artifact import default_artifact_path, load_artifact
 from synthesis.problem.config_toml import load_config
 from synthesis.problem.reconstruct import controller_at
@@ -26,9 +28,10 @@ def test_research_build_is_the_shipped_law_at_a_point_both_boxes_hold():
         np.testing.assert_array_equal(getattr(mine, name), getattr(shipped, name))
 
 
-def test_research_build_says_uncertified_where_a_generated_module_names_its_source():
+def test_research_build_carries_the_mark_the_runtime_loader_refuses():
     design = uncertified_design(DESIGNS / "wide_delay.toml")
-    assert design.display_path.startswith("UNCERTIFIED ")
+    command = command_line(design.display_path, "python", "q31")
+    assert command.startswith(UNCERTIFIED_MARK + "benchmarks/designs/wide_delay.toml")
     assert design.box.tolist() == [[0.15, 3.0], [100.0, 700.0], [10.0, 200.0]]
 
 
@@ -40,12 +43,12 @@ def test_research_build_refuses_a_design_of_another_family():
 def test_delay_designs_widen_only_the_delay_box_and_their_own_rates():
     shipped = load_config(None)
     wide = load_config(DESIGNS / "wide_delay.toml")
-    d70 = load_config(DESIGNS / "delay70.toml")
+    d60 = load_config(DESIGNS / "delay60.toml")
     assert wide.model.box[2].tolist() == [10.0, 200.0]
-    assert d70.model.box[2].tolist() == [10.0, 70.0]
+    assert d60.model.box[2].tolist() == [10.0, 60.0]
     assert wide.model.rate_bounds.tolist() == shipped.model.rate_bounds.tolist()
-    assert d70.model.rate_bounds.tolist() == [2e-4, 0.03, 0.05]
-    for cfg in (wide, d70):
+    assert d60.model.rate_bounds.tolist() == [2e-4, 0.03, 0.05]
+    for cfg in (wide, d60):
         assert cfg.model.box[0].tolist() == shipped.model.box[0].tolist()
         assert cfg.controller == shipped.controller
         assert cfg.reference == shipped.reference
