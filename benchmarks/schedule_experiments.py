@@ -7,7 +7,8 @@ while its held-out predictions beat the nominal model's ("A held-out gate on the
 :class:`BatchFit` (``batchfit:...``) holds a start schedule, fits a first-order-plus-delay model to
 the closed-loop data by batch least squares once, and holds the fit; :func:`wide_estimate`
 (``estwide:...``) is the ``estimated`` source on an estimator whose delay range reaches a wider
-box ("The frontier, revisited").
+box, and :class:`KHandover` (``stepfit-twok:...``) moves a fixed schedule's K from the start-up's
+to the incremental one ("The frontier, revisited").
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ __all__ = [
     "EXPERIMENT_RATES",
     "BatchFit",
     "GatedFit",
+    "KHandover",
     "LimitedFit",
     "fit_closed_loop",
     "wide_estimate",
@@ -340,3 +342,32 @@ def wide_estimate(
     return EstimatedSchedule(
         DelayBankEstimator(sample_period_s, settings), caution_sigma=caution_sigma
     )
+
+
+class KHandover:
+    """Experiment: a fixed schedule (``values`` = (K start, T s, τ s, K later), clamped to
+    ``box``) whose K moves from the start's to the later one at ``rate_per_s`` from ``switch_s``
+    s on: the start-up dose of one sensitivity, the disturbance rejection of another."""
+
+    source = "nominal"
+
+    def __init__(
+        self,
+        box: tuple[tuple[float, float], ...],
+        values: tuple[float, ...],
+        switch_s: float,
+        rate_per_s: float,
+        sample_period_s: float,
+    ) -> None:
+        (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
+        k0, T, tau, k1 = values
+        self.k0, self.k1 = min(max(k0, k_lo), k_hi), min(max(k1, k_lo), k_hi)
+        self.T, self.tau = min(max(T, t_lo), t_hi), min(max(tau, d_lo), d_hi)
+        self.switch_s, self.rate, self.ts, self.k = switch_s, rate_per_s, sample_period_s, 0
+
+    def update(self, inputs: ScheduleInput) -> Schedule:
+        t = self.k * self.ts
+        self.k += 1
+        step = self.rate * max(0.0, t - self.switch_s)
+        K = self.k0 + max(-step, min(step, self.k1 - self.k0))
+        return Schedule(K, self.T, self.tau, "nominal", True, True, True, "prior")

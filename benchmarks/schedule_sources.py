@@ -22,6 +22,9 @@ Experiments, run when named in ``--runs``:
   box;
 * ``lpv-stepfit``, each patient's least-squares FOPDT of a 10 min open-loop step
   (:mod:`benchmarks.step_fit`: the higher-order lags in τ), clamped to the box alike;
+  ``lpv-stepfit-inc`` the same with K the patient's incremental sensitivity at the target
+  (:func:`incremental_gain`); ``lpv-stepfit-twok:switch=S:rate=R`` the fit's K until S s, then
+  towards the incremental one at R per s (:class:`benchmarks.schedule_experiments.KHandover`);
 * ``lpv-gate-early``, ``lpv-gate-late``, ``lpv-gate-revoke``, ``lpv-gate-kstart``
   (:class:`benchmarks.schedule_experiments.GatedFit`: the fit's schedule only while its held-out
   predictions beat the nominal model's; ``lpv-gate:key=value:...`` any other setting of it);
@@ -52,7 +55,13 @@ import statistics
 import sys
 from typing import Any
 
-from benchmarks.schedule_experiments import BatchFit, GatedFit, LimitedFit, wide_estimate
+from benchmarks.schedule_experiments import (
+    BatchFit,
+    GatedFit,
+    KHandover,
+    LimitedFit,
+    wide_estimate,
+)
 from benchmarks.step_fit import step_response_fit
 from contracts.metrics import run_metrics
 from link import PumpStatus, TickInputs
@@ -83,6 +92,7 @@ RUNS = {
     "lpv-fit-slew": ("lpv", "fit-slew"),
     "lpv-truth": ("lpv", "truth"),
     "lpv-stepfit": ("lpv", "stepfit"),
+    "lpv-stepfit-inc": ("lpv", "stepfit-inc"),
     # held-out-validated fit (GatedFit): decided early on a T-100-ish start, or late from nominal
     "lpv-gate-early": ("lpv", "gate:start=1:H=4:L=4:min=4:zero=0.5:s0=0.55/120/40:latch=1:H2=60"),
     "lpv-gate-late": ("lpv", "gate:H=4:L=4:min=4:zero=0.5"),
@@ -119,10 +129,15 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
     """The scheduling source ``source`` (a name of ``make_schedule``, ``fixed:K/T/tau``,
     ``truth`` or ``stepfit``: the patient's ``truth`` K, T, τ clamped to ``controller``'s box, or
     an experiment: ``fit-hold``, ``fit-slew``)."""
-    if source.startswith("fixed:") or source in ("truth", "stepfit"):
+    if source.startswith("stepfit-twok"):
+        kw = dict(item.partition("=")[::2] for item in source.split(":")[1:])
+        box = sched_limits_of(controller)[0]
+        switch, rate = float(kw.get("switch", "600")), float(kw.get("rate", "5e-4"))
+        return KHandover(box, truth, switch, rate, TS_S)
+    if source.startswith("fixed:") or source in ("truth", "stepfit", "stepfit-inc"):
         from runtime.core.scheduling import NominalSchedule
 
-        if source in ("truth", "stepfit"):
+        if source in ("truth", "stepfit", "stepfit-inc"):
             box = sched_limits_of(controller)[0]
             return NominalSchedule(
                 *(min(max(v, lo), hi) for v, (lo, hi) in zip(truth, box, strict=True))
@@ -231,12 +246,26 @@ def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dic
     }
 
 
+def incremental_gain(params: Any, target_mmhg: float) -> float:
+    """The patient's local sensitivity at the rate that holds ``target_mmhg`` (mmHg/(ml/h), the
+    plasma's fast mode settled, the peripheral level and the tolerance not yet moved:
+    :meth:`~sim.patients.pkpd.IndependentPatient.fast_gain_mmhg_per_ml_h`)."""
+    patient = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=False)
+    need = patient.steady_state_rate_ml_h(target_mmhg, PUMP_MAX_ML_H) or PUMP_MAX_ML_H
+    return patient.fast_gain_mmhg_per_ml_h(need)
+
+
 def _truth(source: str, params: Any, target_mmhg: float) -> tuple[float, ...]:
-    """The K, T, τ a ``truth`` or ``stepfit`` run schedules on; () for any other source."""
+    """The values a ``truth``, ``stepfit``, ``stepfit-inc`` or ``stepfit-twok`` run schedules on
+    (K, T, τ; the last also the incremental K); () for any other source."""
     if source == "truth":
         return apparent_fopdt(params, target_mmhg)
-    if source == "stepfit":
-        return step_response_fit(params, target_mmhg, TS_S, CONCENTRATION_UG_ML, PUMP_MAX_ML_H)
+    if source.startswith("stepfit"):
+        fit = step_response_fit(params, target_mmhg, TS_S, CONCENTRATION_UG_ML, PUMP_MAX_ML_H)
+        if source == "stepfit":
+            return fit
+        k_inc = incremental_gain(params, target_mmhg)
+        return (k_inc, *fit[1:]) if source == "stepfit-inc" else (*fit, k_inc)
     return ()
 
 
@@ -289,7 +318,7 @@ def main(argv: list[str] | None = None) -> int:
     for lab in labels:
         if lab.startswith("fixed:"):
             RUNS[lab] = ("lpv", lab)
-        if lab.startswith(("lpv-gate:", "lpv-batchfit", "lpv-estwide")):
+        if lab.startswith(("lpv-gate:", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-twok")):
             RUNS[lab] = ("lpv", lab[4:])
     for lab, (spec, src) in RUNS.items():
         if spec == "lpv":
@@ -357,7 +386,7 @@ def main(argv: list[str] | None = None) -> int:
                      ("lpv-stepfit", "pi"), ("lpv-stepfit", "smith"),
                      ("lpv-validated", "smith-validated"), ("lpv-validated", "lpv-nominal"),
                      ("lpv-estimated", "lpv-nominal"),
-                     *((lab, ref) for lab in labels if lab.startswith(("lpv-gate", "lpv-batchfit", "lpv-estwide"))
+                     *((lab, ref) for lab in labels if lab.startswith(("lpv-gate", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-"))
                        for ref in ("lpv-nominal", "pi"))):  # fmt: skip
             if a in res and b in res:
                 r = ratio(a, b)

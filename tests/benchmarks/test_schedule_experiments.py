@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.schedule_experiments import BatchFit, fit_closed_loop
+from benchmarks.schedule_experiments import BatchFit, KHandover, fit_closed_loop
 from runtime.core.scheduling import ScheduleInput
 
 
@@ -41,3 +41,15 @@ def test_batch_fit_holds_its_start_until_the_decision_then_the_clamped_fit():
     assert (seen[599].T_s, seen[599].tau_s) == (240.0, 70.0)  # tau 84 s clamped to the box
     assert seen[599].K == pytest.approx(0.7, rel=1e-9)
     assert not seen[599].from_prior
+
+
+def test_k_handover_holds_the_start_k_then_moves_at_its_rate_to_the_later_one():
+    box = ((0.15, 3.0), (100.0, 400.0), (10.0, 200.0))
+    source = KHandover(box, (0.9, 500.0, 90.0, 0.6), switch_s=10.0, rate_per_s=0.01,
+                       sample_period_s=1.0)  # fmt: skip
+    inp = ScheduleInput(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
+    seen = [source.update(inp) for _ in range(60)]
+    assert [s.K for s in seen[:11]] == [0.9] * 11  # t = 0 ... 10 s
+    assert seen[20].K == pytest.approx(0.8)  # 10 s at 0.01 per s
+    assert seen[59].K == 0.6  # reached, then held
+    assert {(s.T_s, s.tau_s) for s in seen} == {(400.0, 90.0)}  # T clamped to the box
