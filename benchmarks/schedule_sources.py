@@ -41,9 +41,11 @@ generated module (a design with a wider box or another prefilter, ``benchmarks/d
 Printed per run: IAE (mmHg·s, true MAP), step overshoot (% of the step), time in ±5 mmHg after
 arrival (%), SCHED_RATE / SCHED_OUT_OF_BOX ticks, HOLD or FAILSAFE ticks; then per model the
 summary figures (LPV/PI, LPV/Smith, validated/nominal medians over reachable patients, overshoot
-median and p90; on the two-compartment model also the ratio of the IAE before the haemorrhage, the
-target step's share). ``pressor run`` over a pty (``benchmarks/independent_patients.py``) is
-the reference for the two-compartment model; this harness is for sweeps (about 3 s per run).
+median and p90, reachable patients the run's stability check calls unstable (docs/METRICS.md,
+``stable``: the error swings across the band twice in the last quarter); on the two-compartment
+model also the ratio of the IAE before the haemorrhage, the target step's share). ``pressor run``
+over a pty (``benchmarks/independent_patients.py``) is the reference for the two-compartment
+model; this harness is for sweeps (about 3 s per run).
 """
 
 from __future__ import annotations
@@ -379,7 +381,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"  {lab:14s} overshoot median {statistics.median(os_):5.1f} %, p90"
                 f" {_q(os_, 0.9):5.1f} %; band median {statistics.median(band):5.1f} % (min"
                 f" {min(band):5.1f}); SCHED_RATE total {sum(r['SCHED_RATE'] for r in res[lab])};"
-                f" HOLD/FAILSAFE total {sum(r['HOLD/FAILSAFE'] for r in res[lab])}"
+                f" HOLD/FAILSAFE total {sum(r['HOLD/FAILSAFE'] for r in res[lab])};"
+                f" unstable {sum(not res[lab][i]['stable'] for i in idx)}"
             )
         for a, b in (("lpv-validated", "pi"), ("lpv-nominal", "pi"), ("lpv-estimated", "pi"),
                      ("lpv-truth", "pi"), ("lpv-truth", "smith"), ("lpv-truth", "lpv-nominal"),
