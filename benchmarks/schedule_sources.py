@@ -127,12 +127,18 @@ def apparent_fopdt(params: Any, target_mmhg: float) -> tuple[float, float, float
     return K, T, params.delay_s
 
 
+def _options(source: str) -> dict[str, str]:
+    """The ``key=value`` items after a source name's first ``:`` (``batchfit:decide=180``)."""
+    return dict(item.partition("=")[::2] for item in source.split(":")[1:])
+
+
 def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = ()) -> Any:
-    """The scheduling source ``source`` (a name of ``make_schedule``, ``fixed:K/T/tau``,
-    ``truth`` or ``stepfit``: the patient's ``truth`` K, T, τ clamped to ``controller``'s box, or
-    an experiment: ``fit-hold``, ``fit-slew``)."""
+    """The scheduling source ``source``: a name of ``make_schedule``, ``fixed:K/T/tau``,
+    ``truth``, ``stepfit`` or ``stepfit-inc`` (the patient's ``truth`` K, T, τ clamped to
+    ``controller``'s box), or an experiment (``stepfit-twok:...``, ``fit-hold``, ``fit-slew``,
+    ``batchfit:...``, ``estwide:...``, ``gate...``; module docstring)."""
     if source.startswith("stepfit-twok"):
-        kw = dict(item.partition("=")[::2] for item in source.split(":")[1:])
+        kw = _options(source)
         box = sched_limits_of(controller)[0]
         switch, rate = float(kw.get("switch", "600")), float(kw.get("rate", "5e-4"))
         return KHandover(box, truth, switch, rate, TS_S)
@@ -148,7 +154,7 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
     if source in ("fit-hold", "fit-slew"):
         return LimitedFit(source == "fit-hold", TS_S)
     if source.startswith(("batchfit", "estwide")):
-        kw = dict(item.partition("=")[::2] for item in source.split(":")[1:])
+        kw = _options(source)
         box = sched_limits_of(controller)[0]
         start = tuple(float(v) for v in kw.get("start", "0.55/150/40").split("/"))
         if source.startswith("batchfit"):
@@ -183,7 +189,7 @@ def run_one(
     seed: int, events: list[tuple[str, float]], truth: tuple[float, ...] = (),
 ) -> dict[str, Any]:  # fmt: skip
     """One closed-loop run in process; the run's metrics and its supervisor counts (``truth``:
-    the patient's apparent K, T, τ for the ``truth`` source)."""
+    the values :func:`_truth` gives for ``source``)."""
     controller = load_controller(spec, TS_S, allow_uncertified=True)
     supervisor = Supervisor(supervisor_config_for(controller, NOISE_MMHG))
     core = ClosedLoopCore(controller, supervisor, make_source(source, controller, truth))
@@ -230,8 +236,10 @@ def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dic
     import sim.trials.trial as trial
 
     trial.make_schedule = lambda name, ts: make_source(name)  # type: ignore[assignment]
-    if source == "stepfit":
-        raise ValueError("stepfit runs on the independent models only (the cohort has the oracle)")
+    if source.startswith("stepfit"):
+        raise ValueError(
+            f"{source} runs on the independent models only (the cohort has the oracle)"
+        )
     source = "oracle" if source == "truth" else source  # the cohort's truth is the device's
     rec, traj = trial._simulate_patient(scenario, spec, patient_seed, TS_S, source)
     faults = traj.faults
