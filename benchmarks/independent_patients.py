@@ -5,7 +5,9 @@ pharmacokinetics, an effect compartment, a sigmoid Emax on MAP, a transport dela
 a haemorrhage-like drop at 20 min and a fluid-bolus-like rise at 40 min) is played by the device
 of ``tests/support/protocol_device.py`` (written from docs/PROTOCOL.md alone) on a pty, signed, in
 lockstep, against a real ``pressor run --controller SPEC`` with its default estimated schedule (a
-real monitor sends no K, T, tau). The device announces phenylephrine at 100 µg/ml, the runtime's
+real monitor sends no K, T, tau), or with ``--device-fit`` on the K, T, tau the device sends: each
+patient's least-squares FOPDT of its 10 min open-loop step (docs/ESTIMATION.md, "The frontier,
+revisited"). The device announces phenylephrine at 100 µg/ml, the runtime's
 defaults. Of :mod:`sim` only the patient model's module is used (its world, device and paper
 model are not)::
 
@@ -39,6 +41,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+from benchmarks.step_fit import step_response_fit
 from contracts.metrics import run_metrics
 from sim.patients.pkpd import (
     BOLUS_AT_S,
@@ -64,6 +67,10 @@ class Setup:
     duration_s: float = 3600.0
     target_mmhg: float = 70.0
     noise_mmhg: float = 0.3
+    #: the device sends each patient's least-squares FOPDT of its own 10 min open-loop step
+    #: (:func:`benchmarks.step_fit.step_response_fit`) as SCHEDULING_PARAMS and ``pressor run``
+    #: schedules on it (``--schedule oracle``): an identification made before the loop
+    device_fit: bool = False
 
 
 def controller_label(spec: str) -> tuple[str, str]:
@@ -82,8 +89,10 @@ def launch(
     cfg: DeviceConfig,
     patient: IndependentPatient,
     controller: str,
+    schedule: str = "estimated",
 ) -> list[float]:
-    """Run ``pressor run --controller controller`` on a fresh pty against ``patient``.
+    """Run ``pressor run --controller controller --schedule schedule`` on a fresh pty against
+    ``patient``.
 
     Returns the true MAP (mmHg) at every tick; raises RuntimeError when the run did not finish
     cleanly (its stderr's tail in the message).
@@ -93,7 +102,7 @@ def launch(
     master, slave = os.openpty()
     tty.setraw(slave)
     argv = [sys.executable, "-m", "pressor", "run", "--port", os.ttyname(slave)]
-    argv += ["--signing-key", str(key_file), "--controller", controller]
+    argv += ["--signing-key", str(key_file), "--controller", controller, "--schedule", schedule]
     err = workdir / "run.err"
     with (workdir / "run.out").open("w") as fout, err.open("w") as ferr:
         proc = subprocess.Popen(
@@ -142,11 +151,15 @@ def run_patient(
     ``final_map_mmhg``.
     """
     patient = RecordingPatient(params, SAMPLE_PERIOD_S, CONCENTRATION_UG_ML)
+    if setup.device_fit:  # what the device sends as K, T, tau
+        patient.K, patient.T_s, patient.tau_s = step_response_fit(
+            params, setup.target_mmhg, SAMPLE_PERIOD_S, CONCENTRATION_UG_ML, PUMP_MAX_ML_H
+        )
     n_ticks = round(setup.duration_s / SAMPLE_PERIOD_S)
     cfg = DeviceConfig(
         n_ticks=n_ticks,
         target_mmhg=setup.target_mmhg,
-        send_scheduling=False,
+        send_scheduling=setup.device_fit,
         pump_max_ml_h=PUMP_MAX_ML_H,
         concentration_ug_ml=CONCENTRATION_UG_ML,
         noise_mmhg=setup.noise_mmhg,
@@ -154,7 +167,8 @@ def run_patient(
         name="independent",
     )
     with tempfile.TemporaryDirectory(prefix="indep-run-") as tmp:
-        true_map = launch(dialect, Path(tmp), cfg, patient, controller)
+        schedule = "oracle" if setup.device_fit else "estimated"
+        true_map = launch(dialect, Path(tmp), cfg, patient, controller, schedule)
     t_s = [k * SAMPLE_PERIOD_S for k in range(n_ticks)]
     need = patient.steady_state_rate_ml_h(setup.target_mmhg + params.hemorrhage_mmhg, PUMP_MAX_ML_H)
     m = run_metrics(
@@ -278,15 +292,23 @@ def main(argv: list[str] | None = None) -> int:
         default=Setup.noise_mmhg,
         help="monitor noise std (mmHg, default 0.3)",
     )
+    p.add_argument(
+        "--device-fit",
+        action="store_true",
+        help="the device sends each patient's least-squares FOPDT of its 10 min open-loop step as"
+        " SCHEDULING_PARAMS and pressor run schedules on it (--schedule oracle) (default: off,"
+        " the estimated schedule)",
+    )
     args = p.parse_args(argv)
-    setup = Setup(args.duration_s, args.target_mmhg, args.noise_mmhg)
+    setup = Setup(args.duration_s, args.target_mmhg, args.noise_mmhg, args.device_fit)
     controllers = [controller_label(s) for s in args.controller or DEFAULT_CONTROLLERS]
     cohort = [draw_patient(args.seed, i) for i in range(args.patients)]
     print(
         f"independent patients: {args.patients}, seed {args.seed}, {setup.duration_s:g} s each, "
         f"target {setup.target_mmhg:g} mmHg, monitor noise {setup.noise_mmhg:g} mmHg, "
         f"phenylephrine {CONCENTRATION_UG_ML:g} ug/ml, pump max {PUMP_MAX_ML_H:g} ml/h; "
-        f"haemorrhage at {HEMORRHAGE_AT_S:g} s, bolus at {BOLUS_AT_S:g} s"
+        f"haemorrhage at {HEMORRHAGE_AT_S:g} s, bolus at {BOLUS_AT_S:g} s; schedule "
+        + ("the device's step-response fit (oracle)" if setup.device_fit else "estimated")
     )
     print(
         "  patient  baseline mmHg  delay s  hem mmHg  bolus mmHg  steady ml/h at target, after hem"

@@ -133,6 +133,21 @@ def test_pi_through_pressor_run_brings_an_independent_patient_to_target(
     assert rec["iae_mmhg_s"] > 15.0 * params.delay_s
 
 
+def test_lpv_on_the_device_sent_step_fit_overshoots_far_less_than_on_its_own_estimate(
+    dialect: ModuleType,
+) -> None:
+    # the device sends the patient's step-response fit and pressor run schedules on it; without
+    # it the same patient is run on the online estimate, whose start-up overshoots (40 %)
+    params = draw_patient(2026, 0)
+    runs = {
+        fit: run_patient(dialect, params, "lpv", Setup(duration_s=600.0, device_fit=fit), seed=1)
+        for fit in (True, False)
+    }
+    assert runs[False]["step_overshoot_pct"] > 30.0
+    assert runs[True]["step_overshoot_pct"] < 20.0
+    assert runs[True]["iae_mmhg_s"] < 0.7 * runs[False]["iae_mmhg_s"]
+
+
 def test_same_seed_prints_the_same_bytes_and_progress_goes_to_stderr(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
