@@ -18,12 +18,12 @@ schedule, the PI, and the Smith predictor on ``estimated`` and on ``validated``.
 Experiments, run when named in ``--runs``:
 
 * ``lpv-fit-hold`` / ``lpv-fit-slew`` (:class:`benchmarks.schedule_experiments.LimitedFit`);
-* ``lpv-truth``, each patient's apparent FOPDT (:func:`apparent_fopdt`) clamped to the controller's
-  box;
+* ``lpv-truth``, each patient's apparent FOPDT (:func:`benchmarks.step_fit.apparent_fopdt`)
+  clamped to the controller's box;
 * ``lpv-stepfit``, each patient's least-squares FOPDT of a 10 min open-loop step
   (:mod:`benchmarks.step_fit`: the higher-order lags in τ), clamped to the box alike;
   ``lpv-stepfit-inc`` the same with K the patient's incremental sensitivity at the target
-  (:func:`incremental_gain`); ``lpv-stepfit-twok:switch=S:rate=R`` the fit's K until S s, then
+  (:func:`benchmarks.step_fit.incremental_gain`); ``lpv-stepfit-twok:switch=S:rate=R`` the fit's K until S s, then
   towards the incremental one at R per s (:class:`benchmarks.schedule_experiments.KHandover`);
 * ``lpv-gate-early``, ``lpv-gate-late``, ``lpv-gate-revoke``, ``lpv-gate-kstart``
   (:class:`benchmarks.schedule_experiments.GatedFit`: the fit's schedule only while its held-out
@@ -64,7 +64,14 @@ from benchmarks.schedule_experiments import (
     LimitedFit,
     wide_estimate,
 )
-from benchmarks.step_fit import step_response_fit
+from benchmarks.step_fit import (
+    CONCENTRATION_UG_ML,
+    PUMP_MAX_ML_H,
+    apparent_fopdt,
+    incremental_gain,
+    step_response_fit,
+)
+from benchmarks.step_fit import STEP_S as TS_S
 from contracts.metrics import run_metrics
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
@@ -81,9 +88,6 @@ from sim.patients.pkpd import (
     draw_patient,
 )
 
-TS_S = 0.1
-PUMP_MAX_ML_H = 120.0
-CONCENTRATION_UG_ML = 100.0
 NOISE_MMHG = 0.3
 #: label -> (controller spec, schedule source)
 RUNS = {
@@ -106,25 +110,14 @@ RUNS = {
     "smith": ("smith", "estimated"),
     "smith-validated": ("smith", "validated"),
 }
+#: the prefixes of labels that carry their source's settings (``lpv-batchfit:decide=300``)
+PARAMETRISED = ("lpv-gate:", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-twok")
 #: the labels run when ``--runs`` is not given (the others are experiments)
 DEFAULT_RUNS = ("lpv-nominal", "lpv-estimated", "lpv-validated", "pi", "smith", "smith-validated")
 
 
 #: keyword arguments of the ``validated`` source and of its bank (``--sched``, ``--bank``)
 VARIANT: dict[str, dict[str, Any]] = {"sched": {}, "bank": {}}
-
-
-def apparent_fopdt(params: Any, target_mmhg: float) -> tuple[float, float, float]:
-    """The FOPDT a perfect identification would report for an :mod:`sim.patients.pkpd` patient
-    held at ``target_mmhg``: K the secant sensitivity (target − baseline) / the steady infusion
-    that holds the target (mmHg/(ml/h)), T the plasma's fast time constant V1/(CL + Q) plus the
-    effect-site lag (s), τ the transport delay (s). The pump's limit when the target is out of
-    reach."""
-    patient = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=False)
-    need = patient.steady_state_rate_ml_h(target_mmhg, PUMP_MAX_ML_H) or PUMP_MAX_ML_H
-    K = (target_mmhg - params.baseline_mmhg) / max(need, 1e-6)
-    T = 60.0 * params.v1_l / (params.cl_l_min + params.q_l_min) + params.effect_lag_s
-    return K, T, params.delay_s
 
 
 def _options(source: str) -> dict[str, str]:
@@ -163,11 +156,10 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
         caution = float(kw.get("caution", CAUTION_SIGMA))
         return wide_estimate(box, start, tau_prior, caution, TS_S)
     if source.startswith("gate"):
-        kw = {}
-        for item in source.split(":")[1:]:
-            key, _, value = item.partition("=")
-            kw[key] = value if key in ("drop", "s0") else float(value)
-        return GatedFit(TS_S, **kw)
+        opts = _options(source)
+        return GatedFit(
+            TS_S, **{k: v if k in ("drop", "s0") else float(v) for k, v in opts.items()}
+        )
     if source == "validated" and (VARIANT["sched"] or VARIANT["bank"]):
         kw = dict(VARIANT["sched"])
         start = kw.get("start", (0.55, 150.0, 40.0))
@@ -256,22 +248,13 @@ def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dic
     }
 
 
-def incremental_gain(params: Any, target_mmhg: float) -> float:
-    """The patient's local sensitivity at the rate that holds ``target_mmhg`` (mmHg/(ml/h), the
-    plasma's fast mode settled, the peripheral level and the tolerance not yet moved:
-    :meth:`~sim.patients.pkpd.IndependentPatient.fast_gain_mmhg_per_ml_h`)."""
-    patient = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=False)
-    need = patient.steady_state_rate_ml_h(target_mmhg, PUMP_MAX_ML_H) or PUMP_MAX_ML_H
-    return patient.fast_gain_mmhg_per_ml_h(need)
-
-
 def _truth(source: str, params: Any, target_mmhg: float) -> tuple[float, ...]:
     """The values a ``truth``, ``stepfit``, ``stepfit-inc`` or ``stepfit-twok`` run schedules on
     (K, T, τ; the last also the incremental K); () for any other source."""
     if source == "truth":
         return apparent_fopdt(params, target_mmhg)
     if source.startswith("stepfit"):
-        fit = step_response_fit(params, target_mmhg, TS_S, CONCENTRATION_UG_ML, PUMP_MAX_ML_H)
+        fit = step_response_fit(params, target_mmhg)
         if source == "stepfit":
             return fit
         k_inc = incremental_gain(params, target_mmhg)
@@ -328,7 +311,7 @@ def main(argv: list[str] | None = None) -> int:
     for lab in labels:
         if lab.startswith("fixed:"):
             RUNS[lab] = ("lpv", lab)
-        if lab.startswith(("lpv-gate:", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-twok")):
+        if lab.startswith(PARAMETRISED):
             RUNS[lab] = ("lpv", lab[4:])
     for lab, (spec, src) in RUNS.items():
         if spec == "lpv":

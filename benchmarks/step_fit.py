@@ -1,13 +1,16 @@
-"""A least-squares first-order-plus-delay fit of an open-loop step response (a benchmark's bound).
+"""First-order descriptions of an independent patient (:mod:`sim.patients.pkpd`) that a perfect
+identification would give: the bounds of the scheduling-source benchmark.
 
-What an offline identification would hand the LPV on a patient of higher order than its design
-model: the K, T, τ whose step response is closest (least squares) to the patient's own over a
-window. Unlike :func:`benchmarks.schedule_sources.apparent_fopdt` (K the steady secant gain, T the
-sum of the two fast lags, τ the line delay alone), the fit puts the effect-site and plasma lags that
-a first-order model cannot carry into τ, and K is the gain reached within the window, so the creep
-after it does not count. ``lpv-stepfit`` of :mod:`benchmarks.schedule_sources` schedules on it.
+* :func:`apparent_fopdt`: in closed form, K the steady secant gain, T the sum of the two fast
+  lags, τ the line delay alone (``lpv-truth``).
+* :func:`step_response_fit`: the K, T, τ whose step response is closest (least squares) to the
+  patient's own over a window (``lpv-stepfit``). The fit puts the effect-site and plasma lags that a
+  first-order model cannot carry into τ, and K is the gain reached within the window, so the creep
+  after it does not count.
+* :func:`incremental_gain`: the local sensitivity at the operating point (``lpv-stepfit-inc``).
 
-Units: t in s, MAP changes in mmHg, rates in ml/h, K in mmHg/(ml/h).
+Units: t in s, MAP changes in mmHg, rates in ml/h, K in mmHg/(ml/h). The defaults are the
+benchmark's: 0.1 s steps, a 100 µg/ml syringe, a 120 ml/h pump.
 """
 
 from __future__ import annotations
@@ -15,6 +18,11 @@ from __future__ import annotations
 import numpy as np
 
 from sim.patients.pkpd import IndependentPatient, PatientParams
+
+#: the benchmark's sample period (s), syringe (µg/ml) and pump limit (ml/h)
+STEP_S = 0.1
+CONCENTRATION_UG_ML = 100.0
+PUMP_MAX_ML_H = 120.0
 
 #: the fit's search grid: τ in s, T in s (K is solved in closed form at each grid point)
 TAU_GRID_S = np.arange(0.0, 240.0 + 1e-9, 2.0)
@@ -64,19 +72,49 @@ def fit_fopdt(
     return best[1], best[2], best[3]
 
 
+def held_patient(
+    params: PatientParams,
+    target_mmhg: float,
+    step_s: float = STEP_S,
+    concentration_ug_ml: float = CONCENTRATION_UG_ML,
+    max_rate_ml_h: float = PUMP_MAX_ML_H,
+) -> tuple[IndependentPatient, float]:
+    """A fresh patient of ``params`` without disturbances, and the rate (ml/h) that holds
+    ``target_mmhg`` at steady state (the pump's limit when the target is out of reach)."""
+    patient = IndependentPatient(params, step_s, concentration_ug_ml, disturbances=False)
+    return patient, patient.steady_state_rate_ml_h(target_mmhg, max_rate_ml_h) or max_rate_ml_h
+
+
+def apparent_fopdt(params: PatientParams, target_mmhg: float) -> tuple[float, float, float]:
+    """The patient's apparent FOPDT held at ``target_mmhg``: K the secant sensitivity (target −
+    baseline) / the steady infusion that holds the target (mmHg/(ml/h)), T the plasma's fast time
+    constant V1/(CL + Q) plus the effect-site lag (s), τ the transport delay (s)."""
+    need = held_patient(params, target_mmhg)[1]
+    K = (target_mmhg - params.baseline_mmhg) / max(need, 1e-6)
+    T = 60.0 * params.v1_l / (params.cl_l_min + params.q_l_min) + params.effect_lag_s
+    return K, T, params.delay_s
+
+
+def incremental_gain(params: PatientParams, target_mmhg: float) -> float:
+    """The patient's local sensitivity at the rate that holds ``target_mmhg`` (mmHg/(ml/h), the
+    plasma's fast mode settled, the peripheral level and the tolerance not yet moved:
+    :meth:`~sim.patients.pkpd.IndependentPatient.fast_gain_mmhg_per_ml_h`)."""
+    patient, need = held_patient(params, target_mmhg)
+    return patient.fast_gain_mmhg_per_ml_h(need)
+
+
 def step_response_fit(
     params: PatientParams,
     target_mmhg: float,
-    step_s: float,
-    concentration_ug_ml: float,
-    max_rate_ml_h: float,
+    step_s: float = STEP_S,
+    concentration_ug_ml: float = CONCENTRATION_UG_ML,
+    max_rate_ml_h: float = PUMP_MAX_ML_H,
     window_s: float = WINDOW_S,
 ) -> tuple[float, float, float]:
     """:func:`fit_fopdt` of the patient's noise-free open-loop response, disturbances off, to the
     rate that holds ``target_mmhg`` at steady state (the pump's limit when out of reach), over
     ``window_s`` s sampled every ``step_s`` s."""
-    patient = IndependentPatient(params, step_s, concentration_ug_ml, disturbances=False)
-    rate = patient.steady_state_rate_ml_h(target_mmhg, max_rate_ml_h) or max_rate_ml_h
+    patient, rate = held_patient(params, target_mmhg, step_s, concentration_ug_ml, max_rate_ml_h)
     y0 = patient.map_mmhg
     n = round(window_s / step_s)
     dy = np.empty(n)

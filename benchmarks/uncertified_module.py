@@ -25,18 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen.pipeline import MODULE_NAME, REPO_ROOT, LoadedDesign, emit, quantise, tabulate
+from codegen.pipeline import MODULE_NAME, LoadedDesign, emit, quantise, tabulate
+from codegen.pipeline import _display as shown_path  # a path as generation commands show it
 from plumbing.files import write_atomic
 from runtime.inputs.controller_loader import UNCERTIFIED_MARK
 from synthesis.families.smith.law import SmithLPV
 from synthesis.problem.config_toml import load_config
 from synthesis.problem.reconstruct import DelayedController
-
-
-def _shown(path: Path) -> str:
-    """``path`` as codegen's generation command shows a file: repository-relative when inside."""
-    path = path.resolve()
-    return path.relative_to(REPO_ROOT).as_posix() if path.is_relative_to(REPO_ROOT) else path.name
 
 
 def uncertified_design(config_path: Path) -> LoadedDesign:
@@ -64,7 +59,7 @@ def uncertified_design(config_path: Path) -> LoadedDesign:
     return LoadedDesign(
         sha256=hashlib.sha256(config_path.read_bytes()).hexdigest(),
         # the generation command becomes "pressor codegen UNCERTIFIED <config> ...": the mark
-        display_path=UNCERTIFIED_MARK.removeprefix("pressor codegen ") + _shown(config_path),
+        display_path=UNCERTIFIED_MARK.removeprefix("pressor codegen ") + shown_path(config_path),
         controller_fn=controller_at,
         box=np.asarray(model.box, dtype=float),
         rate_bounds=np.asarray(model.rate_bounds, dtype=float),

@@ -9,8 +9,8 @@ no C compiler works, :func:`shared_library` says why and the caller keeps its Py
 
 Libraries are cached per user, keyed by the sha256 of the source (and its header), the flags and
 the compiler's version line, under ``$PRESSOR_CACHE_DIR`` or ``$XDG_CACHE_HOME/pressor/native``
-(default ``~/.cache/pressor/native``). A library is written to a temporary sibling and moved into place, so
-concurrent processes (a Dask cluster, ``--jobs``) and interrupted builds never leave a half-written
+(default ``~/.cache/pressor/native``). A library is written to a temporary sibling and moved into
+place, so concurrent processes (a Dask cluster, ``--jobs``) and interrupted builds never leave a half-written
 library under a final name.
 
 ``PRESSOR_NATIVE``: ``auto`` (default) uses a compiled kernel where a compiler works; ``off`` never

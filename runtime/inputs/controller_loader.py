@@ -216,12 +216,12 @@ def load_controller(
             " 'pressor.controllers' entry point (runtime.inputs.controller_plugin)"
         )
     module = load_generated_module(path, artifact_sha256)
-    if str(getattr(module, "GENERATION_COMMAND", "")).startswith(UNCERTIFIED_MARK):
-        if not allow_uncertified:
-            raise ControllerSpecError(
-                f"{path}: field 'GENERATION_COMMAND' marks an UNCERTIFIED research build (no"
-                " certificate covers its box); only the benchmarks may run it"
-            )
+    command = str(getattr(module, "GENERATION_COMMAND", ""))
+    if command.startswith(UNCERTIFIED_MARK) and not allow_uncertified:
+        raise ControllerSpecError(
+            f"{path}: field 'GENERATION_COMMAND' marks an UNCERTIFIED research build (no"
+            " certificate covers its box); only the benchmarks may run it"
+        )
     controller = module.Controller()
     period = float(getattr(controller, "sample_period_s", float("nan")))
     if abs(period - sample_period_s) > 1e-12:

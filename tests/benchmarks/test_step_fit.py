@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.schedule_sources import apparent_fopdt
-from benchmarks.step_fit import fit_fopdt, step_response_fit
+from benchmarks.step_fit import apparent_fopdt, fit_fopdt, step_response_fit
 from sim.patients.pkpd import PatientParams
 
 
