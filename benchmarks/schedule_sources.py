@@ -380,8 +380,8 @@ def main(argv: list[str] | None = None) -> int:
                      ("lpv-stepfit", "pi"), ("lpv-stepfit", "smith"),
                      ("lpv-validated", "smith-validated"), ("lpv-validated", "lpv-nominal"),
                      ("lpv-estimated", "lpv-nominal"),
-                     *((lab, ref) for lab in labels if lab.startswith(("lpv-gate", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-"))
-                       for ref in ("lpv-nominal", "pi"))):  # fmt: skip
+                     *((lab, ref) for lab in labels if lab.startswith(("lpv-gate", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-", "fixed:"))
+                       for ref in ("lpv-nominal", "pi", "smith"))):  # fmt: skip
             if a in res and b in res:
                 r = ratio(a, b)
                 step = ""
