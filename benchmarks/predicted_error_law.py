@@ -20,7 +20,8 @@ Per tick of Ts (s), physical units (MAP mmHg, rates ml/h, K mmHg/(ml/h), T and �
   λ_ref = 10 s, pump share 0.9, K floor 0.05), giving u_ff and the reference MAP r_m;
 * feedback on e = r_m − MAP: the filter state u_fb (``u_fb' = −Λ u_fb + Ω u_a``, Ω = Λ = 0.1 1/s),
   the model ``T ŷ' = −ŷ + K u_fb``, the predicted error ``e_p = e − ŷ + ŷ(t − τ)`` and
-  ``u_a = Kc e_p + Ki q`` (``Kc = g/K``, ``Ki = g/(K T)``, g = ``loop_gain``, default 3),
+  ``u_a = Kc e_p + Ki q`` (``Kc = g/K``, ``Ki = g_i/(K T)``, g = ``loop_gain``, default 3,
+  g_i = ``integral_gain``, default g),
   ``q' = e_p`` (exact) or
   ``u_a = Kc e_p + Ki (x_e − τ(ŷ + ŷ(t − τ))/2)``, ``x_e' = e`` (trapezoid);
 * u_fb is clamped to [−u_ff, u_max − u_ff]; the integrators freeze while the clamp holds and the
@@ -77,7 +78,8 @@ class _Line:
 
 
 class PredictedErrorLaw:
-    """The module's law; ``law`` "exact" (default) or "trapezoid", ``loop_gain`` g in (0, 10]."""
+    """The module's law; ``law`` "exact" (default) or "trapezoid", ``loop_gain`` g in (0, 10],
+    ``integral_gain`` g_i in (0, 10] (None: g_i = g)."""
 
     def __init__(
         self,
@@ -85,12 +87,16 @@ class PredictedErrorLaw:
         max_rate_ml_h: float = 120.0,
         law: str = "exact",
         loop_gain: float = LOOP_GAIN,
+        integral_gain: float | None = None,
     ) -> None:
         if law not in LAWS:
             raise ValueError(f"law={law!r} must be one of {LAWS}")
         if not 0.0 < loop_gain <= 10.0:
             raise ValueError(f"loop_gain={loop_gain!r} must lie in (0, 10]")
         self.loop_gain = float(loop_gain)
+        self.integral_gain = float(loop_gain if integral_gain is None else integral_gain)
+        if not 0.0 < self.integral_gain <= 10.0:
+            raise ValueError(f"integral_gain={integral_gain!r} must lie in (0, 10]")
         self.sample_period_s = float(sample_period_s)
         self.max_rate_ml_h = float(max_rate_ml_h)
         self.law = law
@@ -138,7 +144,7 @@ class PredictedErrorLaw:
         yhat_delayed = self._yhat_line.read(lag)
         e_p = e - self._yhat + yhat_delayed
         kc = self.loop_gain / k
-        ki = kc / t_s
+        ki = self.integral_gain / (k * t_s)
         if self.law == "exact":
             u_a = kc * e_p + ki * self._integral
             drive = e_p

@@ -14,7 +14,7 @@ The law (ρ = (K mmHg/(ml/h), T s, τ s) scheduled; u_a is the input of the filt
     T dŷ/dt = −ŷ + K u                            delay-free model (mmHg)
     e_p     = r − MAP − ŷ + ŷ(t − τ)               predicted error (mmHg)
     dq/dt   = e_p                                  its integral (mmHg·s)
-    u_a     = Kc e_p + Ki q,   Kc = g/K,   Ki = g/(K T)
+    u_a     = Kc e_p + Ki q,   Kc = g/K,   Ki = g_i/(K T)   (g_i = g unless set)
 
 This is the scheduled PI-on-predicted-error of :mod:`synthesis.families.smith.law` with the exact
 integral ``q = x_e − ∫_{t−τ}^{t} ŷ`` in place of that module's trapezoid (a distributed delay:
@@ -97,6 +97,9 @@ class PredictionErrorBox:
         g = K·Kc (dimensionless), > 0: the closed-loop time constant is λ = T/g.
     omega, lambda_
         The input filter ``u = omega/(s + lambda_) u_a`` (1/s), > 0.
+    integral_gain
+        g_i = K·T·Ki (dimensionless), > 0; None (default): g_i = g, the PI zero on the model's
+        pole.
     """
 
     k_min: float
@@ -106,6 +109,7 @@ class PredictionErrorBox:
     loop_gain: float
     omega: float
     lambda_: float
+    integral_gain: float | None = None
 
     def __post_init__(self) -> None:
         lo, hi = self.t_range_s
@@ -117,12 +121,20 @@ class PredictionErrorBox:
             "loop_gain": self.loop_gain > 0,
             "omega": self.omega > 0,
             "lambda_": self.lambda_ > 0,
+            "integral_gain": self.integral_gain is None or self.integral_gain > 0,
         }
         for name, ok in checks.items():
             value = getattr(self, name)
+            if value is None:
+                continue
             finite = np.all(np.isfinite(np.asarray(value, dtype=float)))
             if not (ok and finite):
                 raise ValueError(f"{name}={value!r} outside its range (see PredictionErrorBox)")
+
+    @property
+    def g_i(self) -> float:
+        """The integral gain g_i in use (``integral_gain``, else ``loop_gain``)."""
+        return self.loop_gain if self.integral_gain is None else self.integral_gain
 
     @classmethod
     def from_config(cls, cfg: DesignConfig) -> PredictionErrorBox:
@@ -181,11 +193,11 @@ def loop_matrix(t_s: float, k_rate_rel_per_s: float, box: PredictionErrorBox) ->
 
     The prediction-error perturbation (φ1 + φ2 in de/dt) and the disturbance are not included.
     """
-    g, om, lam = box.loop_gain, box.omega, box.lambda_
-    # dũ/dt = (K̇/K − Λ) ũ + Ω K u_a,  K u_a = g e_p + (g/T) q,  e_p = −ŷ − e
+    g, gi, om, lam = box.loop_gain, box.g_i, box.omega, box.lambda_
+    # dũ/dt = (K̇/K − Λ) ũ + Ω K u_a,  K u_a = g e_p + (g_i/T) q,  e_p = −ŷ − e
     return np.array(
         [
-            [-lam + k_rate_rel_per_s, -om * g, om * g / t_s, -om * g],
+            [-lam + k_rate_rel_per_s, -om * g, om * gi / t_s, -om * g],
             [1.0 / t_s, -1.0 / t_s, 0.0, 0.0],
             [0.0, -1.0, 0.0, -1.0],
             [0.0, 0.0, 0.0, -1.0 / t_s],
@@ -447,8 +459,7 @@ def simulate_law(
         u, yhat = u_hist[k], yhat_hist[k]
         measured[k] = y + (disturbance_mmhg if times[k] < disturbance_s else 0.0)
         e_p = -measured[k] - yhat + delayed(yhat_hist, k, tau_s)
-        kc = box.loop_gain / kk
-        u_a = kc * e_p + kc / t_s * q
+        u_a = (box.loop_gain * e_p + box.g_i / t_s * q) / kk
         u_hist[k + 1] = u + dt_s * (-box.lambda_ * u + box.omega * u_a)
         yhat_hist[k + 1] = yhat + dt_s * (-yhat + kk * u) / t_s
         y += dt_s * (-y + kk * delayed(u_hist, k, tau_s)) / t_s

@@ -125,7 +125,13 @@ def test_box_of_the_wide_delay_design_file():
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("k_min", 0.0), ("tau_max_s", math.nan), ("rates", (2e-4, 0.03, 1.0)), ("loop_gain", -1.0)],
+    [
+        ("k_min", 0.0),
+        ("tau_max_s", math.nan),
+        ("rates", (2e-4, 0.03, 1.0)),
+        ("loop_gain", -1.0),
+        ("integral_gain", 0.0),
+    ],
 )
 def test_invalid_box_names_the_field(field: str, value: object):
     kwargs = dict(WIDE.__dict__) | {field: value}
