@@ -140,7 +140,7 @@ class PredictionErrorBox:
     def from_config(cls, cfg: DesignConfig) -> PredictionErrorBox:
         """The box, rates, loop gain and filter of a design (``controller.loop_gain`` required)."""
         if cfg.controller.loop_gain is None:
-            raise ValueError(f"{cfg.source}: controller.loop_gain is needed (structure 'smith')")
+            raise ValueError(f"{cfg.source}: controller.loop_gain is needed (the law's loop gain)")
         box = np.asarray(cfg.model.box, dtype=float)
         rates = np.asarray(cfg.model.rate_bounds, dtype=float)
         return cls(
