@@ -53,6 +53,7 @@ import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -173,7 +174,8 @@ class PredictionErrorCertificate:
         Smallest ``-λ_max`` of the LMI at each check point over its rate vertices (scaled units);
         NaN when the solve failed.
     p_terms, q
-        P0, P1, P2 (3, 4, 4) and Q (4, 4) in the scaled time unit; None on failure.
+        P0, P1, P2 (3, 4, 4) and Q (4, 4) in the scaled coordinates (time in ``time_scale_s``,
+        q in mmHg·T_ref with T_ref the T box's geometric mean); None on failure.
     solve_time_s
         Assembly and solve time (s).
     """
@@ -368,8 +370,14 @@ class _Blocks:
         sel_y[1, 1] = (b * self.tu) ** 2
         return a_mat, sel_u, sel_y
 
-    def lmi(self, cp, t_s, k_dot, p, p_dot, q, mult, gamma2):  # type: ignore[no-untyped-def]
-        """The (2n + 3)-square LMI matrix (cvxpy expression); ``k_dot`` = d(ln K)/dt per s."""
+    def lmi(
+        self, cp: Any, t_s: float, k_dot: float, p: Any, p_dot: Any, q: Any, mult: Any, gamma2: Any
+    ) -> Any:
+        """The (2n + 3)-square LMI matrix at lag ``t_s`` (s), ``k_dot`` = d(ln K)/dt per s.
+
+        ``p``, ``p_dot``, ``q``, ``mult`` (2,) and ``gamma2`` are cvxpy expressions or numpy
+        values; the result is a cvxpy expression (``.value`` evaluates it for numpy inputs).
+        """
         n = N_STATES
         a_mat, sel_u, sel_y = self._pieces(t_s, k_dot)
         zn, z1n, z11 = np.zeros((n, n)), np.zeros((1, n)), np.zeros((1, 1))
