@@ -109,6 +109,7 @@ class PredictedErrorLaw:
         self._y0 = self._ym = self._yhat = self._u_fb = self._integral = 0.0
         self._y0_line, self._uff_line, self._yhat_line = (_Line(self._n) for _ in range(3))
         self._status = _Status()
+        self._last_ml_h = 0.0
 
     @property
     def status(self) -> _Status:
@@ -116,7 +117,13 @@ class PredictedErrorLaw:
         return self._status
 
     def step(self, map_mmhg: float, target_mmhg: float, K: float, T: float, tau: float) -> float:
-        """One tick: the infusion command (ml/h) for this tick."""
+        """One tick: the infusion command (ml/h) for this tick.
+
+        A non-finite MAP, target or ρ holds the previous command and every state (the supervisor
+        judges the sample), as the baselines do.
+        """
+        if not all(math.isfinite(v) for v in (map_mmhg, target_mmhg, K, T, tau)):
+            return self._last_ml_h
         ts, u_max = self.sample_period_s, self.max_rate_ml_h
         rho = [K, T, tau]
         clamped = [min(max(v, lo), hi) for v, lo, hi in zip(rho, GRID_LO, GRID_HI, strict=True)]
@@ -161,4 +168,5 @@ class PredictedErrorLaw:
             self._integral += ts * drive
         self._yhat = decay * self._yhat + (1.0 - decay) * k * self._u_fb
         self._yhat_line.push(self._yhat)
-        return min(max(u_ff + self._u_fb, 0.0), u_max)
+        self._last_ml_h = min(max(u_ff + self._u_fb, 0.0), u_max)
+        return self._last_ml_h

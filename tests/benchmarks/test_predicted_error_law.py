@@ -54,3 +54,12 @@ def test_loads_as_a_plugin_and_declares_its_box():
 def test_unknown_law_is_refused():
     with pytest.raises(ValueError, match="law='simpson'"):
         PredictedErrorLaw(law="simpson")
+
+
+def test_a_missing_sample_holds_the_command():
+    ctrl = PredictedErrorLaw()
+    for _ in range(50):
+        command = ctrl.step(60.0, 75.0, 0.5, 150.0, 60.0)
+    assert command > 0.0
+    assert ctrl.step(math.nan, 75.0, 0.5, 150.0, 60.0) == command
+    assert math.isfinite(ctrl.step(60.0, 75.0, 0.5, 150.0, 60.0))
