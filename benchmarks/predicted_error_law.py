@@ -1,4 +1,4 @@
-"""The Smith law that integrates the predicted error, as a controller plugin (research only).
+"""The scheduled Smith law on a 200 s delay box, exact or trapezoid integral: a research plugin.
 
 Usage (the plugin spec of :mod:`runtime.inputs.controller_plugin`)::
 
@@ -6,13 +6,15 @@ Usage (the plugin spec of :mod:`runtime.inputs.controller_plugin`)::
         --lpv benchmarks.predicted_error_law:PredictedErrorLaw --runs lpv-stepfit,pi,smith
     ... --lpv benchmarks.predicted_error_law:PredictedErrorLaw:law=trapezoid    # the shipped law
 
-The certificate of :mod:`synthesis.certificates.prediction_error` covers delays to 200 s and
-beyond, but for the law with the *exact* integral of the predicted error
-``q = x_e − ∫_{t−τ}^{t} ŷ``, a distributed delay the synthesis controller class and the generated
-modules cannot carry. This module runs that law in plain Python so its worth can be measured before
-codegen learns it. ``law="trapezoid"`` runs the shipped law's feedback (the integral written as the
-trapezoid ``τ(ŷ + ŷ(t − τ))/2``, :mod:`synthesis.families.smith.law`) behind the same prefilter, so
-the two laws are compared with everything else equal.
+The analysis of :mod:`synthesis.certificates.prediction_error` certifies, on a τ ≤ 200 s box,
+the law with the *exact* integral of the predicted error ``q = x_e − ∫_{t−τ}^{t} ŷ`` (a
+distributed delay the synthesis controller class and the generated modules cannot carry) and, at
+slower rates, the shipped law (the integral written as the trapezoid ``τ(ŷ + ŷ(t − τ))/2``,
+:mod:`synthesis.families.smith.law`). ``pressor synth`` does not run that analysis yet, so no
+artifact or generated module of either exists on that box. This module runs both laws in plain
+Python behind the same prefilter, so they are compared with everything else equal; with
+``law="trapezoid"`` it reproduces the research build of ``benchmarks/designs/wide_delay.toml``
+(docs/ESTIMATION.md).
 
 Per tick of Ts (s), physical units (MAP mmHg, rates ml/h, K mmHg/(ml/h), T and τ s):
 
@@ -40,7 +42,8 @@ from dataclasses import dataclass
 #: the scheduling box (K mmHg/(ml/h), T s, τ s) of benchmarks/designs/wide_delay.toml
 GRID_LO = (0.15, 100.0, 10.0)
 GRID_HI = (3.0, 700.0, 200.0)
-#: the rates the certificate holds at τ̄ = 200 s (per s; docs/CERTIFICATE-STRUCTURE.md §5)
+#: the rates at which the exact law is certified at τ̄ = 200 s (per s; docs/CERTIFICATE-STRUCTURE.md
+#: §5; the trapezoid needs 5e-5 / 0.01 / 0.01)
 RATE_BOUNDS = (2e-4, 0.03, 0.05)
 LOOP_GAIN = 3.0
 OMEGA = LAMBDA = 0.1  # 1/s
