@@ -6,8 +6,8 @@ Usage (the plugin spec of :mod:`runtime.inputs.controller_plugin`)::
         --lpv benchmarks.predicted_error_law:PredictedErrorLaw --runs lpv-stepfit,pi,smith
     ... --lpv benchmarks.predicted_error_law:PredictedErrorLaw:law=trapezoid    # the shipped law
 
-The analysis of :mod:`synthesis.certificates.prediction_error` certifies, on a τ ≤ 200 s box,
-the law with the *exact* integral of the predicted error ``q = x_e − ∫_{t−τ}^{t} ŷ`` (a
+The analysis of :mod:`synthesis.certificates.wirtinger.prediction_error` certifies, on a
+τ ≤ 200 s box, the law with the *exact* integral of the predicted error ``q = x_e − ∫_{t−τ}^{t} ŷ`` (a
 distributed delay the synthesis controller class and the generated modules cannot carry) and, at
 slower rates, the shipped law (the integral written as the trapezoid ``τ(ŷ + ŷ(t − τ))/2``,
 :mod:`synthesis.families.smith.law`). ``pressor synth`` does not run that analysis yet, so no
@@ -18,8 +18,8 @@ Python behind the same prefilter, so they are compared with everything else equa
 
 Per tick of Ts (s), physical units (MAP mmHg, rates ml/h, K mmHg/(ml/h), T and τ s):
 
-* prefilter: the shipped design's reference model and feedforward (:mod:`synthesis.problem.reference`,
-  λ_ref = 10 s, pump share 0.9, K floor 0.05), giving u_ff and the reference MAP r_m;
+* prefilter: the shipped design's reference model and feedforward
+  (:mod:`synthesis.problem.reference`, λ_ref = 10 s, pump share 0.9, K floor 0.05), giving u_ff and the reference MAP r_m;
 * feedback on e = r_m − MAP: the filter state u_fb (``u_fb' = −Λ u_fb + Ω u_a``, Ω = Λ = 0.1 1/s),
   the model ``T ŷ' = −ŷ + K u_fb``, the predicted error ``e_p = e − ŷ + ŷ(t − τ)`` and
   ``u_a = Kc e_p + Ki q`` (``Kc = g/K``, ``Ki = g_i/(K T)``, g = ``loop_gain``, default 3,

@@ -6,8 +6,8 @@ Usage::
     python -m benchmarks.prediction_error_frontier --config benchmarks/designs/wide_delay.toml \
         --law trapezoid --verify
 
-Each row runs :func:`synthesis.certificates.prediction_error.certify` (the Wirtinger analysis on a
-3 x 3 grid of T and τ, the box's corners and midpoints) for the shipped box's K floor (0.15
+Each row runs :func:`synthesis.certificates.wirtinger.prediction_error.certify` (the Wirtinger
+analysis on a 3 x 3 grid of T and τ, the box's corners and midpoints) for the shipped box's K floor (0.15
 mmHg/(ml/h)), T box 100-700 s, τ from 10 s, loop gain 3 and filter (Ω = Λ = 0.1 1/s), with the
 law, τ̄ and rates of the row. ``--verify`` also runs the check ``pressor verify`` runs on a
 design: the same analysis on a 5 x 5 grid with γ capped at twice the design's. ``--config``
@@ -21,7 +21,7 @@ import argparse
 import sys
 from dataclasses import replace
 
-from synthesis.certificates.prediction_error import LAWS, PredictionErrorBox, certify
+from synthesis.certificates.wirtinger.prediction_error import LAWS, PredictionErrorBox, certify
 from synthesis.problem.config_toml import load_config
 
 #: |dK/dt| (mmHg/(ml/h)/s), |dT/dt| (s/s), |dτ/dt| (s/s)

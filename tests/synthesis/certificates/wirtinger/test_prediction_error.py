@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from synthesis.certificates.prediction_error import (
+from synthesis.certificates.wirtinger.prediction_error import (
     PredictionErrorBox,
     certify,
     loop_matrices,

@@ -31,8 +31,8 @@ the trapezoid: :func:`loop_matrices`). With ρ moving, |α| and |β| are bounded
 the matrices depend on T and τ only (plus K̇/K on ũ), so the grid is two-dimensional, and the K box
 enters only through the relative K rate ν_K/K_min.
 
-The analysis is the project's Wirtinger LMI (:func:`synthesis.certificates.wirtinger.analysis.analyse_wirtinger`,
-P affine in ρ̂ = (T, τ)) on these loops, each written at the vertices of K̇/K, α and β
+The analysis is the project's Wirtinger LMI
+(:func:`synthesis.certificates.wirtinger.analysis.analyse_wirtinger`, P affine in ρ̂ = (T, τ)) on these loops, each written at the vertices of K̇/K, α and β
 (:func:`vertex_systems`). d is an additive output disturbance on MAP (mmHg) and z = e_p, so γ is
 the certified L2 gain from an output disturbance to the predicted error (dimensionless; a different
 channel from the shipped design's γ).
