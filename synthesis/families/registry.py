@@ -53,6 +53,7 @@ DEFAULT_STRUCTURE = "theorem3"
 _MODULES: dict[str, str] = {
     "theorem3": "synthesis.families.theorem3.family",
     "smith": "synthesis.families.smith.family",
+    "smith-pe": "synthesis.families.smith.pe_family",
 }
 #: allowed ``loop_gain`` (dimensionless) of a family that takes one: lower bound excluded
 LOOP_GAIN_RANGE = (0.0, 10.0)

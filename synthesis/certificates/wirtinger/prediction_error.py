@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 
 from synthesis.certificates.interface import AnalysisResult
 from synthesis.problem.closed_loop import DelaySystem
-from synthesis.problem.config import DesignConfig
+from synthesis.problem.config import DesignConfig, ModelConfig
 
 __all__ = [
     "LAWS",
@@ -137,20 +137,26 @@ class PredictionErrorBox:
         return self.loop_gain if self.integral_gain is None else self.integral_gain
 
     @classmethod
-    def from_config(cls, cfg: DesignConfig) -> PredictionErrorBox:
+    def from_config(cls, cfg: DesignConfig, law: str = "exact") -> PredictionErrorBox:
         """The box, rates, loop gain and filter of a design (``controller.loop_gain`` required)."""
         if cfg.controller.loop_gain is None:
             raise ValueError(f"{cfg.source}: controller.loop_gain is needed (the law's loop gain)")
-        box = np.asarray(cfg.model.box, dtype=float)
-        rates = np.asarray(cfg.model.rate_bounds, dtype=float)
+        return cls.from_model(cfg.model, cfg.controller.loop_gain, law)
+
+    @classmethod
+    def from_model(cls, model: ModelConfig, loop_gain: float, law: str) -> PredictionErrorBox:
+        """The box, rates and filter of ``model`` with ``loop_gain`` and ``law``."""
+        box = np.asarray(model.box, dtype=float)
+        rates = np.asarray(model.rate_bounds, dtype=float)
         return cls(
             k_min=float(box[0, 0]),
             t_range_s=(float(box[1, 0]), float(box[1, 1])),
             tau_range_s=(float(box[2, 0]), float(box[2, 1])),
             rates=(float(rates[0]), float(rates[1]), float(rates[2])),
-            loop_gain=float(cfg.controller.loop_gain),
-            omega=float(cfg.model.omega),
-            lambda_=float(cfg.model.lambda_),
+            loop_gain=float(loop_gain),
+            omega=float(model.omega),
+            lambda_=float(model.lambda_),
+            law=law,
         )
 
 

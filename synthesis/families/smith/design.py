@@ -354,6 +354,25 @@ def design_in_form(
             f"{cfg.grid_points} (status {res.status}, gamma {res.gamma}, worst margin {margin})"
         )
     say(f"certified: gamma {res.gamma:.4g} ({res.solve_time_s:.1f} s)")
+    analysis = f"wirtinger, {form.coordinates}, rate_form {form.rate_form}"
+    basis = f"certificate P {P_DEPENDENCE} in rho_hat (1, rho_i, rho_i^2/2)"
+    return package_artifact(cfg, law, res, scaling, analysis, basis)
+
+
+def package_artifact(
+    cfg: DesignConfig,
+    law: SmithLPV,
+    res: AnalysisResult,
+    scaling: Scaling,
+    analysis: str,
+    basis: str,
+) -> ControllerArtifact:
+    """The artifact of a certified Smith design: the law at the grid nodes, the certificate ``res``
+    (``P``, ``S``, ``R``, ``transform``) and the metadata naming ``analysis`` and the P ``basis``."""
+    model, family = cfg.model, cfg.controller
+    grid = cfg.grid()
+    flat = np.stack(np.meshgrid(*grid, indexing="ij"), axis=-1).reshape(-1, 3)
+    assert res.gamma is not None and res.certificate is not None
     gshape = tuple(g.size for g in grid)
     laws = [law.at(p) for p in flat]
     nodes = {
@@ -369,7 +388,7 @@ def design_in_form(
         "box": model.box.tolist(),
         "rate_bounds": model.rate_bounds.tolist(),
         "grid": [g.tolist() for g in grid],
-        "basis": f"certificate P {P_DEPENDENCE} in rho_hat (1, rho_i, rho_i^2/2)",
+        "basis": basis,
         "model": model.to_dict(),
         "design": cfg.to_dict(),
         "reference": cfg.reference.to_dict(),
@@ -387,7 +406,7 @@ def design_in_form(
         "solver": {
             "name": "CLARABEL",
             "status": res.status,
-            "analysis": f"wirtinger, {form.coordinates}, rate_form {form.rate_form}",
+            "analysis": analysis,
             "p_dependence": res.p_dependence,
             "n_lmi": res.n_lmis,
             "notes": list(res.notes),
