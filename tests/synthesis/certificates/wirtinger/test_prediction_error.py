@@ -44,6 +44,7 @@ def test_certifies_the_exact_law_on_a_200_s_delay_box():
     assert cert.gamma is not None and 1.0 < cert.gamma < 3.0
 
 
+@pytest.mark.slow  # 9 s; tests/synthesis/families/smith/test_pe_family.py covers it through synth
 def test_certifies_the_shipped_trapezoid_law_on_a_200_s_box_only_at_slower_rates():
     slow = replace(WIDE, law="trapezoid", rates=(5e-5, 0.01, 0.01))
     cert = certify(slow, t_points=2, tau_points=2)
