@@ -104,6 +104,7 @@ class PredictedErrorLaw:
         self.max_rate_ml_h = float(max_rate_ml_h)
         self.law = law
         self._n = math.ceil(GRID_HI[2] / self.sample_period_s) + 2
+        self._filter_decay = math.exp(-LAMBDA * self.sample_period_s)  # the input filter, per tick
         self.reset()
 
     def reset(self) -> None:
@@ -161,7 +162,7 @@ class PredictedErrorLaw:
         else:
             u_a = kc * e_p + ki * (self._integral - tau_s * (self._yhat + yhat_delayed) / 2.0)
             drive = e
-        f = math.exp(-LAMBDA * ts)
+        f = self._filter_decay
         u_fb = f * self._u_fb + (1.0 - f) * (OMEGA / LAMBDA) * u_a
         low, high = -u_ff, u_max - u_ff
         freeze = (u_fb > high and drive > 0.0) or (u_fb < low and drive < 0.0)

@@ -37,7 +37,7 @@ from synthesis.families.smith.design import (
     design_in_form,
 )
 from synthesis.families.smith.family import SmithFamily, capped_analysis
-from synthesis.families.smith.pe_family import SmithPEFamily, design_smith_pe
+from synthesis.families.smith.pe_family import SmithPEFamily
 from synthesis.families.theorem3.family import Theorem3Family, jensen_analysis
 from synthesis.problem.closed_loop import DelaySystem
 from synthesis.problem.config import DesignConfig, ModelConfig
@@ -130,22 +130,11 @@ def _jensen_all_points(
     return jensen_analysis(artifact, systems, mesh, p_dependence, progress, all_points_at_once=True)
 
 
-def _smith_pe_all_vertices(
-    artifact: ControllerArtifact,
-    systems: list[DelaySystem],
-    mesh: np.ndarray,
-    centre: tuple[DelaySystem, np.ndarray],
-    p_dependence: str,
-    progress: Progress,
-) -> AnalysisResult:
-    """The "smith-pe" family's check (a): already every point and vertex in one solve."""
-    return SmithPEFamily().analysis(artifact, systems, mesh, centre, p_dependence, progress)
-
-
 #: family object type -> its straightforward check (a)
 _ALL_POINTS: dict[type, Analysis] = {
     SmithFamily: _smith_all_vertices,
-    SmithPEFamily: _smith_pe_all_vertices,
+    # its check (a) is already every point and rate vertex in one solve
+    SmithPEFamily: SmithPEFamily().analysis,
     Theorem3Family: _jensen_all_points,
 }
 
@@ -195,7 +184,7 @@ def _theorem3_synth(cfg: DesignConfig, straightforward: bool) -> dict[str, str]:
 
 def _smith_pe_synth(cfg: DesignConfig, straightforward: bool) -> dict[str, str]:
     """The "smith-pe" design: its analysis has one form (every vertex), so both cases are it."""
-    art = design_smith_pe(cfg)
+    art = SmithPEFamily().certified_artifact(cfg)
     sol = art.metadata["solver"]
     return {
         "outcome": f"gamma={art.gamma:.4f} {sol['status']}",

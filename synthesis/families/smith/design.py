@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.artifact import FORMAT_VERSION, ControllerArtifact, make_artifact
+from synthesis.artifact import ControllerArtifact
 from synthesis.certificates.interface import AnalysisResult
 from synthesis.certificates.state_transform import conditioning_transform
 from synthesis.certificates.wirtinger.analysis import analyse_wirtinger, recheck_certificate
@@ -39,6 +39,7 @@ from synthesis.certificates.wirtinger.conic import COUPLINGS, RATE_FORMS
 from synthesis.certificates.wirtinger.k_scaling import KScaling, k_scaled_system
 from synthesis.families.smith.family import NAME
 from synthesis.families.smith.law import SmithLPV
+from synthesis.families.smith.packaging import package_artifact
 from synthesis.problem.closed_loop import DelaySystem, close_loop
 from synthesis.problem.config import NOMINAL_RHO, DesignConfig, ModelConfig
 from synthesis.problem.model import I_U, dims, plant_at
@@ -356,62 +357,4 @@ def design_in_form(
     say(f"certified: gamma {res.gamma:.4g} ({res.solve_time_s:.1f} s)")
     analysis = f"wirtinger, {form.coordinates}, rate_form {form.rate_form}"
     basis = f"certificate P {P_DEPENDENCE} in rho_hat (1, rho_i, rho_i^2/2)"
-    return package_artifact(cfg, law, res, scaling, analysis, basis)
-
-
-def package_artifact(
-    cfg: DesignConfig,
-    law: SmithLPV,
-    res: AnalysisResult,
-    scaling: Scaling,
-    analysis: str,
-    basis: str,
-) -> ControllerArtifact:
-    """The artifact of a certified Smith design: the law at the grid nodes, the certificate ``res``
-    (``P``, ``S``, ``R``, ``transform``) and the metadata naming ``analysis`` and the P ``basis``."""
-    model, family = cfg.model, cfg.controller
-    grid = cfg.grid()
-    flat = np.stack(np.meshgrid(*grid, indexing="ij"), axis=-1).reshape(-1, 3)
-    assert res.gamma is not None and res.certificate is not None
-    gshape = tuple(g.size for g in grid)
-    laws = [law.at(p) for p in flat]
-    nodes = {
-        name: np.stack([getattr(k, name) for k in laws]).reshape(
-            *gshape, *getattr(laws[0], name).shape
-        )
-        for name in ("Ak", "Adk", "Bk", "Ck", "Cdk", "Dk")
-    }
-    cert = res.certificate
-    coefs = {name: np.asarray(cert[name], dtype=float) for name in ("P", "S", "R", "transform")}
-    meta: dict[str, Any] = {
-        "format_version": FORMAT_VERSION,
-        "box": model.box.tolist(),
-        "rate_bounds": model.rate_bounds.tolist(),
-        "grid": [g.tolist() for g in grid],
-        "basis": basis,
-        "model": model.to_dict(),
-        "design": cfg.to_dict(),
-        "reference": cfg.reference.to_dict(),
-        "controller": family.to_dict(),
-        "scaling": {
-            "time_s": scaling.time_s,
-            "sx": scaling.sx.tolist(),
-            "sy": scaling.sy.tolist(),
-            "rho_center": scaling.rho_center.tolist(),
-            "rho_half": scaling.rho_half.tolist(),
-        },
-        "lambda2": None,
-        "lambda3": None,
-        "gamma": float(res.gamma),
-        "solver": {
-            "name": "CLARABEL",
-            "status": res.status,
-            "analysis": analysis,
-            "p_dependence": res.p_dependence,
-            "n_lmi": res.n_lmis,
-            "notes": list(res.notes),
-        },
-        "verification": None,
-        "created_by": "pressor synth",
-    }
-    return make_artifact(meta, coefs, nodes)
+    return package_artifact(cfg, res, analysis, basis)

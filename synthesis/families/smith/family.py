@@ -78,18 +78,29 @@ class SmithFamily:
         """One allowed shape per coefficient (:func:`smith_coef_shapes`)."""
         return {name: (shape,) for name, shape in smith_coef_shapes(n_plant).items()}
 
+    #: how the design summary names the certifying analysis
+    analysis_name = "Wirtinger analysis"
+
+    def certified_artifact(
+        self, cfg: DesignConfig, progress: Progress | None = None
+    ) -> ControllerArtifact:
+        """The certified artifact (``design.design_smith``); raises ``SmithDesignError``."""
+        from synthesis.families.smith.design import design_smith
+
+        return design_smith(cfg, progress=progress)
+
     def design(self, cfg: DesignConfig, request: SynthRequest, progress: Progress) -> Designed:
-        """Certify the law on the design grid (``design.design_smith``)."""
-        from synthesis.families.smith.design import SmithDesignError, design_smith
+        """Certify the law on the design grid (:meth:`certified_artifact`)."""
+        from synthesis.families.smith.design import SmithDesignError
 
         try:
-            art = design_smith(cfg, progress=progress)
+            art = self.certified_artifact(cfg, progress)
         except SmithDesignError as exc:
             return Designed(None, failure=f"not certified: {exc}")
         notes = [n for n in art.metadata["solver"]["notes"] if n.startswith("KKT fallback")]
         summary = [
-            f"controller       {NAME}, loop gain {cfg.controller.loop_gain:g}",
-            f"gamma            {art.gamma:.6g} (Wirtinger analysis, design grid)",
+            f"controller       {self.name}, loop gain {cfg.controller.loop_gain:g}",
+            f"gamma            {art.gamma:.6g} ({self.analysis_name}, design grid)",
             f"solver status    {art.metadata['solver']['status']}",
         ]
         return Designed(art, summary, notes)

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from synthesis.families.registry import Designed, Progress, SynthRequest
+from synthesis.families.registry import Progress
 from synthesis.families.smith.family import SMITH_GAMMA_CAP_FACTOR, SmithFamily
 
 if TYPE_CHECKING:
@@ -30,8 +30,6 @@ if TYPE_CHECKING:
 __all__ = ["FAMILY", "NAME", "SmithPEFamily", "design_smith_pe"]
 
 NAME = "smith-pe"
-#: states of the analysis in prediction-error coordinates
-PE_STATES = 4
 #: basis terms of P: affine in (T, τ)
 PE_P_TERMS = 3
 
@@ -40,10 +38,12 @@ class SmithPEFamily(SmithFamily):
     """The "smith-pe" family's :class:`synthesis.families.registry.Family` object."""
 
     name = NAME
+    analysis_name = "prediction-error analysis"
 
     def coefficient_shapes(self, n_plant: int, ny: int) -> dict[str, tuple[tuple[int, ...], ...]]:
         """The prediction-error certificate: P (3, 8, 8), S, R and transform (4, 4)."""
-        n = PE_STATES
+        from synthesis.certificates.wirtinger.prediction_error import N_STATES as n
+
         return {
             "P": ((PE_P_TERMS, 2 * n, 2 * n),),
             "S": ((n, n),),
@@ -51,20 +51,11 @@ class SmithPEFamily(SmithFamily):
             "transform": ((n, n),),
         }
 
-    def design(self, cfg: DesignConfig, request: SynthRequest, progress: Progress) -> Designed:
-        """Certify the law in prediction-error coordinates on the design grid's T × τ."""
-        from synthesis.families.smith.design import SmithDesignError
-
-        try:
-            art = design_smith_pe(cfg, progress)
-        except SmithDesignError as exc:
-            return Designed(None, failure=f"not certified: {exc}")
-        summary = [
-            f"controller       {NAME}, loop gain {cfg.controller.loop_gain:g}",
-            f"gamma            {art.gamma:.6g} (prediction-error analysis, design grid)",
-            f"solver status    {art.metadata['solver']['status']}",
-        ]
-        return Designed(art, summary)
+    def certified_artifact(
+        self, cfg: DesignConfig, progress: Progress | None = None
+    ) -> ControllerArtifact:
+        """The certified artifact (:func:`design_smith_pe`); raises ``SmithDesignError``."""
+        return design_smith_pe(cfg, progress)
 
     def analysis(
         self,
@@ -99,10 +90,8 @@ def design_smith_pe(cfg: DesignConfig, progress: Progress | None = None) -> Cont
         If the analysis does not certify the law on the design grid's T × τ.
     """
     from synthesis.certificates.wirtinger.prediction_error import PredictionErrorBox, certify
-    from synthesis.families.smith.design import SmithDesignError, package_artifact
-    from synthesis.families.smith.law import SmithLPV
-    from synthesis.problem.model import dims
-    from synthesis.problem.scaling import Scaling
+    from synthesis.families.smith.design import SmithDesignError
+    from synthesis.families.smith.packaging import package_artifact
 
     say = progress or (lambda _msg: None)
     box = PredictionErrorBox.from_config(cfg, law="trapezoid")
@@ -115,14 +104,9 @@ def design_smith_pe(cfg: DesignConfig, progress: Progress | None = None) -> Cont
             f"loop gain {cfg.controller.loop_gain:g} not certified on T x tau {n_t} x {n_tau} "
             f"(status {res.status})"
         )
-    assert cfg.controller.loop_gain is not None
-    law = SmithLPV(cfg.controller.loop_gain, cfg.model.omega, cfg.model.lambda_)
-    scaling = Scaling.for_box(cfg.model.box, cfg.solver.time_scale_s, dims(cfg.model).n)
     return package_artifact(
         cfg,
-        law,
         res,
-        scaling,
         "wirtinger, prediction-error coordinates (trapezoid law)",
         "certificate P affine in (T, tau) normalised (1, T_hat, tau_hat)",
     )
