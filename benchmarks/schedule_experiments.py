@@ -8,7 +8,9 @@ while its held-out predictions beat the nominal model's ("A held-out gate on the
 the closed-loop data by batch least squares once, and holds the fit; :func:`wide_estimate`
 (``estwide:...``) is the ``estimated`` source on an estimator whose delay range reaches a wider
 box, and :class:`KHandover` (``stepfit-twok:...``) moves a fixed schedule's K from the start-up's
-to the incremental one ("The frontier, revisited").
+to the incremental one ("The frontier, revisited"). :class:`OnsetSwitch` (``onset:...``) picks a
+first-order or a long-delay schedule once, by when the MAP starts to move ("The start schedule
+decides before any data").
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ __all__ = [
     "GatedFit",
     "KHandover",
     "LimitedFit",
+    "OnsetSwitch",
     "fit_closed_loop",
     "wide_estimate",
 ]
@@ -371,3 +374,56 @@ class KHandover:
         step = self.rate * max(0.0, t - self.switch_s)
         K = self.k0 + max(-step, min(step, self.k1 - self.k0))
         return Schedule(K, self.T, self.tau, "nominal", True, True, True, "prior")
+
+
+class OnsetSwitch:
+    """Experiment: the first-order-plus-delay hypothesis or a long-delay one, decided once by when
+    the MAP starts to move. Schedules on ``start`` (default: the source ``short``) until the
+    decision; if the MAP (a 2 s moving mean) has risen ``rise_mmhg`` above its value when the
+    infusion started within ``by_s`` s of that start, on the source ``short`` (fed every tick) for
+    good; otherwise, from ``by_s`` s on, on the fixed ``long`` (K, T s, τ s) for good: a patient
+    whose response starts late is scheduled as one with the lags in τ. At most two jumps (start to
+    short, or start to long). ``rise_time_s`` is when the rise came (NaN if not)."""
+
+    source = "nominal"
+
+    def __init__(
+        self,
+        short: Any,
+        long: tuple[float, float, float],
+        by_s: float,
+        rise_mmhg: float,
+        sample_period_s: float,
+        start: tuple[float, float, float] | None = None,
+    ) -> None:
+        self.short = short
+        self.long = Schedule(*long, "nominal", True, True, True, "prior")
+        self.start = (
+            None if start is None else Schedule(*start, "nominal", True, True, True, "prior")
+        )
+        self.by_s, self.rise, self.ts = by_s, rise_mmhg, sample_period_s
+        self.alpha = sample_period_s / 2.0
+        self.mean = math.nan
+        self.base = math.nan
+        self.t_on = -1.0
+        self.t = 0.0
+        self.rise_time_s = math.nan
+        self.decided: bool | None = None  # True: short for good, False: long for good
+
+    def update(self, inputs: ScheduleInput) -> Schedule:
+        self.t += self.ts
+        if math.isfinite(inputs.map_mmhg):
+            y = inputs.map_mmhg
+            self.mean = y if math.isnan(self.mean) else self.mean + self.alpha * (y - self.mean)
+        short = self.short.update(inputs)
+        if self.decided is None:
+            if self.t_on < 0.0 and inputs.delivered_ml_h > 0.0:
+                self.t_on, self.base = self.t, self.mean
+            if self.t_on >= 0.0:
+                if self.mean - self.base >= self.rise:
+                    self.decided, self.rise_time_s = True, self.t - self.t_on
+                elif self.t - self.t_on >= self.by_s:
+                    self.decided = False
+        if self.decided is None and self.start is not None:
+            return self.start
+        return self.long if self.decided is False else short

@@ -31,7 +31,10 @@ Experiments, run when named in ``--runs``:
 * ``lpv-batchfit:start=K/T/tau:decide=S`` (:class:`benchmarks.schedule_experiments.BatchFit`: the
   start schedule for S s, then one batch least-squares fit of the closed-loop data, held);
 * ``lpv-estwide:start=K/T/tau:tau_prior=MODE/STD:caution=Z`` (the ``estimated`` source with its
-  delay range, prior and box those of the ``--lpv`` design).
+  delay range, prior and box those of the ``--lpv`` design);
+* ``lpv-onset:short=SOURCE|K/T/tau:long=K/T/tau:by=S:rise=MMHG[:start=K/T/tau]``
+  (:class:`benchmarks.schedule_experiments.OnsetSwitch`: ``short`` for good if the MAP rises
+  ``rise`` mmHg within ``by`` s of the infusion's start, else the fixed long-delay ``long``).
 
 Figures in ``docs/ESTIMATION.md`` ("The frontier on patients outside the model class", "A held-out
 gate on the fit", "The frontier, revisited"). ``--lpv PATH`` runs every LPV label on another
@@ -62,6 +65,7 @@ from benchmarks.schedule_experiments import (
     GatedFit,
     KHandover,
     LimitedFit,
+    OnsetSwitch,
     wide_estimate,
 )
 from benchmarks.step_fit import (
@@ -75,9 +79,10 @@ from benchmarks.step_fit import STEP_S as TS_S
 from contracts.metrics import run_metrics
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from runtime.core.scheduling import NominalSchedule
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, State, sched_limits_of, supervisor_config_for
-from runtime.estimation.sources import CAUTION_SIGMA, make_schedule
+from runtime.estimation.sources import CAUTION_SIGMA, SOURCES, make_schedule
 from runtime.estimation.validated import ValidatedSchedule
 from runtime.estimation.validation import ModelBank
 from runtime.inputs.controller_loader import load_controller
@@ -111,7 +116,7 @@ RUNS = {
     "smith-validated": ("smith", "validated"),
 }
 #: the prefixes of labels that carry their source's settings (``lpv-batchfit:decide=300``)
-PARAMETRISED = ("lpv-gate:", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-twok")
+PARAMETRISED = ("lpv-gate:", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-twok", "lpv-onset")
 #: the labels run when ``--runs`` is not given (the others are experiments)
 DEFAULT_RUNS = ("lpv-nominal", "lpv-estimated", "lpv-validated", "pi", "smith", "smith-validated")
 
@@ -136,14 +141,21 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
         switch, rate = float(kw.get("switch", "600")), float(kw.get("rate", "5e-4"))
         return KHandover(box, truth, switch, rate, TS_S)
     if source.startswith("fixed:") or source in ("truth", "stepfit", "stepfit-inc"):
-        from runtime.core.scheduling import NominalSchedule
-
         if source in ("truth", "stepfit", "stepfit-inc"):
             box = sched_limits_of(controller)[0]
             return NominalSchedule(
                 *(min(max(v, lo), hi) for v, (lo, hi) in zip(truth, box, strict=True))
             )
         return NominalSchedule(*(float(v) for v in source[6:].split("/")))
+    if source.startswith("onset"):
+        kw = _options(source)
+        short = kw.get("short", "0.55/150/40")
+        first = (make_schedule(short, TS_S) if short in SOURCES
+                 else NominalSchedule(*(float(v) for v in short.split("/"))))  # fmt: skip
+        long = tuple(float(v) for v in kw.get("long", "0.55/200/80").split("/"))
+        start = tuple(float(v) for v in kw["start"].split("/")) if "start" in kw else None
+        by, rise = float(kw.get("by", "48")), float(kw.get("rise", "2"))
+        return OnsetSwitch(first, long, by, rise, TS_S, start)  # type: ignore[arg-type]
     if source in ("fit-hold", "fit-slew"):
         return LimitedFit(source == "fit-hold", TS_S)
     if source.startswith(("batchfit", "estwide")):
@@ -380,7 +392,7 @@ def main(argv: list[str] | None = None) -> int:
                      ("lpv-stepfit", "pi"), ("lpv-stepfit", "smith"),
                      ("lpv-validated", "smith-validated"), ("lpv-validated", "lpv-nominal"),
                      ("lpv-estimated", "lpv-nominal"),
-                     *((lab, ref) for lab in labels if lab.startswith(("lpv-gate", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-", "fixed:"))
+                     *((lab, ref) for lab in labels if lab.startswith(("lpv-gate", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-", "lpv-onset", "fixed:"))
                        for ref in ("lpv-nominal", "pi", "smith"))):  # fmt: skip
             if a in res and b in res:
                 r = ratio(a, b)

@@ -199,7 +199,7 @@ def _file_label(spec: str) -> str:
     """The controller's part of the default ``.rrd`` name (a plugin: its class name)."""
     from runtime.inputs.controller_plugin import is_plugin_spec, plugin_label
 
-    if spec.partition(":")[0] == "lpv":  # lpv:DRUG, a shipped design
+    if spec.partition(":")[0] == "lpv":  # lpv:NAME, a shipped design
         return spec.replace(":", "_")
     return plugin_label(spec) if is_plugin_spec(spec) else Path(spec).stem
 

@@ -151,8 +151,9 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
     p.add_argument(
         "--controller",
         default="lpv",
-        help="lpv (default: the shipped LPV module), pi, smith[:LAMBDA_S] (Smith predictor,"
-        " closed-loop time constant LAMBDA_S in s, default 30 s), a generated .py, or your own"
+        help="lpv (default: the shipped LPV module; lpv:norepinephrine and lpv:wide-delay the"
+        " other shipped designs, docs/DRUGS.md and docs/SCHEDULING.md), pi, smith[:LAMBDA_S]"
+        " (Smith predictor, closed-loop time constant LAMBDA_S in s, default 30 s), a generated .py, or your own"
         " class: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed 'pressor.controllers'"
         " entry point NAME[:ARGS] (ARGS: key=value,...; runtime.inputs.controller_plugin)",
     )

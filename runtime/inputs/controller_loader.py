@@ -10,7 +10,10 @@ closed-loop time constant (30 s); ``smith:45`` sets λ = 45 s (allowed range in 
 ``lpv`` is the generated module for the shipped default design, committed at
 ``runtime/generated/lpv_map_controller.py``; ``lpv:DRUG`` names a drug's shipped design
 (:data:`LPV_DESIGNS`: ``lpv:phenylephrine`` is ``lpv``, ``lpv:norepinephrine`` the module
-``runtime/generated/lpv_norepinephrine.py`` of ``synthesis/data/norepinephrine_design.npz``); a path names any module written by ``pressor codegen``
+``runtime/generated/lpv_norepinephrine.py`` of ``synthesis/data/norepinephrine_design.npz``);
+``lpv:wide-delay`` names phenylephrine's design for a schedule sent from outside the loop with
+delays to 200 s (``runtime/generated/lpv_wide_delay.py`` of
+``synthesis/data/wide_delay_design.npz``); a path names any module written by ``pressor codegen``
 (``--target python``). Loading a generated module imports it from its file: it must be the standard
 library-only module codegen writes, exposing a ``Controller`` class. A process imports the same
 verified text once (every load still checks the file first) and gives each load a fresh controller.
@@ -36,11 +39,13 @@ from contracts.module_hash import ARTIFACT_SHA_LINE, MODULE_SHA_LINE, module_tex
 
 GENERATED_DIR = Path(__file__).resolve().parents[1] / "generated"
 DEFAULT_LPV_MODULE = GENERATED_DIR / "lpv_map_controller.py"
-#: ``lpv:DRUG`` -> the committed generated module of that drug's shipped design (``lpv`` alone is
-#: the default design, phenylephrine at 100 µg/ml; docs/DRUGS.md)
+#: ``lpv:NAME`` -> the committed generated module of a shipped design: a drug's (``lpv`` alone is
+#: the default design, phenylephrine at 100 µg/ml; docs/DRUGS.md) or phenylephrine's wide-delay
+#: design, certified to τ 200 s for a schedule the device sends (docs/SCHEDULING.md)
 LPV_DESIGNS: dict[str, Path] = {
     "phenylephrine": DEFAULT_LPV_MODULE,
     "norepinephrine": GENERATED_DIR / "lpv_norepinephrine.py",
+    "wide-delay": GENERATED_DIR / "lpv_wide_delay.py",
 }
 LPV_PREFIX = "lpv"
 #: (path, text sha256) -> the module imported from that text: a cohort loads the same module once
@@ -73,24 +78,24 @@ def _smith(spec: str, sample_period_s: float) -> SmithController:
 
 
 def lpv_design_module(spec: str) -> Path | None:
-    """The committed module ``lpv`` or ``lpv:DRUG`` names, ``None`` for any other spec.
+    """The committed module ``lpv`` or ``lpv:NAME`` names, ``None`` for any other spec.
 
     Raises
     ------
     ControllerSpecError
-        ``lpv:DRUG`` with a drug that has no shipped design (naming the ones that do).
+        ``lpv:NAME`` with a name that has no shipped design (naming the ones that do).
     """
     if spec == LPV_PREFIX:
         return DEFAULT_LPV_MODULE
-    head, sep, drug = spec.partition(":")
+    head, sep, name = spec.partition(":")
     if head != LPV_PREFIX or not sep:
         return None
-    if drug not in LPV_DESIGNS:
+    if name not in LPV_DESIGNS:
         raise ControllerSpecError(
-            f"--controller {spec!r}: no shipped design for drug {drug!r}; one of"
+            f"--controller {spec!r}: no shipped design named {name!r}; one of"
             f" {', '.join(f'lpv:{d}' for d in LPV_DESIGNS)}"
         )
-    return LPV_DESIGNS[drug]
+    return LPV_DESIGNS[name]
 
 
 def verify_module_file(path: Path, artifact_sha256: str | None = None) -> str:
@@ -181,7 +186,7 @@ def load_controller(
     ----------
     spec
         ``"pi"`` (the paper's PI baseline), ``"smith"`` / ``"smith:LAMBDA_S"`` (the scheduled Smith
-        predictor, λ in s), ``"lpv"`` / ``"lpv:DRUG"`` (a shipped generated LPV module), a path
+        predictor, λ in s), ``"lpv"`` / ``"lpv:NAME"`` (a shipped generated LPV module), a path
         to a generated ``.py`` module, or a plugin (:mod:`runtime.inputs.controller_plugin`:
         ``MODULE:CLASS[:ARGS]``,
         ``FILE.py:CLASS[:ARGS]`` or an installed ``pressor.controllers`` entry point name).

@@ -1,4 +1,4 @@
-"""The batch least-squares experiment of benchmarks/schedule_experiments.py."""
+"""The experimental scheduling sources of benchmarks/schedule_experiments.py."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.schedule_experiments import BatchFit, KHandover, fit_closed_loop
-from runtime.core.scheduling import ScheduleInput
+from benchmarks.schedule_experiments import BatchFit, KHandover, OnsetSwitch, fit_closed_loop
+from runtime.core.scheduling import NominalSchedule, ScheduleInput
 
 
 def _fopdt_map(rate: np.ndarray, K: float, T: float, tau: int, baseline: float) -> np.ndarray:
@@ -53,3 +53,27 @@ def test_k_handover_holds_the_start_k_then_moves_at_its_rate_to_the_later_one():
     assert seen[20].K == pytest.approx(0.8)  # 10 s at 0.01 per s
     assert seen[59].K == 0.6  # reached, then held
     assert {(s.T_s, s.tau_s) for s in seen} == {(400.0, 90.0)}  # T clamped to the box
+
+
+def _onset_run(delay_s: float) -> tuple[list, OnsetSwitch]:
+    # 1 s ticks, an infusion from t = 1 s, MAP ramps 0.1 mmHg/s from 1 s + delay_s
+    source = OnsetSwitch(NominalSchedule(0.55, 150.0, 40.0), (0.55, 200.0, 80.0), 48.0, 2.0, 1.0)
+    seen = []
+    for k in range(120):
+        y = 55.0 + 0.1 * max(0.0, k - 1 - delay_s)
+        seen.append(source.update(ScheduleInput(y, 0, 10.0 * (k >= 1), *(math.nan,) * 3, False)))
+    return seen, source
+
+
+def test_onset_switch_keeps_the_first_source_when_the_map_rises_in_time():
+    seen, source = _onset_run(10.0)  # 2 mmHg (its 2 s mean) about 32 s after the infusion
+    assert {(s.K, s.T_s, s.tau_s) for s in seen} == {(0.55, 150.0, 40.0)}
+    assert 30.0 < source.rise_time_s < 36.0
+
+
+def test_onset_switch_jumps_once_for_good_to_the_long_delay_schedule_when_the_rise_is_late():
+    seen, source = _onset_run(60.0)  # no rise within 48 s; rises later, the jump stays
+    taus = [s.tau_s for s in seen]
+    assert taus[:47] == [40.0] * 47 and taus[50:] == [80.0] * 70
+    assert sum(a != b for a, b in zip(taus, taus[1:], strict=False)) == 1
+    assert math.isnan(source.rise_time_s)

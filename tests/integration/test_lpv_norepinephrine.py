@@ -43,7 +43,7 @@ def test_lpv_drug_specs_load_each_drugs_module_with_its_binding() -> None:
     assert binding_of(c) == NOREPINEPHRINE
     assert binding_of(load_controller("lpv:phenylephrine")) == DEFAULT_BINDING
     assert controller_name("lpv:norepinephrine") == "lpv:norepinephrine"
-    with pytest.raises(ControllerSpecError, match="no shipped design for drug 'dopamine'"):
+    with pytest.raises(ControllerSpecError, match="no shipped design named 'dopamine'"):
         load_controller("lpv:dopamine")
 
 

@@ -13,7 +13,7 @@ from synthesis.families.smith.law import SmithLPV
 from synthesis.problem.config_toml import load_config
 from synthesis.verification.verify import verify_artifact
 
-DESIGN = "benchmarks/designs/wide_delay_pe.toml"
+DESIGN = "synthesis/data/wide_delay_design.toml"
 
 
 @pytest.fixture(scope="module")
