@@ -21,7 +21,10 @@ Experiments, run when named in ``--runs``:
 * ``lpv-truth``, each patient's apparent FOPDT (:func:`benchmarks.step_fit.apparent_fopdt`)
   clamped to the controller's box;
 * ``lpv-stepfit``, each patient's least-squares FOPDT of a 10 min open-loop step
-  (:mod:`benchmarks.step_fit`: the higher-order lags in τ), clamped to the box alike;
+  (:mod:`benchmarks.step_fit`: the higher-order lags in τ), clamped to the box alike; the ideal
+  device's, at the rate that holds the target and noise-free. ``lpv-stepfit-device[:k=K]`` is a
+  realistic device's: the step at (target − baseline) / K ml/h (default K the nominal 0.55, so
+  the rate a device can choose without knowing the patient), the monitor's 0.3 mmHg noise;
   ``lpv-stepfit-inc`` the same with K the patient's incremental sensitivity at the target
   (:func:`benchmarks.step_fit.incremental_gain`); ``lpv-stepfit-twok:switch=S:rate=R`` the fit's K until S s, then
   towards the incremental one at R per s (:class:`benchmarks.schedule_experiments.KHandover`);
@@ -82,6 +85,7 @@ from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
 from runtime.core.scheduling import NominalSchedule
 from runtime.core.supervisor import Supervisor
 from runtime.core.supervisor_config import Fault, State, sched_limits_of, supervisor_config_for
+from runtime.estimation.settings import NOMINAL_PLANT
 from runtime.estimation.sources import CAUTION_SIGMA, SOURCES, make_schedule
 from runtime.estimation.validated import ValidatedSchedule
 from runtime.estimation.validation import ModelBank
@@ -116,7 +120,14 @@ RUNS = {
     "smith-validated": ("smith", "validated"),
 }
 #: the prefixes of labels that carry their source's settings (``lpv-batchfit:decide=300``)
-PARAMETRISED = ("lpv-gate:", "lpv-batchfit", "lpv-estwide", "lpv-stepfit-twok", "lpv-onset")
+PARAMETRISED = (
+    "lpv-gate:",
+    "lpv-batchfit",
+    "lpv-estwide",
+    "lpv-stepfit-twok",
+    "lpv-stepfit-device",
+    "lpv-onset",
+)
 #: the labels run when ``--runs`` is not given (the others are experiments)
 DEFAULT_RUNS = ("lpv-nominal", "lpv-estimated", "lpv-validated", "pi", "smith", "smith-validated")
 
@@ -140,8 +151,12 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
         box = sched_limits_of(controller)[0]
         switch, rate = float(kw.get("switch", "600")), float(kw.get("rate", "5e-4"))
         return KHandover(box, truth, switch, rate, TS_S)
-    if source.startswith("fixed:") or source in ("truth", "stepfit", "stepfit-inc"):
-        if source in ("truth", "stepfit", "stepfit-inc"):
+    if source.startswith(("fixed:", "stepfit-device")) or source in (
+        "truth",
+        "stepfit",
+        "stepfit-inc",
+    ):
+        if not source.startswith("fixed:"):
             box = sched_limits_of(controller)[0]
             return NominalSchedule(
                 *(min(max(v, lo), hi) for v, (lo, hi) in zip(truth, box, strict=True))
@@ -260,11 +275,19 @@ def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dic
     }
 
 
-def _truth(source: str, params: Any, target_mmhg: float) -> tuple[float, ...]:
-    """The values a ``truth``, ``stepfit``, ``stepfit-inc`` or ``stepfit-twok`` run schedules on
-    (K, T, τ; the last also the incremental K); () for any other source."""
+def _truth(source: str, params: Any, target_mmhg: float, seed: int = 0) -> tuple[float, ...]:
+    """The values a ``truth``, ``stepfit``, ``stepfit-inc``, ``stepfit-twok`` or
+    ``stepfit-device`` run schedules on (K, T, τ; ``stepfit-twok`` also the incremental K); () for
+    any other source. ``seed`` draws ``stepfit-device``'s monitor noise."""
     if source == "truth":
         return apparent_fopdt(params, target_mmhg)
+    if source.startswith("stepfit-device"):
+        # a realistic device: the nominal patient's rate for the step, a noisy monitor
+        kw = _options(source)
+        rate = (target_mmhg - params.baseline_mmhg) / float(kw.get("k", str(NOMINAL_PLANT[0])))
+        rate = min(max(rate, 1.0), PUMP_MAX_ML_H)
+        return step_response_fit(params, target_mmhg, rate_ml_h=rate, noise_mmhg=NOISE_MMHG,
+                                 seed=seed)  # fmt: skip
     if source.startswith("stepfit"):
         fit = step_response_fit(params, target_mmhg)
         if source == "stepfit":
@@ -355,7 +378,7 @@ def main(argv: list[str] | None = None) -> int:
                 else:
                     disturb = model == "two-compartment"
                     pt = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=disturb)
-                    truth = _truth(src, params, target)
+                    truth = _truth(src, params, target, args.seed * 1000 + i)
                     r = run_one(pt, spec, src, target, dur, args.seed * 1000 + i, events, truth)
                 res[lab].append(r)
                 line.append(

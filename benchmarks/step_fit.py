@@ -15,6 +15,8 @@ benchmark's: 0.1 s steps, a 100 µg/ml syringe, a 120 ml/h pump.
 
 from __future__ import annotations
 
+import random
+
 import numpy as np
 
 from sim.patients.pkpd import IndependentPatient, PatientParams
@@ -110,15 +112,33 @@ def step_response_fit(
     concentration_ug_ml: float = CONCENTRATION_UG_ML,
     max_rate_ml_h: float = PUMP_MAX_ML_H,
     window_s: float = WINDOW_S,
+    rate_ml_h: float | None = None,
+    noise_mmhg: float = 0.0,
+    seed: int = 0,
 ) -> tuple[float, float, float]:
-    """:func:`fit_fopdt` of the patient's noise-free open-loop response, disturbances off, to the
-    rate that holds ``target_mmhg`` at steady state (the pump's limit when out of reach), over
-    ``window_s`` s sampled every ``step_s`` s."""
+    """:func:`fit_fopdt` of the patient's open-loop response, disturbances off, over ``window_s``
+    s sampled every ``step_s`` s.
+
+    By default the ideal device: the rate that holds ``target_mmhg`` at steady state (the pump's
+    limit when out of reach), noise-free. A realistic one gives ``rate_ml_h`` (a test rate chosen
+    without knowing the patient, (0, ``max_rate_ml_h``]) and ``noise_mmhg`` (the monitor's
+    Gaussian noise, mmHg, >= 0, drawn from ``random.Random(seed)``; the pre-step level is then the
+    mean of 10 s of noisy samples)."""
     patient, rate = held_patient(params, target_mmhg, step_s, concentration_ug_ml, max_rate_ml_h)
+    if rate_ml_h is not None:
+        if not 0.0 < rate_ml_h <= max_rate_ml_h:
+            raise ValueError(f"rate_ml_h={rate_ml_h!r} outside (0, {max_rate_ml_h}] ml/h")
+        rate = rate_ml_h
+    if not noise_mmhg >= 0.0:
+        raise ValueError(f"noise_mmhg={noise_mmhg!r} must be >= 0 mmHg")
+    rng = random.Random(seed)
+    n0 = round(10.0 / step_s)
     y0 = patient.map_mmhg
+    if noise_mmhg > 0.0:
+        y0 += sum(rng.gauss(0.0, noise_mmhg) for _ in range(n0)) / n0
     n = round(window_s / step_s)
     dy = np.empty(n)
     for k in range(n):
-        dy[k] = patient.map_mmhg - y0
+        dy[k] = patient.map_mmhg - y0 + (rng.gauss(0.0, noise_mmhg) if noise_mmhg > 0.0 else 0.0)
         patient.step(rate)
     return fit_fopdt(np.arange(n) * step_s, dy, rate)
