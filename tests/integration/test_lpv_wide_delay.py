@@ -37,7 +37,7 @@ def test_committed_module_is_current_for_the_certified_wide_delay_artifact() -> 
     artifact = load_artifact(ARTIFACT)
     verification = artifact.metadata["verification"]
     assert verification["passed"] is True and verification["analysis_lmi"]["certified"] is True
-    assert artifact.metadata["controller"] == {"loop_gain": 5.0, "structure": "smith-pe"}
+    assert artifact.metadata["controller"] == {"loop_gain": 3.0, "structure": "smith-pe"}
     assert "tau [10.0,\n200.0] s" in text  # the box the default design (tau <= 45 s) lacks
 
 

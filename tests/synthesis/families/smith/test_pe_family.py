@@ -23,7 +23,7 @@ def designed():
     return cfg, done
 
 
-def test_the_200_s_box_at_loop_gain_5_is_certified(designed):
+def test_the_200_s_box_is_certified_at_the_designs_loop_gain(designed):
     _, done = designed
     assert done.artifact is not None, done.failure
     assert done.artifact.family.structure == "smith-pe"
@@ -34,7 +34,7 @@ def test_the_200_s_box_at_loop_gain_5_is_certified(designed):
 def test_its_nodes_are_the_shipped_law(designed):
     cfg, done = designed
     art = done.artifact
-    law = SmithLPV(5.0, cfg.model.omega, cfg.model.lambda_)
+    law = SmithLPV(cfg.controller.loop_gain, cfg.model.omega, cfg.model.lambda_)
     k, t, tau = (g[-1] for g in art.grid)
     at = law.at((k, t, tau))
     np.testing.assert_array_equal(art.nodes["Adk"][-1, -1, -1], at.Adk)
