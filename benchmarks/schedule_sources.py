@@ -25,6 +25,8 @@ Experiments, run when named in ``--runs``:
   device's, at the rate that holds the target and noise-free. ``lpv-stepfit-device[:k=K]`` is a
   realistic device's: the step at (target − baseline) / K ml/h (default K the nominal 0.55, so
   the rate a device can choose without knowing the patient), the monitor's 0.3 mmHg noise;
+  ``lpv-stepfit-secant[:rate=R]`` that fit with its K moved at R per s (default 5e-5) toward the
+  secant gain the settled loop measures (:class:`benchmarks.schedule_experiments.SecantK`);
   ``lpv-stepfit-inc`` the same with K the patient's incremental sensitivity at the target
   (:func:`benchmarks.step_fit.incremental_gain`); ``lpv-stepfit-twok:switch=S:rate=R`` the fit's K until S s, then
   towards the incremental one at R per s (:class:`benchmarks.schedule_experiments.KHandover`);
@@ -70,6 +72,7 @@ from benchmarks.schedule_experiments import (
     KHandover,
     LimitedFit,
     OnsetSwitch,
+    SecantK,
     wide_estimate,
 )
 from benchmarks.step_fit import (
@@ -127,6 +130,7 @@ PARAMETRISED = (
     "lpv-estwide",
     "lpv-stepfit-twok",
     "lpv-stepfit-device",
+    "lpv-stepfit-secant",
     "lpv-onset",
 )
 #: the labels run when ``--runs`` is not given (the others are experiments)
@@ -147,6 +151,10 @@ def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = 
     ``truth``, ``stepfit`` or ``stepfit-inc`` (the patient's ``truth`` K, T, τ clamped to
     ``controller``'s box), or an experiment (``stepfit-twok:...``, ``fit-hold``, ``fit-slew``,
     ``batchfit:...``, ``estwide:...``, ``gate...``; module docstring)."""
+    if source.startswith("stepfit-secant"):
+        kw = _options(source)
+        box = sched_limits_of(controller)[0]
+        return SecantK(box, truth[:3], truth[3], float(kw.get("rate", "5e-5")), TS_S)
     if source.startswith("stepfit-twok"):
         kw = _options(source)
         box = sched_limits_of(controller)[0]
@@ -282,13 +290,14 @@ def _truth(source: str, params: Any, target_mmhg: float, seed: int = 0) -> tuple
     any other source. ``seed`` draws ``stepfit-device``'s monitor noise."""
     if source == "truth":
         return apparent_fopdt(params, target_mmhg)
-    if source.startswith("stepfit-device"):
+    if source.startswith(("stepfit-device", "stepfit-secant")):
         # a realistic device: the nominal patient's rate for the step, a noisy monitor
         kw = _options(source)
         rate = (target_mmhg - params.baseline_mmhg) / float(kw.get("k", str(NOMINAL_PLANT[0])))
         rate = min(max(rate, 1.0), PUMP_MAX_ML_H)
-        return step_response_fit(params, target_mmhg, rate_ml_h=rate, noise_mmhg=NOISE_MMHG,
-                                 seed=seed)  # fmt: skip
+        fit = step_response_fit(params, target_mmhg, rate_ml_h=rate, noise_mmhg=NOISE_MMHG,
+                                seed=seed)  # fmt: skip
+        return fit if source.startswith("stepfit-device") else (*fit, target_mmhg)
     if source.startswith("stepfit"):
         fit = step_response_fit(params, target_mmhg)
         if source == "stepfit":

@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.schedule_experiments import BatchFit, KHandover, OnsetSwitch, fit_closed_loop
+from benchmarks.schedule_experiments import (
+    BatchFit,
+    KHandover,
+    OnsetSwitch,
+    SecantK,
+    fit_closed_loop,
+)
 from runtime.core.scheduling import NominalSchedule, ScheduleInput
 
 
@@ -77,3 +83,24 @@ def test_onset_switch_jumps_once_for_good_to_the_long_delay_schedule_when_the_ri
     assert taus[:47] == [40.0] * 47 and taus[50:] == [80.0] * 70
     assert sum(a != b for a, b in zip(taus, taus[1:], strict=False)) == 1
     assert math.isnan(source.rise_time_s)
+
+
+def test_secant_k_moves_at_its_rate_toward_the_gain_the_settled_loop_measures():
+    # baseline 55 mmHg, held at the 70 mmHg target by 30 ml/h from the start: secant 0.5
+    box = ((0.15, 3.0), (100.0, 700.0), (10.0, 200.0))
+    source = SecantK(box, (0.2, 300.0, 100.0), 70.0, 1e-3, 1.0, after_s=60.0, window_s=30.0)
+    ks = []
+    for k in range(400):
+        y = 55.0 if k == 0 else 70.0
+        ks.append(source.update(ScheduleInput(y, 0, 30.0, *(math.nan,) * 3, False)).K)
+    assert ks[59] == 0.2  # nothing before after_s
+    assert ks[60] == pytest.approx(0.201)  # then at 1e-3 per s
+    assert ks[-1] == pytest.approx(0.5)  # until the secant gain
+
+
+def test_secant_k_holds_while_the_loop_is_not_settled():
+    box = ((0.15, 3.0), (100.0, 700.0), (10.0, 200.0))
+    source = SecantK(box, (0.2, 300.0, 100.0), 70.0, 1e-3, 1.0, after_s=60.0, window_s=30.0)
+    for k in range(200):  # 3 mmHg short of the target: not settled
+        s = source.update(ScheduleInput(55.0 if k == 0 else 67.0, 0, 30.0, *(math.nan,) * 3, False))
+    assert s.K == 0.2
