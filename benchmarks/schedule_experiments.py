@@ -7,11 +7,9 @@ while its held-out predictions beat the nominal model's ("A held-out gate on the
 :class:`BatchFit` (``batchfit:...``) holds a start schedule, fits a first-order-plus-delay model to
 the closed-loop data by batch least squares once, and holds the fit; :func:`wide_estimate`
 (``estwide:...``) is the ``estimated`` source on an estimator whose delay range reaches a wider
-box, and :class:`KHandover` (``stepfit-twok:...``) moves a fixed schedule's K from the start-up's
-to the incremental one ("The frontier, revisited"). :class:`OnsetSwitch` (``onset:...``) picks a
-first-order or a long-delay schedule once, by when the MAP starts to move ("The start schedule
-decides before any data"). :class:`SecantK` (``stepfit-secant:...``) moves a held schedule's K
-toward the secant gain the settled loop measures ("A realistic device's fit, and the loop gain").
+box ("The frontier, revisited"). :class:`OnsetSwitch` (``onset:...``) picks a first-order or a
+long-delay schedule once, by when the MAP starts to move ("The start schedule decides before any
+data"). Schedules on a fit from outside the loop: :mod:`benchmarks.fit_schedules`.
 """
 
 from __future__ import annotations
@@ -33,10 +31,8 @@ __all__ = [
     "EXPERIMENT_RATES",
     "BatchFit",
     "GatedFit",
-    "KHandover",
     "LimitedFit",
     "OnsetSwitch",
-    "SecantK",
     "fit_closed_loop",
     "wide_estimate",
 ]
@@ -349,35 +345,6 @@ def wide_estimate(
     )
 
 
-class KHandover:
-    """Experiment: a fixed schedule (``values`` = (K start, T s, τ s, K later), clamped to
-    ``box``) whose K moves from the start's to the later one at ``rate_per_s`` from ``switch_s``
-    s on: the start-up dose of one sensitivity, the disturbance rejection of another."""
-
-    source = "nominal"
-
-    def __init__(
-        self,
-        box: tuple[tuple[float, float], ...],
-        values: tuple[float, ...],
-        switch_s: float,
-        rate_per_s: float,
-        sample_period_s: float,
-    ) -> None:
-        (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
-        k0, T, tau, k1 = values
-        self.k0, self.k1 = min(max(k0, k_lo), k_hi), min(max(k1, k_lo), k_hi)
-        self.T, self.tau = min(max(T, t_lo), t_hi), min(max(tau, d_lo), d_hi)
-        self.switch_s, self.rate, self.ts, self.k = switch_s, rate_per_s, sample_period_s, 0
-
-    def update(self, inputs: ScheduleInput) -> Schedule:
-        t = self.k * self.ts
-        self.k += 1
-        step = self.rate * max(0.0, t - self.switch_s)
-        K = self.k0 + max(-step, min(step, self.k1 - self.k0))
-        return Schedule(K, self.T, self.tau, "nominal", True, True, True, "prior")
-
-
 class OnsetSwitch:
     """Experiment: the first-order-plus-delay hypothesis or a long-delay one, decided once by when
     the MAP starts to move. Schedules on ``start`` (default: the source ``short``) until the
@@ -429,59 +396,3 @@ class OnsetSwitch:
         if self.decided is None and self.start is not None:
             return self.start
         return self.long if self.decided is False else short
-
-
-class SecantK:
-    """Experiment: a held schedule (``values`` = K, T s, τ s) whose K moves, at ``rate_per_s``
-    (mmHg/(ml/h) per s, the design's certified K rate), toward the secant gain the loop itself
-    measures once it holds the target: (target − the MAP before the infusion) ÷ the mean
-    delivered rate over the last ``window_s`` s, recomputed every tick from ``after_s`` s on while
-    the window's mean error is within ``settled_mmhg``. The target comes from ``target_mmhg``;
-    K stays inside ``box``."""
-
-    source = "nominal"
-
-    def __init__(
-        self,
-        box: tuple[tuple[float, float], ...],
-        values: tuple[float, ...],
-        target_mmhg: float,
-        rate_per_s: float,
-        sample_period_s: float,
-        after_s: float = 600.0,
-        window_s: float = 300.0,
-        settled_mmhg: float = 1.0,
-    ) -> None:
-        (self.k_lo, self.k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
-        K, T, tau = values[:3]
-        self.K = min(max(K, self.k_lo), self.k_hi)
-        self.T, self.tau = min(max(T, t_lo), t_hi), min(max(tau, d_lo), d_hi)
-        self.target, self.step_ = target_mmhg, rate_per_s * sample_period_s
-        self.ts, self.after_s = sample_period_s, after_s
-        self.n = round(window_s / sample_period_s)
-        self.settled = settled_mmhg
-        self.k = 0
-        self.y0 = math.nan
-        self.u: list[float] = []
-        self.e: list[float] = []
-        self.goal = self.K
-
-    def update(self, inputs: ScheduleInput) -> Schedule:
-        t = self.k * self.ts
-        self.k += 1
-        y, u = inputs.map_mmhg, inputs.delivered_ml_h
-        if math.isnan(self.y0) and math.isfinite(y):
-            self.y0 = y
-        if math.isfinite(y):
-            self.u.append(u)
-            self.e.append(self.target - y)
-            if len(self.u) > self.n:
-                self.u.pop(0)
-                self.e.pop(0)
-        if t >= self.after_s and len(self.u) == self.n:
-            u_mean, e_mean = sum(self.u) / self.n, sum(self.e) / self.n
-            if abs(e_mean) <= self.settled and u_mean > 0.0:
-                goal = (self.target - self.y0) / u_mean
-                self.goal = min(max(goal, self.k_lo), self.k_hi)
-        self.K += max(-self.step_, min(self.step_, self.goal - self.K))
-        return Schedule(self.K, self.T, self.tau, "nominal", True, True, True, "prior")

@@ -26,10 +26,10 @@ Experiments, run when named in ``--runs``:
   realistic device's: the step at (target − baseline) / K ml/h (default K the nominal 0.55, so
   the rate a device can choose without knowing the patient), the monitor's 0.3 mmHg noise;
   ``lpv-stepfit-secant[:rate=R]`` that fit with its K moved at R per s (default 5e-5) toward the
-  secant gain the settled loop measures (:class:`benchmarks.schedule_experiments.SecantK`);
+  secant gain the settled loop measures (:class:`benchmarks.fit_schedules.SecantK`);
   ``lpv-stepfit-inc`` the same with K the patient's incremental sensitivity at the target
   (:func:`benchmarks.step_fit.incremental_gain`); ``lpv-stepfit-twok:switch=S:rate=R`` the fit's K until S s, then
-  towards the incremental one at R per s (:class:`benchmarks.schedule_experiments.KHandover`);
+  towards the incremental one at R per s (:class:`benchmarks.fit_schedules.KHandover`);
 * ``lpv-gate-early``, ``lpv-gate-late``, ``lpv-gate-revoke``, ``lpv-gate-kstart``
   (:class:`benchmarks.schedule_experiments.GatedFit`: the fit's schedule only while its held-out
   predictions beat the nominal model's; ``lpv-gate:key=value:...`` any other setting of it);
@@ -66,33 +66,22 @@ import statistics
 import sys
 from typing import Any
 
-from benchmarks.schedule_experiments import (
-    BatchFit,
-    GatedFit,
-    KHandover,
-    LimitedFit,
-    OnsetSwitch,
-    SecantK,
-    wide_estimate,
+from benchmarks.schedule_labels import (
+    DEFAULT_RUNS,
+    NOISE_MMHG,
+    PARAMETRISED,
+    RUNS,
+    VARIANT,
+    make_source,
+    scheduled_values,
 )
-from benchmarks.step_fit import (
-    CONCENTRATION_UG_ML,
-    PUMP_MAX_ML_H,
-    apparent_fopdt,
-    incremental_gain,
-    step_response_fit,
-)
+from benchmarks.step_fit import CONCENTRATION_UG_ML, PUMP_MAX_ML_H
 from benchmarks.step_fit import STEP_S as TS_S
 from contracts.metrics import run_metrics
 from link import PumpStatus, TickInputs
 from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
-from runtime.core.scheduling import NominalSchedule
 from runtime.core.supervisor import Supervisor
-from runtime.core.supervisor_config import Fault, State, sched_limits_of, supervisor_config_for
-from runtime.estimation.settings import NOMINAL_PLANT
-from runtime.estimation.sources import CAUTION_SIGMA, SOURCES, make_schedule
-from runtime.estimation.validated import ValidatedSchedule
-from runtime.estimation.validation import ModelBank
+from runtime.core.supervisor_config import Fault, State, supervisor_config_for
 from runtime.inputs.controller_loader import load_controller
 from sim.patients.pkpd import (
     BOLUS_AT_S,
@@ -100,108 +89,6 @@ from sim.patients.pkpd import (
     IndependentPatient,
     draw_patient,
 )
-
-NOISE_MMHG = 0.3
-#: label -> (controller spec, schedule source)
-RUNS = {
-    "lpv-nominal": ("lpv", "nominal"),
-    "lpv-validated": ("lpv", "validated"),
-    "lpv-estimated": ("lpv", "estimated"),
-    "lpv-fit-hold": ("lpv", "fit-hold"),
-    "lpv-fit-slew": ("lpv", "fit-slew"),
-    "lpv-truth": ("lpv", "truth"),
-    "lpv-stepfit": ("lpv", "stepfit"),
-    "lpv-stepfit-inc": ("lpv", "stepfit-inc"),
-    # held-out-validated fit (GatedFit): decided early on a T-100-ish start, or late from nominal
-    "lpv-gate-early": ("lpv", "gate:start=1:H=4:L=4:min=4:zero=0.5:s0=0.55/120/40:latch=1:H2=60"),
-    "lpv-gate-late": ("lpv", "gate:H=4:L=4:min=4:zero=0.5"),
-    # the same, and an adopted fit revoked for good when its 60 s changes, fully held out, do
-    # not beat the nominal model's; and the early decision from a K-only cautious start
-    "lpv-gate-revoke": ("lpv", "gate:H=4:L=4:min=4:zero=0.5:H2=60"),
-    "lpv-gate-kstart": ("lpv", "gate:start=1:H=4:L=4:min=4:zero=0.5:s0=0.65/150/40:latch=1:H2=60"),
-    "pi": ("pi", "nominal"),
-    "smith": ("smith", "estimated"),
-    "smith-validated": ("smith", "validated"),
-}
-#: the prefixes of labels that carry their source's settings (``lpv-batchfit:decide=300``)
-PARAMETRISED = (
-    "lpv-gate:",
-    "lpv-batchfit",
-    "lpv-estwide",
-    "lpv-stepfit-twok",
-    "lpv-stepfit-device",
-    "lpv-stepfit-secant",
-    "lpv-onset",
-)
-#: the labels run when ``--runs`` is not given (the others are experiments)
-DEFAULT_RUNS = ("lpv-nominal", "lpv-estimated", "lpv-validated", "pi", "smith", "smith-validated")
-
-
-#: keyword arguments of the ``validated`` source and of its bank (``--sched``, ``--bank``)
-VARIANT: dict[str, dict[str, Any]] = {"sched": {}, "bank": {}}
-
-
-def _options(source: str) -> dict[str, str]:
-    """The ``key=value`` items after a source name's first ``:`` (``batchfit:decide=180``)."""
-    return dict(item.partition("=")[::2] for item in source.split(":")[1:])
-
-
-def make_source(source: str, controller: Any = None, truth: tuple[float, ...] = ()) -> Any:
-    """The scheduling source ``source``: a name of ``make_schedule``, ``fixed:K/T/tau``,
-    ``truth``, ``stepfit`` or ``stepfit-inc`` (the patient's ``truth`` K, T, τ clamped to
-    ``controller``'s box), or an experiment (``stepfit-twok:...``, ``fit-hold``, ``fit-slew``,
-    ``batchfit:...``, ``estwide:...``, ``gate...``; module docstring)."""
-    if source.startswith("stepfit-secant"):
-        kw = _options(source)
-        box = sched_limits_of(controller)[0]
-        return SecantK(box, truth[:3], truth[3], float(kw.get("rate", "5e-5")), TS_S)
-    if source.startswith("stepfit-twok"):
-        kw = _options(source)
-        box = sched_limits_of(controller)[0]
-        switch, rate = float(kw.get("switch", "600")), float(kw.get("rate", "5e-4"))
-        return KHandover(box, truth, switch, rate, TS_S)
-    if source.startswith(("fixed:", "stepfit-device")) or source in (
-        "truth",
-        "stepfit",
-        "stepfit-inc",
-    ):
-        if not source.startswith("fixed:"):
-            box = sched_limits_of(controller)[0]
-            return NominalSchedule(
-                *(min(max(v, lo), hi) for v, (lo, hi) in zip(truth, box, strict=True))
-            )
-        return NominalSchedule(*(float(v) for v in source[6:].split("/")))
-    if source.startswith("onset"):
-        kw = _options(source)
-        short = kw.get("short", "0.55/150/40")
-        first = (make_schedule(short, TS_S) if short in SOURCES
-                 else NominalSchedule(*(float(v) for v in short.split("/"))))  # fmt: skip
-        long = tuple(float(v) for v in kw.get("long", "0.55/200/80").split("/"))
-        start = tuple(float(v) for v in kw["start"].split("/")) if "start" in kw else None
-        by, rise = float(kw.get("by", "48")), float(kw.get("rise", "2"))
-        return OnsetSwitch(first, long, by, rise, TS_S, start)  # type: ignore[arg-type]
-    if source in ("fit-hold", "fit-slew"):
-        return LimitedFit(source == "fit-hold", TS_S)
-    if source.startswith(("batchfit", "estwide")):
-        kw = _options(source)
-        box = sched_limits_of(controller)[0]
-        start = tuple(float(v) for v in kw.get("start", "0.55/150/40").split("/"))
-        if source.startswith("batchfit"):
-            return BatchFit(box, start, float(kw.get("decide", "180")), TS_S)
-        tau_prior = tuple(float(v) for v in kw.get("tau_prior", "40/20").split("/"))
-        caution = float(kw.get("caution", CAUTION_SIGMA))
-        return wide_estimate(box, start, tau_prior, caution, TS_S)
-    if source.startswith("gate"):
-        opts = _options(source)
-        return GatedFit(
-            TS_S, **{k: v if k in ("drop", "s0") else float(v) for k, v in opts.items()}
-        )
-    if source == "validated" and (VARIANT["sched"] or VARIANT["bank"]):
-        kw = dict(VARIANT["sched"])
-        start = kw.get("start", (0.55, 150.0, 40.0))
-        bank = ModelBank(2.0, round(2.0 / TS_S), start, **VARIANT["bank"])
-        return ValidatedSchedule(sample_period_s=TS_S, bank=bank, **kw)
-    return make_schedule(source, TS_S)
 
 
 def _kwargs(text: str) -> dict[str, Any]:
@@ -217,7 +104,7 @@ def run_one(
     seed: int, events: list[tuple[str, float]], truth: tuple[float, ...] = (),
 ) -> dict[str, Any]:  # fmt: skip
     """One closed-loop run in process; the run's metrics and its supervisor counts (``truth``:
-    the values :func:`_truth` gives for ``source``)."""
+    the values :func:`benchmarks.schedule_labels.scheduled_values` gives for ``source``)."""
     controller = load_controller(spec, TS_S, allow_uncertified=True)
     supervisor = Supervisor(supervisor_config_for(controller, NOISE_MMHG))
     core = ClosedLoopCore(controller, supervisor, make_source(source, controller, truth))
@@ -282,29 +169,6 @@ def run_project(scenario: Any, spec: str, source: str, patient_seed: int) -> dic
         "SCHED_OUT_OF_BOX": int(((faults & int(Fault.SCHED_OUT_OF_BOX)) != 0).sum()),
         "HOLD/FAILSAFE": int(((traj.state == State.HOLD) | (traj.state == State.FAILSAFE)).sum()),
     }
-
-
-def _truth(source: str, params: Any, target_mmhg: float, seed: int = 0) -> tuple[float, ...]:
-    """The values a ``truth``, ``stepfit``, ``stepfit-inc``, ``stepfit-twok`` or
-    ``stepfit-device`` run schedules on (K, T, τ; ``stepfit-twok`` also the incremental K); () for
-    any other source. ``seed`` draws ``stepfit-device``'s monitor noise."""
-    if source == "truth":
-        return apparent_fopdt(params, target_mmhg)
-    if source.startswith(("stepfit-device", "stepfit-secant")):
-        # a realistic device: the nominal patient's rate for the step, a noisy monitor
-        kw = _options(source)
-        rate = (target_mmhg - params.baseline_mmhg) / float(kw.get("k", str(NOMINAL_PLANT[0])))
-        rate = min(max(rate, 1.0), PUMP_MAX_ML_H)
-        fit = step_response_fit(params, target_mmhg, rate_ml_h=rate, noise_mmhg=NOISE_MMHG,
-                                seed=seed)  # fmt: skip
-        return fit if source.startswith("stepfit-device") else (*fit, target_mmhg)
-    if source.startswith("stepfit"):
-        fit = step_response_fit(params, target_mmhg)
-        if source == "stepfit":
-            return fit
-        k_inc = incremental_gain(params, target_mmhg)
-        return (k_inc, *fit[1:]) if source == "stepfit-inc" else (*fit, k_inc)
-    return ()
 
 
 def cohort(model: str, seed: int, n: int) -> list[tuple[IndependentPatient, float, float, list]]:
@@ -388,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
                 else:
                     disturb = model == "two-compartment"
                     pt = IndependentPatient(params, TS_S, CONCENTRATION_UG_ML, disturbances=disturb)
-                    truth = _truth(src, params, target, args.seed * 1000 + i)
+                    truth = scheduled_values(src, params, target, args.seed * 1000 + i)
                     r = run_one(pt, spec, src, target, dur, args.seed * 1000 + i, events, truth)
                 res[lab].append(r)
                 line.append(

@@ -1,4 +1,5 @@
-"""The experimental scheduling sources of benchmarks/schedule_experiments.py."""
+"""The experimental scheduling sources of benchmarks/schedule_experiments.py and
+benchmarks/fit_schedules.py."""
 
 from __future__ import annotations
 
@@ -7,13 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.schedule_experiments import (
-    BatchFit,
-    KHandover,
-    OnsetSwitch,
-    SecantK,
-    fit_closed_loop,
-)
+from benchmarks.fit_schedules import KHandover, SecantK
+from benchmarks.schedule_experiments import BatchFit, OnsetSwitch, fit_closed_loop
 from runtime.core.scheduling import NominalSchedule, ScheduleInput
 
 

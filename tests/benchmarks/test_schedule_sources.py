@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.schedule_sources import make_source
+from benchmarks.schedule_labels import make_source
 from benchmarks.step_fit import apparent_fopdt
 from runtime.core.scheduling import ScheduleInput
 from runtime.inputs.controller_loader import load_controller
