@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from contracts.checks import check_range
+from pressor.contracts.checks import check_range
 
 KP_ML_H_PER_MMHG = 3.0
 KI_ML_H_PER_MMHG_S = 0.017
@@ -47,7 +47,7 @@ class PIStatus:
 
 
 class PIController:
-    """Discrete PI baseline implementing :class:`contracts.controller.Controller`.
+    """Discrete PI baseline implementing :class:`pressor.contracts.controller.Controller`.
 
     Parameters
     ----------

@@ -29,7 +29,7 @@ write and two reads per tick (O(1)). τ is read as a fractional delay d = τ/Ts 
 interpolated between lags floor(d) and floor(d) + 1. Before the first tick the model has rested at
 zero (zero infusion), which is what the buffer holds after :meth:`SmithController.reset`.
 
-Anti-windup: conditional integration, as :mod:`baselines.pi` (no integration while the
+Anti-windup: conditional integration, as :mod:`pressor.baselines.pi` (no integration while the
 command is clamped and the error pushes further into the limit). The model always runs on the
 clamped command, so saturation does not corrupt the prediction.
 
@@ -55,8 +55,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from baselines.pi import check_period_and_limit
-from contracts.checks import check_range
+from pressor.baselines.pi import check_period_and_limit
+from pressor.contracts.checks import check_range
 
 LAMBDA_DEFAULT_S = 30.0
 LAMBDA_MIN_S = 5.0
@@ -98,7 +98,7 @@ def _limit(value: float, previous: float, max_step: float) -> float:
 
 
 class SmithController:
-    """Scheduled Smith predictor + PI implementing :class:`contracts.controller.Controller`.
+    """Scheduled Smith predictor + PI implementing :class:`pressor.contracts.controller.Controller`.
 
     Parameters
     ----------

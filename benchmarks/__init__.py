@@ -6,9 +6,9 @@ project's packages and the shared test doubles (``tests.support``) import withou
 Importing this package pins OpenBLAS to one thread (unless ``OPENBLAS_NUM_THREADS`` is set), as
 ``pressor synth``, ``verify`` and ``trial`` do: the figures are per core, and idle OpenBLAS threads
 spinning on another core after each tiny BLAS call would count against them
-(:mod:`synthesis.solver.blas_threads`). It runs before any benchmark module loads numpy.
+(:mod:`pressor.synthesis.solver.blas_threads`). It runs before any benchmark module loads numpy.
 """
 
-from synthesis.solver.blas_threads import single_blas_thread
+from pressor.synthesis.solver.blas_threads import single_blas_thread
 
 single_blas_thread()

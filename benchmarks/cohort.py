@@ -8,7 +8,7 @@ with the target it must meet::
     python -m benchmarks.cohort                       # 100 patients, seed 2026, 2 jobs
     python -m benchmarks.cohort --patients 40 --seed 11 --lpv out/lpv_map_controller.py
 
-Every figure comes from :func:`sim.trials.trial.run_trial`, the code path of ``pressor trial``, so a
+Every figure comes from :func:`pressor.hil_sim.trials.trial.run_trial`, the code path of ``pressor trial``, so a
 line here can be reproduced with ``pressor trial --controller C --patients N --seed S
 --scenario NAME``.
 """
@@ -22,8 +22,8 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from sim.scenarios.scenario import load_scenario
-from sim.trials.trial import run_trial
+from pressor.hil_sim.scenarios.scenario import load_scenario
+from pressor.hil_sim.trials.trial import run_trial
 
 TRACKING = "paper-tracking"
 DISTURBANCE = "paper-disturbance"

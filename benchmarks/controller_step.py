@@ -18,7 +18,7 @@ import time
 import tracemalloc
 from pathlib import Path
 
-from codegen import pipeline as pl
+from pressor.codegen import pipeline as pl
 
 MODULE = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
 

@@ -1,4 +1,4 @@
-"""Cost and accuracy of the online K, T, τ estimator (runtime.estimation), in shadow mode.
+"""Cost and accuracy of the online K, T, τ estimator (pressor.runtime.estimation), in shadow mode.
 
 Usage::
 
@@ -29,11 +29,11 @@ import random
 import statistics
 import time
 
-from runtime.core.scheduling import ScheduleInput
-from runtime.estimation.sources import EstimatedSchedule
-from runtime.inputs.controller_loader import load_controller
-from sim.patients.cohort import cohort_seeds
-from sim.world import World
+from pressor.hil_sim.patients.cohort import cohort_seeds
+from pressor.hil_sim.world import World
+from pressor.runtime.core.scheduling import ScheduleInput
+from pressor.runtime.estimation.sources import EstimatedSchedule
+from pressor.runtime.inputs.controller_loader import load_controller
 
 SCENARIOS = ("paper-tracking", "paper-disturbance")
 TARGETS = {"K_rel_err_pct": 15.0, "T_rel_err_pct": 25.0, "tau_abs_err_s": 5.0}

@@ -3,7 +3,7 @@
 Usage: python -m benchmarks.gym_step [--scenario NAME] [--duration-s S] [--episodes E]
 
 In one process, on the same scenario, patient and constant action, in CPU time of the process (a
-busy host's preemptions do not count), prints µs per tick of :func:`sim.episode.simulate`
+busy host's preemptions do not count), prints µs per tick of :func:`pressor.hil_sim.episode.simulate`
 and, at 1 and at 10 ticks per action, over blocks of 100 ticks run alternately through
 ``env.step`` and through the bare closed loop (``world.observe`` → ``ClosedLoopCore.step`` →
 ``world.apply_command`` → ``world.advance``, the body of ``simulate`` without its recording): the
@@ -22,11 +22,11 @@ import numpy as np
 
 from pressor.api import _scenario
 from pressor.gym import AgentController, MapEnv
-from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
-from runtime.core.supervisor import Supervisor
-from runtime.core.supervisor_config import supervisor_config_for
-from sim.episode import simulate
-from sim.world import World
+from pressor.hil_sim.episode import simulate
+from pressor.hil_sim.world import World
+from pressor.runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from pressor.runtime.core.supervisor import Supervisor
+from pressor.runtime.core.supervisor_config import supervisor_config_for
 
 SEED = 3
 ACTION_ML_H = 12.0
@@ -64,7 +64,7 @@ class BareLoop:
 
 
 def simulate_us(scenario) -> float:
-    """µs per tick of :func:`sim.episode.simulate` (what a trial runs), one episode."""
+    """µs per tick of :func:`pressor.hil_sim.episode.simulate` (what a trial runs), one episode."""
     world = World(scenario, SEED, PERIOD_S)
     agent = AgentController(PERIOD_S, scenario.pump.max_rate_ml_h)
     agent.action_ml_h = ACTION_ML_H
@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> None:
         f" blocks of {BLOCK_TICKS} ticks, CPU time of this process; step and tick: lower deciles,"
         " overhead: median of the block pairs' differences"
     )
-    print(f"sim.episode.simulate, per tick:  {simulate_us(sc):8.2f} us")
+    print(f"pressor.hil_sim.episode.simulate, per tick:  {simulate_us(sc):8.2f} us")
     for tpa in (1, 10):
         step, tick, over = interleaved(sc, tpa, args.episodes)
         print(

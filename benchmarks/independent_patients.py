@@ -1,6 +1,6 @@
 """LPV vs PI vs Smith on a patient model not the paper's, through the real ``pressor run``.
 
-Each seeded patient of :mod:`sim.patients.pkpd` (the ``pkpd`` patient model: two-compartment
+Each seeded patient of :mod:`pressor.hil_sim.patients.pkpd` (the ``pkpd`` patient model: two-compartment
 pharmacokinetics, an effect compartment, a sigmoid Emax on MAP, a transport delay, tachyphylaxis,
 a haemorrhage-like drop at 20 min and a fluid-bolus-like rise at 40 min) is played by the device
 of ``tests/support/protocol_device.py`` (written from docs/PROTOCOL.md alone) on a pty, signed, in
@@ -8,7 +8,7 @@ lockstep, against a real ``pressor run --controller SPEC`` with its default esti
 real monitor sends no K, T, tau), or with ``--device-fit`` on the K, T, tau the device sends: each
 patient's least-squares FOPDT of its 10 min open-loop step (docs/ESTIMATION.md, "The frontier,
 revisited"). The device announces phenylephrine at 100 µg/ml, the runtime's
-defaults. Of :mod:`sim` only the patient model's module is used (its world, device and paper
+defaults. Of :mod:`pressor.hil_sim` only the patient model's module is used (its world, device and paper
 model are not)::
 
     python -m benchmarks.independent_patients                  # 10 patients x lpv, pi, smith
@@ -41,15 +41,15 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from benchmarks.step_fit import step_response_fit
-from contracts.metrics import run_metrics
-from sim.patients.pkpd import (
+from pressor.contracts.metrics import run_metrics
+from pressor.hil_sim.patients.pkpd import (
     BOLUS_AT_S,
     HEMORRHAGE_AT_S,
     IndependentPatient,
     PatientParams,
     draw_patient,
 )
+from research.step_fit import step_response_fit
 from tests.support.protocol_device import DeviceConfig, ProtocolDevice, build_dialect, read_key
 from tests.support.protocol_harness import wait_for_port_open, write_key
 
@@ -68,7 +68,7 @@ class Setup:
     target_mmhg: float = 70.0
     noise_mmhg: float = 0.3
     #: the device sends each patient's least-squares FOPDT of its own 10 min open-loop step
-    #: (:func:`benchmarks.step_fit.step_response_fit`) as SCHEDULING_PARAMS and ``pressor run``
+    #: (:func:`research.step_fit.step_response_fit`) as SCHEDULING_PARAMS and ``pressor run``
     #: schedules on it (``--schedule oracle``): an identification made before the loop
     device_fit: bool = False
 

@@ -11,10 +11,10 @@ Every patient of the cohort ``(--seed, --patients)`` runs the scenario (default
 model's, the seven responsiveness levels of published closed-loop vasopressor robustness tests)
 under each controller (default ``lpv``, ``pi``, ``smith``), all on one scheduling source (default
 ``estimated``, the runtime's own; the PI ignores it). A level is the patient model
-``MODEL@sensitivity=f`` (:mod:`sim.patients.sensitivity`: the patient responds to each delivered
+``MODEL@sensitivity=f`` (:mod:`pressor.hil_sim.patients.sensitivity`: the patient responds to each delivered
 ml/h as the model's responds to f ml/h, so K is f × the model's); level 1 is the unwrapped model,
 so its records are ``pressor trial``'s bytes. Every cohort runs through
-:func:`sim.trials.trial.run_cohort`, the code path of ``pressor trial`` (``--jobs`` local processes
+:func:`pressor.hil_sim.trials.trial.run_cohort`, the code path of ``pressor trial`` (``--jobs`` local processes
 or ``--scheduler`` a Dask cluster; the results do not depend on either), with progress on stderr.
 
 Printed (stdout, a Markdown table as each level finishes): per level and controller one row for
@@ -27,7 +27,7 @@ the reachable patients and one for the unreachable ones (a group without a patie
   (docs/METRICS.md): non-finite true MAP, or in the final quarter of the run the error swinging
   from beyond +band to beyond −band (or back) twice or more, i.e. a sustained oscillation;
 - ``MDPE``, ``MDAPE``, ``wobble``: medians over the row's patients of the records' Varvel figures
-  (%, over the whole period after the target step; :mod:`contracts.metrics`);
+  (%, over the whole period after the target step; :mod:`pressor.contracts.metrics`);
 - ``in ±5``: median % of time within ±5 mmHg of the target after first arriving there (a patient
   that never arrives counts 0 %);
 - ``overshoot``: median and 90th percentile of the step overshoot (% of the step, before the first
@@ -48,12 +48,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from contracts.metrics import percentile_summary
-from runtime.estimation.sources import SOURCES
-from sim.patients.patient_model import DEFAULT_PATIENT_MODEL, PatientModelError
-from sim.patients.sensitivity import check_factor, with_sensitivity
-from sim.scenarios.scenario import Scenario, load_scenario
-from sim.trials.trial import controller_dir_name, run_cohort, write_outputs
+from pressor.contracts.metrics import percentile_summary
+from pressor.hil_sim.patients.patient_model import DEFAULT_PATIENT_MODEL, PatientModelError
+from pressor.hil_sim.patients.sensitivity import check_factor, with_sensitivity
+from pressor.hil_sim.scenarios.scenario import Scenario, load_scenario
+from pressor.hil_sim.trials.trial import controller_dir_name, run_cohort, write_outputs
+from pressor.runtime.estimation.sources import SOURCES
 
 #: sensitivity levels (× the model's; dimensionless)
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)

@@ -5,7 +5,7 @@ prints, in this order:
 
 1. floor: a bare pty ping-pong between two processes (a 184-byte tick burst one way, a 33-byte
    command back; no Python work) on one CPU, across two and unpinned, without and with the CPU
-   wake-up latency request (:mod:`runtime.shell.cpu_latency`): the real-time factor no lockstep run
+   wake-up latency request (:mod:`pressor.runtime.shell.cpu_latency`): the real-time factor no lockstep run
    over this pty on this machine can exceed;
 2. lockstep: simulated seconds per wall second (real-time factor) for ``--sim-hours`` of patient
    time (default 1 h) at 10 Hz, per controller and scheduling source (``--schedule``: the device's
@@ -98,7 +98,7 @@ def pty_floor_us(n: int, cpus: tuple[int, int] | None) -> float:
 
 def print_floor(n: int, rate_hz: float) -> None:
     """The bare pty round trip per CPU placement, without and with the wake-latency request."""
-    from runtime.shell.cpu_latency import CpuLatencyRequest
+    from pressor.runtime.shell.cpu_latency import CpuLatencyRequest
 
     cpus = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
     placements: list[tuple[str, tuple[int, int] | None]] = [("unpinned", None)]

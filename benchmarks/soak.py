@@ -27,17 +27,17 @@ from pathlib import Path
 
 os.environ.setdefault("CI", "1")  # before rerun is imported: no analytics files
 
-from contracts.faults import FAULT_KINDS, FaultScorer, parse_faults  # noqa: E402
-from link import Hello, PtyPair, RuntimeSession, Signing  # noqa: E402
-from runtime.core.supervisor import Supervisor  # noqa: E402
-from runtime.core.supervisor_config import (  # noqa: E402
+from pressor.contracts.faults import FAULT_KINDS, FaultScorer, parse_faults  # noqa: E402
+from pressor.link import Hello, PtyPair, RuntimeSession, Signing  # noqa: E402
+from pressor.runtime.core.supervisor import Supervisor  # noqa: E402
+from pressor.runtime.core.supervisor_config import (  # noqa: E402
     Fault,
     sched_limits_of,
     supervisor_config_for,
 )
-from runtime.inputs.controller_loader import load_controller  # noqa: E402
-from runtime.shell.loop import Loop  # noqa: E402
-from runtime.summary import print_fault_table  # noqa: E402
+from pressor.runtime.inputs.controller_loader import load_controller  # noqa: E402
+from pressor.runtime.shell.loop import Loop  # noqa: E402
+from pressor.runtime.summary import print_fault_table  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -113,7 +113,7 @@ def main() -> int:
                     marks["wall0"] = time.perf_counter()
 
             if args.rrd is not None:
-                from runtime.record.recorder import Recorder
+                from pressor.runtime.record.recorder import Recorder
 
                 recorder = Recorder(args.rrd, run_label=f"soak|{args.controller}|{args.hours}h")
             loop = Loop(

@@ -4,20 +4,20 @@ Each case runs in its own subprocess (so peak memory is its own ``ru_maxrss``), 
 run so machine load is comparable. Prints wall time, peak RSS and the outcome of each case, and the
 ratio of the straightforward formulation to the one ``pressor synth`` / ``pressor verify`` use.
 The cases follow the controller family of the config (synth) and of the artifact (verify),
-:mod:`synthesis.families.registry`, and come from the research entry :mod:`synthesis.research`:
+:mod:`pressor.synthesis.families.registry`, and come from the research entry :mod:`research.synthesis_forms`:
 
-* synth: :func:`synthesis.research.synth_case` — what ``pressor synth`` solves (the shipped family:
+* synth: :func:`research.synthesis_forms.synth_case` — what ``pressor synth`` solves (the shipped family:
   the Wirtinger analysis on the design grid in the rate-bound form, one LMI per point, one solve
   at the strictness ``DESIGN_EPSILON``; the Theorem-3 family: the batched sparse formulation,
-  :func:`synthesis.families.theorem3.lmi_solve.solve`) vs the straightforward formulation of the
+  :func:`pressor.synthesis.families.theorem3.lmi_solve.solve`) vs the straightforward formulation of the
   same design (every rate / delay-ratio vertex as its own LMI; the naive per-point cvxpy
-  formulation, :mod:`synthesis.research.naive_lmi`);
-* verify: :func:`synthesis.verification.verify.verify_artifact` (check (a) as ``pressor verify``
+  formulation, :mod:`research.synthesis_forms.naive_lmi`);
+* verify: :func:`pressor.synthesis.verification.verify.verify_artifact` (check (a) as ``pressor verify``
   runs it: one capped rate-bound solve over the dense grid; the Theorem-3 family: a working set) vs
-  :func:`synthesis.research.verify_all_points_at_once` (every dense point and rate vertex as its own
+  :func:`research.synthesis_forms.verify_all_points_at_once` (every dense point and rate vertex as its own
   LMI in one solve).
 
-Every case runs with one KKT backend forced (:mod:`synthesis.solver.kkt`), once per backend of
+Every case runs with one KKT backend forced (:mod:`pressor.synthesis.solver.kkt`), once per backend of
 ``--kkt`` (default: each of them), so the table gives the time per backend; the straightforward
 cases run on the first backend only.
 
@@ -45,7 +45,7 @@ from typing import Any
 
 
 def _child(kind: str, args: argparse.Namespace) -> None:
-    from synthesis.solver.kkt import kkt_chain
+    from pressor.synthesis.solver.kkt import kkt_chain
 
     with kkt_chain([args.kkt]):
         row = _case(kind, args)
@@ -55,9 +55,9 @@ def _child(kind: str, args: argparse.Namespace) -> None:
 def _case(kind: str, args: argparse.Namespace) -> dict[str, Any]:
     t0 = time.perf_counter()
     if kind.startswith("verify"):
-        from synthesis.artifact import default_artifact_path, load_artifact
-        from synthesis.research import verify_all_points_at_once
-        from synthesis.verification.verify import verify_artifact
+        from pressor.synthesis.artifact import default_artifact_path, load_artifact
+        from pressor.synthesis.verification.verify import verify_artifact
+        from research.synthesis_forms import verify_all_points_at_once
 
         art = load_artifact(args.artifact or default_artifact_path())
         verify = verify_all_points_at_once if kind == "verify-all" else verify_artifact
@@ -70,8 +70,8 @@ def _case(kind: str, args: argparse.Namespace) -> dict[str, Any]:
     else:
         from dataclasses import replace
 
-        from synthesis.problem.config_toml import load_config
-        from synthesis.research import synth_case
+        from pressor.synthesis.problem.config_toml import load_config
+        from research.synthesis_forms import synth_case
 
         cfg = load_config(args.config)
         if args.grid:
@@ -94,7 +94,7 @@ def _run(kind: str, argv: list[str], method: str) -> dict:
         f"--kkt={method}",
         *argv,
     ]
-    # one BLAS thread, as pressor synth / verify set it (synthesis.solver.blas_threads), for every
+    # one BLAS thread, as pressor synth / verify set it (pressor.synthesis.solver.blas_threads), for every
     # case
     env = {**os.environ, "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1")}
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False, env=env)

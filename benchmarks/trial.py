@@ -4,7 +4,7 @@ Runs the in-process closed loop (World + the runtime's core, 10 Hz) on one core 
 of a scenario and prints the figure, measured in CPU time so that other load on the machine does not
 count. The LPV runs on its estimated schedule by default (how it is meant to run); every other
 controller on the oracle, ``pressor trial``'s default. It says whether the compiled twins
-(:mod:`sim.native`) ran; ``PRESSOR_NATIVE=off`` measures the Python alone, and ``--vs-python``
+(:mod:`pressor.hil_sim.native`) ran; ``PRESSOR_NATIVE=off`` measures the Python alone, and ``--vs-python``
 measures both in the same run, each patient once with the twins and once without, alternating (a
 shared host's speed drifts by ±15 % between runs; the ratio of the paired times does not).
 Usage::
@@ -21,15 +21,15 @@ import statistics
 import time
 from collections.abc import Callable
 
-from plumbing.native_build import NATIVE_ENV
-from runtime.estimation.sources import SOURCES
-from sim.native import controller as native_controller
-from sim.native import estimator as native_estimator
-from sim.native import patient as native_patient
-from sim.patients.cohort import cohort_seeds
-from sim.patients.patient_model import DEFAULT_PATIENT_MODEL
-from sim.scenarios.scenario import load_scenario
-from sim.trials.trial import run_patient
+from pressor.hil_sim.native import controller as native_controller
+from pressor.hil_sim.native import estimator as native_estimator
+from pressor.hil_sim.native import patient as native_patient
+from pressor.hil_sim.patients.cohort import cohort_seeds
+from pressor.hil_sim.patients.patient_model import DEFAULT_PATIENT_MODEL
+from pressor.hil_sim.scenarios.scenario import load_scenario
+from pressor.hil_sim.trials.trial import run_patient
+from pressor.plumbing.native_build import NATIVE_ENV
+from pressor.runtime.estimation.sources import SOURCES
 
 
 def main() -> None:

@@ -16,8 +16,8 @@ import time
 
 from distributed import LocalCluster
 
-from sim.scenarios.scenario import load_scenario
-from sim.trials.trial import run_trial
+from pressor.hil_sim.scenarios.scenario import load_scenario
+from pressor.hil_sim.trials.trial import run_trial
 
 
 def main() -> None:

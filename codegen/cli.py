@@ -11,11 +11,11 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from plumbing.usage import UsageError, UsageParser, run_command
+from pressor.plumbing.usage import UsageError, UsageParser, run_command
 
 
 def _parser() -> UsageParser:
-    from codegen.pipeline import DEFAULT_ARTIFACT
+    from pressor.codegen.pipeline import DEFAULT_ARTIFACT
 
     p = UsageParser(
         prog="pressor codegen",
@@ -66,7 +66,7 @@ def main(command: str, argv: list[str]) -> int:
 
 def _codegen(argv: Sequence[str]) -> int:
     args = _parser().parse_args(argv)
-    from codegen.pipeline import CodegenError, generate
+    from pressor.codegen.pipeline import CodegenError, generate
 
     out = Path(args.out)
     err = _check_out_dir(out)

@@ -1,6 +1,6 @@
 """Exact sampled-data (ZOH) discretisation of the delayed controller, input filter and integrator.
 
-The synthesis controller (``synthesis.problem.reconstruct.controller_at``, physical units, time in
+The synthesis controller (``pressor.synthesis.problem.reconstruct.controller_at``, physical units, time in
 s) is::
 
     dx_k/dt = Ak x_k + Adk x_k(t - tau) + Bk y,      y = [e_mmhg, x_e_mmhg_s]
@@ -54,7 +54,7 @@ Matrix = NDArray[np.float64]
 
 
 class ContinuousController(Protocol):
-    """Anything with the ``synthesis.problem.reconstruct.DelayedController`` matrices.
+    """Anything with the ``pressor.synthesis.problem.reconstruct.DelayedController`` matrices.
 
     Time in s.
     """

@@ -3,10 +3,10 @@
 One scalar typedef (``lpvmap_scalar_t``: ``int32_t`` Q0.31 in fixed-point mode, ``double`` in float
 mode), static const tables, caller-owned ``lpvmap_state_t``, no heap and no libm call in the step
 (reciprocals of the grid spacings are stored; finiteness is tested with ``x - x != 0``). The only
-divisions are the prefilter's (:mod:`synthesis.problem.reference`, emitted when the design enables
+divisions are the prefilter's (:mod:`pressor.synthesis.problem.reference`, emitted when the design enables
 it), by its K and T clamped to strictly positive ranges. The fixed-point step is the integer twin
 of the Python module's ``Controller(fixed_point=True)`` and agrees with it bit for bit (see
-:mod:`codegen.fixed_point` for formats, accumulators and shifts; it relies on arithmetic right
+:mod:`pressor.codegen.fixed_point` for formats, accumulators and shifts; it relies on arithmetic right
 shifts of negative values, asserted at compile time, and the prefilter's double arithmetic on
 IEEE-754 operations in the Python order, i.e. no contraction into fused multiply-adds: gcc's
 default in an ISO mode such as ``-std=c99`` is ``-ffp-contract=off``). Compiles with
@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from codegen.c_syntax import PU, P, c_double
-from codegen.emit_c_step import step_fixed, step_float
-from codegen.emit_spec import EmitSpec, corner_offsets, derived_constants, nonzero_entries
-from codegen.fixed_point import FixedPointPlan
+from pressor.codegen.c_syntax import PU, P, c_double
+from pressor.codegen.emit_c_step import step_fixed, step_float
+from pressor.codegen.emit_spec import EmitSpec, corner_offsets, derived_constants, nonzero_entries
+from pressor.codegen.fixed_point import FixedPointPlan
 
 __all__ = ["emit_c"]
 

@@ -1,15 +1,15 @@
 """The C target's ``lpvmap_step``: fixed-point (integer twin of the Python module) and float.
 
-Each helper returns C source for one piece of the algorithm of :mod:`codegen.emit_python` (input
+Each helper returns C source for one piece of the algorithm of :mod:`pressor.codegen.emit_python` (input
 check and prefilter, rho clamp/rate limit/cell search, delay line, output); :func:`step_fixed` and
 :func:`step_float` assemble the two bodies.
 """
 
 from __future__ import annotations
 
-from codegen.c_syntax import PU, P
-from codegen.emit_spec import EmitSpec
-from codegen.fixed_point import FixedPointPlan
+from pressor.codegen.c_syntax import PU, P
+from pressor.codegen.emit_spec import EmitSpec
+from pressor.codegen.fixed_point import FixedPointPlan
 
 __all__ = ["step_fixed", "step_float"]
 

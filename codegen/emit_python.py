@@ -1,11 +1,11 @@
 """Emit the standalone Python controller module (standard library only, no import at all).
 
 The emitted module has a float mode and a bit-exact integer mode (the C target's twin). Both run
-the same algorithm (see :mod:`codegen.fixed_point` for the integer formats):
+the same algorithm (see :mod:`pressor.codegen.fixed_point` for the integer formats):
 
 1. e = target - MAP; any non-finite input (or e) holds the last command, updates nothing and sets
    ``status.input_invalid``. With the design's two-degree-of-freedom prefilter
-   (:mod:`synthesis.problem.reference`, emitted only when the artifact enables it) e = r_m - MAP
+   (:mod:`pressor.synthesis.problem.reference`, emitted only when the artifact enables it) e = r_m - MAP
    instead, r_m and the feedforward u_ff from the scheduled model, in double in both modes. e is
    clamped to +-E_LIM.
 2. rho -> grid coordinates s_i = (rho_i - lo_i) * inv_h_i, clamped to [0, n_i - 1] (never
@@ -29,10 +29,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from codegen.emit_python_step import fixed_step, float_step
-from codegen.emit_spec import EmitSpec, corner_offsets, derived_constants, nonzero_entries, py_float
-from codegen.fixed_point import FixedPointPlan
-from contracts.module_hash import MODULE_SHA_PREFIX, module_text_sha256
+from pressor.codegen.emit_python_step import fixed_step, float_step
+from pressor.codegen.emit_spec import (
+    EmitSpec,
+    corner_offsets,
+    derived_constants,
+    nonzero_entries,
+    py_float,
+)
+from pressor.codegen.fixed_point import FixedPointPlan
+from pressor.contracts.module_hash import MODULE_SHA_PREFIX, module_text_sha256
 
 __all__ = ["emit_python", "module_sha256"]
 

@@ -1,14 +1,14 @@
 """The ``step`` methods of the generated Python module: float and bit-exact integer data paths.
 
 Each function returns source lines of one piece of the algorithm listed in
-:mod:`codegen.emit_python` (input check and prefilter, rho clamp/rate limit/cell search, corner
+:mod:`pressor.codegen.emit_python` (input check and prefilter, rho clamp/rate limit/cell search, corner
 weights, delay line, row increments, anti-windup and output); :func:`float_step` and
 :func:`fixed_step` assemble them into the two methods.
 """
 
 from __future__ import annotations
 
-from codegen.emit_spec import EmitSpec
+from pressor.codegen.emit_spec import EmitSpec
 
 __all__ = ["fixed_step", "float_step"]
 

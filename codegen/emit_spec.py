@@ -1,6 +1,6 @@
 """What both emitters share: the emit specification and the numbers derived from it.
 
-The Python module (:mod:`codegen.emit_python`) and the C target (:mod:`codegen.emit_c`) compute
+The Python module (:mod:`pressor.codegen.emit_python`) and the C target (:mod:`pressor.codegen.emit_c`) compute
 with the same constants (:func:`derived_constants`), store the same coefficients
 (:func:`nonzero_entries`) and address the same cell corners (:func:`corner_offsets`).
 """
@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from codegen.fixed_point import FixedPointPlan
-from contracts.drug import DEFAULT_BINDING, DrugBinding
+from pressor.codegen.fixed_point import FixedPointPlan
+from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
 
 __all__ = ["EmitSpec", "corner_offsets", "derived_constants", "nonzero_entries", "py_float"]
 
@@ -40,7 +40,7 @@ class EmitSpec:
         Name -> (value, description) error budgets stated in the header.
     reference
         (lambda_s, pump_fraction, k_min) of the two-degree-of-freedom prefilter
-        (:mod:`synthesis.problem.reference`), or None: the controller then sees the target directly.
+        (:mod:`pressor.synthesis.problem.reference`), or None: the controller then sees the target directly.
     drug
         The drug and syringe concentration (µg/ml) the gains are for.
     """

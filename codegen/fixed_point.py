@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from synthesis.verification.discrete_step import sampled_fopdt
+from pressor.synthesis.verification.discrete_step import sampled_fopdt
 
 __all__ = [
     "E_LIM_MMHG",
@@ -77,7 +77,7 @@ def signal_peaks(
     [0, max_rate_ml_h] with the generated step's anti-windup (controller update frozen while the
     command is pinned at a limit and its increment pushes further into it). The patient is the
     first-order-plus-delay model sampled exactly
-    (:func:`synthesis.verification.discrete_step.sampled_fopdt`).
+    (:func:`pressor.synthesis.verification.discrete_step.sampled_fopdt`).
     """
     nk_, nt_, na_ = tables.shape[:3]
     idx = [(i, j, k) for i in (0, nk_ - 1) for j in (0, nt_ - 1) for k in (0, na_ - 1)]

@@ -10,7 +10,7 @@ cannot be stepped over unnoticed.
 The loop is the FOPDT patient K/(T s + 1) e^(-tau s) under ZOH with the discrete controller
 reading its delayed state from a shift buffer, exactly what the generated step does
 (:func:`frozen_loop_matrices`; the patient's sampling is the one the synthesis-side discrete step
-uses, :func:`synthesis.verification.discrete_step.sampled_fopdt`); :func:`unstable_root_count`
+uses, :func:`pressor.synthesis.verification.discrete_step.sampled_fopdt`); :func:`unstable_root_count`
 counts its unstable roots.
 """
 
@@ -22,7 +22,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from synthesis.verification.discrete_step import sampled_fopdt
+from pressor.synthesis.verification.discrete_step import sampled_fopdt
 
 __all__ = ["frozen_loop_matrices", "unstable_root_count"]
 

@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from codegen.discretise import ContinuousController
-from codegen.fixed_point import FixedPointPlan, make_plan
-from codegen.tables import TabulationProof, choose_grid
-from contracts.drug import DEFAULT_BINDING, DrugBinding
-from plumbing.files import write_atomic
-from synthesis.artifact import default_artifact_path
+from pressor.codegen.discretise import ContinuousController
+from pressor.codegen.fixed_point import FixedPointPlan, make_plan
+from pressor.codegen.tables import TabulationProof, choose_grid
+from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
+from pressor.plumbing.files import write_atomic
+from pressor.synthesis.artifact import default_artifact_path
 
 __all__ = [
     "BUDGETS",
@@ -86,7 +86,7 @@ class LoadedDesign:
     display_path
         Path as shown in the generation command (repository-relative when inside the repo).
     controller_fn
-        rho -> delayed continuous controller (``synthesis.problem.reconstruct.controller_at``).
+        rho -> delayed continuous controller (``pressor.synthesis.problem.reconstruct.controller_at``).
     box, rate_bounds
         (3, 2) box and (3,) rate bounds (K mmHg/(ml/h), T s, tau s; per s).
     omega, lambda_
@@ -97,7 +97,7 @@ class LoadedDesign:
         Node counts of the synthesis grid (the tabulation search starts there).
     reference
         (lambda_s, pump_fraction, k_min) of the design's two-degree-of-freedom prefilter
-        (``synthesis.problem.reference``), or None when the artifact has none or it is disabled.
+        (``pressor.synthesis.problem.reference``), or None when the artifact has none or it is disabled.
     drug
         The drug and syringe concentration the gains are for (the artifact's ``design.drug``,
         phenylephrine at 100 µg/ml when it names none); emitted as ``DRUG`` and
@@ -154,7 +154,7 @@ def _display(path: Path) -> str:
 
 
 def load_design(path: str | Path) -> LoadedDesign:
-    """Stage 1: load and validate an artifact (``synthesis.artifact.load_artifact``).
+    """Stage 1: load and validate an artifact (``pressor.synthesis.artifact.load_artifact``).
 
     Raises
     ------
@@ -164,8 +164,8 @@ def load_design(path: str | Path) -> LoadedDesign:
     path = Path(path)
     if not path.is_file():
         raise CodegenError(f"{path}: artifact not found")
-    from synthesis.artifact import ArtifactError, load_artifact
-    from synthesis.problem.reconstruct import controller_at
+    from pressor.synthesis.artifact import ArtifactError, load_artifact
+    from pressor.synthesis.problem.reconstruct import controller_at
 
     try:
         art = load_artifact(path)
@@ -245,8 +245,8 @@ def emit(
     c_float: bool = False,
 ) -> GeneratedFiles:
     """Stage 4: render the target's files."""
-    from codegen.emit_python import emit_python
-    from codegen.emit_spec import EmitSpec
+    from pressor.codegen.emit_python import emit_python
+    from pressor.codegen.emit_spec import EmitSpec
 
     chash = content_hash(
         design.sha256, target + ("-float" if c_float else ""), plan.fmt, sample_period_s
@@ -268,7 +268,7 @@ def emit(
     if target == "python":
         return GeneratedFiles({f"{MODULE_NAME}.py": emit_python(spec, plan, thash)}, chash)
     if target == "c":
-        from codegen.emit_c import emit_c
+        from pressor.codegen.emit_c import emit_c
 
         return GeneratedFiles(emit_c(spec, plan, thash, MODULE_NAME, float_mode=c_float), chash)
     raise CodegenError(f"--target {target!r}: allowed python, c")

@@ -20,7 +20,7 @@ step stays division-free: it finds the cell by a bounded binary search over the 
 multiplies by the stored reciprocal of that cell's width. Clamping and rate limiting act on the
 physical rho, never on a transformed coordinate.
 
-The frozen-loop stability test is :mod:`codegen.frozen_loop`.
+The frozen-loop stability test is :mod:`pressor.codegen.frozen_loop`.
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from codegen.discretise import ContinuousController, discretise_node
-from codegen.frozen_loop import frozen_loop_matrices, unstable_root_count
+from pressor.codegen.discretise import ContinuousController, discretise_node
+from pressor.codegen.frozen_loop import frozen_loop_matrices, unstable_root_count
 
 __all__ = [
     "GridCheck",

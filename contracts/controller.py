@@ -1,7 +1,7 @@
 """The one small interface every controller the runtime can run implements.
 
-Both the generated LPV modules (``codegen``) and the PI baseline (:mod:`baselines.pi`)
-satisfy :class:`Controller`; the loop, the in-process simulator (``sim``) and user code call
+Both the generated LPV modules (``codegen``) and the PI baseline (:mod:`pressor.baselines.pi`)
+satisfy :class:`Controller`; the loop, the in-process simulator (``hil_sim``) and user code call
 nothing else. A step is a pure function of the controller's own state and its arguments: no clock,
 no I/O, no allocation that grows.
 
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Protocol, runtime_checkable
 
-from contracts.drug import DEFAULT_BINDING
+from pressor.contracts.drug import DEFAULT_BINDING
 
 #: The drug the shipped designs are for (the paper's vasopressor).
 DESIGN_DRUG = DEFAULT_BINDING.name
@@ -23,7 +23,7 @@ DESIGN_DRUG = DEFAULT_BINDING.name
 #: so a design holds only at the concentration its K was identified at. The paper does not state
 #: it; 100 µg/ml is the usual phenylephrine infusion dilution (10 mg in 100 ml), assumed here.
 #: A generated module declares its own (``DRUG``, ``DRUG_CONCENTRATION_UG_ML``; read by
-#: :func:`contracts.drug.binding_of`); the baselines declare none and assume these.
+#: :func:`pressor.contracts.drug.binding_of`); the baselines declare none and assume these.
 DESIGN_CONCENTRATION_UG_ML = DEFAULT_BINDING.concentration_ug_ml
 
 

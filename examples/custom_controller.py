@@ -3,7 +3,7 @@
 ``ScheduledPI`` is a PI controller re-tuned every tick from the K, T, τ it is given (IMC/lambda
 tuning of a first order plus delay: kp = T / (K (λ + τ)), ki = kp / T), clamped to the pump and
 with conditional-integration anti-windup. It is a plain class: it satisfies
-``contracts.controller.Controller`` by having the members, nothing to inherit. The same class runs
+``pressor.contracts.controller.Controller`` by having the members, nothing to inherit. The same class runs
 from the command line, supervised like the shipped controllers::
 
     pressor trial --controller examples/custom_controller.py:ScheduledPI:lambda_s=60 \\
@@ -26,7 +26,7 @@ HERE = Path(__file__).resolve().parent
 
 @dataclass
 class Status:
-    """The flags of the last step (contracts.controller.ControllerStatus)."""
+    """The flags of the last step (pressor.contracts.controller.ControllerStatus)."""
 
     saturated: bool = False
     rho_clamped: bool = False

@@ -2,7 +2,7 @@
 
 A policy is any function from an observation to an action. This one feeds the newest MAP sample
 (no value when its ``QUALITY_INVALID`` bit is set) and the target to
-:class:`baselines.pi.PIController`, discretised at the action period, and returns its command.
+:class:`pressor.baselines.pi.PIController`, discretised at the action period, and returns its command.
 
 At one tick per action (``--ticks-per-action 1``) the episode is tick for tick the one
 ``pressor trial --controller pi`` simulates for that patient seed (same supervisor, same pump, same
@@ -21,9 +21,9 @@ import gymnasium
 import numpy as np
 
 import pressor.gym  # noqa: F401  (registers pressor/MAP-v0)
-from baselines.pi import PIController
-from contracts.faults import QUALITY_INVALID
 from pressor import api
+from pressor.baselines.pi import PIController
+from pressor.contracts.faults import QUALITY_INVALID
 
 
 class PIPolicy:

@@ -1,6 +1,6 @@
 """The serial link between the controller runtime and the pump/patient device (MAVLink 2).
 
-Both ends speak it: the runtime (``runtime``) and the simulated device (``sim.devices.device``). It
+Both ends speak it: the runtime (``runtime``) and the simulated device (``pressor.hil_sim.devices.device``). It
 imports no other package of this project.
 
 Modules
@@ -8,20 +8,20 @@ Modules
 ``pressor.xml``
     The dialect (message ids 45000-45007, a block no dialect in pymavlink's ``all`` uses).
 ``dialect/pressor.py``
-    The module mavgen generates from it (committed; ``python -m link.generate``).
+    The module mavgen generates from it (committed; ``python -m pressor.link.generate``).
 ``messages``
     One typed message per frame, the same on both ends: :class:`Hello`, :class:`Heartbeat`,
     :class:`TickInputs` (a tick's scheduling, target and MAP frames), :class:`Command`,
     :class:`PumpStatus`; the dialect's enums (``MODE_*``, ``STATE_*``, ``LINK_*``, ``ROLE_*``,
     ``REFUSAL_*``).
 ``codec``
-    :class:`~link.codec.FrameCodec` - framing with resynchronisation, CRC, sequence and signature
+    :class:`~pressor.link.codec.FrameCodec` - framing with resynchronisation, CRC, sequence and signature
     checks, the fast pack/decode path.
 ``counters``, ``signing``
     :class:`LinkCounters` (``DROP_CAUSES``: the ones counting what is dropped, by cause),
     :class:`LinkError`, :class:`LinkClosedError`, :class:`SigningMismatch`,
     :class:`HelloRefused` (this end refuses the peer's hello), :class:`PeerRefused` (the peer
-    refused ours), both a :class:`Refusal`; :class:`Signing`, :func:`~link.signing.default_key_path`.
+    refused ours), both a :class:`Refusal`; :class:`Signing`, :func:`~pressor.link.signing.default_key_path`.
 ``session``, ``runtime_session``, ``device_session``
     :class:`Session` (what both ends share: hellos, handshake, heartbeats, reading, dispatch),
     :class:`RuntimeSession` (assembles ticks, sends commands), :class:`DeviceSession` (sends ticks
@@ -38,7 +38,7 @@ Runtime side (what the loop uses)
 ---------------------------------
 ::
 
-    from link import RuntimeSession, Hello, Signing, PtyPair, MODE_AUTO
+    from pressor.link import RuntimeSession, Hello, Signing, PtyPair, MODE_AUTO
 
     pty = PtyPair.open()                          # device process opens pty.follower_path
     ep = RuntimeSession(pty.leader_port(), signing=Signing.from_file(key), tlog=tlog)
@@ -74,10 +74,10 @@ Ts, noise, n_ticks), ...)``, ``ep.send_tick(world.observe())`` (a :class:`TickIn
 ``ep.wait_for_command(tick, timeout_s)`` -> :class:`Command` ``(tick, rate_ml_h, mode)``,
 ``ep.send_pump_status(world.advance())`` (a :class:`PumpStatus`), ``ep.send_heartbeat(...)``.
 
-Values are float32 on the wire (sim time is double), matching ``sim.world``'s rounding.
+Values are float32 on the wire (sim time is double), matching ``pressor.hil_sim.world``'s rounding.
 """
 
-from link.counters import (
+from pressor.link.counters import (
     DROP_CAUSES,
     HelloRefused,
     LinkClosedError,
@@ -87,8 +87,8 @@ from link.counters import (
     Refusal,
     SigningMismatch,
 )
-from link.device_session import DeviceSession
-from link.messages import (
+from pressor.link.device_session import DeviceSession
+from pressor.link.messages import (
     LINK_LOCKSTEP,
     LINK_REALTIME,
     MODE_AUTO,
@@ -117,12 +117,12 @@ from link.messages import (
     PumpStatus,
     TickInputs,
 )
-from link.ports import PortWrapper, open_port
-from link.runtime_session import RuntimeSession
-from link.session import ManualClock, Session
-from link.signing import Signing
-from link.tlog import TlogWriter, read_tlog, register_dialect_with_mavutil
-from link.ttyport import FdPort, PtyPair, fast_port
+from pressor.link.ports import PortWrapper, open_port
+from pressor.link.runtime_session import RuntimeSession
+from pressor.link.session import ManualClock, Session
+from pressor.link.signing import Signing
+from pressor.link.tlog import TlogWriter, read_tlog, register_dialect_with_mavutil
+from pressor.link.ttyport import FdPort, PtyPair, fast_port
 
 __all__ = [
     "DROP_CAUSES",

@@ -1,8 +1,8 @@
 """Framing of the pressor link: pack frames, scan a byte stream for them, check and decode them.
 
-A :class:`FrameCodec` owns one end's generated ``MAVLink`` object (``link.dialect.pressor``: system
+A :class:`FrameCodec` owns one end's generated ``MAVLink`` object (``pressor.link.dialect.pressor``: system
 and component ids, sequence number, signing state), its receive buffer and its per-stream sequence
-tracking, and counts into the session's :class:`~link.counters.LinkCounters`.
+tracking, and counts into the session's :class:`~pressor.link.counters.LinkCounters`.
 
 Framing. The codec frames the byte stream itself and hands each complete candidate frame to the
 generated ``MAVLink.decode`` (what ``parse_buffer`` does internally, minus its weaknesses):
@@ -21,7 +21,7 @@ generated ``MAVLink.decode`` (what ``parse_buffer`` does internally, minus its w
 Sequence numbers are tracked per (system, component); a jump counts one ``seq_gaps`` event and
 ``frames_lost`` missing frames.
 
-Signing (MAVLink 2). With a :class:`~link.signing.Signing`, every outgoing frame is signed, and
+Signing (MAVLink 2). With a :class:`~pressor.link.signing.Signing`, every outgoing frame is signed, and
 incoming frames are checked against the same key; unsigned frames (``require=True``) and frames
 with a wrong signature or a replayed timestamp are refused and counted (``refused_unsigned``,
 ``refused_bad_signature``; :attr:`FrameCodec.refusal` says why the last one was). The signing
@@ -42,9 +42,9 @@ import struct
 from collections.abc import Callable
 from typing import Any
 
-from link.counters import LinkCounters
-from link.dialect import pressor as mavlink
-from link.signing import Signing
+from pressor.link.counters import LinkCounters
+from pressor.link.dialect import pressor as mavlink
+from pressor.link.signing import Signing
 
 _MARKER = 0xFD
 _HEADER = 10
@@ -125,7 +125,7 @@ class FrameCodec:
     ) -> None:
         mav = mavlink.MAVLink(None, system_id, component_id)
         if signing is not None and signing.wall_clock:
-            from link.signing import wall_clock_s
+            from pressor.link.signing import wall_clock_s
 
             clock = wall_clock_s
             # a receiver starts at its own wall-clock stamp: a new stream more than a minute

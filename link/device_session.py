@@ -11,9 +11,9 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from link.dialect import pressor as mavlink
-from link.messages import ROLE_DEVICE, ROLE_RUNTIME, Command, Hello, PumpStatus, TickInputs
-from link.session import Session
+from pressor.link.dialect import pressor as mavlink
+from pressor.link.messages import ROLE_DEVICE, ROLE_RUNTIME, Command, Hello, PumpStatus, TickInputs
+from pressor.link.session import Session
 
 _ID_SCHED = mavlink.MAVLINK_MSG_ID_SCHEDULING_PARAMS
 _ID_TARGET = mavlink.MAVLINK_MSG_ID_MAP_TARGET
@@ -28,8 +28,8 @@ class DeviceSession(Session):
     Parameters
     ----------
     port, signing, clock, tlog, system_id, component_id
-        As for :class:`~link.session.Session`; ``clock`` is the device's sim time (s), set by its
-        owner (a :class:`~link.session.ManualClock`).
+        As for :class:`~pressor.link.session.Session`; ``clock`` is the device's sim time (s), set by its
+        owner (a :class:`~pressor.link.session.ManualClock`).
     """
 
     ROLE = ROLE_DEVICE

@@ -1,6 +1,6 @@
 """Regenerate the committed Python module of the pressor MAVLink dialect.
 
-Run ``python -m link.generate`` after editing ``link/pressor.xml``; it rewrites
+Run ``python -m pressor.link.generate`` after editing ``link/pressor.xml``; it rewrites
 ``link/dialect/pressor.py`` with pymavlink's mavgen (wire protocol 2.0, Python 3, XML
 validation on). ``tests/link/test_dialect.py`` regenerates into a temporary directory and fails
 when the committed module and the XML disagree.
@@ -67,7 +67,7 @@ def generate(xml_path: Path = XML_PATH, out_path: Path = MODULE_PATH) -> Path:
 
 def main(argv: list[str] | None = None) -> int:
     """Command line: regenerate the committed module (or write it elsewhere with ``--out``)."""
-    parser = argparse.ArgumentParser(prog="python -m link.generate", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m pressor.link.generate", description=__doc__)
     parser.add_argument("--xml", type=Path, default=XML_PATH, help="dialect XML")
     parser.add_argument("--out", type=Path, default=MODULE_PATH, help="generated module path")
     args = parser.parse_args(argv)

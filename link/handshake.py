@@ -3,15 +3,15 @@
 :class:`link.Session` calls these: :func:`signing_mismatch` on every frame read while waiting
 for the peer's hello (the first frame showing the peer signs differently ends the handshake), then
 :func:`check_peer_hello` on the hello itself. The runtime adds its own checks of the device's hello
-(sample period, link mode, noise, drug, concentration, pump maximum: ``runtime.session``,
-``runtime.inputs.clinician``); every refusal carries a ``PRESSOR_REFUSAL_REASON`` code that
+(sample period, link mode, noise, drug, concentration, pump maximum: ``pressor.runtime.session``,
+``pressor.runtime.inputs.clinician``); every refusal carries a ``PRESSOR_REFUSAL_REASON`` code that
 :meth:`link.Session.refuse` sends the peer (docs/PROTOCOL.md, "Refusals").
 """
 
 from __future__ import annotations
 
-from link.counters import HelloRefused
-from link.messages import (
+from pressor.link.counters import HelloRefused
+from pressor.link.messages import (
     PROTOCOL_VERSION,
     REFUSAL_PROTOCOL_VERSION,
     REFUSAL_ROLE,

@@ -1,6 +1,6 @@
 """The typed messages of the pressor link, one per frame (or frame bundle), used by both ends.
 
-The device (``sim``) builds them and the runtime receives them: the same types on both sides,
+The device (``hil_sim``) builds them and the runtime receives them: the same types on both sides,
 so a value never changes shape between the world, the wire and the loop. Floats are float32 on the
 wire (sim time is double); the world rounds to float32 before it builds a message, so a message
 reads back from the wire exactly as it was sent.
@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from link.dialect import pressor as mavlink
+from pressor.link.dialect import pressor as mavlink
 
 #: MAVLink role values (enum PRESSOR_ROLE), also the default system ids.
 ROLE_RUNTIME = mavlink.PRESSOR_ROLE_RUNTIME
@@ -123,7 +123,7 @@ class TickInputs:
     map_mmhg
         Measured MAP (mmHg); NaN when the monitor has no valid value.
     quality
-        Monitor quality flags (0 = good; :data:`contracts.faults` sensor-quality bits).
+        Monitor quality flags (0 = good; :data:`pressor.contracts.faults` sensor-quality bits).
     target_mmhg
         The clinician's MAP target (mmHg); NaN on the runtime side if none received yet, or in
         lockstep when the runtime does not require it and the tick's own had not arrived.
@@ -136,7 +136,7 @@ class TickInputs:
         Tick the scheduling parameters / target belong to (-1 if none): equal to ``tick`` as the
         world builds it; on the runtime side in real time they differ when those frames were lost
         and the values are stale ones from an earlier tick (lockstep never hands over stale ones:
-        see :class:`~link.runtime_session.RuntimeSession`).
+        see :class:`~pressor.link.runtime_session.RuntimeSession`).
     """
 
     tick: int
@@ -174,7 +174,7 @@ class PumpStatus:
     volume_ml
         Volume delivered since the start (ml).
     alarms
-        Pump alarm bit flags (:mod:`contracts.faults`).
+        Pump alarm bit flags (:mod:`pressor.contracts.faults`).
     """
 
     tick: int

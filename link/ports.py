@@ -2,7 +2,7 @@
 
 Everything here returns a *port*: an object with the small subset of the pyserial API the session
 uses (``write(bytes)``, ``read(n)``, ``in_waiting``, ``close()``, ``timeout``). Real pyserial
-objects satisfy it; :mod:`link.ttyport` adds ports over tty descriptors (pty pairs, the fast path).
+objects satisfy it; :mod:`pressor.link.ttyport` adds ports over tty descriptors (pty pairs, the fast path).
 
 Facts this package relies on:
 

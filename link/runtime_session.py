@@ -5,12 +5,12 @@ rest of its tick is there - SCHEDULING_PARAMS if ``require_sched``, MAP_TARGET i
 ``require_target``, and PUMP_STATUS once the device has sent one numbered as docs/PROTOCOL.md
 says - and the tick goes to the loop as soon as it is complete (docs/PROTOCOL.md, "Required and
 optional").
-:meth:`RuntimeSession.wait_for_sample` returns it as a :class:`~link.messages.TickInputs`;
+:meth:`RuntimeSession.wait_for_sample` returns it as a :class:`~pressor.link.messages.TickInputs`;
 :meth:`RuntimeSession.send_command` answers it. A tick whose frames were lost stays unanswered
 until the device resends it (its pump status is not resent: the tick then goes without it).
 When the device retransmits a tick the runtime has already answered (the command was lost), the
 session re-sends the same command by itself. Whatever is dropped is counted by cause
-(:class:`~link.counters.LinkCounters`, ``DROP_CAUSES``).
+(:class:`~pressor.link.counters.LinkCounters`, ``DROP_CAUSES``).
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from link.dialect import pressor as mavlink
-from link.messages import (
+from pressor.link.dialect import pressor as mavlink
+from pressor.link.messages import (
     LINK_LOCKSTEP,
     MODE_AUTO,
     ROLE_DEVICE,
@@ -28,7 +28,7 @@ from link.messages import (
     PumpStatus,
     TickInputs,
 )
-from link.session import Session
+from pressor.link.session import Session
 
 _ID_SCHED = mavlink.MAVLINK_MSG_ID_SCHEDULING_PARAMS
 _ID_TARGET = mavlink.MAVLINK_MSG_ID_MAP_TARGET
@@ -43,9 +43,9 @@ class RuntimeSession(Session):
     Parameters
     ----------
     port, signing, tlog, system_id, component_id
-        As for :class:`~link.session.Session`.
+        As for :class:`~pressor.link.session.Session`.
     clock
-        The run clock. Default: a :class:`~link.session.ManualClock` at 0 that follows the sim
+        The run clock. Default: a :class:`~pressor.link.session.ManualClock` at 0 that follows the sim
         time of the received MAP samples (lockstep virtual time); pass another (e.g. the monotonic
         clock in real-time mode) to use it instead.
     complete_ticks

@@ -1,10 +1,10 @@
 """One end of the pressor link: typed sends and receives over a byte port.
 
-A :class:`Session` owns a port (see :mod:`link.ports`), a :class:`~link.codec.FrameCodec` (framing,
-signing, sequence checks), a send queue and :class:`~link.counters.LinkCounters`. It never sleeps
+A :class:`Session` owns a port (see :mod:`pressor.link.ports`), a :class:`~pressor.link.codec.FrameCodec` (framing,
+signing, sequence checks), a send queue and :class:`~pressor.link.counters.LinkCounters`. It never sleeps
 except inside a bounded wait on the port. What the two roles send and wait for lives in the
-subclasses, :class:`link.runtime_session.RuntimeSession` and
-:class:`link.device_session.DeviceSession`; this base holds what both ends share: hellos and the
+subclasses, :class:`pressor.link.runtime_session.RuntimeSession` and
+:class:`pressor.link.device_session.DeviceSession`; this base holds what both ends share: hellos and the
 handshake and its refusals, heartbeats, reading, dispatching, the tlog and closing.
 """
 
@@ -17,8 +17,8 @@ from typing import Any
 
 import serial
 
-from link.codec import FrameCodec, message_object
-from link.counters import (
+from pressor.link.codec import FrameCodec, message_object
+from pressor.link.counters import (
     HelloRefused,
     LinkClosedError,
     LinkCounters,
@@ -26,11 +26,17 @@ from link.counters import (
     PeerRefused,
     SigningMismatch,
 )
-from link.dialect import pressor as mavlink
-from link.handshake import check_peer_hello, signing_mismatch
-from link.messages import PROTOCOL_VERSION, REFUSAL_TEXT_CHARS, STATE_FAULT, Heartbeat, Hello
-from link.signing import Signing
-from link.tlog import TlogWriter
+from pressor.link.dialect import pressor as mavlink
+from pressor.link.handshake import check_peer_hello, signing_mismatch
+from pressor.link.messages import (
+    PROTOCOL_VERSION,
+    REFUSAL_TEXT_CHARS,
+    STATE_FAULT,
+    Heartbeat,
+    Hello,
+)
+from pressor.link.signing import Signing
+from pressor.link.tlog import TlogWriter
 
 _ID_HEARTBEAT = mavlink.MAVLINK_MSG_ID_PRESSOR_HEARTBEAT
 _ID_HELLO = mavlink.MAVLINK_MSG_ID_PRESSOR_HELLO
@@ -64,14 +70,14 @@ class ManualClock:
 
 
 class Session:
-    """What both ends of the link do; use :class:`~link.runtime_session.RuntimeSession` or
-    :class:`~link.device_session.DeviceSession`.
+    """What both ends of the link do; use :class:`~pressor.link.runtime_session.RuntimeSession` or
+    :class:`~pressor.link.device_session.DeviceSession`.
 
     Parameters
     ----------
     port
         A pyserial port or anything with ``write``, ``read``, ``in_waiting`` (see
-        :mod:`link.ports`). Its ``timeout`` should be short (~10 ms): waits loop on it.
+        :mod:`pressor.link.ports`). Its ``timeout`` should be short (~10 ms): waits loop on it.
     signing
         Sign outgoing frames and check incoming ones; ``None`` = no signing (and signed incoming
         frames are then accepted unchecked, as pymavlink does - give the pump side a key).
@@ -337,7 +343,7 @@ class Session:
     def check_signing(self) -> None:
         """Raise :class:`SigningMismatch` naming the cause if a received frame showed that the
         peer signs differently from this end (unsigned, another key, stale timestamps, or signed
-        while this end has no key: :func:`link.handshake.signing_mismatch`)."""
+        while this end has no key: :func:`pressor.link.handshake.signing_mismatch`)."""
         codec = self.codec
         why = signing_mismatch(self.PEER_NAME, codec.refusal, codec.peer_signed)
         if why is not None:
@@ -356,7 +362,7 @@ class Session:
             hello.
         HelloRefused
             The peer's hello announces the wrong role, comes from a system id other than its role
-            or carries another protocol version (:func:`link.handshake.check_peer_hello`); the
+            or carries another protocol version (:func:`pressor.link.handshake.check_peer_hello`); the
             peer has been sent the refusal (:meth:`refuse`).
         """
         peer = self._exchange_hellos(hello, timeout_s, resend_s)

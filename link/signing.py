@@ -1,7 +1,7 @@
 """MAVLink 2 signing configuration shared by both ends of the link.
 
 With a :class:`Signing`, a session signs every outgoing frame and checks incoming frames against
-the same key (see :mod:`link.codec`); the pump side requires signed frames.
+the same key (see :mod:`pressor.link.codec`); the pump side requires signed frames.
 
 Timestamps. A key that outlives a run (a key file, or a random per-run key) signs with the wall
 clock, as the MAVLink signing rules ask (10 µs units since 2015-01-01 UTC): a receiver starts from

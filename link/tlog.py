@@ -17,7 +17,7 @@ Stock ``mavlogdump.py`` reads a log with the dialect XML under ``link/message_de
 
 In Python, make the committed dialect module known to pymavlink's tools first::
 
-    from link.tlog import register_dialect_with_mavutil
+    from pressor.link.tlog import register_dialect_with_mavutil
     mavutil = register_dialect_with_mavutil()
     log = mavutil.mavlink_connection("run.tlog", dialect="pressor")
 """
@@ -31,7 +31,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import BinaryIO
 
-from plumbing.files import AtomicFile
+from pressor.plumbing.files import AtomicFile
 
 _TS = struct.Struct(">Q")
 
@@ -112,7 +112,7 @@ def register_dialect_with_mavutil() -> ModuleType:
     """
     import sys
 
-    from link.dialect import pressor
+    from pressor.link.dialect import pressor
 
     os.environ["MAVLINK20"] = "1"
     sys.modules["pymavlink.dialects.v20.pressor"] = pressor

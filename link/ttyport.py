@@ -31,7 +31,7 @@ from typing import Any
 
 import serial
 
-from link.ports import DEFAULT_READ_TIMEOUT_S, PortWrapper, open_port
+from pressor.link.ports import DEFAULT_READ_TIMEOUT_S, PortWrapper, open_port
 
 #: The tty read timer of fast ports (s): ``VTIME`` is in tenths of a second; a ``read_some`` wait
 #: at least this long is one blocking ``os.read`` that returns on the first byte or after this.

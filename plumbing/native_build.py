@@ -1,7 +1,7 @@
 """Compile a C source into a cached shared library, for optional compiled kernels of simulations.
 
 The in-process simulator can run some of its pure arithmetic as compiled C instead of Python (the
-LPV controller's C twin, the estimator, the paper patient: :mod:`sim.native`). Such a kernel must
+LPV controller's C twin, the estimator, the paper patient: :mod:`pressor.hil_sim.native`). Such a kernel must
 give the same IEEE double results as the Python it stands in for, so the flags are fixed:
 ``-O2 -ffp-contract=off -fno-fast-math -fexcess-precision=standard`` (no fused multiply-add, no
 reassociation; every intermediate rounded to double), ``-std=c99``. Nothing here is needed: when
@@ -27,7 +27,7 @@ import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
-from plumbing.files import AtomicFile
+from pressor.plumbing.files import AtomicFile
 
 #: the compiler flags; a change here is a new cache key
 FLAGS = (

@@ -11,19 +11,19 @@ Two functions, two typed results::
     result.summary["metrics"], result.to_pandas()      # one row per patient (patients.csv)
     result.write("out/")                               # patients.json, patients.csv, summary.json
 
-Both run the code the command runs: :func:`trial` calls :func:`sim.trials.trial.run_cohort`, as
+Both run the code the command runs: :func:`trial` calls :func:`pressor.hil_sim.trials.trial.run_cohort`, as
 ``pressor trial`` does (same seed, same records, same bytes, whatever ``jobs``), and
-:func:`simulate` runs one patient exactly as a trial does (:func:`sim.trials.trial.run_patient`'s
+:func:`simulate` runs one patient exactly as a trial does (:func:`pressor.hil_sim.trials.trial.run_patient`'s
 path: the world, the controller, the runtime's closed-loop core and supervisor, the metrics), which
 is tick for tick what a lockstep ``pressor sil`` of that seed gives. ``controller`` is any
 ``--controller`` spec (``pi``, ``lpv``, ``smith:45``, a generated module, a plugin
-``MODULE:CLASS[:ARGS]`` - :mod:`runtime.inputs.controller_plugin`) or a controller class itself (see
+``MODULE:CLASS[:ARGS]`` - :mod:`pressor.runtime.inputs.controller_plugin`) or a controller class itself (see
 :func:`controller_spec`). ``to_pandas`` needs pandas (``pip install -e ".[pandas]"``).
 
 Errors: a bad argument raises :class:`ValueError` (a subclass naming the argument, the value and
-the allowed range: :class:`runtime.inputs.controller_loader.ControllerSpecError`,
-:class:`sim.scenarios.scenario.ScenarioError`,
-:class:`sim.patients.patient_model.PatientModelError`); a controller that raises mid-run raises :class:`runtime.core.closed_loop.ControllerError` naming it,
+the allowed range: :class:`pressor.runtime.inputs.controller_loader.ControllerSpecError`,
+:class:`pressor.hil_sim.scenarios.scenario.ScenarioError`,
+:class:`pressor.hil_sim.patients.patient_model.PatientModelError`); a controller that raises mid-run raises :class:`pressor.runtime.core.closed_loop.ControllerError` naming it,
 the patient and the tick.
 """
 
@@ -39,15 +39,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from contracts.checks import check_int_range, check_range
-from runtime.core.supervisor_config import ALARM_FAULTS, State
-from runtime.estimation.sources import SOURCES
-from runtime.inputs.controller_loader import load_controller
-from sim.episode import Trajectory
-from sim.patients.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
-from sim.patients.sensitivity import with_sensitivity
-from sim.scenarios.scenario import Scenario, load_scenario
-from sim.trials.trial import _csv_text, _simulate_patient, run_cohort, write_outputs
+from pressor.contracts.checks import check_int_range, check_range
+from pressor.hil_sim.episode import Trajectory
+from pressor.hil_sim.patients.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
+from pressor.hil_sim.patients.sensitivity import with_sensitivity
+from pressor.hil_sim.scenarios.scenario import Scenario, load_scenario
+from pressor.hil_sim.trials.trial import _csv_text, _simulate_patient, run_cohort, write_outputs
+from pressor.runtime.core.supervisor_config import ALARM_FAULTS, State
+from pressor.runtime.estimation.sources import SOURCES
+from pressor.runtime.inputs.controller_loader import load_controller
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas
@@ -101,7 +101,7 @@ class SimulationResult:
         The patient's record, as ``pressor trial`` writes it in ``patients.json`` (seed,
         coefficients, schedule range, §3 metrics, disturbance events; docs/METRICS.md).
     trajectory
-        Every tick (:class:`sim.episode.Trajectory`: MAP in mmHg, rates in ml/h, K in
+        Every tick (:class:`pressor.hil_sim.episode.Trajectory`: MAP in mmHg, rates in ml/h, K in
         mmHg/(ml/h), T and τ in s, supervisor state and fault bits).
     """
 
@@ -198,7 +198,7 @@ def controller_spec(controller: str | type, args: Mapping[str, Any] | None = Non
     Parameters
     ----------
     controller
-        A spec (returned as is), or a class satisfying :class:`contracts.controller.Controller`:
+        A spec (returned as is), or a class satisfying :class:`pressor.contracts.controller.Controller`:
         ``module:Class``, or ``FILE.py:Class`` for a class of the script being run (``__main__``),
         so that worker processes import it again from its file.
     args
@@ -286,10 +286,10 @@ def simulate(
     schedule
         Where K, T, τ come from: ``oracle``, ``estimated``, ``nominal`` or ``validated``.
     patient_model
-        A patient model name or ``MODULE:CLASS`` (:mod:`sim.patients.patient_model`).
+        A patient model name or ``MODULE:CLASS`` (:mod:`pressor.hil_sim.patients.patient_model`).
     sensitivity
         The patient's drug sensitivity × this factor (dimensionless, [0.05, 20];
-        :mod:`sim.patients.sensitivity`); 1 (default) runs the model as drawn, byte for byte.
+        :mod:`pressor.hil_sim.patients.sensitivity`); 1 (default) runs the model as drawn, byte for byte.
 
     Returns
     -------

@@ -8,7 +8,7 @@ serial or rerun.
 
 A stage CLI module exposes ``main(command: str, argv: list[str]) -> int`` and parses ``argv`` itself.
 Exit codes: 0 success, 1 the run completed but a check failed, 2 bad usage or bad input
-(:mod:`plumbing.usage`).
+(:mod:`pressor.plumbing.usage`).
 """
 
 from __future__ import annotations
@@ -17,29 +17,32 @@ import importlib
 import sys
 from importlib.metadata import version
 
-from plumbing.usage import USAGE_EXIT, usage_exit
+from pressor.plumbing.usage import USAGE_EXIT, usage_exit
 
 #: subcommand -> (module that serves it, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "synth": ("synthesis.cli", "synthesize, verify and write a controller artifact"),
+    "synth": ("pressor.synthesis.cli", "synthesize, verify and write a controller artifact"),
     "verify": (
         "pressor.verify",
         "independent checks of an artifact (default: the shipped design) or a plugin's step",
     ),
     "codegen": (
-        "codegen.cli",
+        "pressor.codegen.cli",
         "emit a standalone scheduled controller (python or C) from an artifact",
     ),
-    "scenarios": ("sim.cli", "list the named SIL scenarios"),
-    "trial": ("sim.cli", "in-silico cohort trial of a controller on seeded patients"),
+    "scenarios": ("pressor.hil_sim.cli", "list the named SIL scenarios"),
+    "trial": ("pressor.hil_sim.cli", "in-silico cohort trial of a controller on seeded patients"),
     "device": (
-        "sim.devices.device",
+        "pressor.hil_sim.devices.device",
         "run the simulated patient/pump/monitor device on a serial port",
     ),
     "sil": ("pressor.sil", "software-in-the-loop run: device process + runtime over a serial link"),
-    "run": ("runtime.cli", "run the controller runtime alone on a serial port"),
-    "faults": ("runtime.cli", "list the injectable fault kinds"),
-    "keygen": ("runtime.cli", "write a link signing key for pressor run and pressor device"),
+    "run": ("pressor.runtime.cli", "run the controller runtime alone on a serial port"),
+    "faults": ("pressor.runtime.cli", "list the injectable fault kinds"),
+    "keygen": (
+        "pressor.runtime.cli",
+        "write a link signing key for pressor run and pressor device",
+    ),
 }
 
 
@@ -48,7 +51,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 #: each after which OpenBLAS' idle threads spin on another core (≈ 13 % more CPU time per patient,
 #: docs/notes/benchmarks.md, "Trial throughput"); its worker processes inherit the pin. The pin must
 #: come before numpy's import, which importing the command's module already triggers
-#: (:mod:`synthesis.solver.blas_threads`)
+#: (:mod:`pressor.synthesis.solver.blas_threads`)
 ONE_BLAS_THREAD = frozenset({"synth", "verify", "trial"})
 
 
@@ -87,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     if command not in COMMANDS:
         return usage_exit("pressor", f"unknown command {command!r}; one of: {', '.join(COMMANDS)}")
     if command in ONE_BLAS_THREAD:
-        from synthesis.solver.blas_threads import single_blas_thread
+        from pressor.synthesis.solver.blas_threads import single_blas_thread
 
         single_blas_thread()
     module = importlib.import_module(COMMANDS[command][0])

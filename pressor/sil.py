@@ -1,20 +1,20 @@
 """``pressor sil``: the software-in-the-loop run, device process and runtime over a serial link.
 
 The front door knows both ends, so the two-process orchestration lives here: ``pressor sil``
-loads the scenario through the simulator's scenario API (:mod:`sim.scenarios.scenario`), starts the
+loads the scenario through the simulator's scenario API (:mod:`pressor.hil_sim.scenarios.scenario`), starts the
 device as its own process (``python -m pressor device --port ...``), connects to it over a
 pseudo-terminal (a real tty to pyserial), signs the link (a fresh key per run unless
 ``--signing-key``), runs the runtime in lockstep (or ``--realtime``) through
-:func:`runtime.session.run_runtime`, records everything to an ``.rrd``, prints the metric summary
-(:mod:`runtime.summary`, defined in docs/METRICS.md) and the ``rerun FILE.rrd`` command to replay
+:func:`pressor.runtime.session.run_runtime`, records everything to an ``.rrd``, prints the metric summary
+(:mod:`pressor.runtime.summary`, defined in docs/METRICS.md) and the ``rerun FILE.rrd`` command to replay
 it. The run lasts the scenario's ``duration_s`` unless ``--duration`` is given; on a terminal a
-status line shows simulated time and the real-time factor (:mod:`runtime.shell.progress`). The
+status line shows simulated time and the real-time factor (:mod:`pressor.runtime.shell.progress`). The
 runtime itself never imports the simulator: the control path learns of the patient, and of any
 fault, only through what arrives on the link. ``--schedule`` picks where the controller's K, T, τ
-come from (:func:`runtime.estimation.sources.make_schedule`); the default here is still the oracle
+come from (:func:`pressor.runtime.estimation.sources.make_schedule`); the default here is still the oracle
 (the device's truth), because the online estimator's figures do not all hold yet
 (docs/notes/cohort-evidence.md). ``--patient-model`` picks the device's patient model
-(:mod:`sim.patients.patient_model`); a model other than ``paper`` is named in the summary as
+(:mod:`pressor.hil_sim.patients.patient_model`); a model other than ``paper`` is named in the summary as
 ``patient_model``.
 
 Faults. ``--fault KIND[:ARGS]`` (repeatable) is passed to the device process, which injects it.
@@ -40,18 +40,18 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from contracts.checks import check_int_range
-from contracts.drug import DEFAULT_BINDING, DrugBinding
-from plumbing.usage import USAGE_EXIT, UsageError, UsageParser
-from runtime.inputs.config import (
+from pressor.contracts.checks import check_int_range
+from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
+from pressor.hil_sim.patients.patient_model import add_patient_model_option
+from pressor.plumbing.usage import USAGE_EXIT, UsageError, UsageParser
+from pressor.runtime.inputs.config import (
     ORACLE_DEFAULT_WHY,
     RunConfig,
     add_run_options,
     positive,
     run_config,
 )
-from runtime.shell.placement import CpuChoice, parse_lockstep_cpus
-from sim.patients.patient_model import add_patient_model_option
+from pressor.runtime.shell.placement import CpuChoice, parse_lockstep_cpus
 
 DEFAULT_SCENARIO = "paper-tracking"
 DEFAULT_PATIENT_SEED = 1
@@ -78,16 +78,16 @@ class SilConfig:
     signed
         Whether the link is signed (``--no-signing`` turns a generated key off).
     cpu
-        Lockstep CPU placement choice (:mod:`runtime.shell.placement`).
+        Lockstep CPU placement choice (:mod:`pressor.runtime.shell.placement`).
     events
         The scenario's disturbance events ``(kind, start_s)`` for the metrics.
     noisy
         Whether the scenario's monitor adds noise (the metrics' settling band, docs/METRICS.md).
     patient_model
-        The device's patient model (a :data:`sim.patients.patient_model.PATIENT_MODELS` name or
+        The device's patient model (a :data:`pressor.hil_sim.patients.patient_model.PATIENT_MODELS` name or
         ``MODULE:CLASS``).
     drug
-        The loaded design's drug and syringe (:func:`contracts.drug.binding_of`): the device is
+        The loaded design's drug and syringe (:func:`pressor.contracts.drug.binding_of`): the device is
         told to announce them (``--drug``, ``--concentration-ug-ml``).
     """
 
@@ -149,12 +149,12 @@ def sil_parser() -> UsageParser:
 
 def sil_config(argv: Sequence[str]) -> SilConfig:
     """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
-    disturbance events (raises :class:`plumbing.usage.UsageError`)."""
-    from contracts.drug import binding_of
-    from runtime.inputs.config import load_controller
-    from sim.patients.patient_model import PatientModelError, check_model_for_scenario
-    from sim.scenarios.scenario import ScenarioError, is_scenario_path, load_scenario
-    from sim.trials.trial import scenario_events
+    disturbance events (raises :class:`pressor.plumbing.usage.UsageError`)."""
+    from pressor.contracts.drug import binding_of
+    from pressor.hil_sim.patients.patient_model import PatientModelError, check_model_for_scenario
+    from pressor.hil_sim.scenarios.scenario import ScenarioError, is_scenario_path, load_scenario
+    from pressor.hil_sim.trials.trial import scenario_events
+    from pressor.runtime.inputs.config import load_controller
 
     args = sil_parser().parse_args(argv)
     if args.rrd is None:
@@ -197,7 +197,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
 
 def _file_label(spec: str) -> str:
     """The controller's part of the default ``.rrd`` name (a plugin: its class name)."""
-    from runtime.inputs.controller_plugin import is_plugin_spec, plugin_label
+    from pressor.runtime.inputs.controller_plugin import is_plugin_spec, plugin_label
 
     if spec.partition(":")[0] == "lpv":  # lpv:NAME, a shipped design
         return spec.replace(":", "_")
@@ -250,18 +250,18 @@ def device_command(
 
 def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     """Start the device process on a fresh pty, run the runtime against it; return
-    ``(summary, result)`` (:func:`runtime.session.run_runtime`).
+    ``(summary, result)`` (:func:`pressor.runtime.session.run_runtime`).
 
     A device that exits with a usage error turns into a :class:`UsageError` with its message;
     any other device output is printed on stderr when the run fails or the device exits non-zero.
     """
-    from link import PtyPair
-    from runtime.core.closed_loop import ControllerError
-    from runtime.inputs.config import load_signing
-    from runtime.session import run_runtime
-    from runtime.shell.interrupt import Interrupted
-    from runtime.shell.placement import lockstep_cpus
-    from runtime.shell.progress import TerminalProgress
+    from pressor.link import PtyPair
+    from pressor.runtime.core.closed_loop import ControllerError
+    from pressor.runtime.inputs.config import load_signing
+    from pressor.runtime.session import run_runtime
+    from pressor.runtime.shell.interrupt import Interrupted
+    from pressor.runtime.shell.placement import lockstep_cpus
+    from pressor.runtime.shell.progress import TerminalProgress
 
     run = config.run
     signing = load_signing(run, generate=config.signed)
@@ -336,7 +336,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
 def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:
     """Add the device's true MAP to the recording once the device has ended and written it
     (``pressor device --truth-out``); a device that did not write it leaves the series out."""
-    from sim.patients.truth import load_truth
+    from pressor.hil_sim.patients.truth import load_truth
 
     try:
         proc.wait(timeout=10.0)
@@ -361,7 +361,7 @@ def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:
 
 
 def _main(argv: Sequence[str]) -> int:
-    from runtime.summary import finish
+    from pressor.runtime.summary import finish
 
     config = sil_config(argv)
     summary, result = run_sil(config)
@@ -370,6 +370,6 @@ def _main(argv: Sequence[str]) -> int:
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point for ``pressor sil`` (see the module docstring for exit codes)."""
-    from runtime.session import run_guarded
+    from pressor.runtime.session import run_guarded
 
     return run_guarded(f"pressor {command}", _main, argv)

@@ -1,15 +1,15 @@
-"""``pressor verify``: :mod:`synthesis.verify_cli` with the runtime's plugin loader.
+"""``pressor verify``: :mod:`pressor.synthesis.verify_cli` with the runtime's plugin loader.
 
 ``synthesis`` may not import ``runtime`` (docs/ARCHITECTURE.md), so ``pressor verify
 --controller SPEC`` gets its plugin from here: :func:`load_plugin` resolves the spec with
-:mod:`runtime.inputs.controller_plugin` and hands the instance to the synthesis side, which checks
-its nominal step (:mod:`synthesis.verification.plugin`). Without ``--controller`` this is the
+:mod:`pressor.runtime.inputs.controller_plugin` and hands the instance to the synthesis side, which checks
+its nominal step (:mod:`pressor.synthesis.verification.plugin`). Without ``--controller`` this is the
 artifact verification, unchanged.
 """
 
 from __future__ import annotations
 
-from contracts.controller import Controller
+from pressor.contracts.controller import Controller
 
 
 def load_plugin(spec: str, sample_period_s: float) -> Controller:
@@ -18,12 +18,12 @@ def load_plugin(spec: str, sample_period_s: float) -> Controller:
     Raises
     ------
     ValueError
-        (:class:`runtime.inputs.controller_loader.ControllerSpecError`) ``spec`` is not a plugin -
+        (:class:`pressor.runtime.inputs.controller_loader.ControllerSpecError`) ``spec`` is not a plugin -
         the shipped controllers are checked by ``pressor verify [ARTIFACT]`` - or the plugin cannot
         be loaded (naming module, class and what is missing).
     """
-    from runtime.inputs.controller_loader import ControllerSpecError
-    from runtime.inputs.controller_plugin import is_plugin_spec, load_plugin_controller
+    from pressor.runtime.inputs.controller_loader import ControllerSpecError
+    from pressor.runtime.inputs.controller_plugin import is_plugin_spec, load_plugin_controller
 
     if not is_plugin_spec(spec):
         raise ControllerSpecError(
@@ -37,6 +37,6 @@ def load_plugin(spec: str, sample_period_s: float) -> Controller:
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point used by the ``pressor`` dispatcher; returns the exit code."""
-    from synthesis.verify_cli import main as verify_main
+    from pressor.synthesis.verify_cli import main as verify_main
 
     return verify_main(command, argv, load_plugin=load_plugin)

@@ -1,9 +1,9 @@
 """``pressor run`` and ``pressor faults``: the runtime's own commands.
 
 ``pressor run --port DEV`` is the runtime end alone, on a device started by hand (a real cable or
-a ``socat`` pty). It parses its options into a :class:`runtime.inputs.config.RunConfig`, opens the
+a ``socat`` pty). It parses its options into a :class:`pressor.runtime.inputs.config.RunConfig`, opens the
 port, signs the link (``--signing-key``, default the ``pressor keygen`` key), runs the loop
-(:func:`runtime.session.run_runtime`) and prints the summary (:mod:`runtime.summary`). It
+(:func:`pressor.runtime.session.run_runtime`) and prints the summary (:mod:`pressor.runtime.summary`). It
 schedules on its own online estimate by default (``--schedule estimated``): a real monitor and pump
 send no K, T, τ, and a device that never sends SCHEDULING_PARAMS works; ``--schedule oracle`` needs
 a device that sends them. ``pressor run --fault ...`` scores a schedule injected by that device;
@@ -13,10 +13,10 @@ sets the MAP target on the runtime side instead of the device's MAP_TARGET (a li
 same inputs acknowledges an alarm: HOLD or FAILSAFE resume once the fault cleared); the device's
 hello must announce the drug and concentration the controller assumes (``--drug``,
 ``--concentration-ug-ml``) and a pump that reaches the controller's maximum rate, else the run
-refuses the device, telling it why (PRESSOR_REFUSAL), and exits 2 (:mod:`runtime.inputs.clinician`).
+refuses the device, telling it why (PRESSOR_REFUSAL), and exits 2 (:mod:`pressor.runtime.inputs.clinician`).
 ``pressor sil``, which also starts the device, is served by the front door (:mod:`pressor.sil`).
 
-``pressor keygen`` writes a fresh signing key (default :func:`link.signing.default_key_path`):
+``pressor keygen`` writes a fresh signing key (default :func:`pressor.link.signing.default_key_path`):
 ``pressor run`` and ``pressor device`` sign the link with it unless ``--no-signing`` (warned).
 
 ``pressor faults`` lists the injectable fault kinds (``--fault KIND[:ARGS]``) with their arguments,
@@ -33,16 +33,16 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from plumbing.usage import UsageError, UsageParser, usage_exit
-from runtime.inputs.clinician import add_clinician_options, clinician_input
-from runtime.inputs.config import (
+from pressor.plumbing.usage import UsageError, UsageParser, usage_exit
+from pressor.runtime.inputs.clinician import add_clinician_options, clinician_input
+from pressor.runtime.inputs.config import (
     DEFAULT_RATE_HZ,
     MAX_RATE_HZ,
     add_run_options,
     positive,
     run_config,
 )
-from runtime.inputs.dosing import add_dosing_options
+from pressor.runtime.inputs.dosing import add_dosing_options
 
 
 def _run_parser() -> UsageParser:
@@ -63,10 +63,10 @@ def _run_parser() -> UsageParser:
 
 
 def _main_run(argv: Sequence[str]) -> int:
-    from link import fast_port, open_port
-    from runtime.inputs.config import load_signing
-    from runtime.session import run_runtime
-    from runtime.summary import finish
+    from pressor.link import fast_port, open_port
+    from pressor.runtime.inputs.config import load_signing
+    from pressor.runtime.session import run_runtime
+    from pressor.runtime.summary import finish
 
     args = _run_parser().parse_args(argv)
     config = run_config(args, ticks=args.ticks, clinician=clinician_input(args))
@@ -93,7 +93,7 @@ def _main_run(argv: Sequence[str]) -> int:
 
 
 def _main_keygen(argv: Sequence[str]) -> int:
-    from link.signing import Signing, default_key_path
+    from pressor.link.signing import Signing, default_key_path
 
     p = UsageParser(
         prog="pressor keygen",
@@ -117,9 +117,9 @@ def _main_keygen(argv: Sequence[str]) -> int:
 
 
 def _main_faults(argv: Sequence[str]) -> int:
-    from contracts.faults import catalogue_rows
-    from runtime.core.supervisor_bounds import detection_bounds
-    from runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S, SupervisorConfig
+    from pressor.contracts.faults import catalogue_rows
+    from pressor.runtime.core.supervisor_bounds import detection_bounds
+    from pressor.runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S, SupervisorConfig
 
     p = UsageParser(prog="pressor faults", description="fault kinds the supervisor detects")
     p.add_argument(
@@ -156,9 +156,9 @@ def _main_faults(argv: Sequence[str]) -> int:
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point for ``pressor run | faults`` (see the module docstring for exit codes)."""
-    from runtime.session import run_guarded
+    from pressor.runtime.session import run_guarded
 
     handlers = {"run": _main_run, "faults": _main_faults, "keygen": _main_keygen}
     if command not in handlers:
-        return usage_exit("runtime.cli", f"unknown command {command!r}")
+        return usage_exit("pressor.runtime.cli", f"unknown command {command!r}")
     return run_guarded(f"pressor {command}", handlers[command], argv)

@@ -3,7 +3,7 @@
 :func:`run_runtime` is the runtime end of ``pressor run`` (a port it opened) and of ``pressor sil``
 (the leader of the pty whose follower the device process opened). Its outputs (``.rrd``,
 ``.tlog``) are written to hidden temporary names and moved into place only when the run succeeds
-(:mod:`plumbing.files`): a failed run leaves earlier files untouched. :func:`run_guarded` gives
+(:mod:`pressor.plumbing.files`): a failed run leaves earlier files untouched. :func:`run_guarded` gives
 both commands their exit codes.
 """
 
@@ -13,21 +13,21 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from plumbing.usage import USAGE_EXIT, run_command
-from runtime.inputs.clinician import ClinicianInput, check_device_hello, check_link_hello
-from runtime.inputs.config import RunConfig, load_controller
-from runtime.inputs.controller_loader import controller_name
-from runtime.shell.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
-from runtime.shell.placement import Pinned
-from runtime.summary import build_summary
+from pressor.plumbing.usage import USAGE_EXIT, run_command
+from pressor.runtime.inputs.clinician import ClinicianInput, check_device_hello, check_link_hello
+from pressor.runtime.inputs.config import RunConfig, load_controller
+from pressor.runtime.inputs.controller_loader import controller_name
+from pressor.runtime.shell.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
+from pressor.runtime.shell.placement import Pinned
+from pressor.runtime.summary import build_summary
 
 if TYPE_CHECKING:  # the stages' types; at run time each stage imports what it needs, when it runs
-    from contracts.controller import Controller
-    from link import Hello, RuntimeSession
-    from runtime.core.supervisor import Supervisor
-    from runtime.inputs.target_source import TargetSource
-    from runtime.record.recorder import Recorder
-    from runtime.shell.trajectory import LoopResult
+    from pressor.contracts.controller import Controller
+    from pressor.link import Hello, RuntimeSession
+    from pressor.runtime.core.supervisor import Supervisor
+    from pressor.runtime.inputs.target_source import TargetSource
+    from pressor.runtime.record.recorder import Recorder
+    from pressor.runtime.shell.trajectory import LoopResult
 
 
 def run_runtime(
@@ -63,7 +63,7 @@ def run_runtime(
     events
         The device scenario's disturbance events ``(kind, start_s)``; ``None`` when not known.
     cpus
-        ``(loop CPU, device CPU)`` of a pinned lockstep run (:mod:`runtime.shell.placement`), or
+        ``(loop CPU, device CPU)`` of a pinned lockstep run (:mod:`pressor.runtime.shell.placement`), or
         ``None``; the loop thread runs on the first.
     on_connected
         Called once the handshake succeeded.
@@ -73,9 +73,9 @@ def run_runtime(
         Wall seconds to wait for the device's hello.
     on_tick
         The loop's per-tick callback ``(tick, state, fault bits, command ml/h)``, e.g. a
-        :class:`runtime.shell.progress.TerminalProgress`.
+        :class:`pressor.runtime.shell.progress.TerminalProgress`.
     before_close
-        Called with the :class:`runtime.record.recorder.Recorder` after the loop ended and before
+        Called with the :class:`pressor.runtime.record.recorder.Recorder` after the loop ended and before
         the recording is closed (``pressor sil`` adds the simulated device's true MAP there).
     noisy_band
         Whether the summary's settling band is the noisy monitor's ±5 mmHg rather than 2 % of the
@@ -87,10 +87,10 @@ def run_runtime(
     Returns
     -------
     tuple
-        The summary (:func:`runtime.summary.build_summary`) and the loop's result.
+        The summary (:func:`pressor.runtime.summary.build_summary`) and the loop's result.
     """
-    from link import RuntimeSession
-    from link.tlog import TlogWriter
+    from pressor.link import RuntimeSession
+    from pressor.link.tlog import TlogWriter
 
     period_s = config.period_s
     controller = load_controller(config.controller, period_s)
@@ -137,7 +137,7 @@ def _clinician_for(config: RunConfig, controller: Controller) -> ClinicianInput:
     syringe (a device announcing another is refused)."""
     if config.clinician is not None:
         return config.clinician
-    from contracts.drug import binding_of
+    from pressor.contracts.drug import binding_of
 
     design = binding_of(controller)
     return ClinicianInput(drug=design.name, concentration_ug_ml=design.concentration_ug_ml)
@@ -160,7 +160,14 @@ def _handshake(
     error once ``handshake_timeout_s`` wall seconds have passed. A mismatch is sent to the device
     (so it is told why) before :class:`link.HelloRefused` is raised.
     """
-    from link import LINK_LOCKSTEP, LINK_REALTIME, Hello, HelloRefused, LinkError, SigningMismatch
+    from pressor.link import (
+        LINK_LOCKSTEP,
+        LINK_REALTIME,
+        Hello,
+        HelloRefused,
+        LinkError,
+        SigningMismatch,
+    )
 
     mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
     hello = Hello(
@@ -212,8 +219,8 @@ def _build_supervisor(
     config: RunConfig, controller: Controller, clinician: ClinicianInput, peer: Hello
 ) -> Supervisor:
     """The safety supervisor matched to the controller and the device's monitor noise."""
-    from runtime.core.supervisor import Supervisor
-    from runtime.core.supervisor_config import supervisor_config_for
+    from pressor.runtime.core.supervisor import Supervisor
+    from pressor.runtime.core.supervisor_config import supervisor_config_for
 
     return Supervisor(
         supervisor_config_for(
@@ -223,7 +230,7 @@ def _build_supervisor(
             stale_after_s=config.sample_age_limit_s,
             dose_limits=clinician.dose_limits,  # pressor run: the drug library's
             # pressor run (a patient on the line) holds on a controller fault until the
-            # clinician acknowledges; pressor sil stops with exit 1 (runtime.core.supervisor)
+            # clinician acknowledges; pressor sil stops with exit 1 (pressor.runtime.core.supervisor)
             controller_faults="latch" if config.clinician is not None else "stop",
         )
     )
@@ -236,7 +243,7 @@ def _open_recorder(
     mode), or ``None`` without one."""
     if config.rrd is None:
         return None
-    from runtime.record.recorder import Recorder
+    from pressor.runtime.record.recorder import Recorder
 
     label = (
         f"{identity['controller']}|{peer.name}|seed{peer.patient_seed}|{config.rate_hz}Hz"
@@ -267,10 +274,10 @@ def _run_loop(
 ) -> tuple[LoopResult, TargetSource | None]:
     """Run the fixed-rate loop (real time, or lockstep pinned to ``cpus[0]``) under the CPU
     wake-up latency request; return (the loop's result, the runtime's own target or ``None``)."""
-    from runtime.estimation.sources import make_schedule
-    from runtime.inputs.target_source import TargetSource
-    from runtime.shell.cpu_latency import CpuLatencyRequest
-    from runtime.shell.loop import Loop
+    from pressor.runtime.estimation.sources import make_schedule
+    from pressor.runtime.inputs.target_source import TargetSource
+    from pressor.runtime.shell.cpu_latency import CpuLatencyRequest
+    from pressor.runtime.shell.loop import Loop
 
     loop_kw: dict[str, Any] = {
         "recorder": recorder,
@@ -280,7 +287,7 @@ def _run_loop(
         "prog": "pressor run" if config.clinician is not None else "pressor sil",
         "ack_input": clinician.target_stdin or clinician.target_file is not None,
     }
-    # the runtime's own target, in place of the device's (runtime.inputs.target_source)
+    # the runtime's own target, in place of the device's (pressor.runtime.inputs.target_source)
     target = None if clinician.target_mmhg is None else TargetSource(clinician)
     loop = Loop(controller, sup, ep, target=target, **loop_kw)
     with CpuLatencyRequest(config.cpu_latency_us) as wake:
@@ -305,7 +312,7 @@ def _close_recording(
     if before_close is not None:
         before_close(recorder)
     if clinician.dose_limits is not None:
-        from runtime.inputs.dosing import log_dose_series
+        from pressor.runtime.inputs.dosing import log_dose_series
 
         log_dose_series(recorder, result.trajectory, clinician)
     recorder.close()
@@ -327,8 +334,8 @@ def _summarize(
     ``pressor run``, where the target came from, the syringe and the dose."""
     report = None
     if config.fault_specs:
-        from contracts.faults import fault_report
-        from runtime.core.supervisor_config import FAULT_BITS, sched_limits_of
+        from pressor.contracts.faults import fault_report
+        from pressor.runtime.core.supervisor_config import FAULT_BITS, sched_limits_of
 
         report = fault_report(
             list(config.fault_specs),
@@ -353,7 +360,7 @@ def _summarize(
             "pump_max_ml_h": float(peer.pump_max_ml_h),
         }
         if clinician.dose_limits is not None:
-            from runtime.inputs.dosing import dose_summary
+            from pressor.runtime.inputs.dosing import dose_summary
 
             summary["dose"] = dose_summary(
                 result.trajectory["command_ml_h"], config.period_s, clinician, sup.detections
@@ -366,16 +373,16 @@ def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
 
     0 success; 1 the run completed but a check failed, or the device stalled or the link failed,
     or the controller raised under ``pressor sil``
-    (:class:`runtime.core.closed_loop.ControllerError`; ``pressor run`` holds instead,
-    :mod:`runtime.core.supervisor`) (one line on stderr); 2 bad usage or input
-    (:func:`plumbing.usage.run_command`), or the device's hello refused (:class:`link.Refusal`: one
+    (:class:`pressor.runtime.core.closed_loop.ControllerError`; ``pressor run`` holds instead,
+    :mod:`pressor.runtime.core.supervisor`) (one line on stderr); 2 bad usage or input
+    (:func:`pressor.plumbing.usage.run_command`), or the device's hello refused (:class:`link.Refusal`: one
     line, the device was told); 130 / 143 stopped by SIGINT / SIGTERM
-    (:mod:`runtime.shell.interrupt`: the run stops at a tick boundary, commands the safe rate, and
+    (:mod:`pressor.runtime.shell.interrupt`: the run stops at a tick boundary, commands the safe rate, and
     keeps its outputs).
     """
-    from link import LinkError, Refusal
-    from runtime.core.closed_loop import ControllerError
-    from runtime.shell.loop import DeviceStalled
+    from pressor.link import LinkError, Refusal
+    from pressor.runtime.core.closed_loop import ControllerError
+    from pressor.runtime.shell.loop import DeviceStalled
 
     def guarded(args: Sequence[str]) -> int:
         with stop_on_signals():

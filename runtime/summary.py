@@ -1,13 +1,13 @@
 """The summary of a runtime run: built from the loop's result, printed, written as JSON.
 
 :func:`build_summary` gives the JSON-ready summary: run identity, the per-run metrics
-(:func:`contracts.metrics.run_metrics`, defined in docs/METRICS.md; with ``pressor sil`` the step
+(:func:`pressor.contracts.metrics.run_metrics`, defined in docs/METRICS.md; with ``pressor sil`` the step
 metrics stop at the first disturbance and each hemorrhage or bolus of the scenario gets a
 ``disturbances`` record; with ``pressor run`` the device's scenario is not known, so those are
 null) plus ``commands_out_of_range``, the supervisor's account, the link's error counts
 (``link_errors``), what the runtime's end of the link dropped by cause (``link_dropped``, every
-cause of :data:`link.counters.DROP_CAUSES`, documented in docs/PROTOCOL.md) and, when
-faults were scheduled, the scored fault list (:func:`contracts.faults.fault_report`: ``kind``,
+cause of :data:`pressor.link.counters.DROP_CAUSES`, documented in docs/PROTOCOL.md) and, when
+faults were scheduled, the scored fault list (:func:`pressor.contracts.faults.fault_report`: ``kind``,
 ``start_tick``, ``detected_tick``, ``latency_ticks`` and its documented bound, ``safe_state_s``,
 ``max_reentry_step_ml_h``). It holds only values that are functions of the seed (no wall-clock
 timing), so two runs give identical files - except the link counts of a run that lost frames
@@ -16,11 +16,11 @@ timing), so two runs give identical files - except the link counts of a run that
 
 ``reachable`` is inferred from the run, since the runtime does not know the patient: false when
 the pump sat at its limit for the whole final 10 % of the run with MAP still below the target by
-more than the metrics' band (:func:`contracts.metrics.reachable_band_mmhg`: the settling band of
+more than the metrics' band (:func:`pressor.contracts.metrics.reachable_band_mmhg`: the settling band of
 the run's step, 2 % of it noise-free or 5 mmHg noisy; 5 mmHg without a step).
 
 :func:`finish` prints the summary and writes the ``--summary`` and ``--timing`` files atomically
-(:mod:`plumbing.files`): a failed run leaves earlier files untouched.
+(:mod:`pressor.plumbing.files`): a failed run leaves earlier files untouched.
 """
 
 from __future__ import annotations
@@ -33,12 +33,12 @@ from typing import Any
 
 import numpy as np
 
-from contracts.metrics import reachable_band_mmhg, run_metrics
-from link.counters import DROP_CAUSES
-from plumbing.files import write_atomic
-from runtime.inputs.clinician import describe_target
-from runtime.inputs.config import RunConfig
-from runtime.shell.trajectory import held_delivered_ml_h
+from pressor.contracts.metrics import reachable_band_mmhg, run_metrics
+from pressor.link.counters import DROP_CAUSES
+from pressor.plumbing.files import write_atomic
+from pressor.runtime.inputs.clinician import describe_target
+from pressor.runtime.inputs.config import RunConfig
+from pressor.runtime.shell.trajectory import held_delivered_ml_h
 
 
 def _step_of(
@@ -87,7 +87,7 @@ def build_summary(
     Parameters
     ----------
     result
-        The loop's :class:`runtime.shell.trajectory.LoopResult`. The rate metrics (drug total, max
+        The loop's :class:`pressor.runtime.shell.trajectory.LoopResult`. The rate metrics (drug total, max
         rate, time at limit) use the rate the pump reported delivering (its ``delivered_ml_h``).
     identity
         Run identity (controller, scenario, seed, rate, ...), copied into the summary.
@@ -270,7 +270,7 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
     -------
     int
         128 + the signal number when a signal stopped the run (one line on stderr,
-        :mod:`runtime.shell.interrupt`); else 1 if a command left [0, max] or the controller failed
+        :mod:`pressor.runtime.shell.interrupt`); else 1 if a command left [0, max] or the controller failed
         (``pressor run``: the supervisor held on it, ``supervisor.controller_faults``; a check
         failed), else 0.
     """
@@ -293,7 +293,7 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
     if config.rrd is not None:
         print(f"recording: {config.rrd}\nreplay:    rerun {config.rrd}")
     if result.stop_signal is not None:
-        from runtime.shell.interrupt import exit_code
+        from pressor.runtime.shell.interrupt import exit_code
 
         print(
             f"{prog}: {result.ended} after {summary['ticks']} ticks; safe rate commanded,"

@@ -8,20 +8,20 @@ Layout (``numpy.savez``, no pickled objects):
   config), ``scaling``, ``lambda2``, ``lambda3``, ``gamma``, ``solver`` (name, status, times,
   iterations), ``verification`` (``null`` until :func:`with_verification` fills it), ``created_by``,
   and optionally ``reference`` (``enabled``, ``lambda_s``, ``pump_fraction``, ``k_min``: the 2-DOF
-  prefilter of :mod:`synthesis.problem.reference`; absent in older artifacts, read as disabled), and
+  prefilter of :mod:`pressor.synthesis.problem.reference`; absent in older artifacts, read as disabled), and
   optionally ``controller`` (``structure``, ``loop_gain``: the family of
-  :mod:`synthesis.families.registry`; absent in older artifacts and in every artifact of the default
+  :mod:`pressor.synthesis.families.registry`; absent in older artifacts and in every artifact of the default
   family; a family without a synthesis LMI stores null ``lambda2``/``lambda3`` and its analysis'
   bound on the design grid as ``gamma``), and optionally ``design.drug`` (``name``,
   ``concentration_ug_ml``: the drug and syringe the gains are for,
-  :class:`contracts.drug.DrugBinding`; absent in artifacts made before designs named their drug,
-  read as :data:`contracts.drug.DEFAULT_BINDING`, phenylephrine at 100 µg/ml).
+  :class:`pressor.contracts.drug.DrugBinding`; absent in artifacts made before designs named their drug,
+  read as :data:`pressor.contracts.drug.DEFAULT_BINDING`, phenylephrine at 100 µg/ml).
 * ``coef_<name>`` — the family's coefficients
-  (:meth:`synthesis.families.registry.Family.coefficient_shapes`): the decision variables of a
+  (:meth:`pressor.synthesis.families.registry.Family.coefficient_shapes`): the decision variables of a
   synthesised family (scaled coordinates), the certificate of an analysed one.
 * ``node_<name>`` — the controller at the grid nodes, physical units (time in s), shape
   ``(nK, nT, ntau, rows, cols)`` for Ak, Adk, Bk, Ck, Cdk, Dk (controller order:
-  :meth:`synthesis.families.registry.Family.controller_order`).
+  :meth:`pressor.synthesis.families.registry.Family.controller_order`).
 * ``sha256`` — uint8 bytes of the hex digest of everything above (canonical order).
 
 Loading checks the format version, every expected field's presence, dtype, shape and finiteness and
@@ -41,12 +41,12 @@ from typing import Any
 
 import numpy as np
 
-from contracts.drug import DEFAULT_BINDING, DrugBinding
-from plumbing.files import AtomicFile
-from synthesis.families.registry import ControllerFamily
-from synthesis.problem.config import ModelConfig
-from synthesis.problem.model import dims
-from synthesis.problem.reference import ReferenceConfig
+from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
+from pressor.plumbing.files import AtomicFile
+from pressor.synthesis.families.registry import ControllerFamily
+from pressor.synthesis.problem.config import ModelConfig
+from pressor.synthesis.problem.model import dims
+from pressor.synthesis.problem.reference import ReferenceConfig
 
 FORMAT_VERSION = 1
 
@@ -54,7 +54,7 @@ FORMAT_VERSION = 1
 def node_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
     """Controller of order ``n`` at the grid nodes: name -> (rows, cols).
 
-    The order is the family's (:meth:`synthesis.families.registry.Family.controller_order`).
+    The order is the family's (:meth:`pressor.synthesis.families.registry.Family.controller_order`).
     """
     return {
         "Ak": (n, n),
@@ -96,7 +96,7 @@ class ControllerArtifact:
         The JSON metadata (see module docstring).
     coefficients
         The family's coefficients, name -> array
-        (:meth:`synthesis.families.registry.Family.coefficient_shapes`).
+        (:meth:`pressor.synthesis.families.registry.Family.coefficient_shapes`).
     nodes
         Reconstructed controller at the grid nodes, name -> (nK, nT, ntau, rows, cols) (physical).
     """
@@ -149,26 +149,26 @@ class ControllerArtifact:
 
     @property
     def reference(self) -> ReferenceConfig:
-        """The design's prefilter (:class:`~synthesis.problem.reference.ReferenceConfig`); disabled
+        """The design's prefilter (:class:`~pressor.synthesis.problem.reference.ReferenceConfig`); disabled
         when the artifact carries none."""
         ref = self.metadata.get("reference")
         return ReferenceConfig() if ref is None else ReferenceConfig.from_dict(ref)
 
     @property
     def family(self) -> ControllerFamily:
-        """The controller family (:mod:`synthesis.families.registry`); the default one when the
+        """The controller family (:mod:`pressor.synthesis.families.registry`); the default one when the
         artifact has none."""
         return ControllerFamily.from_metadata(self.metadata)
 
     @property
     def drug(self) -> DrugBinding:
         """The drug and syringe concentration the gains are for (``design.drug``); phenylephrine at
-        100 µg/ml (:data:`contracts.drug.DEFAULT_BINDING`) when the artifact names none."""
+        100 µg/ml (:data:`pressor.contracts.drug.DEFAULT_BINDING`) when the artifact names none."""
         return drug_of(self.metadata)
 
     @property
     def model_config(self) -> ModelConfig:
-        """The design's :class:`~synthesis.problem.config.ModelConfig`."""
+        """The design's :class:`~pressor.synthesis.problem.config.ModelConfig`."""
         return ModelConfig.from_dict(self.metadata["model"])
 
 
@@ -372,4 +372,4 @@ def default_artifact_path() -> Path:
     the one place that names it."""
     from importlib import resources
 
-    return Path(str(resources.files("synthesis") / "data" / "default_design.npz")).resolve()
+    return Path(str(resources.files("pressor.synthesis") / "data" / "default_design.npz")).resolve()

@@ -7,17 +7,17 @@
 
 Prints progress on stderr (per λ point, per stage and one line per solver iteration: iteration,
 cost, relative gap, primal and dual residuals), then on stdout γ, solve time, solver status and the
-verification verdict (from :func:`synthesis.verification.verify.verify_artifact`; the result is
+verification verdict (from :func:`pressor.synthesis.verification.verify.verify_artifact`; the result is
 stored in the artifact's ``verification`` field). Exit codes: 0 ok, 1 the synthesis finished but the
 solver or the verification failed, 2 bad usage or a bad config value (one line naming file, field,
 value and allowed range).
 
 The design stage is the config's controller family's
-(:meth:`synthesis.families.registry.Family.design`): the shipped family certifies its closed-form
+(:meth:`pressor.synthesis.families.registry.Family.design`): the shipped family certifies its closed-form
 law with the Wirtinger analysis on the design grid, the Theorem-3 family synthesises; if the design
 does not certify, the command says so, writes nothing and exits 1. ``--lambda-search``,
 ``--lambda2``, ``--lambda3`` and ``--backoff`` are options of the families that list them
-(:attr:`synthesis.families.registry.Family.synth_options`) and a usage error (exit 2) for the
+(:attr:`pressor.synthesis.families.registry.Family.synth_options`) and a usage error (exit 2) for the
 others.
 """
 
@@ -30,13 +30,13 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from contracts.checks import check_range
-from plumbing.usage import UsageError, UsageParser, run_command
-from synthesis.families.registry import SynthRequest, family_named, structures
-from synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
+from pressor.contracts.checks import check_range
+from pressor.plumbing.usage import UsageError, UsageParser, run_command
+from pressor.synthesis.families.registry import SynthRequest, family_named, structures
+from pressor.synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 if TYPE_CHECKING:
-    from synthesis.artifact import ControllerArtifact
+    from pressor.synthesis.artifact import ControllerArtifact
 
 DEFAULT_OUT = "design.npz"
 
@@ -142,8 +142,8 @@ def _synth_with(args: argparse.Namespace) -> int:
 
     from dataclasses import replace
 
-    from synthesis.problem.config import ConfigError
-    from synthesis.problem.config_toml import load_config
+    from pressor.synthesis.problem.config import ConfigError
+    from pressor.synthesis.problem.config_toml import load_config
 
     def say(msg: str) -> None:
         if not args.quiet:
@@ -209,13 +209,13 @@ def _verify_and_save(
     art: ControllerArtifact, out: Path, no_verify: bool, say: Callable[[str], None], t0: float
 ) -> int:
     """Verify (unless ``no_verify``), store the verdict in the artifact, write it; the exit code."""
-    from synthesis.artifact import save_artifact, with_verification
+    from pressor.synthesis.artifact import save_artifact, with_verification
 
     verdict_code = 0
     if no_verify:
         print("verification     skipped (--no-verify)")
     else:
-        from synthesis.verification.verify import verify_artifact
+        from pressor.synthesis.verification.verify import verify_artifact
 
         say("verify: independent checks ...")
         report = verify_artifact(art, density=2, progress=say)

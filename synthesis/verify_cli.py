@@ -1,16 +1,16 @@
 """``pressor verify [ARTIFACT | --controller SPEC] [--json FILE] [--density N] [--p-dependence ...]``.
 
-Runs :func:`synthesis.verification.verify.verify_artifact` on ARTIFACT (default: the shipped
+Runs :func:`pressor.synthesis.verification.verify.verify_artifact` on ARTIFACT (default: the shipped
 ``synthesis/data/default_design.npz``), prints progress on stderr (one line per stage and per
 solver iteration: iteration, cost, relative gap, residuals) and a summary on stdout, and
 optionally writes the full report as JSON (``nominal_step.lpv`` / ``.pi`` / ``.smith`` carry the
 metric names of docs/METRICS.md; ``smith`` is the scheduled Smith predictor, lambda 30 s;
-``artifact.controller`` the artifact's family, :mod:`synthesis.families.registry`). Exit codes:
+``artifact.controller`` the artifact's family, :mod:`pressor.synthesis.families.registry`). Exit codes:
 0 every check passed, 1 a check failed, 2 bad input (a missing, unreadable or corrupt artifact, a
 bad option value) with one line naming it.
 
 ``--controller SPEC`` checks a plugin controller instead of an artifact
-(:mod:`synthesis.verification.plugin`): its nominal step beside the PI and the Smith predictor, and
+(:mod:`pressor.synthesis.verification.plugin`): its nominal step beside the PI and the Smith predictor, and
 the line ``certificate: not applicable (plugin controller)...``; exit 0 when the step is stable and
 settles, 1 when it does not (or the plugin raised, or returned a non-finite command), 2 when the
 spec names no loadable plugin. ``synthesis`` does not import the runtime's loader: the ``pressor``
@@ -26,9 +26,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from plumbing.usage import UsageError, UsageParser, run_command
-from synthesis.artifact import default_artifact_path
-from synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
+from pressor.plumbing.usage import UsageError, UsageParser, run_command
+from pressor.synthesis.artifact import default_artifact_path
+from pressor.synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 DEFAULT_ARTIFACT = default_artifact_path()
 #: the loop period (s) a plugin is loaded at: the runtime's default 10 Hz
@@ -115,8 +115,8 @@ def _verify(command: str, argv: Sequence[str], load_plugin: PluginLoader | None)
         raise UsageError(f"artifact {path}: file not found")
     _check_json_dir(args.json)
 
-    from synthesis.artifact import ArtifactError, load_artifact
-    from synthesis.verification.verify import verify_artifact
+    from pressor.synthesis.artifact import ArtifactError, load_artifact
+    from pressor.synthesis.verification.verify import verify_artifact
 
     try:
         artifact = load_artifact(path)
@@ -176,7 +176,7 @@ def _verify(command: str, argv: Sequence[str], load_plugin: PluginLoader | None)
 
 
 def _verify_plugin(args: Any, load_plugin: PluginLoader | None) -> int:
-    """``--controller SPEC``: the plugin's nominal step (:mod:`synthesis.verification.plugin`)."""
+    """``--controller SPEC``: the plugin's nominal step (:mod:`pressor.synthesis.verification.plugin`)."""
     if args.artifact is not None:
         raise UsageError(
             f"--controller {args.controller!r} and artifact {args.artifact}: give one (a plugin"
@@ -199,8 +199,8 @@ def _verify_plugin(args: Any, load_plugin: PluginLoader | None) -> int:
     if load_plugin is None:
         raise UsageError("--controller needs the runtime's plugin loader: run it as pressor verify")
     _check_json_dir(args.json)
-    from synthesis.verification.plugin import verify_plugin_step
-    from synthesis.verification.step_response import NOMINAL_STEP_MMHG
+    from pressor.synthesis.verification.plugin import verify_plugin_step
+    from pressor.synthesis.verification.step_response import NOMINAL_STEP_MMHG
 
     try:
         controller = load_plugin(args.controller, PLUGIN_PERIOD_S)

@@ -11,7 +11,7 @@ from types import ModuleType
 
 import pytest
 
-from plumbing.native_build import CACHE_ENV
+from pressor.plumbing.native_build import CACHE_ENV
 from tests.support.protocol_device import build_dialect
 from tests.support.sil_helpers import bridged_ttys
 
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="session", autouse=True)
 def native_cache() -> Iterator[Path]:
-    """Compiled twins (plumbing.native_build) go to a directory of this test session, not the
+    """Compiled twins (pressor.plumbing.native_build) go to a directory of this test session, not the
     user's cache; subprocesses the tests start inherit it."""
     path = Path(tempfile.mkdtemp(prefix="pressor-native-"))
     old = os.environ.get(CACHE_ENV)

@@ -4,8 +4,12 @@ The allowed arrows are written once, in :data:`ALLOWED`; every module of every p
 each of its imports, function-local ones included, must land in its own package, in an allowed one,
 or outside the project. A new package has to be added here, with its arrows, before it can ship.
 
-Inside ``synthesis``, ``runtime`` and ``sim`` the same holds one level down, between their parts
+Inside ``synthesis``, ``runtime`` and ``hil_sim`` the same holds one level down, between their parts
 (:data:`INNER_ALLOWED`, docs/ARCHITECTURE.md).
+
+Every package is imported through the one installed namespace, ``pressor`` (``pressor.runtime``
+is the folder ``runtime/``; setup.py maps them): an import of a folder's bare name
+(``import runtime``) works only inside a checkout and is a violation everywhere.
 """
 
 from __future__ import annotations
@@ -26,9 +30,9 @@ ALLOWED: dict[str, frozenset[str]] = {
     "synthesis": frozenset({"plumbing", "contracts", "baselines"}),
     "codegen": frozenset({"plumbing", "contracts", "synthesis"}),
     "runtime": frozenset({"plumbing", "contracts", "baselines", "link"}),
-    "sim": frozenset({"plumbing", "contracts", "baselines", "link", "runtime"}),
+    "hil_sim": frozenset({"plumbing", "contracts", "baselines", "link", "runtime"}),
     "pressor": frozenset(
-        {"plumbing", "contracts", "baselines", "link", "synthesis", "codegen", "runtime", "sim"}
+        {"plumbing", "contracts", "baselines", "link", "synthesis", "codegen", "runtime", "hil_sim"}
     ),
 }
 
@@ -69,16 +73,6 @@ SYNTHESIS_ALLOWED: dict[str, frozenset[str]] = {
         }
     ),
     "verification": frozenset({"certificates", "problem"}),
-    "research": frozenset(
-        {
-            "artifact",
-            "certificates",
-            "families.smith",
-            "families.theorem3",
-            "problem",
-            "verification",
-        }
-    ),
     "cli": frozenset({"artifact", "families.registry", "problem", "solver", "verification"}),
     "verify_cli": frozenset({"artifact", "solver", "verification"}),
 }
@@ -98,12 +92,12 @@ RUNTIME_ALLOWED: dict[str, frozenset[str]] = {
     "cli": frozenset({"core", "inputs", "session", "summary"}),
 }
 
-#: part of sim -> the parts of sim it may import (besides itself): patients and the two devices
+#: part of hil_sim -> the parts of hil_sim it may import (besides itself): patients and the two devices
 #: (pump, monitor) at the bottom, scenarios on them, the world on all three, one patient's episode
 #: on the world, trials and the cli on top; the compiled twins (``native``) on the patients, used
 #: by trials. The device process is its own part of ``devices``
 #: (``devices.device``, ``devices.device_options``): it runs the world, which runs the pump.
-SIM_ALLOWED: dict[str, frozenset[str]] = {
+HIL_SIM_ALLOWED: dict[str, frozenset[str]] = {
     "__init__": frozenset(),
     "patients": frozenset(),
     "devices": frozenset(),
@@ -122,8 +116,13 @@ SIM_ALLOWED: dict[str, frozenset[str]] = {
 INNER_ALLOWED: dict[str, dict[str, frozenset[str]]] = {
     "synthesis": SYNTHESIS_ALLOWED,
     "runtime": RUNTIME_ALLOWED,
-    "sim": SIM_ALLOWED,
+    "hil_sim": HIL_SIM_ALLOWED,
 }
+
+
+#: folders of the checkout that are not installed: the tests, the re-runnable figures and the
+#: experiments behind the docs' findings
+NOT_INSTALLED = ("tests", "benchmarks", "research")
 
 
 def project_packages() -> list[str]:
@@ -131,8 +130,19 @@ def project_packages() -> list[str]:
     return sorted(
         p.name
         for p in ROOT.iterdir()
-        if p.is_dir() and (p / "__init__.py").is_file() and p.name not in ("tests", "benchmarks")
+        if p.is_dir() and (p / "__init__.py").is_file() and p.name not in NOT_INSTALLED
     )
+
+
+def layer_of(dotted: str) -> str:
+    """The package (a key of :data:`ALLOWED`) a dotted import lands in, ``bare:NAME`` for a
+    folder imported by its bare name, or the top-level name of a third-party import."""
+    parts = dotted.split(".")
+    if parts[0] == "pressor":
+        return parts[1] if len(parts) > 1 and parts[1] in ALLOWED else "pressor"
+    if parts[0] in ALLOWED:
+        return f"bare:{parts[0]}"
+    return parts[0]
 
 
 def package_modules(package: str) -> list[Path]:
@@ -140,10 +150,10 @@ def package_modules(package: str) -> list[Path]:
     return sorted((ROOT / package).rglob("*.py"))
 
 
-def imported_top_levels(path: Path) -> set[str]:
-    """Top-level names of every absolute import in ``path``, at any depth of the syntax tree
+def imported_layers(path: Path) -> set[str]:
+    """:func:`layer_of` every absolute import in ``path``, at any depth of the syntax tree
     (``if TYPE_CHECKING:`` imports included: a package may not even name what it must not load)."""
-    return {module.split(".")[0] for module in imported_modules(path)}
+    return {layer_of(module) for module in imported_modules(path)}
 
 
 def violations(package: str) -> list[str]:
@@ -154,8 +164,8 @@ def violations(package: str) -> list[str]:
     found = []
     for path in package_modules(package):
         rel = path.relative_to(ROOT).as_posix()
-        for name in sorted(imported_top_levels(path)):
-            if (name in ours and name not in allowed) or name in banned:
+        for name in sorted(imported_layers(path)):
+            if (name in ours and name not in allowed) or name in banned or name.startswith("bare:"):
                 found.append(f"{rel} -> {name}")
     return found
 
@@ -164,8 +174,9 @@ def part_of(package: str, module: str) -> str | None:
     """The part of ``package`` (:data:`INNER_ALLOWED`) holding the dotted ``module``; None when
     ``module`` is outside ``package`` or in no part."""
     parts = module.split(".")
-    if parts[0] != package:
+    if parts[:2] != ["pressor", package]:
         return None
+    parts = parts[1:]
     if len(parts) == 1:
         return "__init__"
     best = None
@@ -207,8 +218,12 @@ def imported_modules(path: Path, run_time_only: bool = False) -> set[str]:
 def run_time_imports(path: Path, package: str) -> set[str]:
     """Dotted modules of ``package`` that ``path`` imports at run time (:func:`imported_modules`;
     this is how synthesis's registry and reconstruction name types from above without loading
-    them). ``from package import x`` counts as ``package.x``."""
-    return {m for m in imported_modules(path, run_time_only=True) if m.split(".")[0] == package}
+    them). ``from pressor.package import x`` counts as ``pressor.package.x``."""
+    return {
+        m
+        for m in imported_modules(path, run_time_only=True)
+        if m.split(".")[:2] == ["pressor", package]
+    }
 
 
 def inner_violations(package: str) -> list[str]:
@@ -217,14 +232,14 @@ def inner_violations(package: str) -> list[str]:
     found = []
     for path in package_modules(package):
         rel = path.relative_to(ROOT).with_suffix("")
-        module = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        module = ".".join(("pressor", *(rel.parts[:-1] if rel.name == "__init__" else rel.parts)))
         own = part_of(package, module)
         if own is None:
             found.append(f"{rel.as_posix()}.py: in no part of {package}'s arrows")
             continue
         for imported in sorted(run_time_imports(path, package)):
-            # ``from synthesis.problem import basis`` names synthesis.problem.basis: its part is
-            # problem either way; a plain ``import synthesis`` is the front door
+            # ``from pressor.synthesis.problem import basis`` names pressor.synthesis.problem.basis:
+            # its part is problem either way; a plain ``import pressor.synthesis`` is the front door
             target = part_of(package, imported)
             if target is not None and target != own and target not in allowed[own]:
                 found.append(f"{rel.as_posix()}.py ({own}) -> {imported} ({target})")
@@ -273,9 +288,60 @@ def test_package_imports_only_along_the_allowed_arrows(package):
 def test_the_import_scan_sees_function_local_imports(tmp_path):
     module = tmp_path / "m.py"
     module.write_text(
-        "def f():\n    from synthesis.families.theorem3.lmi import x\n    import sim.world\n"
+        "def f():\n    from pressor.synthesis.families.theorem3.lmi import x\n"
+        "    import pressor.hil_sim.world\n    from pressor import api\n"
     )
-    assert imported_top_levels(module) == {"synthesis", "sim"}
+    assert imported_layers(module) == {"synthesis", "hil_sim", "pressor"}
+
+
+def test_the_import_scan_flags_a_folder_imported_by_its_bare_name(tmp_path):
+    module = tmp_path / "m.py"
+    module.write_text("import runtime.core\nfrom link import codec\nimport linkage\n")
+    assert imported_layers(module) == {"bare:runtime", "bare:link", "linkage"}
+
+
+def test_setup_installs_every_package_under_the_pressor_namespace():
+    tree = ast.parse((ROOT / "setup.py").read_text(encoding="utf-8"))
+    stages = next(
+        ast.literal_eval(node.value)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", None) == "STAGES"
+    )
+    assert set(stages) == set(ALLOWED) - {"pressor"}
+
+
+def test_installed_packages_import_no_benchmark_research_or_test_code():
+    leaks = [
+        f"{path.relative_to(ROOT).as_posix()} -> {name}"
+        for package in ALLOWED
+        for path in package_modules(package)
+        for name in sorted(imported_layers(path))
+        if name in NOT_INSTALLED
+    ]
+    assert leaks == []
+
+
+def test_research_code_imports_nothing_from_benchmarks():
+    # one way only: a benchmark may use research code (the straightforward formulations its
+    # synthesis figures are ratios against, the device's step fit), never the reverse
+    back = [
+        f"{path.relative_to(ROOT).as_posix()} -> {module}"
+        for path in sorted((ROOT / "research").rglob("*.py"))
+        for module in sorted(imported_modules(path))
+        if module.split(".")[0] == "benchmarks"
+    ]
+    assert back == []
+
+
+@pytest.mark.parametrize("folder", ["tests", "benchmarks", "research", "examples", "scripts"])
+def test_code_outside_the_packages_imports_them_through_pressor(folder):
+    bare = [
+        f"{path.relative_to(ROOT).as_posix()} -> {name}"
+        for path in sorted((ROOT / folder).rglob("*.py"))
+        for name in sorted(imported_layers(path))
+        if name.startswith("bare:")
+    ]
+    assert bare == []
 
 
 @pytest.mark.parametrize("package", sorted(INNER_ALLOWED))
@@ -294,19 +360,18 @@ def test_the_inner_scan_skips_only_type_checking_imports(tmp_path):
     module = tmp_path / "m.py"
     module.write_text(
         "from typing import TYPE_CHECKING\n"
-        "from synthesis import cli\n"
-        "if TYPE_CHECKING:\n    from synthesis.artifact import A\n"
-        "def f():\n    import synthesis.research.naive_lmi\n"
+        "from pressor.synthesis import cli\n"
+        "if TYPE_CHECKING:\n    from pressor.synthesis.artifact import A\n"
+        "def f():\n    import pressor.synthesis.families.smith.law\n"
     )
     assert run_time_imports(module, "synthesis") == {
-        "synthesis.cli",
-        "synthesis.research.naive_lmi",
+        "pressor.synthesis.cli",
+        "pressor.synthesis.families.smith.law",
     }
-    assert part_of("synthesis", "synthesis.research.naive_lmi") == "research"
-    assert part_of("synthesis", "synthesis.families.smith.law") == "families.smith"
-    assert part_of("synthesis", "synthesis.families.registry.Family") == "families.registry"
-    assert part_of("runtime", "runtime.shell.loop.Loop") == "shell"
-    assert part_of("runtime", "runtime.session") == "session"
-    assert part_of("sim", "sim.devices.pump") == "devices"
-    assert part_of("sim", "sim.devices.device_options") == "devices.device_options"
-    assert part_of("sim", "sim.episode.simulate") == "episode"
+    assert part_of("synthesis", "pressor.synthesis.families.smith.law") == "families.smith"
+    assert part_of("synthesis", "pressor.synthesis.families.registry.Family") == "families.registry"
+    assert part_of("runtime", "pressor.runtime.shell.loop.Loop") == "shell"
+    assert part_of("runtime", "pressor.runtime.session") == "session"
+    assert part_of("hil_sim", "pressor.hil_sim.devices.pump") == "devices"
+    assert part_of("hil_sim", "pressor.hil_sim.devices.device_options") == "devices.device_options"
+    assert part_of("hil_sim", "pressor.hil_sim.episode.simulate") == "episode"

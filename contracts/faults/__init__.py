@@ -8,18 +8,18 @@ Times are in simulated seconds and are rounded to whole ticks of the loop (fault
 virtual time, so a lockstep run with faults is as deterministic as one without).
 
 This package is pure (no I/O besides reading a scenario TOML on request) and imports nothing from
-``sim``: the device side (``sim.scenarios.faults``) imports it to *inject* the faults, the runtime
+``hil_sim``: the device side (``pressor.hil_sim.scenarios.faults``) imports it to *inject* the faults, the runtime
 uses it only to *label and score* them in its summary, from the schedule it was given on its own
 command line and from the supervisor's detection log. The runtime's control path never sees a
 fault except through its inputs.
 
-The modules: :mod:`~contracts.faults.wire_bits` (pump alarm and monitor quality bits, defined
-once for both ends), :mod:`~contracts.faults.catalogue` (the kinds, their arguments and detection
-bounds), :mod:`~contracts.faults.spec` (parsing ``--fault`` and ``[[faults]]``),
-:mod:`~contracts.faults.scoring` (scoring detections from the supervisor's log).
+The modules: :mod:`~pressor.contracts.faults.wire_bits` (pump alarm and monitor quality bits, defined
+once for both ends), :mod:`~pressor.contracts.faults.catalogue` (the kinds, their arguments and detection
+bounds), :mod:`~pressor.contracts.faults.spec` (parsing ``--fault`` and ``[[faults]]``),
+:mod:`~pressor.contracts.faults.scoring` (scoring detections from the supervisor's log).
 """
 
-from contracts.faults.catalogue import (
+from pressor.contracts.faults.catalogue import (
     CATALOGUE,
     DEFAULT_START_S,
     FAULT_KINDS,
@@ -27,11 +27,11 @@ from contracts.faults.catalogue import (
     Param,
     catalogue_rows,
 )
-from contracts.faults.scoring import (
+from pressor.contracts.faults.scoring import (
     FaultScorer,
     fault_report,
 )
-from contracts.faults.spec import (
+from pressor.contracts.faults.spec import (
     FaultSpec,
     FaultSpecError,
     make_spec,
@@ -39,7 +39,7 @@ from contracts.faults.spec import (
     parse_fault_table,
     parse_faults,
 )
-from contracts.faults.wire_bits import (
+from pressor.contracts.faults.wire_bits import (
     PUMP_ALARM_INVALID_COMMAND,
     PUMP_ALARM_OCCLUSION,
     PUMP_ALARM_OUT_OF_RANGE,

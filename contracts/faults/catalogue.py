@@ -45,7 +45,7 @@ class FaultKind:
     default_duration_s
         Default ``duration_s``.
     detected_as
-        Supervisor fault names (``runtime.core.supervisor_config.Fault``) that count as detecting
+        Supervisor fault names (``pressor.runtime.core.supervisor_config.Fault``) that count as detecting
         it.
     bound_ticks
         Documented detection bound (ticks after the first fault tick at 10 Hz; scaled with the rate

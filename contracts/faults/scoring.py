@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from contracts.faults.spec import FaultSpec
+from pressor.contracts.faults.spec import FaultSpec
 
 
 class FaultScorer:

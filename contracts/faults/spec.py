@@ -1,6 +1,6 @@
 """Fault specifications: ``--fault KIND[:ARGS]`` texts and ``[[faults]]`` tables, validated.
 
-Syntax: the package docstring (:mod:`contracts.faults`). Every bad value raises
+Syntax: the package docstring (:mod:`pressor.contracts.faults`). Every bad value raises
 :class:`FaultSpecError` naming the source, the field, the value and the allowed range.
 """
 
@@ -10,7 +10,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from contracts.faults.catalogue import CATALOGUE, COMMON_PARAMS, FAULT_KINDS, FaultKind, Param
+from pressor.contracts.faults.catalogue import (
+    CATALOGUE,
+    COMMON_PARAMS,
+    FAULT_KINDS,
+    FaultKind,
+    Param,
+)
 
 
 class FaultSpecError(ValueError):
@@ -104,7 +110,7 @@ def make_spec(kind: str, values: dict[str, Any], src: str, index: int = 0) -> Fa
 
 
 def parse_fault(text: str, index: int = 0, src: str = "--fault") -> FaultSpec:
-    """Parse ``KIND[:ARGS]`` (syntax: :mod:`contracts.faults`)."""
+    """Parse ``KIND[:ARGS]`` (syntax: :mod:`pressor.contracts.faults`)."""
     kind, _, rest = text.strip().partition(":")
     values: dict[str, Any] = {}
     positional = ("start_s", "duration_s")

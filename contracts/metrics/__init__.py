@@ -9,10 +9,10 @@ docs/METRICS.md. A metric that does not apply (no target step, never reached, ne
 valid sample) is ``None``, never a made-up number. Non-finite MAP samples (a faulted monitor
 reports NaN) are ignored by every MAP metric; time-based percentages count only valid samples.
 
-The modules: :mod:`~contracts.metrics.names` (metric names, bands, event kinds),
-:mod:`~contracts.metrics.step` (one step response), :mod:`~contracts.metrics.disturbance`
-(disturbance events), :mod:`~contracts.metrics.run` (every metric of one run),
-:mod:`~contracts.metrics.aggregate` (cohort summaries).
+The modules: :mod:`~pressor.contracts.metrics.names` (metric names, bands, event kinds),
+:mod:`~pressor.contracts.metrics.step` (one step response), :mod:`~pressor.contracts.metrics.disturbance`
+(disturbance events), :mod:`~pressor.contracts.metrics.run` (every metric of one run),
+:mod:`~pressor.contracts.metrics.aggregate` (cohort summaries).
 
 Definitions (a target step of size Δ mmHg at ``t0``; e = MAP − target):
 
@@ -72,9 +72,13 @@ start_s)`` pairs (:data:`EVENT_KINDS`; a continuous sinusoid is background, not 
     gives ``None`` for the three numbers. ``None`` (not a list) when the events are not known.
 """
 
-from contracts.metrics.aggregate import aggregate, aggregate_disturbances, percentile_summary
-from contracts.metrics.disturbance import disturbance_metrics, event_labels, event_windows
-from contracts.metrics.names import (
+from pressor.contracts.metrics.aggregate import (
+    aggregate,
+    aggregate_disturbances,
+    percentile_summary,
+)
+from pressor.contracts.metrics.disturbance import disturbance_metrics, event_labels, event_windows
+from pressor.contracts.metrics.names import (
     CLINICAL_BAND_MMHG,
     EVENT_KINDS,
     EVENT_METRICS,
@@ -86,8 +90,8 @@ from contracts.metrics.names import (
     STEP_WINDOW_METRICS,
     Event,
 )
-from contracts.metrics.run import run_metrics, stable_flag
-from contracts.metrics.step import (
+from pressor.contracts.metrics.run import run_metrics, stable_flag
+from pressor.contracts.metrics.step import (
     reachable_band_mmhg,
     step_band_mmhg,
     step_metrics,

@@ -7,16 +7,16 @@ from typing import Any
 
 import numpy as np
 
-from contracts.metrics.disturbance import event_labels
-from contracts.metrics.names import RUN_METRICS
-from contracts.metrics.signals import to_float
+from pressor.contracts.metrics.disturbance import event_labels
+from pressor.contracts.metrics.names import RUN_METRICS
+from pressor.contracts.metrics.signals import to_float
 
 
 def percentile_summary(values: Iterable[float | None]) -> dict[str, float | int | None]:
     """Median, 10th and 90th percentiles of the non-``None`` values, with counts.
 
     Which tail is the bad one depends on the metric: p90 for errors and times, p10 for
-    ``time_in_band_pct`` (:data:`contracts.metrics.names.HIGHER_IS_BETTER`).
+    ``time_in_band_pct`` (:data:`pressor.contracts.metrics.names.HIGHER_IS_BETTER`).
 
     Returns
     -------

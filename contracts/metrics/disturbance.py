@@ -1,6 +1,6 @@
 """Disturbance events of a run: their windows, labels and per-event metrics.
 
-Definitions: the package docstring (:mod:`contracts.metrics`) and docs/METRICS.md.
+Definitions: the package docstring (:mod:`pressor.contracts.metrics`) and docs/METRICS.md.
 """
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from contracts.metrics.names import CLINICAL_BAND_MMHG, EVENT_KINDS, EVENT_METRICS, Event
-from contracts.metrics.signals import TIME_EPS_S, as_arrays, in_window, period, to_float
+from pressor.contracts.metrics.names import CLINICAL_BAND_MMHG, EVENT_KINDS, EVENT_METRICS, Event
+from pressor.contracts.metrics.signals import TIME_EPS_S, as_arrays, in_window, period, to_float
 
 
 def event_windows(

@@ -1,6 +1,6 @@
 """Every metric of one run: step response, clinical band, Varvel errors, drug use, stability.
 
-Definitions: the package docstring (:mod:`contracts.metrics`) and docs/METRICS.md.
+Definitions: the package docstring (:mod:`pressor.contracts.metrics`) and docs/METRICS.md.
 """
 
 from __future__ import annotations
@@ -11,16 +11,16 @@ from typing import Any
 
 import numpy as np
 
-from contracts.metrics.disturbance import disturbance_metrics
-from contracts.metrics.names import (
+from pressor.contracts.metrics.disturbance import disturbance_metrics
+from pressor.contracts.metrics.names import (
     CLINICAL_BAND_MMHG,
     NOISY_BAND_MMHG,
     STEP_METRICS,
     STEP_WINDOW_METRICS,
     Event,
 )
-from contracts.metrics.signals import as_arrays, percent, period, to_float
-from contracts.metrics.step import step_band_mmhg, step_metrics, step_window_metrics
+from pressor.contracts.metrics.signals import as_arrays, percent, period, to_float
+from pressor.contracts.metrics.step import step_band_mmhg, step_metrics, step_window_metrics
 
 
 def stable_flag(

@@ -1,6 +1,6 @@
 """Step-response metrics: overshoot, rise and settling time, steady-state deviation, IAE.
 
-Definitions: the package docstring (:mod:`contracts.metrics`) and docs/METRICS.md.
+Definitions: the package docstring (:mod:`pressor.contracts.metrics`) and docs/METRICS.md.
 """
 
 from __future__ import annotations
@@ -9,14 +9,20 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from contracts.metrics.names import (
+from pressor.contracts.metrics.names import (
     CLINICAL_BAND_MMHG,
     NOISE_FREE_BAND_FRACTION,
     NOISY_BAND_MMHG,
     STEP_METRICS,
     STEP_WINDOW_METRICS,
 )
-from contracts.metrics.signals import TIME_EPS_S, as_arrays, first_crossing, period, to_float
+from pressor.contracts.metrics.signals import (
+    TIME_EPS_S,
+    as_arrays,
+    first_crossing,
+    period,
+    to_float,
+)
 
 
 def step_band_mmhg(step_mmhg: float, noisy: bool) -> float:

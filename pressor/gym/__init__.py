@@ -29,13 +29,13 @@ observation, ``Dict``, what a device sends
         ``QUALITY_INVALID`` set. After :meth:`reset` the N − 1 earlier entries repeat tick 0's
         sample with ``QUALITY_HELD``.
     ``quality`` (N,) uint8
-        The samples' quality bits (:mod:`contracts.faults`: 1 invalid, 2 waveform, 4 held).
+        The samples' quality bits (:mod:`pressor.contracts.faults`: 1 invalid, 2 waveform, 4 held).
     ``target_mmhg`` (1,) float32 mmHg
         The clinician's target at the current tick.
     ``delivered_ml_h`` (1,) float32 ml/h
         The pump's latest reported delivered rate (0 before the first tick).
     ``pump_alarms`` (1,) uint8
-        The pump's latest alarm bits (:mod:`contracts.faults`).
+        The pump's latest alarm bits (:mod:`pressor.contracts.faults`).
 
 ``gymnasium.wrappers.FlattenObservation`` turns it into one vector for agents that need one.
 

@@ -1,11 +1,11 @@
 """``pressor/MAP-v0``: the simulated patient and the runtime's supervised loop as a Gymnasium env.
 
 The agent sits where a controller sits. :class:`AgentController` is a
-:class:`contracts.controller.Controller` whose ``step`` returns the agent's latest action; the
-environment drives :class:`sim.world.World` and the runtime's
-:class:`runtime.core.closed_loop.ClosedLoopCore` tick by tick exactly as
-:func:`sim.episode.simulate` (and so ``pressor trial`` and :func:`pressor.api.simulate`) does, with the supervisor
-:func:`runtime.core.supervisor_config.supervisor_config_for` builds for a controller. So the action
+:class:`pressor.contracts.controller.Controller` whose ``step`` returns the agent's latest action; the
+environment drives :class:`pressor.hil_sim.world.World` and the runtime's
+:class:`pressor.runtime.core.closed_loop.ClosedLoopCore` tick by tick exactly as
+:func:`pressor.hil_sim.episode.simulate` (and so ``pressor trial`` and :func:`pressor.api.simulate`) does, with the supervisor
+:func:`pressor.runtime.core.supervisor_config.supervisor_config_for` builds for a controller. So the action
 passes the same supervisor (STARTUP/AUTO/HOLD/FAILSAFE/RECOVERING, clamp to [0, pump limit],
 bumpless re-entry) and the same float32 pump link a controller's command does; in HOLD or
 FAILSAFE the supervisor does not ask the agent and the pump gets the supervisor's command.
@@ -28,16 +28,16 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from contracts.checks import check_int_range, check_range
-from contracts.faults import QUALITY_HELD, QUALITY_INVALID, FaultSpec, parse_fault
 from pressor.api import _scenario
+from pressor.contracts.checks import check_int_range, check_range
+from pressor.contracts.faults import QUALITY_HELD, QUALITY_INVALID, FaultSpec, parse_fault
 from pressor.gym.reward import COLUMNS, MapReward, Ticks
-from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
-from runtime.core.supervisor import Supervisor
-from runtime.core.supervisor_config import supervisor_config_for
-from sim.patients.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
-from sim.scenarios.scenario import Scenario
-from sim.world import World
+from pressor.hil_sim.patients.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
+from pressor.hil_sim.scenarios.scenario import Scenario
+from pressor.hil_sim.world import World
+from pressor.runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from pressor.runtime.core.supervisor import Supervisor
+from pressor.runtime.core.supervisor_config import supervisor_config_for
 
 __all__ = ["AgentController", "MapEnv"]
 
@@ -96,7 +96,7 @@ class MapEnv(gymnasium.Env):
     scenario
         A scenario name (``pressor scenarios``), a ``.toml`` path or a :class:`Scenario`.
     patient_model
-        A patient model name or ``MODULE:CLASS`` (:mod:`sim.patients.patient_model`).
+        A patient model name or ``MODULE:CLASS`` (:mod:`pressor.hil_sim.patients.patient_model`).
     faults
         Extra faults, ``--fault`` texts (``"sensor-nan:300,5"``) or :class:`FaultSpec`, after the
         scenario's own; sensor, pump and scheduling faults (the link is perfect).
@@ -113,7 +113,7 @@ class MapEnv(gymnasium.Env):
     max_rate_ml_h
         The pump limit (ml/h) of the action space and the supervisor; default the scenario pump's.
     supervisor
-        Overrides of the supervisor's configuration (:class:`runtime.core.supervisor_config.
+        Overrides of the supervisor's configuration (:class:`pressor.runtime.core.supervisor_config.
         SupervisorConfig` fields, e.g. ``{"safe_rate_ml_h": 5.0}``).
     render_mode
         Only ``None``: the environment does not render (``pressor view`` shows recordings).
@@ -290,7 +290,7 @@ class MapEnv(gymnasium.Env):
     # -- helpers ----------------------------------------------------------------------------------
     def episode(self) -> Ticks:
         """Every tick of the episode so far (arrays of :class:`Ticks`; the same names and values
-        as :class:`sim.episode.Trajectory` for the same seed and commands)."""
+        as :class:`pressor.hil_sim.episode.Trajectory` for the same seed and commands)."""
         if self.world is None:
             raise RuntimeError("episode() before reset()")
         return self._slice(0, self.world.tick)

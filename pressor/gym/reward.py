@@ -50,7 +50,7 @@ class Ticks:
     """Control ticks of the loop, oldest first: one environment step's, or a whole episode's.
 
     Every column is a numpy array with one entry per tick k (sampled at the tick, the command held
-    over it), with the names and units of :class:`sim.episode.Trajectory`. Build one from arrays
+    over it), with the names and units of :class:`pressor.hil_sim.episode.Trajectory`. Build one from arrays
     (``Ticks(t_s=..., ..., period_s=..., max_rate_ml_h=...)``); the environment builds its own
     from its record with :meth:`of_record`, and then makes each array only when it is read (most
     steps' rewards read three of the eleven). :meth:`values` gives a column as a Python list, the
@@ -63,7 +63,7 @@ class Ticks:
     map_mmhg
         Measured MAP as the device sent it (mmHg; NaN when the monitor had no value).
     quality
-        The sample's monitor quality bits (:mod:`contracts.faults`).
+        The sample's monitor quality bits (:mod:`pressor.contracts.faults`).
     map_true_mmhg
         True MAP (mmHg): what the patient experiences.
     target_mmhg
@@ -77,7 +77,7 @@ class Ticks:
     alarms
         Pump alarm bits after the tick.
     state, faults
-        Supervisor state (:class:`runtime.core.supervisor_config.State`) and fault bits at the tick.
+        Supervisor state (:class:`pressor.runtime.core.supervisor_config.State`) and fault bits at the tick.
     period_s
         Loop period Ts (s).
     max_rate_ml_h

@@ -3,7 +3,7 @@
 Per tick the caller hands over what arrived for the tick (:class:`link.TickInputs`: MAP sample,
 target and whatever scheduling parameters the device sent), the pump status of the tick
 (:class:`link.PumpStatus`, if one arrived) and the link's health; :meth:`ClosedLoopCore.step`
-feeds the scheduling source (:mod:`runtime.core.scheduling`: oracle, estimated, nominal or
+feeds the scheduling source (:mod:`pressor.runtime.core.scheduling`: oracle, estimated, nominal or
 validated) the MAP sample, its quality bits and the pump's latest delivered rate (0 ml/h before any
 status), assesses the inputs - the supervisor's scheduling checks see the K, T, τ the source
 returned -
@@ -25,8 +25,8 @@ does not step the controller.
 
 Two callers drive the same core, so they cannot drift apart:
 
-- the runtime loop (:mod:`runtime.shell.loop`), which adds only link I/O, timing and recording;
-- the in-process trial (:func:`sim.episode.simulate`), which feeds it the world's
+- the runtime loop (:mod:`pressor.runtime.shell.loop`), which adds only link I/O, timing and recording;
+- the in-process trial (:func:`pressor.hil_sim.episode.simulate`), which feeds it the world's
   observations and pump statuses directly, with a perfect link (:data:`CLEAN_LINK`).
 
 A lockstep SIL run and an in-process run of the same seed therefore give the same commands and
@@ -37,7 +37,7 @@ handles its faults (PX4's rule). When ``step`` raises, or returns something ``fl
 the supervisor's ``controller_faults`` decides: ``"stop"`` (``pressor sil``, ``trial``, the API)
 raises :class:`ControllerError` - the run ends and the researcher sees the bug; ``"latch"``
 (``pressor run``) hands the failure to the supervisor (``CONTROLLER_FAULT``: HOLD at the held rate,
-alarm, until the clinician acknowledges; :mod:`runtime.core.supervisor`) and the tick's record
+alarm, until the clinician acknowledges; :mod:`pressor.runtime.core.supervisor`) and the tick's record
 carries the error's text (``TickRecord.controller_error``; also for a non-finite command, the
 supervisor's ``COMMAND_INVALID``) for the shell to log; the loop goes on.
 """
@@ -48,11 +48,11 @@ import math
 import sys
 from typing import NamedTuple
 
-from contracts.controller import Controller
-from contracts.faults import QUALITY_HELD
-from link import PumpStatus, TickInputs
-from runtime.core.scheduling import OracleSchedule, Schedule, ScheduleInput, ScheduleSource
-from runtime.core.supervisor import Supervisor, SupervisorInput, SupervisorOutput
+from pressor.contracts.controller import Controller
+from pressor.contracts.faults import QUALITY_HELD
+from pressor.link import PumpStatus, TickInputs
+from pressor.runtime.core.scheduling import OracleSchedule, Schedule, ScheduleInput, ScheduleSource
+from pressor.runtime.core.supervisor import Supervisor, SupervisorInput, SupervisorOutput
 
 
 class LinkHealth(NamedTuple):
@@ -141,11 +141,11 @@ class ClosedLoopCore:
     Parameters
     ----------
     controller
-        Any :class:`~contracts.controller.Controller`.
+        Any :class:`~pressor.contracts.controller.Controller`.
     supervisor
         The safety supervisor (its config's period must match the controller's).
     schedule
-        Where K, T, τ come from (:func:`runtime.estimation.sources.make_schedule`); default the
+        Where K, T, τ come from (:func:`pressor.runtime.estimation.sources.make_schedule`); default the
         oracle (the device's values, as sent).
     """
 

@@ -10,7 +10,7 @@ any plugin controller, the supervisor's own state logic and its [0, max_rate_ml_
 
 All three raise the alarm and are counted as detections; none changes the supervisor's state
 (the command is cut, the loop keeps running; a held command stays cut). The limits are the
-library's dose limits converted to ml/h once (:meth:`runtime.inputs.drug_library.DrugEntry.limits`,
+library's dose limits converted to ml/h once (:meth:`pressor.runtime.inputs.drug_library.DrugEntry.limits`,
 rounded down): a command at or below ``hard_max_ml_h`` is at or below the hard dose maximum.
 The hour is counted in ticks of the loop period; each tick's volume is its command times the
 period (the pump runs the command until the next one).
@@ -22,7 +22,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
-#: fault bits, the same values as :class:`runtime.core.supervisor_config.Fault` (no import cycle)
+#: fault bits, the same values as :class:`pressor.runtime.core.supervisor_config.Fault` (no import cycle)
 DOSE_HARD_LIMIT = 1 << 18
 DOSE_SOFT_LIMIT = 1 << 19
 DOSE_HOUR_LIMIT = 1 << 20
@@ -34,7 +34,7 @@ _HOUR_S = 3600.0
 class DoseLimits:
     """One drug's limits at one concentration and weight, in ml/h (what the supervisor compares).
 
-    Defined here, with the guard that enforces it, not in :mod:`runtime.inputs.drug_library` (which
+    Defined here, with the guard that enforces it, not in :mod:`pressor.runtime.inputs.drug_library` (which
     builds it): the core imports nothing from the inputs above it.
 
     Attributes

@@ -1,8 +1,8 @@
-"""One report of the online estimator (:mod:`runtime.estimation.estimator`): values, uncertainty,
+"""One report of the online estimator (:mod:`pressor.runtime.estimation.estimator`): values, uncertainty,
 health. Immutable; the estimator hands out the same object until a window's bank update completes.
 
-It lives in the core because a :class:`runtime.core.scheduling.Schedule` carries it to the recorder,
-and the core imports nothing from :mod:`runtime.estimation` (which builds on the core).
+It lives in the core because a :class:`pressor.runtime.core.scheduling.Schedule` carries it to the recorder,
+and the core imports nothing from :mod:`pressor.runtime.estimation` (which builds on the core).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ controller faults (:class:`EventLog`).
 A transition is kept for the summary (``supervisor.transitions``) and written to the recording's
 event log (HOLD and FAILSAFE as warnings); a rising advisory fault only to the event log. A
 controller fault (``pressor run``: the controller raised or returned a non-number, the supervisor
-holds, :mod:`runtime.core.supervisor`) is logged once per failure, with the error's text: one line
+holds, :mod:`pressor.runtime.core.supervisor`) is logged once per failure, with the error's text: one line
 on stderr, a warning in the recording's event log, and a record in the summary's
 ``supervisor.controller_faults``.
 """
@@ -14,8 +14,8 @@ from __future__ import annotations
 import sys
 from typing import Any, TextIO
 
-from runtime.core.closed_loop import TickRecord
-from runtime.core.supervisor_config import Fault, State, fault_names
+from pressor.runtime.core.closed_loop import TickRecord
+from pressor.runtime.core.supervisor_config import Fault, State, fault_names
 
 
 class EventLog:
@@ -24,7 +24,7 @@ class EventLog:
     Parameters
     ----------
     recorder
-        The run's :class:`runtime.record.recorder.Recorder`, or ``None``.
+        The run's :class:`pressor.runtime.record.recorder.Recorder`, or ``None``.
     prog
         Program name in front of each line written to ``err``.
     err

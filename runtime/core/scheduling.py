@@ -6,8 +6,8 @@ the device sent) in, the tick's :class:`Schedule` out. Units and ranges of the r
 K > 0 mmHg/(ml/h), T > 0 s, τ ≥ 0 s (the controller clamps to its design box, as it always has).
 
 This module holds the protocol and the two sources that learn nothing; the learning ones live in
-:mod:`runtime.estimation` (which builds on :class:`Schedule`), and
-:func:`runtime.estimation.sources.make_schedule` picks one by name.
+:mod:`pressor.runtime.estimation` (which builds on :class:`Schedule`), and
+:func:`pressor.runtime.estimation.sources.make_schedule` picks one by name.
 
 :class:`OracleSchedule`
     The device's values, exactly as sent (a simulator's truth; research comparisons only).
@@ -16,9 +16,9 @@ This module holds the protocol and the two sources that learn nothing; the learn
     apply, exactly as before this module existed.
 :class:`NominalSchedule`
     Constant prior values (default: the nominal patient, :data:`NOMINAL_PLANT`); always valid.
-:class:`runtime.estimation.sources.EstimatedSchedule`
+:class:`pressor.runtime.estimation.sources.EstimatedSchedule`
     The online estimator, scheduled cautiously (see its docstring).
-:class:`runtime.estimation.validated.ValidatedSchedule`
+:class:`pressor.runtime.estimation.validated.ValidatedSchedule`
     Opt-in (``--schedule validated``): the nominal patient, with T and τ slewed inside the
     certified rates toward a model validated on held-out windows.
 """
@@ -29,12 +29,12 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
-from baselines.smith import INITIAL_SCHEDULE
-from contracts.checks import check_range
-from runtime.core.estimate import Estimate
+from pressor.baselines.smith import INITIAL_SCHEDULE
+from pressor.contracts.checks import check_range
+from pressor.runtime.core.estimate import Estimate
 
 #: the nominal patient (K mmHg/(ml/h), T s, τ s): the same constants as the estimator's prior
-#: (:data:`runtime.estimation.settings.NOMINAL_PLANT`), named here so that the core needs no
+#: (:data:`pressor.runtime.estimation.settings.NOMINAL_PLANT`), named here so that the core needs no
 #: estimation import
 NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
 
@@ -48,7 +48,7 @@ class ScheduleInput(NamedTuple):
     map_mmhg
         The tick's MAP sample (mmHg); NaN when there is none or it is too old to use.
     quality
-        Monitor quality bits (0 = good; :data:`contracts.faults` sensor-quality bits).
+        Monitor quality bits (0 = good; :data:`pressor.contracts.faults` sensor-quality bits).
     delivered_ml_h
         The pump's latest delivered rate (ml/h, from PUMP_STATUS; 0 before any status).
     device_K
@@ -108,7 +108,7 @@ class Schedule:
 
 
 class ScheduleSource(Protocol):
-    """What the closed-loop core (:mod:`runtime.core.closed_loop`) calls once per tick."""
+    """What the closed-loop core (:mod:`pressor.runtime.core.closed_loop`) calls once per tick."""
 
     source: str
 

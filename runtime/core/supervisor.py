@@ -2,7 +2,7 @@
 
 No I/O, no clock: every call gets the time (s) and the inputs explicitly, in a typed record, so the
 same input sequence gives the same output sequence, byte for byte. The closed-loop core
-(:mod:`runtime.core.closed_loop`) calls, once per tick::
+(:mod:`pressor.runtime.core.closed_loop`) calls, once per tick::
 
     run_controller = sup.assess(SupervisorInput(now_s, map_mmhg, ...))   # every field given
     raw = controller.step(...) if run_controller else None
@@ -11,7 +11,7 @@ same input sequence gives the same output sequence, byte for byte. The closed-lo
 
 With ``config.dose_limits`` (``pressor run``: the drug library) the last step of every tick cuts
 the command to the hard and hourly dose maxima and flags the soft one
-(:mod:`runtime.core.dose_guard`).
+(:mod:`pressor.runtime.core.dose_guard`).
 
 States
 ------
@@ -36,11 +36,11 @@ RECOVERING
 
 Input faults do not latch: a HOLD or FAILSAFE lasts exactly as long as a fault persists, plus
 ``recover_after_s`` (or until the acknowledgement). What clears each fault, and so ends the state:
-docs/PROTOCOL.md, "Alarms"; the acknowledgement rule: :mod:`runtime.core.supervisor_io`.
+docs/PROTOCOL.md, "Alarms"; the acknowledgement rule: :mod:`pressor.runtime.core.supervisor_io`.
 
 Controller faults (``config.controller_faults``). With ``"stop"`` (``pressor sil``, ``trial``, the
 API and the Gymnasium environment) a controller that raises ends the run (the core raises
-:class:`runtime.core.closed_loop.ControllerError`: a researcher sees the bug) and a non-finite
+:class:`pressor.runtime.core.closed_loop.ControllerError`: a researcher sees the bug) and a non-finite
 command is ``COMMAND_INVALID``: HOLD, re-entry once the inputs have been good for
 ``recover_after_s``. With ``"latch"`` (``pressor run``: a patient on the line) a step that raises or
 returns a non-number (``CONTROLLER_FAULT``, via ``finalize(None, failed=True)``) and a non-finite
@@ -56,7 +56,7 @@ bumpless slew; a further failure latches again. Without an acknowledgement input
 run`` without ``--target-stdin`` or ``--target-file``) the latch lasts for the rest of the run.
 
 The fault kinds, their detection bounds and the configuration are in
-:mod:`runtime.core.supervisor_config`.
+:mod:`pressor.runtime.core.supervisor_config`.
 
 Deviation from the paper: the paper has no supervisor; this is the IEC 60601-1-10 shell around it.
 """
@@ -65,10 +65,10 @@ from __future__ import annotations
 
 import math
 
-from contracts.faults import PUMP_ALARM_WATCHDOG
-from runtime.core.dose_guard import DoseGuard
-from runtime.core.flatline import FlatlineRules
-from runtime.core.supervisor_config import (
+from pressor.contracts.faults import PUMP_ALARM_WATCHDOG
+from pressor.runtime.core.dose_guard import DoseGuard
+from pressor.runtime.core.flatline import FlatlineRules
+from pressor.runtime.core.supervisor_config import (
     ADVISORY,
     ALARM_FAULTS,
     SCHED_ENVELOPE,
@@ -77,7 +77,12 @@ from runtime.core.supervisor_config import (
     SupervisorConfig,
     fault_names,
 )
-from runtime.core.supervisor_io import AckOutcome, SupervisorInput, SupervisorOutput, judge_ack
+from pressor.runtime.core.supervisor_io import (
+    AckOutcome,
+    SupervisorInput,
+    SupervisorOutput,
+    judge_ack,
+)
 
 __all__ = ["AckOutcome", "Supervisor", "SupervisorInput", "SupervisorOutput"]
 
@@ -180,7 +185,7 @@ class Supervisor:
 
     def acknowledge(self) -> None:
         """The clinician acknowledges the alarm and asks to resume; judged at the next
-        :meth:`assess` (:func:`runtime.core.supervisor_io.judge_ack`), its outcome in
+        :meth:`assess` (:func:`pressor.runtime.core.supervisor_io.judge_ack`), its outcome in
         ``last_ack``."""
         self._ack_requested = True
 

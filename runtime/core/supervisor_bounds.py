@@ -1,11 +1,11 @@
 """What ``pressor faults`` prints for the runtime supervisor: each fault kind with its detection
-rule and bound under a :class:`runtime.core.supervisor_config.SupervisorConfig`, and the
+rule and bound under a :class:`pressor.runtime.core.supervisor_config.SupervisorConfig`, and the
 reaction."""
 
 from __future__ import annotations
 
-from runtime.core.flatline import stuck_samples
-from runtime.core.supervisor_config import SupervisorConfig
+from pressor.runtime.core.flatline import stuck_samples
+from pressor.runtime.core.supervisor_config import SupervisorConfig
 
 
 def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:

@@ -1,7 +1,7 @@
 """What the safety supervisor checks and with which limits: states, fault kinds, configuration.
 
-The state machine itself is :mod:`runtime.core.supervisor`; this module holds what it is configured
-with; what ``pressor faults`` prints of it is :mod:`runtime.core.supervisor_bounds`.
+The state machine itself is :mod:`pressor.runtime.core.supervisor`; this module holds what it is configured
+with; what ``pressor faults`` prints of it is :mod:`pressor.runtime.core.supervisor_bounds`.
 
 Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults):
 
@@ -12,7 +12,7 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
   tick; a real level change is a single spike and is accepted after ``recover_after_s``;
 - ``MAP_FLATLINE`` a frozen line (new samples stuck within ±max(``flatline_eps_mmhg``, quantum/2)
   for a count of samples scaled to the announced noise and the quantum, and ``flatline_s`` at
-  least) or a damped one (variance collapse of the new samples) - :mod:`runtime.core.flatline`; only
+  least) or a damped one (variance collapse of the new samples) - :mod:`pressor.runtime.core.flatline`; only
   when the monitor announces noise (``sensor_noise_mmhg`` > 0): a noise-free simulator
   legitimately produces constant samples;
 - ``SENSOR_QUALITY`` the monitor flags the sample (any bit of ``quality`` in ``quality_mask``; by
@@ -31,9 +31,9 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
 - ``CONTROLLER_FAULT`` (``controller_faults="latch"``, ``pressor run``) the controller raised in
   ``step`` or returned something ``float()`` refuses (held, → HOLD); with ``"stop"`` (``pressor
   sil``, ``trial``) the core ends the run instead
-  (:class:`runtime.core.closed_loop.ControllerError`). Under ``"latch"`` this and
+  (:class:`pressor.runtime.core.closed_loop.ControllerError`). Under ``"latch"`` this and
   ``COMMAND_INVALID`` hold until the clinician's acknowledgement
-  (:mod:`runtime.core.supervisor_io`);
+  (:mod:`pressor.runtime.core.supervisor_io`);
 - ``COMMAND_CLAMPED`` the controller returned a command outside [0, max] (clamped; an alarm, not a
   state change);
 - ``LINK_ERRORS`` the link layer discarded something since the last tick (bad CRC, junk bytes,
@@ -56,7 +56,7 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
   advisory alarm (the controller clamps ρ to its box, as it does with any scheduling value);
 - ``DOSE_HARD_LIMIT``, ``DOSE_SOFT_LIMIT``, ``DOSE_HOUR_LIMIT`` (``pressor run``, with
   ``dose_limits`` from the drug library) the final command is cut to the hard or the hourly dose
-  maximum, or lies above the soft one (:mod:`runtime.core.dose_guard`); advisory, alarm raised.
+  maximum, or lies above the soft one (:mod:`pressor.runtime.core.dose_guard`); advisory, alarm raised.
 
 The pump checks need a pump status of this tick (``pump_delivered_ml_h`` not NaN); a missing one is
 not a fault (the link watchdogs cover silence).
@@ -69,14 +69,19 @@ from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 from typing import Any
 
-from contracts.controller import Controller
-from contracts.faults import (
+from pressor.contracts.controller import Controller
+from pressor.contracts.faults import (
     PUMP_ALARM_OCCLUSION,
     PUMP_ALARM_RESERVOIR_EMPTY,
     PUMP_ALARM_WATCHDOG,
     QUALITY_HELD,
 )
-from runtime.core.dose_guard import DOSE_HARD_LIMIT, DOSE_HOUR_LIMIT, DOSE_SOFT_LIMIT, DoseLimits
+from pressor.runtime.core.dose_guard import (
+    DOSE_HARD_LIMIT,
+    DOSE_HOUR_LIMIT,
+    DOSE_SOFT_LIMIT,
+    DoseLimits,
+)
 
 
 class State(IntEnum):

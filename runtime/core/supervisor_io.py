@@ -1,4 +1,4 @@
-"""What the safety supervisor (:mod:`runtime.core.supervisor`) takes and gives each tick, and how it
+"""What the safety supervisor (:mod:`pressor.runtime.core.supervisor`) takes and gives each tick, and how it
 judges a clinician's acknowledgement.
 
 The records are named tuples rather than frozen dataclasses: one is built every tick of every
@@ -8,7 +8,7 @@ Acknowledge and resume
 ----------------------
 HOLD and FAILSAFE leave by themselves once every input has been good for ``recover_after_s``
 (RECOVERING, then AUTO). A clinician's acknowledgement (``pressor run``: the line ``ack`` on stdin
-or in the target file, :mod:`runtime.inputs.target_source`) shortens that wait: taken at the next
+or in the target file, :mod:`pressor.runtime.inputs.target_source`) shortens that wait: taken at the next
 tick, it is accepted only when that tick has no fault that holds the loop (advisory faults do not
 count), and then moves HOLD or FAILSAFE to RECOVERING at once, so the command slews back to the
 controller's (bumpless) and the state reaches AUTO; while a fault persists it is refused naming the
@@ -16,7 +16,7 @@ faults, and the state is unchanged. In STARTUP, AUTO and RECOVERING there is not
 acknowledge. A latched controller fault (``controller_faults="latch"``, ``pressor run``:
 ``CONTROLLER_FAULT``, ``COMMAND_INVALID``) is the one fault the acknowledgement itself clears: the
 clinician, not an input turning good, decides that the controller may run again
-(:mod:`runtime.core.supervisor`, "Controller faults"); it is accepted when no *other* holding fault
+(:mod:`pressor.runtime.core.supervisor`, "Controller faults"); it is accepted when no *other* holding fault
 persists. :func:`judge_ack` is the rule; :class:`AckOutcome` what the loop logs.
 """
 
@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from runtime.core.supervisor_config import State, fault_names
+from pressor.runtime.core.supervisor_config import State, fault_names
 
 
 class SupervisorInput(NamedTuple):
@@ -43,7 +43,7 @@ class SupervisorInput(NamedTuple):
         Newest scheduling parameters (mmHg/(ml/h), s, s) and their validity flag.
     sample_age_s
         Age (s) of the sample: since it was received, or for a ``QUALITY_HELD`` repeat since the
-        last sample without the bit (:mod:`runtime.core.closed_loop`); 0 marks a new sample, the
+        last sample without the bit (:mod:`pressor.runtime.core.closed_loop`); 0 marks a new sample, the
         only kind the flatline rules judge. The MAP checks are skipped once stale.
     link_silence_s
         Time (s) since any frame was received from the device.

@@ -6,7 +6,7 @@ mean rate ū (ml/h) and fits θ = (a, b, c) by the recursive prediction-error me
     x̂_j = a·x̂_{j−1} + b·ū_{j−d},      ȳ_j − y_ref = x̂_j + c + e_j
 
 with a = e^(−Δ/T), b = K·(1 − a) (mmHg/(ml/h)) and c the baseline's shift (mmHg); θ are random
-walks, the gradient is ψ = (∂x̂/∂a, ∂x̂/∂b, 1). See :mod:`runtime.estimation.estimator` for why.
+walks, the gradient is ψ = (∂x̂/∂a, ∂x̂/∂b, 1). See :mod:`pressor.runtime.estimation.estimator` for why.
 Pure Python floats, preallocated lists: no allocation per update.
 """
 

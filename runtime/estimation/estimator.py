@@ -13,7 +13,7 @@ with the output-error gradient ψ = (∂x̂/∂a, ∂x̂/∂b, 1))::
 ``y_ref`` is the first valid window (the MAP before the drug acts). Per window the random walks
 have standard deviations ``q_a``, ``q_b`` and ``q_c`` (mmHg: a haemorrhage of 10 mmHg over 5 min is
 ≈ 0.07 mmHg per window); the output error's variance is ``r_mmhg``² or, when larger, the monitor
-noise the window means show (:class:`runtime.estimation.noise.WindowNoise`). An innovation beyond
+noise the window means show (:class:`pressor.runtime.estimation.noise.WindowNoise`). An innovation beyond
 ``jump_sigma`` standard deviations is taken as a baseline jump (the offset's variance is raised by
 its square, so c absorbs it rather than a, b).
 Each model keeps an exponentially forgotten negative log-likelihood of its innovations (memory
@@ -27,7 +27,7 @@ from the filter covariance (first order); τ an interval holding ~90 % of the ba
 weight.
 
 Two priors from the literature patient model this project simulates (the paper's Table 1,
-``sim/patients/patient.py``) stand in where a settled loop carries no information. The τ prior
+``hil_sim/patients/patient.py``) stand in where a settled loop carries no information. The τ prior
 (``tau_prior_s``, Gaussian, mode 15 s, std 10 s: a held infusion's delay) weighs the delays where
 the data do not: after a rate change the likelihood differences between delays are hundreds of
 units and the prior (at most 9) does not matter; once the loop has settled the forgetting shrinks
@@ -58,14 +58,14 @@ Why this method (evidence: ``benchmarks/estimator.py`` and ``tests/runtime/estim
 Start-up and health: until the K and T relative standard deviations have fallen below
 ``learn_rel_std`` (≈ 40–80 s after the first rate step has reached the MAP) the prior (the nominal
 patient, :data:`NOMINAL_PLANT`) is reported with reason ``"learning"``; the scheduling source
-schedules cautiously around it (:class:`runtime.estimation.sources.EstimatedSchedule`). Every
+schedules cautiously around it (:class:`pressor.runtime.estimation.sources.EstimatedSchedule`). Every
 estimate is checked (finite parameters and covariance, 0 < a < 1, K and T in the plausible ranges)
 before it is reported; when the bank's best model fails, the prior is reported with the reason
 (``"diverged"``, ``"K implausible"``, ``"T implausible"``) and ``healthy=False``; once an estimate
 has been reported it stays so until a model with ``min_age_s`` of data since a restart from the
 prior passes (before, the learning gate already holds the prior: an ill-conditioned fit in the
 step's first minute does not lock the estimate out for ``min_age_s``). Bad samples are
-kept out by :class:`runtime.estimation.gate.SampleGate`; a window with fewer than half its samples
+kept out by :class:`pressor.runtime.estimation.gate.SampleGate`; a window with fewer than half its samples
 accepted is not fitted (the models still simulate through it).
 
 The tuning evidence (q_c, memory, drift prior) and the known limits (what a settled loop cannot
@@ -76,12 +76,12 @@ from __future__ import annotations
 
 import math
 
-from contracts.checks import check_range
-from runtime.core.estimate import Estimate
-from runtime.estimation.bank import DelayModel, FilterSettings
-from runtime.estimation.gate import SampleGate
-from runtime.estimation.noise import WindowNoise
-from runtime.estimation.settings import DEFAULT_SETTINGS, EstimatorSettings
+from pressor.contracts.checks import check_range
+from pressor.runtime.core.estimate import Estimate
+from pressor.runtime.estimation.bank import DelayModel, FilterSettings
+from pressor.runtime.estimation.gate import SampleGate
+from pressor.runtime.estimation.noise import WindowNoise
+from pressor.runtime.estimation.settings import DEFAULT_SETTINGS, EstimatorSettings
 
 
 class DelayBankEstimator:
@@ -92,7 +92,7 @@ class DelayBankEstimator:
     sample_period_s
         Tick period (s), > 0 (10 Hz: 0.1): the loop's, not a tuning.
     settings
-        The tuning (:class:`~runtime.estimation.settings.EstimatorSettings`; units, ranges and
+        The tuning (:class:`~pressor.runtime.estimation.settings.EstimatorSettings`; units, ranges and
         defaults there); its ``window_s`` must be a whole number (>= 2) of ``sample_period_s``.
     gate
         The sample gate (default: :class:`SampleGate` at ``sample_period_s``).

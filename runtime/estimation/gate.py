@@ -5,7 +5,7 @@ A sample is rejected, with the first matching reason, when it is
 ``nonfinite``
     NaN or ±inf (a monitor with no value, a corrupted reading);
 ``quality``
-    any monitor quality bit is set (:data:`contracts.faults.QUALITY_INVALID`, ``QUALITY_WAVEFORM``);
+    any monitor quality bit is set (:data:`pressor.contracts.faults.QUALITY_INVALID`, ``QUALITY_WAVEFORM``);
 ``range``
     outside ``[map_min_mmhg, map_max_mmhg]`` (a fast-flush to the bag pressure, a transducer open to
     air, an out-of-range value);

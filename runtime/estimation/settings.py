@@ -1,6 +1,6 @@
 """The online estimator's tuning, one immutable value checked once when it is made.
 
-:class:`EstimatorSettings` holds everything :class:`runtime.estimation.estimator.DelayBankEstimator`
+:class:`EstimatorSettings` holds everything :class:`pressor.runtime.estimation.estimator.DelayBankEstimator`
 can be tuned by; the estimator itself takes only the settings, the loop's tick period and the
 sample gate (which are the loop's, not the estimator's). What each setting does to the fit: the
 estimator's module docstring; the tuning evidence: ``docs/ESTIMATION.md``.
@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from baselines.smith import INITIAL_SCHEDULE
-from contracts.checks import check_range
-from runtime.generated import lpv_map_controller as shipped
+from pressor.baselines.smith import INITIAL_SCHEDULE
+from pressor.contracts.checks import check_range
+from pressor.runtime.generated import lpv_map_controller as shipped
 
 __all__ = [
     "DEFAULT_SETTINGS",
@@ -28,7 +28,7 @@ __all__ = [
 NOMINAL_PLANT: tuple[float, float, float] = INITIAL_SCHEDULE
 #: the shipped design's certified box, (low, high) of K (mmHg/(ml/h)), T (s), τ (s), and rate
 #: bounds (K mmHg/(ml/h) per s, T s per s, τ s per s), read from its generated module (as
-#: runtime.core.supervisor_config.sched_limits_of does for any controller; estimation stays free
+#: pressor.runtime.core.supervisor_config.sched_limits_of does for any controller; estimation stays free
 #: of that module's numpy)
 DESIGN_BOX: tuple[tuple[float, float], ...] = tuple(
     (float(lo), float(hi)) for lo, hi in zip(shipped.GRID_LO, shipped.GRID_HI, strict=True)
@@ -42,7 +42,7 @@ DESIGN_RATES: tuple[float, float, float] = tuple(float(r) for r in shipped.RATE_
 #: estimator's range and the certified box").
 ESTIMATE_BOX: tuple[tuple[float, float], ...] = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
 #: the T-drift prior: T rises this many s per (ml/h)·s of infusion (the literature patient model's
-#: b_T, middle of its [1e-4, 3e-4] range; sim/patients/patient.py)
+#: b_T, middle of its [1e-4, 3e-4] range; hil_sim/patients/patient.py)
 T_DRIFT_PER_ML_H = 2e-4
 
 

@@ -1,7 +1,7 @@
 """The estimated scheduling source, and every source by name.
 
 :class:`EstimatedSchedule`
-    The online estimator (:class:`runtime.estimation.estimator.DelayBankEstimator`); always valid:
+    The online estimator (:class:`pressor.runtime.estimation.estimator.DelayBankEstimator`); always valid:
     it reports the prior until it has learned and whenever its health check rejects an estimate,
     with ``healthy`` and ``reason`` saying so. K and T are scheduled *cautiously*: on the low-gain
     side of the estimate's credible region (higher K, shorter T: the feedforward expects a faster,
@@ -13,24 +13,24 @@
     edge at the same K/T (:meth:`EstimatedSchedule.keep_slope`). Tuned on cohort seed 11
     (``docs/ESTIMATION.md``; the held-out figures are in ``docs/notes/cohort-evidence.md``).
 :func:`make_schedule`
-    The source named by ``--schedule``: oracle and nominal from :mod:`runtime.core.scheduling`
-    (the protocol, :class:`~runtime.core.scheduling.Schedule`), estimated from here, validated
-    from :mod:`runtime.estimation.validated`.
+    The source named by ``--schedule``: oracle and nominal from :mod:`pressor.runtime.core.scheduling`
+    (the protocol, :class:`~pressor.runtime.core.scheduling.Schedule`), estimated from here, validated
+    from :mod:`pressor.runtime.estimation.validated`.
 """
 
 from __future__ import annotations
 
 import math
 
-from runtime.core.estimate import Estimate
-from runtime.core.scheduling import (
+from pressor.runtime.core.estimate import Estimate
+from pressor.runtime.core.scheduling import (
     NominalSchedule,
     OracleSchedule,
     Schedule,
     ScheduleInput,
     ScheduleSource,
 )
-from runtime.estimation.estimator import DelayBankEstimator
+from pressor.runtime.estimation.estimator import DelayBankEstimator
 
 SOURCES = ("oracle", "estimated", "nominal", "validated")
 #: the cautious rule's full shift (standard deviations) and the relative standard deviation from
@@ -131,7 +131,7 @@ def make_schedule(source: str, sample_period_s: float = 0.1) -> ScheduleSource:
         return EstimatedSchedule(sample_period_s=sample_period_s)
     if source == "validated":
         # imported here: only this opt-in source needs the model bank and the generated module
-        from runtime.estimation.validated import ValidatedSchedule
+        from pressor.runtime.estimation.validated import ValidatedSchedule
 
         return ValidatedSchedule(sample_period_s=sample_period_s)
     raise ValueError(f"schedule source {source!r} not one of {SOURCES}")

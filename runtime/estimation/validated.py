@@ -1,7 +1,7 @@
 """The opt-in ``--schedule validated`` source: adaptation that cannot leave the certificate.
 
 It schedules on the nominal patient and moves T and τ (K stays nominal by default) toward the
-model of a bank of fixed FOPDT models (:class:`runtime.estimation.validation.ModelBank`) only while
+model of a bank of fixed FOPDT models (:class:`pressor.runtime.estimation.validation.ModelBank`) only while
 that model predicts the measured MAP's 60 s changes better than the nominal one by a relative and
 a statistical margin, at a fraction of the certified rates and inside the design box, so the
 source itself never raises ``SCHED_RATE`` or ``SCHED_OUT_OF_BOX``. The evidence behind it and the
@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import math
 
-from contracts.checks import check_range
-from runtime.core.estimate import Estimate
-from runtime.core.scheduling import Schedule, ScheduleInput
-from runtime.estimation.estimator import DelayBankEstimator
-from runtime.estimation.settings import DESIGN_BOX, DESIGN_RATES, NOMINAL_PLANT
-from runtime.estimation.validation import ModelBank
+from pressor.contracts.checks import check_range
+from pressor.runtime.core.estimate import Estimate
+from pressor.runtime.core.scheduling import Schedule, ScheduleInput
+from pressor.runtime.estimation.estimator import DelayBankEstimator
+from pressor.runtime.estimation.settings import DESIGN_BOX, DESIGN_RATES, NOMINAL_PLANT
+from pressor.runtime.estimation.validation import ModelBank
 
 __all__ = ["DESIGN_RATES", "ValidatedSchedule"]
 
@@ -27,9 +27,9 @@ class ValidatedSchedule:
     """Schedule on a validated model, slew-limited inside the design box and its certified rates.
 
     Opt-in (``--schedule validated``; the default ``estimated`` is
-    :class:`~runtime.estimation.sources.EstimatedSchedule`). Starts on ``start`` (default the
+    :class:`~pressor.runtime.estimation.sources.EstimatedSchedule`). Starts on ``start`` (default the
     nominal patient) and moves toward the model the
-    :class:`~runtime.estimation.validation.ModelBank` has adopted (the nominal one until another
+    :class:`~pressor.runtime.estimation.validation.ModelBank` has adopted (the nominal one until another
     predicts the measured MAP changes better by its margins), each of K, T, τ by at most
     ``rate_fraction`` of the certified rate per tick, and never outside the design box: the
     source itself can raise neither ``SCHED_RATE`` nor ``SCHED_OUT_OF_BOX``. The device's values
@@ -38,10 +38,10 @@ class ValidatedSchedule:
     is ``healthy``; it does not set the schedule. Why (evidence in ``docs/ESTIMATION.md``,
     "Adaptation that cannot make things worse"): on patients outside the FOPDT class the fit chased
     the unmodelled dynamics with K, T, τ, and scheduling on it
-    (:class:`~runtime.estimation.sources.EstimatedSchedule`) was worse than the nominal schedule;
+    (:class:`~pressor.runtime.estimation.sources.EstimatedSchedule`) was worse than the nominal schedule;
     this source is below nominal there. Why it is not the default: on the project's own cohort
     (paper-tracking, seed 11) its step overshoot is 33 %,
-    :class:`~runtime.estimation.sources.EstimatedSchedule`'s 5 % (its start-up jump of K to the
+    :class:`~pressor.runtime.estimation.sources.EstimatedSchedule`'s 5 % (its start-up jump of K to the
     estimate, which no source within the certified rates can make).
 
     Parameters

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 
-from contracts.checks import check_range
+from pressor.contracts.checks import check_range
 
 #: default grid of the bank over the design box: K (mmHg/(ml/h)), T (s), τ (s)
 K_GRID = (0.25, 0.35, 0.45, 0.55, 0.7, 0.85, 1.0)

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  dfb7195a5376dbc896d9e984a0745bc1850ab07d9e37f55972f0d7a1f4e0a314
-Content hash:     c15fc8403f734b1b5607691ba24bd450408a6945c6cb9de8ebbf00859d39e63c
+Content hash:     31a86c2c1eb6b644c843989a1bb0a7fe929a0e02f596379b4379d8c5c363f837
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'fb201a8ddf9cfe2da135d6df9782422ce67f7011cf82cad73f63c7bd9b297783'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '6c9771dce11a70ac4810cfc5e976613c2d8a545f5385c46d948a7b7e5e94db36'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'dfb7195a5376dbc896d9e984a0745bc1850ab07d9e37f55972f0d7a1f4e0a314'
-CONTENT_HASH = 'c15fc8403f734b1b5607691ba24bd450408a6945c6cb9de8ebbf00859d39e63c'
+CONTENT_HASH = '31a86c2c1eb6b644c843989a1bb0a7fe929a0e02f596379b4379d8c5c363f837'
 TABLES_SHA256 = '979f57c13cbfd533a92da3fe5517366bd5750e63ad335fa3898bda3eea729e91'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

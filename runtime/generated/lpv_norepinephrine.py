@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31
 Artifact sha256:  114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd
-Content hash:     a5ef3f68537024bd96891c1a6668b95930bf62afa6aa14b6cec2655d40235d2a
+Content hash:     14c0da0ba7c529acaecd6b975ce20d7bfe02b9b600605e4473c9209aaedceefb
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'f075972add7cd9c646a120643b4690609b22ff0bbb5d8c182c2bf3f9aa130fae'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '9d77832f554392236eee6232816052591b23ab005ac8c4d1ac6f5390c8fa3c61'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = '114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd'
-CONTENT_HASH = 'a5ef3f68537024bd96891c1a6668b95930bf62afa6aa14b6cec2655d40235d2a'
+CONTENT_HASH = '14c0da0ba7c529acaecd6b975ce20d7bfe02b9b600605e4473c9209aaedceefb'
 TABLES_SHA256 = '0d1ccefeea03128a1d935e8d7cc8d5bfdac89085e3823c267c71c6c1312a5ffb'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

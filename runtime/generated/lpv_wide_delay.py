@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/wide_delay_design.npz --target python --fixed-point q31
 Artifact sha256:  ad2d3ee0d3c878a86986c0e35ad944b61bae23f60ccd354fb99cbe0863882f7f
-Content hash:     a6339956e0f062743d7ef0f217508ce5f9d2f93a12072eac9fb8f05de53987e7
+Content hash:     8028cad74754da8a575065d38fa9775cbfaa1a4f6940b86e2a0cd1b213df375f
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -51,9 +51,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '9f3e8a8dd4f9ad0770ad420e890ca57ffbe07204d9ea1921202ebad39ae3a9d2'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'd315eac396cc6e40fee9a8533f68770e9e872619880d9bb95668e09b732dbffd'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'ad2d3ee0d3c878a86986c0e35ad944b61bae23f60ccd354fb99cbe0863882f7f'
-CONTENT_HASH = 'a6339956e0f062743d7ef0f217508ce5f9d2f93a12072eac9fb8f05de53987e7'
+CONTENT_HASH = '8028cad74754da8a575065d38fa9775cbfaa1a4f6940b86e2a0cd1b213df375f'
 TABLES_SHA256 = '4ea2fc6b005f59792b9165fd01ad55b60091662989ebd02d6e514ce11e64ff1b'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/wide_delay_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -3,12 +3,12 @@
 ``pressor run`` takes the target from the device's MAP_TARGET by default. ``--target-mmhg`` (or
 ``--target-file``) makes it the runtime's own: the device's value is then ignored and MAP_TARGET is
 no longer required for a tick. ``--target-file`` and ``--target-stdin`` change it while the loop
-runs (:mod:`runtime.inputs.target_source`), and carry the clinician's acknowledgement (a line
-``ack``: HOLD or FAILSAFE resume once the fault cleared, :mod:`runtime.core.supervisor_io`).
+runs (:mod:`pressor.runtime.inputs.target_source`), and carry the clinician's acknowledgement (a line
+``ack``: HOLD or FAILSAFE resume once the fault cleared, :mod:`pressor.runtime.core.supervisor_io`).
 ``--drug`` and ``--concentration-ug-ml`` state the drug and concentration in the syringe; they must
-match the loaded design's (:mod:`contracts.drug`: a generated module's ``DRUG`` and
+match the loaded design's (:mod:`pressor.contracts.drug`: a generated module's ``DRUG`` and
 ``DRUG_CONCENTRATION_UG_ML``, else phenylephrine at 100 µg/ml) and default to them
-(:mod:`runtime.inputs.dosing` checks them, the drug library and ``--weight-kg``);
+(:mod:`pressor.runtime.inputs.dosing` checks them, the drug library and ``--weight-kg``);
 :func:`check_device_hello` refuses a device whose hello announces another drug, another
 concentration or a pump that cannot reach the controller's maximum rate (docs/PROTOCOL.md,
 "Clinician's input"), :func:`check_link_hello` one whose sample period, link mode or announced
@@ -24,10 +24,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from contracts.checks import allowed_range, check_range
-from contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
-from contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS
-from plumbing.usage import UsageError
+from pressor.contracts.checks import allowed_range, check_range
+from pressor.contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
+from pressor.contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS
+from pressor.plumbing.usage import UsageError
 
 #: MAP targets the runtime accepts (mmHg), from any source
 TARGET_MIN_MMHG = 50.0
@@ -50,7 +50,7 @@ class ClinicianInput:
         Read a new target from each stdin line while running.
     drug
         Drug in the syringe (lower case); the loaded design's once checked
-        (:mod:`runtime.inputs.dosing`).
+        (:mod:`pressor.runtime.inputs.dosing`).
     concentration_ug_ml
         Syringe concentration (µg/ml); the loaded design's once checked.
     drug_given, concentration_given
@@ -59,8 +59,8 @@ class ClinicianInput:
         The patient's weight (kg, ``--weight-kg``), or ``None``.
     dose_limits
         The drug library's limits for this drug, syringe and weight
-        (:class:`runtime.inputs.drug_library.DoseLimits`), set by
-        :func:`runtime.inputs.dosing.bind_syringe`.
+        (:class:`pressor.runtime.inputs.drug_library.DoseLimits`), set by
+        :func:`pressor.runtime.inputs.dosing.bind_syringe`.
     dose_unit
         The unit of the library's limits for this drug (``ug/min`` or ``ug/kg/min``).
     """
@@ -85,7 +85,7 @@ class ClinicianInput:
 def number_in(text: str, lo: float, hi: float, unit: str, *, lo_open: bool = False) -> float:
     """The number ``text`` holds if it lies in [lo, hi] (``lo_open``: (lo, hi]) ``unit``;
     ``ValueError`` naming the text, its value and the allowed range otherwise (NaN included;
-    :func:`contracts.checks.check_range`)."""
+    :func:`pressor.contracts.checks.check_range`)."""
     try:
         value = float(text)
     except ValueError:
@@ -195,7 +195,7 @@ def clinician_input(args: argparse.Namespace) -> ClinicianInput:
 
     Raises
     ------
-    plumbing.usage.UsageError
+    pressor.plumbing.usage.UsageError
         Both ``--target-mmhg`` and ``--target-file``; ``--target-stdin`` without a starting
         target; a target file that cannot be read or holds no valid target.
     """
@@ -245,7 +245,7 @@ def check_link_hello(peer: Any, period_s: float, rate_hz: float, link_mode: int)
         One line naming both values: ``REFUSAL_SAMPLE_PERIOD`` (the periods differ by more than
         1e-9 s), ``REFUSAL_SENSOR_NOISE`` (noise not in [0, 50] mmHg) or ``REFUSAL_LINK_MODE``.
     """
-    from link import (
+    from pressor.link import (
         LINK_REALTIME,
         REFUSAL_LINK_MODE,
         REFUSAL_SAMPLE_PERIOD,
@@ -286,7 +286,7 @@ def check_device_hello(peer: Any, max_rate_ml_h: float, clinician: ClinicianInpu
         The controller's largest command (ml/h).
     clinician
         The drug and concentration the loaded design is for (checked against the design by
-        :func:`runtime.inputs.dosing.bind_syringe`).
+        :func:`pressor.runtime.inputs.dosing.bind_syringe`).
 
     Raises
     ------
@@ -297,7 +297,7 @@ def check_device_hello(peer: Any, max_rate_ml_h: float, clinician: ClinicianInpu
         controller commands; a larger pump maximum is fine: the runtime never commands more than
         the controller's).
     """
-    from link import REFUSAL_CONCENTRATION, REFUSAL_DRUG, REFUSAL_PUMP_MAXIMUM, HelloRefused
+    from pressor.link import REFUSAL_CONCENTRATION, REFUSAL_DRUG, REFUSAL_PUMP_MAXIMUM, HelloRefused
 
     drug = peer.drug.strip().lower()
     if drug != clinician.drug:

@@ -3,7 +3,7 @@
 ``pressor run`` and ``pressor sil`` share the runtime's options (:func:`add_run_options`); the
 parsed namespace becomes a frozen :class:`RunConfig` in :func:`run_config`, which checks every
 value before anything starts (output directories, the controller, the fault specs). A bad value
-raises :class:`plumbing.usage.UsageError` naming the option, the value and the allowed range;
+raises :class:`pressor.plumbing.usage.UsageError` naming the option, the value and the allowed range;
 past this boundary the run code trusts its configuration.
 """
 
@@ -15,13 +15,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from contracts.checks import check_range
-from contracts.faults import FaultSpec, FaultSpecError, parse_faults
-from plumbing.usage import UsageError
-from runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S
-from runtime.estimation.sources import SOURCES
-from runtime.inputs.clinician import ClinicianInput
-from runtime.shell.cpu_latency import MAX_LATENCY_US
+from pressor.contracts.checks import check_range
+from pressor.contracts.faults import FaultSpec, FaultSpecError, parse_faults
+from pressor.plumbing.usage import UsageError
+from pressor.runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S
+from pressor.runtime.estimation.sources import SOURCES
+from pressor.runtime.inputs.clinician import ClinicianInput
+from pressor.runtime.shell.cpu_latency import MAX_LATENCY_US
 
 #: what ``--schedule`` means, for the help of every command that takes it
 SCHEDULE_HELP = (
@@ -52,7 +52,7 @@ class RunConfig:
     ----------
     controller
         The ``--controller`` spec (``lpv``, ``pi``, ``smith[:LAMBDA_S]``, a generated module or a
-        plugin, :mod:`runtime.inputs.controller_plugin`).
+        plugin, :mod:`pressor.runtime.inputs.controller_plugin`).
     rate_hz
         Loop rate (Hz).
     realtime
@@ -78,9 +78,9 @@ class RunConfig:
         Ticks to run (0: until the device ends).
     schedule
         The scheduling source (``oracle``, ``estimated``, ``nominal``, ``validated``;
-        :func:`runtime.estimation.sources.make_schedule`).
+        :func:`pressor.runtime.estimation.sources.make_schedule`).
     clinician
-        ``pressor run``'s target and syringe options (:mod:`runtime.inputs.clinician`); ``None``
+        ``pressor run``'s target and syringe options (:mod:`pressor.runtime.inputs.clinician`); ``None``
         (``pressor sil``): the device's target, the shipped designs' drug and concentration.
     sample_age_limit_s
         Age (s) past which the held MAP sample is stale (the supervisor's ``STALE_SAMPLE``).
@@ -155,7 +155,7 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
         " other shipped designs, docs/DRUGS.md and docs/SCHEDULING.md), pi, smith[:LAMBDA_S]"
         " (Smith predictor, closed-loop time constant LAMBDA_S in s, default 30 s), a generated .py, or your own"
         " class: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed 'pressor.controllers'"
-        " entry point NAME[:ARGS] (ARGS: key=value,...; runtime.inputs.controller_plugin)",
+        " entry point NAME[:ARGS] (ARGS: key=value,...; pressor.runtime.inputs.controller_plugin)",
     )
     p.add_argument(
         "--schedule",
@@ -249,12 +249,12 @@ def run_config(
         ``pressor run --ticks`` (0: until the device ends).
     clinician
         ``pressor run``'s checked target and syringe options
-        (:func:`runtime.inputs.clinician.clinician_input`); checked against the loaded design and
-        the drug library (:func:`runtime.inputs.dosing.bind_syringe`).
+        (:func:`pressor.runtime.inputs.clinician.clinician_input`); checked against the loaded design and
+        the drug library (:func:`pressor.runtime.inputs.dosing.bind_syringe`).
 
     Raises
     ------
-    plumbing.usage.UsageError
+    pressor.plumbing.usage.UsageError
         A value out of range, an output directory that does not exist, a controller that does
         not load, a bad fault spec.
     """
@@ -273,8 +273,8 @@ def run_config(
         )
     controller = load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device
     if clinician is not None:  # pressor run: the syringe and patient against design and library
-        from contracts.drug import binding_of
-        from runtime.inputs.dosing import bind_syringe
+        from pressor.contracts.drug import binding_of
+        from pressor.runtime.inputs.dosing import bind_syringe
 
         try:
             design = binding_of(controller)
@@ -318,8 +318,8 @@ def _check_out_path(opt: str, path: Path | None, suffix: str | None = None) -> N
 
 def load_controller(spec: str, period_s: float) -> Any:
     """The controller ``spec`` names at ``period_s`` (s); a :class:`UsageError` if it does not load."""
-    from runtime.inputs.controller_loader import ControllerSpecError
-    from runtime.inputs.controller_loader import load_controller as load
+    from pressor.runtime.inputs.controller_loader import ControllerSpecError
+    from pressor.runtime.inputs.controller_loader import load_controller as load
 
     try:
         return load(spec, sample_period_s=period_s)
@@ -337,10 +337,10 @@ def load_signing(config: RunConfig, generate: bool) -> Any:
     """The link's :class:`Signing`, or ``None`` with ``--no-signing``.
 
     From ``--signing-key``; else a fresh key if ``generate`` (``pressor sil``); else the key file
-    at :func:`link.signing.default_key_path` (``pressor run``). A key file that is missing or
+    at :func:`pressor.link.signing.default_key_path` (``pressor run``). A key file that is missing or
     cannot be read is a :class:`UsageError` saying how to make one.
     """
-    from link.signing import Signing, default_key_path
+    from pressor.link.signing import Signing, default_key_path
 
     if not config.signed:
         return None

@@ -2,9 +2,9 @@
 
 A plugin (``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]``, an installed ``pressor.controllers``
 entry point) is any class satisfying the protocol, loaded and checked by
-:mod:`runtime.inputs.controller_plugin`; the integrity check below is for generated modules only.
+:mod:`pressor.runtime.inputs.controller_plugin`; the integrity check below is for generated modules only.
 
-``smith`` is the scheduled Smith predictor of :mod:`baselines.smith` with its default
+``smith`` is the scheduled Smith predictor of :mod:`pressor.baselines.smith` with its default
 closed-loop time constant (30 s); ``smith:45`` sets λ = 45 s (allowed range in that module).
 
 ``lpv`` is the generated module for the shipped default design, committed at
@@ -32,10 +32,10 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
-from baselines.pi import PIController
-from baselines.smith import LAMBDA_MAX_S, LAMBDA_MIN_S, SmithController
-from contracts.controller import Controller
-from contracts.module_hash import ARTIFACT_SHA_LINE, MODULE_SHA_LINE, module_text_sha256
+from pressor.baselines.pi import PIController
+from pressor.baselines.smith import LAMBDA_MAX_S, LAMBDA_MIN_S, SmithController
+from pressor.contracts.controller import Controller
+from pressor.contracts.module_hash import ARTIFACT_SHA_LINE, MODULE_SHA_LINE, module_text_sha256
 
 GENERATED_DIR = Path(__file__).resolve().parents[1] / "generated"
 DEFAULT_LPV_MODULE = GENERATED_DIR / "lpv_map_controller.py"
@@ -170,7 +170,7 @@ def load_generated_module(path: Path, artifact_sha256: str | None = None) -> Mod
 
 
 #: how a research build of a law no certificate covers marks its generation command
-#: (``benchmarks/uncertified_module.py``)
+#: (``research/uncertified_module.py``)
 UNCERTIFIED_MARK = "pressor codegen UNCERTIFIED "
 
 
@@ -187,7 +187,7 @@ def load_controller(
     spec
         ``"pi"`` (the paper's PI baseline), ``"smith"`` / ``"smith:LAMBDA_S"`` (the scheduled Smith
         predictor, λ in s), ``"lpv"`` / ``"lpv:NAME"`` (a shipped generated LPV module), a path
-        to a generated ``.py`` module, or a plugin (:mod:`runtime.inputs.controller_plugin`:
+        to a generated ``.py`` module, or a plugin (:mod:`pressor.runtime.inputs.controller_plugin`:
         ``MODULE:CLASS[:ARGS]``,
         ``FILE.py:CLASS[:ARGS]`` or an installed ``pressor.controllers`` entry point name).
     sample_period_s
@@ -208,7 +208,7 @@ def load_controller(
         return PIController(sample_period_s=sample_period_s)
     if spec == SMITH_PREFIX or spec.startswith(SMITH_PREFIX + ":"):
         return _smith(spec, sample_period_s)
-    from runtime.inputs.controller_plugin import is_plugin_spec, load_plugin_controller
+    from pressor.runtime.inputs.controller_plugin import is_plugin_spec, load_plugin_controller
 
     named = lpv_design_module(spec)
     if named is None and is_plugin_spec(spec):
@@ -218,7 +218,7 @@ def load_controller(
         raise ControllerSpecError(
             f"--controller {spec!r}: expected 'pi', 'smith[:LAMBDA_S]', 'lpv', a path to a generated"
             " .py module, or a plugin: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed"
-            " 'pressor.controllers' entry point (runtime.inputs.controller_plugin)"
+            " 'pressor.controllers' entry point (pressor.runtime.inputs.controller_plugin)"
         )
     module = load_generated_module(path, artifact_sha256)
     command = str(getattr(module, "GENERATION_COMMAND", ""))
@@ -240,7 +240,7 @@ def load_controller(
 def controller_name(spec: str) -> str:
     """A short name for ``spec`` (the link's hello, file names): ``pi``, ``lpv``, ``smith:45`` as
     given, a generated module's file stem, a plugin's class name."""
-    from runtime.inputs.controller_plugin import is_plugin_spec, plugin_label
+    from pressor.runtime.inputs.controller_plugin import is_plugin_spec, plugin_label
 
     if spec in ("pi", "lpv") or spec == SMITH_PREFIX or spec.startswith(SMITH_PREFIX + ":"):
         return spec

@@ -1,14 +1,14 @@
 """Controllers as plugins: ``--controller MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]``, ``NAME[:ARGS]``.
 
-Any class whose instances satisfy :class:`contracts.controller.Controller` runs wherever the shipped
+Any class whose instances satisfy :class:`pressor.contracts.controller.Controller` runs wherever the shipped
 controllers run (``pressor sil``, ``pressor run``, ``pressor trial``, :mod:`pressor.api`), behind
-the same supervisor, clamps and rate limits: the runtime's core (:mod:`runtime.core.closed_loop`)
+the same supervisor, clamps and rate limits: the runtime's core (:mod:`pressor.runtime.core.closed_loop`)
 steps it and the supervisor turns what it returns into the pump command (non-finite:
 ``COMMAND_INVALID``, HOLD; outside [0, ``max_rate_ml_h``]: clamped, ``COMMAND_CLAMPED``, alarm). A
 controller that raises ends ``pressor sil`` and ``trial`` with
-:class:`runtime.core.closed_loop.ControllerError` naming it; under ``pressor run`` the supervisor
+:class:`pressor.runtime.core.closed_loop.ControllerError` naming it; under ``pressor run`` the supervisor
 holds the last command until the clinician acknowledges (``CONTROLLER_FAULT``,
-:mod:`runtime.core.supervisor`). The whole contract: docs/INTERFACES.md, "Controller".
+:mod:`pressor.runtime.core.supervisor`). The whole contract: docs/INTERFACES.md, "Controller".
 
 Spec forms (the first that applies):
 
@@ -47,14 +47,14 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
-from contracts.controller import Controller
-from runtime.inputs.controller_loader import ControllerSpecError
+from pressor.contracts.controller import Controller
+from pressor.runtime.inputs.controller_loader import ControllerSpecError
 
 #: the entry point group installed packages register controllers under (name = "module:Class")
 ENTRY_POINT_GROUP = "pressor.controllers"
 #: largest pump limit (ml/h) a controller may declare (the supervisor's own bound)
 MAX_RATE_LIMIT_ML_H = 10000.0
-#: the flags a controller's ``status`` carries (contracts.controller.ControllerStatus)
+#: the flags a controller's ``status`` carries (pressor.contracts.controller.ControllerStatus)
 STATUS_FLAGS = ("saturated", "rho_clamped", "rho_rate_limited")
 
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
@@ -183,7 +183,7 @@ def load_plugin_controller(spec: str, sample_period_s: float) -> Controller:
     ControllerPluginError
         Naming the spec, the module, the class and what is missing or out of range: a module
         that does not import, no such class, a constructor that fails, or an instance that does
-        not satisfy :class:`contracts.controller.Controller`.
+        not satisfy :class:`pressor.contracts.controller.Controller`.
     """
     module, cls_name, args_text = split_spec(spec)
     where = f"--controller {spec!r}"
@@ -217,7 +217,7 @@ def _takes_period(cls: Any, positional: list[Any]) -> bool:
 
 
 def check_controller(controller: Any, what: str, sample_period_s: float) -> None:
-    """Check that ``controller`` satisfies :class:`contracts.controller.Controller` at the loop
+    """Check that ``controller`` satisfies :class:`pressor.contracts.controller.Controller` at the loop
     period ``sample_period_s`` (s); ``what`` starts the message.
 
     Raises
@@ -241,7 +241,7 @@ def check_controller(controller: Any, what: str, sample_period_s: float) -> None
         missing.append(f"status with {', '.join(STATUS_FLAGS)}")
     if missing:
         raise ControllerPluginError(
-            f"{what} does not satisfy contracts.controller.Controller: missing {'; '.join(missing)}"
+            f"{what} does not satisfy pressor.contracts.controller.Controller: missing {'; '.join(missing)}"
         )
     try:
         inspect.signature(controller.step).bind(0.0, 0.0, 0.0, 0.0, 0.0)

@@ -3,7 +3,7 @@
 :func:`bind_syringe` checks, before any device is opened:
 
 1. ``--drug`` and ``--concentration-ug-ml``, when given, against the loaded design's binding
-   (:func:`contracts.drug.binding_of`): the shipped design's gains count ml/h of its syringe, so
+   (:func:`pressor.contracts.drug.binding_of`): the shipped design's gains count ml/h of its syringe, so
    another drug or concentration is refused naming both (no rescaling: docs/DRUGS.md);
 2. the drug and concentration against the drug library (``--drug-library``, default the shipped
    ``runtime/inputs/drug_library.toml``): a drug it does not list, or a concentration it does not
@@ -11,7 +11,7 @@
 3. ``--weight-kg`` (kg, in [30, 250]): required when the drug's limits are per kg.
 
 It returns the clinician input with the design's drug and concentration and the
-:class:`runtime.inputs.drug_library.DoseLimits` the supervisor enforces. :func:`dose_summary` is the
+:class:`pressor.runtime.inputs.drug_library.DoseLimits` the supervisor enforces. :func:`dose_summary` is the
 summary's ``dose`` record: the commanded doses in µg/min and, with a weight, µg/kg/min.
 """
 
@@ -23,11 +23,11 @@ import math
 from pathlib import Path
 from typing import Any
 
-from contracts.checks import allowed_range
-from contracts.drug import DrugBinding, dose_ug_kg_min, dose_ug_min
-from plumbing.usage import UsageError
-from runtime.inputs.clinician import ClinicianInput, argtype, number_in
-from runtime.inputs.drug_library import (
+from pressor.contracts.checks import allowed_range
+from pressor.contracts.drug import DrugBinding, dose_ug_kg_min, dose_ug_min
+from pressor.plumbing.usage import UsageError
+from pressor.runtime.inputs.clinician import ClinicianInput, argtype, number_in
+from pressor.runtime.inputs.drug_library import (
     WEIGHT_MAX_KG,
     WEIGHT_MIN_KG,
     DrugLibraryError,
@@ -86,7 +86,7 @@ def bind_syringe(
 
     Raises
     ------
-    plumbing.usage.UsageError
+    pressor.plumbing.usage.UsageError
         One line naming both values (the option's and the design's or the library's).
     """
     where = f"the loaded design (--controller {controller}) is for {design.describe()}"
@@ -185,7 +185,7 @@ def log_dose_series(recorder: Any, trajectory: dict[str, Any], clinician: Clinic
 
     ``/dose/command_ug_min`` always, ``/dose/command_ug_kg_min`` with a weight, and
     ``/dose/hard_max``, ``/dose/soft_max`` in the library's unit for the drug; on the tick and
-    sim-time timelines of the loop's series (:data:`runtime.record.blueprint.DOSE_ENTITIES`).
+    sim-time timelines of the loop's series (:data:`pressor.runtime.record.blueprint.DOSE_ENTITIES`).
     """
     import numpy as np
 

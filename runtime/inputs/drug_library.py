@@ -5,7 +5,7 @@ docs/DRUGS.md); ``pressor run --drug-library FILE`` reads another. :func:`load_l
 field and raises :class:`DrugLibraryError` naming the file, the field, the value and the allowed
 range. :meth:`DrugEntry.limits` turns one drug's limits, the syringe concentration (µg/ml) and the
 patient's weight (kg) into the :class:`DoseLimits` the supervisor enforces
-(:mod:`runtime.core.supervisor`): the dose limits are converted to ml/h once, at the start, rounded
+(:mod:`pressor.runtime.core.supervisor`): the dose limits are converted to ml/h once, at the start, rounded
 down so that no command at or below them exceeds the dose limit.
 """
 
@@ -18,8 +18,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS, dose_ug_min
-from runtime.core.dose_guard import DoseLimits
+from pressor.contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS, dose_ug_min
+from pressor.runtime.core.dose_guard import DoseLimits
 
 #: the patient weights ``--weight-kg`` accepts (kg): adults, whom the designs' patient models
 #: represent (a child under 30 kg is outside them); above 250 kg per-kg dosing by total weight is
@@ -99,7 +99,7 @@ def _rate_below(dose_ug_per_min: float, c: float) -> float:
 
 def default_library_path() -> Path:
     """Path of the shipped drug library."""
-    return Path(str(resources.files("runtime.inputs") / "drug_library.toml"))
+    return Path(str(resources.files("pressor.runtime.inputs") / "drug_library.toml"))
 
 
 def _bad(path: Path, fieldname: str, value: Any, allowed: str) -> DrugLibraryError:

@@ -1,7 +1,7 @@
 """The runtime's own MAP target, changed while the loop runs (``pressor run --target-*``).
 
 A :class:`TargetSource` holds the target the clinician gave the runtime. The loop it is given to
-(:class:`runtime.shell.loop.Loop`'s ``target``, which runs every tick through it, silent ones
+(:class:`pressor.runtime.shell.loop.Loop`'s ``target``, which runs every tick through it, silent ones
 included) asks it at each tick boundary to :meth:`~TargetSource.apply` itself to the tick's
 inputs: it first reads what arrived since the previous tick (the ``--target-file`` when its
 modification time, size or inode changed; complete lines on stdin with ``--target-stdin``), then
@@ -15,7 +15,7 @@ is ignored (a writer that truncates the file before it writes).
 The same two inputs carry the clinician's acknowledgement: the line ``ack`` on stdin, or an
 ``ack`` line in the target file (each time the file changes and holds one; the file read at start
 acknowledges nothing). It is taken at the next tick: the supervisor judges it
-(:func:`runtime.core.supervisor_io.judge_ack`: HOLD or FAILSAFE resume at once, through RECOVERING,
+(:func:`pressor.runtime.core.supervisor_io.judge_ack`: HOLD or FAILSAFE resume at once, through RECOVERING,
 only if no fault holds the loop at that tick) and the outcome is printed on stderr, logged to the
 event log with the tick and the time, and listed in :meth:`~TargetSource.summary` (``acks``).
 
@@ -32,9 +32,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, TextIO
 
-from link import TickInputs
-from runtime.core.supervisor import AckOutcome
-from runtime.inputs.clinician import ClinicianInput, parse_target, split_ack
+from pressor.link import TickInputs
+from pressor.runtime.core.supervisor import AckOutcome
+from pressor.runtime.inputs.clinician import ClinicianInput, parse_target, split_ack
 
 
 class TargetSource:
@@ -144,7 +144,7 @@ class TargetSource:
     def apply(self, inp: TickInputs, recorder: Any = None) -> TickInputs:
         """Read pending changes, apply them at this tick, and return ``inp`` carrying the
         runtime's target (``target_tick`` = the tick: it is current). Changes and refusals are
-        logged to ``recorder`` (a :class:`runtime.record.recorder.Recorder`) when given."""
+        logged to ``recorder`` (a :class:`pressor.runtime.record.recorder.Recorder`) when given."""
         self.poll()
         tick, t = inp.tick, inp.sim_time_s
         if not self._announced:
@@ -182,7 +182,7 @@ class TargetSource:
     def log_ack(
         self, outcome: AckOutcome, sources: list[str], tick: int, t: float, recorder: Any = None
     ) -> None:
-        """Keep, print and log (to ``recorder``, a :class:`runtime.record.recorder.Recorder`) what
+        """Keep, print and log (to ``recorder``, a :class:`pressor.runtime.record.recorder.Recorder`) what
         became of the acknowledgement from ``sources`` taken at ``tick`` (sim time ``t``, s)."""
         source = ", ".join(dict.fromkeys(sources))
         self.acks.append(

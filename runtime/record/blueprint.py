@@ -98,7 +98,7 @@ def _sched_view(index: int) -> rrb.TimeSeriesView:
     return _plot(f"{name} ({unit})", [device, used, *estimated, *BOX_ENTITIES[index]])
 
 
-#: the dose channels of a ``pressor run`` recording (:func:`runtime.inputs.dosing.log_dose_series`)
+#: the dose channels of a ``pressor run`` recording (:func:`pressor.runtime.inputs.dosing.log_dose_series`)
 DOSE_ENTITIES = (
     "/dose/command_ug_min",
     "/dose/command_ug_kg_min",

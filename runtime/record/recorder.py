@@ -1,7 +1,7 @@
 """The rerun recorder: every loop signal to an ``.rrd`` file, batched off the hot path.
 
 Per tick the loop calls :meth:`Recorder.record_tick` with the closed-loop core's
-:class:`~runtime.core.closed_loop.TickRecord` (or :meth:`Recorder.record` with one float per
+:class:`~pressor.runtime.core.closed_loop.TickRecord` (or :meth:`Recorder.record` with one float per
 channel); the row goes into a preallocated ``float64`` array (``chunk_ticks`` rows). When the array
 is full — and at :meth:`Recorder.close` — each channel is sent as one column with ``send_columns``
 on two timelines, ``tick`` (sequence) and ``sim_time`` (duration, s). ``log()`` costs ~30 µs a call
@@ -20,7 +20,7 @@ Entities (units in the names): see :data:`CHANNELS`; besides them, the design bo
 controller (:meth:`Recorder.use_controller`, two points per bound: first and last tick), markers on
 the MAP plot where a disturbance or fault starts (:meth:`Recorder.plan_markers`) and on the safety
 plot at each supervisor transition. The viewer's layout is
-:func:`runtime.record.blueprint.default_blueprint` (docs/VIEWER.md).
+:func:`pressor.runtime.record.blueprint.default_blueprint` (docs/VIEWER.md).
 """
 
 from __future__ import annotations
@@ -34,12 +34,12 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from contracts.checks import check_int_range
-from contracts.controller import Controller
-from plumbing.files import AtomicFile
-from runtime.core.closed_loop import TickRecord
-from runtime.core.supervisor_config import sched_limits_of
-from runtime.record.blueprint import (
+from pressor.contracts.checks import check_int_range
+from pressor.contracts.controller import Controller
+from pressor.plumbing.files import AtomicFile
+from pressor.runtime.core.closed_loop import TickRecord
+from pressor.runtime.core.supervisor_config import sched_limits_of
+from pressor.runtime.record.blueprint import (
     BOX_COLOR,
     BOX_ENTITIES,
     DISTURBANCE_MARKERS,
@@ -105,7 +105,7 @@ class Recorder:
         Rows buffered before a flush, in [16, 1_000_000].
     dose_view
         Open the viewer with the dose plot (``pressor run``:
-        :func:`runtime.inputs.dosing.log_dose_series` adds its series).
+        :func:`pressor.runtime.inputs.dosing.log_dose_series` adds its series).
     """
 
     def __init__(

@@ -16,7 +16,7 @@ The loop never calls ``time`` itself; it asks a clock. Two clocks offer the same
     accumulate. ``wait_until`` sleeps for the bulk of the interval and spins only the last
     ``spin_s`` (default 0.2 ms) to trade a little CPU for sub-millisecond release accuracy. Host
     stalls of 10–20 ms happen whatever the sleep method (docs/PLATFORM-NOTES.md); they show up as lateness
-    and skipped periods in :mod:`runtime.shell.timing`, never as drift.
+    and skipped periods in :mod:`pressor.runtime.shell.timing`, never as drift.
 
 Both return seconds as float. ``perf_counter_s`` (always the wall clock) is used to measure the
 loop's own execution time in both modes: execution time is a property of the host, not of sim time.
@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import time
 
-from contracts.checks import check_range
+from pressor.contracts.checks import check_range
 
 perf_counter_s = time.perf_counter
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import os
 import struct
 
-from contracts.checks import check_int_range
+from pressor.contracts.checks import check_int_range
 
 #: the PM QoS device of the CPU wake-up latency (µs, a native int32)
 QOS_DEVICE = "/dev/cpu_dma_latency"

@@ -1,15 +1,15 @@
 """The fixed-rate loop: the shell around the controller step (PX4 module style).
 
 Each tick: read the newest sample, target and scheduling parameters from the link, hand them with
-the pump status and the link's health to the closed-loop core (:mod:`runtime.core.closed_loop`, the
+the pump status and the link's health to the closed-loop core (:mod:`pressor.runtime.core.closed_loop`, the
 same core the in-process trial runs), send the command, record. The loop holds only link I/O,
-recording and its own timing (:class:`~runtime.shell.timing.TimingStats`).
+recording and its own timing (:class:`~pressor.runtime.shell.timing.TimingStats`).
 
-Two ways to keep time (injected clocks, :mod:`runtime.shell.clock`):
+Two ways to keep time (injected clocks, :mod:`pressor.runtime.shell.clock`):
 
 Lockstep (default in ``pressor sil``)
     The device sends tick k's sample and waits for tick k's command (PX4 SITL style); the
-    :class:`~runtime.shell.clock.VirtualClock` follows the sample's sim time, in the in-process
+    :class:`~pressor.runtime.shell.clock.VirtualClock` follows the sample's sim time, in the in-process
     simulator's order, so a clean serial run reproduces it sample for sample. A device silent for
     ``stall_timeout_s`` of *wall* time ends the run (:class:`DeviceStalled`) rather than a link
     loss, which would make the trajectory depend on host load.
@@ -22,13 +22,13 @@ Lockstep (default in ``pressor sil``)
 
 Real time (``--realtime``)
     Ticks are released at absolute deadlines ``t0 + k·Ts``
-    (:class:`~runtime.shell.clock.MonotonicClock`); the newest sample is answered, sample age and
+    (:class:`~pressor.runtime.shell.clock.MonotonicClock`); the newest sample is answered, sample age and
     link silence are wall-clock (real watchdogs), and lateness and skipped periods are counted.
 
 Execution time = wall time from release (sample decoded, or deadline reached) to the command
 written; recording comes after. Real-time ticks run slower than lockstep ones: after a period
 asleep the caches are cold (figures: docs/notes/benchmarks.md, "Design measurements"). A stop signal
-(:mod:`runtime.shell.interrupt`) ends either loop at a tick boundary after a safe-rate command.
+(:mod:`pressor.runtime.shell.interrupt`) ends either loop at a tick boundary after a safe-rate command.
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ from contextlib import suppress
 from dataclasses import replace
 from typing import Any, Protocol
 
-from contracts.controller import Controller
-from link import (
+from pressor.contracts.controller import Controller
+from pressor.link import (
     MODE_AUTO,
     MODE_SAFE,
     STATE_FINISHED,
@@ -48,16 +48,21 @@ from link import (
     RuntimeSession,
     TickInputs,
 )
-from runtime.core.closed_loop import ClosedLoopCore, LinkHealth
-from runtime.core.events import EventLog
-from runtime.core.scheduling import ScheduleSource
-from runtime.core.supervisor import AckOutcome, Supervisor
-from runtime.core.supervisor_config import State
-from runtime.record.recorder import Recorder
-from runtime.shell.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
-from runtime.shell.interrupt import signal_name, stop_requested
-from runtime.shell.timing import TimingStats
-from runtime.shell.trajectory import LoopResult, Trajectory
+from pressor.runtime.core.closed_loop import ClosedLoopCore, LinkHealth
+from pressor.runtime.core.events import EventLog
+from pressor.runtime.core.scheduling import ScheduleSource
+from pressor.runtime.core.supervisor import AckOutcome, Supervisor
+from pressor.runtime.core.supervisor_config import State
+from pressor.runtime.record.recorder import Recorder
+from pressor.runtime.shell.clock import (
+    MonotonicClock,
+    PeriodicSchedule,
+    VirtualClock,
+    perf_counter_s,
+)
+from pressor.runtime.shell.interrupt import signal_name, stop_requested
+from pressor.runtime.shell.timing import TimingStats
+from pressor.runtime.shell.trajectory import LoopResult, Trajectory
 
 _NAN = math.nan
 
@@ -68,7 +73,7 @@ class DeviceStalled(RuntimeError):
 
 class TickTarget(Protocol):
     """What the loop asks each tick of the runtime's own target (an input given to the loop, not a
-    subclass of it: :class:`runtime.inputs.target_source.TargetSource`)."""
+    subclass of it: :class:`pressor.runtime.inputs.target_source.TargetSource`)."""
 
     def apply(self, inp: TickInputs, recorder: Any = None) -> TickInputs: ...
     def take_acks(self) -> list[str]: ...
@@ -83,7 +88,7 @@ class Loop:
     Parameters
     ----------
     controller
-        Any :class:`~contracts.controller.Controller` (stepped once per tick).
+        Any :class:`~pressor.contracts.controller.Controller` (stepped once per tick).
     supervisor
         The safety supervisor (its config's period must match the controller's).
     endpoint
@@ -97,12 +102,12 @@ class Loop:
         runs); ``None`` keeps every tick.
     on_tick
         Called after every tick with ``(tick, state, fault bits, command ml/h)`` (e.g. a
-        :class:`contracts.faults.FaultScorer`'s ``update``).
+        :class:`pressor.contracts.faults.FaultScorer`'s ``update``).
     schedule
         The scheduling source the core steps the controller on
-        (:func:`runtime.estimation.sources.make_schedule`); default the oracle.
+        (:func:`pressor.runtime.estimation.sources.make_schedule`); default the oracle.
     prog
-        Program name in front of the controller-fault lines on stderr (:mod:`runtime.core.events`).
+        Program name in front of the controller-fault lines on stderr (:mod:`pressor.runtime.core.events`).
     ack_input
         Whether the clinician can acknowledge (``pressor run --target-stdin`` or
         ``--target-file``): what those lines say ends a controller fault's hold.

@@ -8,7 +8,7 @@ device process pins itself on start (``pressor device --cpu N``, :func:`parse_cp
 Why two CPUs. ``auto`` puts the two ends on two different CPUs: the loop thread stays on the CPU
 it runs on and the device takes another. Each end then keeps its caches, and the runtime records
 tick k while the device computes tick k+1 (recording happens after the command is sent). With the
-CPU wake-up latency request held (:mod:`runtime.shell.cpu_latency`), two CPUs beat one (development
+CPU wake-up latency request held (:mod:`pressor.runtime.shell.cpu_latency`), two CPUs beat one (development
 VM, LPV, 30 min at 10 Hz: 610-680x split, 620-650x unpinned, 460-470x on one CPU); without it split
 and unpinned give ~400x and one CPU ~330x. ``benchmarks/sil.py`` measures the bare pty round trip
 each way. Only the loop thread is pinned; the recorder's rerun threads stay free.

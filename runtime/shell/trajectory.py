@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from runtime.core.closed_loop import TickRecord
+from pressor.runtime.core.closed_loop import TickRecord
 
 
 @dataclass
@@ -120,7 +120,7 @@ class LoopResult:
     wall_s: float = 0.0
     #: where the run executed (filled by the CLI: CPU wake-up latency request, CPU pinning)
     host: dict[str, Any] = field(default_factory=dict)
-    #: the signal that stopped the run early (:mod:`runtime.shell.interrupt`), else None
+    #: the signal that stopped the run early (:mod:`pressor.runtime.shell.interrupt`), else None
     stop_signal: int | None = None
-    #: controller failures the supervisor held on (``pressor run``; :mod:`runtime.core.events`)
+    #: controller failures the supervisor held on (``pressor run``; :mod:`pressor.runtime.core.events`)
     controller_faults: list[dict[str, Any]] = field(default_factory=list)

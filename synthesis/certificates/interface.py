@@ -1,7 +1,7 @@
 """What every delay-dependent analysis LMI shares: the accepted inputs and the result.
 
-Both analyses (:mod:`synthesis.certificates.jensen.analysis`, the Jensen functional of Theorem 1,
-and :mod:`synthesis.certificates.wirtinger.analysis`) take the same closed loops, normalised
+Both analyses (:mod:`pressor.synthesis.certificates.jensen.analysis`, the Jensen functional of Theorem 1,
+and :mod:`pressor.synthesis.certificates.wirtinger.analysis`) take the same closed loops, normalised
 parameters, rate bounds and delay range, validated by :func:`checked_inputs`, and return an
 :class:`AnalysisResult`.
 """
@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from synthesis.problem.basis import P_DEPENDENCES
-from synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.problem.basis import P_DEPENDENCES
+from pressor.synthesis.problem.closed_loop import DelaySystem
 
 __all__ = ["P_DEPENDENCES", "AnalysisResult", "checked_inputs"]
 
@@ -49,11 +49,11 @@ class AnalysisResult:
         The constant term P0 of the certificate mapped back to the original (unscaled,
         untransformed) state coordinates, up to a positive factor (None when the solve failed); used
         to whiten the state for a better-conditioned second solve
-        (:func:`synthesis.certificates.state_transform.whitening_transform`).
+        (:func:`pressor.synthesis.certificates.state_transform.whitening_transform`).
     certificate
         The Lyapunov-Krasovskii matrices divided by gamma, with the state transform and time
         scale they live in, for analyses that return them
-        (:mod:`synthesis.certificates.wirtinger.analysis`); None here.
+        (:mod:`pressor.synthesis.certificates.wirtinger.analysis`); None here.
     """
 
     certified: bool

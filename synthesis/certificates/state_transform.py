@@ -14,7 +14,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
-from synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.problem.closed_loop import DelaySystem
 
 __all__ = ["conditioning_transform", "transform_of", "whitening_transform"]
 

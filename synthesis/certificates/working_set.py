@@ -1,7 +1,7 @@
 """The solve-and-recheck driver of every analysis LMI, and its working set.
 
-An analysis (:mod:`synthesis.certificates.jensen.analysis`,
-:mod:`synthesis.certificates.wirtinger.analysis`) supplies its own steps (:class:`Steps`: how to
+An analysis (:mod:`pressor.synthesis.certificates.jensen.analysis`,
+:mod:`pressor.synthesis.certificates.wirtinger.analysis`) supplies its own steps (:class:`Steps`: how to
 build and solve its conic problem at a set of points, optionally back off from the boundary, and
 re-check a solution at every point and rate vertex in floating point); :func:`solve_and_recheck`
 runs them: solve, back off if asked, re-check, grow the working set, try the next formulation if
@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from synthesis.certificates.interface import AnalysisResult
+from pressor.synthesis.certificates.interface import AnalysisResult
 
 __all__ = [
     "BackOff",

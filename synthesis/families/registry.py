@@ -9,9 +9,9 @@ family's :class:`Family` object, defined in the family's own module and looked u
 
 Registered families:
 
-* ``"smith"`` (:mod:`synthesis.families.smith.family`, the shipped one): the scheduled Smith
+* ``"smith"`` (:mod:`pressor.synthesis.families.smith.family`, the shipped one): the scheduled Smith
   predictor + PI in closed form, certified by the Wirtinger analysis LMI in K-scaled coordinates.
-* ``"theorem3"`` (:mod:`synthesis.families.theorem3.family`, the alternative): the full-order
+* ``"theorem3"`` (:mod:`pressor.synthesis.families.theorem3.family`, the alternative): the full-order
   controller synthesised by the paper's Theorem-3 LMIs. A design file or an artifact without a
   ``controller`` entry is this family (:data:`DEFAULT_STRUCTURE`), so it is never stored.
 
@@ -30,11 +30,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 if TYPE_CHECKING:
-    from synthesis.artifact import ControllerArtifact
-    from synthesis.certificates.interface import AnalysisResult
-    from synthesis.problem.closed_loop import DelaySystem
-    from synthesis.problem.config import DesignConfig
-    from synthesis.problem.reconstruct import DelayedController
+    from pressor.synthesis.artifact import ControllerArtifact
+    from pressor.synthesis.certificates.interface import AnalysisResult
+    from pressor.synthesis.problem.closed_loop import DelaySystem
+    from pressor.synthesis.problem.config import DesignConfig
+    from pressor.synthesis.problem.reconstruct import DelayedController
 
 __all__ = [
     "DEFAULT_STRUCTURE",
@@ -51,9 +51,9 @@ __all__ = [
 DEFAULT_STRUCTURE = "theorem3"
 #: registered name -> the module whose ``FAMILY`` attribute is the family object
 _MODULES: dict[str, str] = {
-    "theorem3": "synthesis.families.theorem3.family",
-    "smith": "synthesis.families.smith.family",
-    "smith-pe": "synthesis.families.smith.pe_family",
+    "theorem3": "pressor.synthesis.families.theorem3.family",
+    "smith": "pressor.synthesis.families.smith.family",
+    "smith-pe": "pressor.synthesis.families.smith.pe_family",
 }
 #: allowed ``loop_gain`` (dimensionless) of a family that takes one: lower bound excluded
 LOOP_GAIN_RANGE = (0.0, 10.0)

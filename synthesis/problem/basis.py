@@ -1,14 +1,14 @@
 """The paper's parameter basis M(ρ) = M0 + Σ ρi Mi1 + ½ Σ ρi² Mi2, in scaled ρ̂ ∈ [−1, 1]³.
 
 The one place that says what the basis functions and their derivatives are: the synthesis LMIs
-(:mod:`synthesis.families.theorem3`), the artifact reconstruction and the Lyapunov matrices of
-both analysis LMIs (:mod:`synthesis.certificates`) all take them from :func:`basis_terms`.
+(:mod:`pressor.synthesis.families.theorem3`), the artifact reconstruction and the Lyapunov matrices of
+both analysis LMIs (:mod:`pressor.synthesis.certificates`) all take them from :func:`basis_terms`.
 
 Term order: the constant term, then ρ̂i for each parameter i, then ½ρ̂i² for each; the full basis of
 the 3 model parameters has 7 terms ``[M0, M11, M21, M31, M12, M22, M32]``. A p-dependence keeps
 the terms up to a degree ("constant" 1, "affine" adds ρ̂i, "quadratic" adds ½ρ̂i²), and the
 analyses may keep the terms of only some parameters. The basis is evaluated at the scaled
-parameters ρ̂ (see :mod:`synthesis.problem.scaling`), not the physical ones; this is a deviation
+parameters ρ̂ (see :mod:`pressor.synthesis.problem.scaling`), not the physical ones; this is a deviation
 from the paper kept for conditioning (the same span of functions).
 """
 

@@ -1,8 +1,8 @@
 """The closed-loop delay system: augmented MAP plant + delayed full-order LPV controller.
 
-At a frozen parameter point rho = (K, T, tau) the plant (``synthesis.problem.model.plant_at``; state
+At a frozen parameter point rho = (K, T, tau) the plant (``pressor.synthesis.problem.model.plant_at``; state
 x_a = [dMAP mmHg, u ml/h, x_e mmHg*s], the input filter du/dt = -Lambda u + Omega u_a already part
-of A and B2) and the reconstructed controller (``synthesis.problem.reconstruct.controller_at``;
+of A and B2) and the reconstructed controller (``pressor.synthesis.problem.reconstruct.controller_at``;
 state x_k) close into (paper eq. "closed-loop system", physical units, time in s)::
 
     dx_cl/dt = A_cl x_cl + Ad_cl x_cl(t - tau) + B_cl w

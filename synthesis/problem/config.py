@@ -1,6 +1,6 @@
 """The design configuration of the LPV synthesis: model, grid, solver settings and the prefilter.
 
-The types here are what every synthesis stage receives; :mod:`synthesis.problem.config_toml` reads
+The types here are what every synthesis stage receives; :mod:`pressor.synthesis.problem.config_toml` reads
 and validates them from a design TOML file (all physical units, time in s). Any bad value raises
 :class:`ConfigError` whose message names the file, the field, the value and the allowed range; the
 CLI turns it into exit code 2.
@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from contracts.checks import check_range
-from contracts.drug import DEFAULT_BINDING, DrugBinding
-from synthesis.families.registry import ControllerFamily
-from synthesis.problem.reference import ReferenceConfig
+from pressor.contracts.checks import check_range
+from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
+from pressor.synthesis.families.registry import ControllerFamily
+from pressor.synthesis.problem.reference import ReferenceConfig
 
 #: Nominal plant the default box must contain: K (mmHg/(ml/h)), T (s), tau (s).
 NOMINAL_RHO = (0.55, 150.0, 40.0)
@@ -47,7 +47,7 @@ def field_check(source: str) -> Callable[..., float]:
     """A range check for the fields of ``source``: ``check(fieldname, value, lo, hi, lo_open=False)``
     returns ``value`` as a float in [lo, hi] (``(lo, hi]`` with ``lo_open``), else raises
     :class:`ConfigError` ``<source>: field '<name>' = <value>: must be a finite number in [lo, hi]``
-    (:func:`contracts.checks.check_range`, with the file and field named)."""
+    (:func:`pressor.contracts.checks.check_range`, with the file and field named)."""
 
     def error(message: str) -> ConfigError:
         return ConfigError(f"{source}: {message}")
@@ -72,7 +72,7 @@ def check_grid(source: str, fieldname: str, value: Any) -> tuple[int, int, int]:
 
 @dataclass(frozen=True)
 class PerformanceShaping:
-    """Frequency weights of the "shaped" performance output (see :mod:`synthesis.problem.model`).
+    """Frequency weights of the "shaped" performance output (see :mod:`pressor.synthesis.problem.model`).
 
     Attributes
     ----------
@@ -189,7 +189,7 @@ class SolverConfig:
         Strictness margin of every LMI (scaled units).
     xy_dependence
         "x": X(rho) in the basis, Y constant (rigorous with M = I, see
-        :mod:`synthesis.families.theorem3.lmi`); "constant": X and Y constant; "xy": both in the
+        :mod:`pressor.synthesis.families.theorem3.lmi`); "constant": X and Y constant; "xy": both in the
         basis (the paper's choice: the congruence step of the proof then does not hold, so only the
         independent verification certifies it).
     time_scale_s
@@ -215,9 +215,9 @@ class SolverConfig:
 @dataclass(frozen=True)
 class DesignConfig:
     """A full design: model, grid, solver settings, line-search candidates, the prefilter, the
-    controller family (:mod:`synthesis.families.registry`; a family without a synthesis LMI leaves
+    controller family (:mod:`pressor.synthesis.families.registry`; a family without a synthesis LMI leaves
     the solver settings but ``time_scale_s`` unused) and the drug and syringe concentration its
-    gains are for (:class:`contracts.drug.DrugBinding`)."""
+    gains are for (:class:`pressor.contracts.drug.DrugBinding`)."""
 
     model: ModelConfig
     grid_points: tuple[int, int, int]

@@ -10,7 +10,7 @@ A design is described by a TOML file with the sections below (all physical units
                  e_crossover_rad_s (ω_b), e_peak (M), e_dc (A) of W_e(s) = (s/M + ω_b)/(s + ω_b A)
                  on the tracking error and u_crossover_rad_s (ω_u), u_dc (M_u, (ml/h)/mmHg),
                  u_hf (ε_u) of W_u(s) = (s + ω_u/M_u)/(ε_u s + ω_u) on the infusion
-                 (see :mod:`synthesis.problem.model`; optional keys, defaults in
+                 (see :mod:`pressor.synthesis.problem.model`; optional keys, defaults in
                  ``SHAPING_DEFAULTS``)
     [grid]       points = [nK, nT, ntau]              synthesis grid (each >= 2)
     [solver]     lambda2, lambda3 (scaled-time slack multipliers), backoff (fraction, >= 0),
@@ -19,26 +19,26 @@ A design is described by a TOML file with the sections below (all physical units
                  ("vertices" | "bound"), mean_gamma_weight
     [line_search] lambda2 = [...], lambda3 = [...]   candidate values for ``--lambda-search``
     [pump]       max_rate_ml_h
-    [controller] structure (a family of :func:`synthesis.families.registry.structures`), loop_gain
+    [controller] structure (a family of :func:`pressor.synthesis.families.registry.structures`), loop_gain
                  (dimensionless, in (0, 10], only and required for a family that takes it): the
-                 controller family of :mod:`synthesis.families.registry`. Unlike the other sections
+                 controller family of :mod:`pressor.synthesis.families.registry`. Unlike the other sections
                  it never takes the shipped default: no [controller] section (or no ``structure``)
-                 means :data:`synthesis.families.registry.DEFAULT_STRUCTURE`, so a design file
+                 means :data:`pressor.synthesis.families.registry.DEFAULT_STRUCTURE`, so a design file
                  written before the section existed keeps its meaning. For a family without a
                  synthesis LMI the [solver] (but ``time_scale_s``) and [line_search] keys are unused
                  (they are still validated if present)
     [drug]       name (lower case, 1-16 ASCII characters), concentration_ug_ml (µg/ml, in (0, 1e5]):
                  the drug and the syringe concentration whose ml/h the design's gains count
-                 (:class:`contracts.drug.DrugBinding`); carried into the artifact
+                 (:class:`pressor.contracts.drug.DrugBinding`); carried into the artifact
                  (``design.drug``) and the generated module (``DRUG``,
                  ``DRUG_CONCENTRATION_UG_ML``); ``pressor run`` refuses any other (docs/DRUGS.md)
     [reference]  enabled (bool), lambda_s (s, in [1, 1000]), pump_fraction (in [0.1, 1]),
                  k_min (mmHg/(ml/h), in [0.001, box K upper])
-                 the two-degree-of-freedom prefilter of :mod:`synthesis.problem.reference` (outside
+                 the two-degree-of-freedom prefilter of :mod:`pressor.synthesis.problem.reference` (outside
                  the certified loop: it changes the reference and adds a feedforward, not the LMIs)
 
 Every missing key takes the shipped default (``synthesis/data/default_design.toml``). Any bad
-value raises :class:`~synthesis.problem.config.ConfigError` naming the file, the field, the value
+value raises :class:`~pressor.synthesis.problem.config.ConfigError` naming the file, the field, the value
 and the allowed range.
 """
 
@@ -51,15 +51,15 @@ from typing import Any
 
 import numpy as np
 
-from contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS, DrugBinding
-from synthesis.families.registry import (
+from pressor.contracts.drug import MAX_CONCENTRATION_UG_ML, MAX_DRUG_CHARS, DrugBinding
+from pressor.synthesis.families.registry import (
     DEFAULT_STRUCTURE,
     LOOP_GAIN_RANGE,
     ControllerFamily,
     family_named,
     structures,
 )
-from synthesis.problem.config import (
+from pressor.synthesis.problem.config import (
     ConfigError,
     DesignConfig,
     ModelConfig,
@@ -69,7 +69,7 @@ from synthesis.problem.config import (
     field_check,
     field_error,
 )
-from synthesis.problem.reference import (
+from pressor.synthesis.problem.reference import (
     K_MIN_RANGE,
     LAMBDA_RANGE_S,
     PUMP_FRACTION_RANGE,
@@ -106,7 +106,7 @@ SHAPING_DEFAULTS: dict[str, Any] = {
 
 def default_config_path() -> Path:
     """Path of the shipped default design TOML."""
-    return Path(str(resources.files("synthesis") / "data" / "default_design.toml"))
+    return Path(str(resources.files("pressor.synthesis") / "data" / "default_design.toml"))
 
 
 def theorem3_config_path() -> Path:

@@ -57,7 +57,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from synthesis.problem.config import ModelConfig
+    from pressor.synthesis.problem.config import ModelConfig
 
 #: Dimensions of the shipped ("integral") generalised plant; :func:`dims` gives them for any config.
 N_STATE = 3

@@ -4,7 +4,7 @@ Factorisation (deviation from the paper's "any N, M with I − XY = N Mᵀ"): **
 the same smooth, deterministic choice at every ρ (never a per-point SVD), so all ρ share one
 controller state coordinate system and codegen may interpolate between nodes. It is also the
 choice that keeps the congruence Π1 = [[Y, I], [Mᵀ, 0]] constant when Y is constant
-(see :mod:`synthesis.families.theorem3.lmi`). N is invertible because Ṽ = [[Y, I], [I, X]] ≻ 0
+(see :mod:`pressor.synthesis.families.theorem3.lmi`). N is invertible because Ṽ = [[Y, I], [I, X]] ≻ 0
 implies X ≻ Y⁻¹.
 
 Inverting the paper's change of variables with M = I (scaled coordinates)::
@@ -16,10 +16,10 @@ Inverting the paper's change of variables with M = I (scaled coordinates)::
     Adk = N⁻¹ (Âd − X Ad Y − X B2 Dk C2d Y − N Bk C2d Y − X B2 Cdk)
     Ak  = N⁻¹ (Â  − X A Y  − X B2 Dk C2 Y  − N Bk C2 Y  − X B2 Ck)
 
-then :func:`synthesis.problem.scaling.unscale_controller` maps to physical units (time in s).
+then :func:`pressor.synthesis.problem.scaling.unscale_controller` maps to physical units (time in s).
 
 :func:`controller_at` checks ρ against the box and asks the artifact's family for its controller
-there (:meth:`synthesis.families.registry.Family.controller_at`: this reconstruction for the
+there (:meth:`pressor.synthesis.families.registry.Family.controller_at`: this reconstruction for the
 Theorem-3 family, a closed-form law for the shipped one), so codegen, ``pressor verify`` and the
 closed-loop tools all see the same law.
 """
@@ -31,14 +31,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from synthesis.problem import basis
-from synthesis.problem.model import plant_batch
-from synthesis.problem.scaling import Scaling, unscale_controller
+from pressor.synthesis.problem import basis
+from pressor.synthesis.problem.model import plant_batch
+from pressor.synthesis.problem.scaling import Scaling, unscale_controller
 
 if TYPE_CHECKING:
     # type-only: the artifact is built from problem/ (config, model, reference), so loading it here
     # would point problem/ back up at artifact.py
-    from synthesis.artifact import ControllerArtifact
+    from pressor.synthesis.artifact import ControllerArtifact
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,7 @@ class DelayedController:
 
 
 def scaling_of(artifact: ControllerArtifact) -> Scaling:
-    """The :class:`~synthesis.problem.scaling.Scaling` stored in the artifact."""
+    """The :class:`~pressor.synthesis.problem.scaling.Scaling` stored in the artifact."""
     s = artifact.metadata["scaling"]
     return Scaling(
         time_s=float(s["time_s"]),
@@ -127,7 +127,7 @@ def controller_at(
     """The delayed controller at ρ = (K [mmHg/(ml/h)], T [s], τ [s]) inside the artifact's box.
 
     The artifact's family gives the controller
-    (:meth:`synthesis.families.registry.Family.controller_at`).
+    (:meth:`pressor.synthesis.families.registry.Family.controller_at`).
 
     Raises
     ------

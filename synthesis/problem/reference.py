@@ -51,7 +51,7 @@ up against the feedforward.
 
 This module holds the configuration and the continuous-time solution of the law for frozen
 parameters (the nominal step of ``pressor verify``). The per-sample law is emitted by
-:mod:`codegen.emit_python` and :mod:`codegen.emit_c`.
+:mod:`pressor.codegen.emit_python` and :mod:`pressor.codegen.emit_c`.
 """
 
 from __future__ import annotations

@@ -42,7 +42,7 @@ class Scaling:
     def for_box(cls, box: np.ndarray, time_s: float, n_state: int = 3) -> Scaling:
         """Scaling for a (3, 2) box: x_e and the x_e measurement divided by t_s.
 
-        States after x_e (the frequency-weight states of :mod:`synthesis.problem.model`, integrals
+        States after x_e (the frequency-weight states of :mod:`pressor.synthesis.problem.model`, integrals
         of e or u over their weight's time constant) are divided by t_s as well.
         """
         b = np.asarray(box, dtype=float)
@@ -67,7 +67,7 @@ class Scaling:
         return self.time_s * np.asarray(rate_bounds, dtype=float) / self.rho_half
 
     def plant(self, p: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Scale a batch of plant matrices (as from :func:`synthesis.problem.model.plant_batch`)."""
+        """Scale a batch of plant matrices (as from :func:`pressor.synthesis.problem.model.plant_batch`)."""
         ts = self.time_s
         sx, sxi = self.sx, 1.0 / self.sx
         syi = 1.0 / self.sy

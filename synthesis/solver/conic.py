@@ -10,9 +10,9 @@ No single KKT solver decides. Clarabel factorises its KKT system with a backend 
 ``direct_solve_method``; the default (faer, supernodal and multithreaded) dispatches to SIMD
 kernels by CPU feature, so the same data can meet different rounding on different CPUs. A solve
 that ends in a numerical failure (``NumericalError``, ``InsufficientProgress``) is repeated with
-the next backend of the chain (:data:`synthesis.solver.kkt.DEFAULT_KKT_CHAIN`: faer, then qdldl, a
+the next backend of the chain (:data:`pressor.synthesis.solver.kkt.DEFAULT_KKT_CHAIN`: faer, then qdldl, a
 simplicial LDL' with its own ordering and no SIMD dispatch), and each retry is reported through
-``progress`` and recorded in :attr:`ConicSolution.fallbacks`. :func:`synthesis.solver.kkt.kkt_chain`
+``progress`` and recorded in :attr:`ConicSolution.fallbacks`. :func:`pressor.synthesis.solver.kkt.kkt_chain`
 sets the chain for a block of code (the ``--kkt`` option of ``pressor synth`` and ``pressor
 verify``, the tests that force one backend). An infeasible, unbounded or iteration-limited end is
 an answer, not a numerical failure: it is not retried. Whatever backend solved, the callers'
@@ -34,7 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KktAttempt, current_kkt_chain
+from pressor.synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KktAttempt, current_kkt_chain
 
 __all__ = ["ConicSolution", "solve_conic", "solve_cvxpy", "svec_eye", "svec_rows", "unsvec"]
 
@@ -167,7 +167,7 @@ def solve_conic(
 ) -> ConicSolution:
     """Solve ``min 1/2 x'Px + q'x  s.t.  a x + s = b, s in cones`` with Clarabel.
 
-    The KKT backends of :func:`synthesis.solver.kkt.current_kkt_chain` are tried in order while a
+    The KKT backends of :func:`pressor.synthesis.solver.kkt.current_kkt_chain` are tried in order while a
     solve ends in a numerical failure (module docstring); each retry is reported through
     ``progress``.
 

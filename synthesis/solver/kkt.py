@@ -1,7 +1,7 @@
 """Which of Clarabel's KKT solvers the synthesis solves use, in which order (no numpy here).
 
 Clarabel factorises the KKT system of each interior-point iteration with the backend named by its
-``direct_solve_method`` setting. :func:`synthesis.solver.conic.solve_conic` tries the attempts of
+``direct_solve_method`` setting. :func:`pressor.synthesis.solver.conic.solve_conic` tries the attempts of
 the current chain in order while a solve ends in a numerical failure; :func:`kkt_chain` sets the
 chain for a block of code (a context variable, so it follows the code that runs the solve, not a
 global); ``pressor synth --kkt`` and ``pressor verify --kkt`` take it as text
@@ -105,6 +105,6 @@ def parse_kkt_chain(text: str) -> tuple[KktAttempt, ...]:
 
 
 def current_kkt_chain() -> tuple[KktAttempt, ...]:
-    """The attempts :func:`synthesis.solver.conic.solve_conic` makes, in order (:func:`kkt_chain`
+    """The attempts :func:`pressor.synthesis.solver.conic.solve_conic` makes, in order (:func:`kkt_chain`
     sets them)."""
     return _CHAIN.get()

@@ -1,9 +1,9 @@
 """Check (a) of ``pressor verify``: the controller family's analysis LMI over the dense grid.
 
-The analysis itself is the family's (:meth:`synthesis.families.registry.Family.analysis`: the
+The analysis itself is the family's (:meth:`pressor.synthesis.families.registry.Family.analysis`: the
 Wirtinger analysis the design ran for the shipped family, the Jensen analysis of Theorem 1 for the
 alternative); this module runs it and turns its
-:class:`~synthesis.certificates.interface.AnalysisResult` into the report's ``analysis_lmi`` entry.
+:class:`~pressor.synthesis.certificates.interface.AnalysisResult` into the report's ``analysis_lmi`` entry.
 Either way the verdict is the floating-point re-check of every vertex LMI at every dense point.
 """
 
@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.certificates.interface import AnalysisResult
-from synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.certificates.interface import AnalysisResult
+from pressor.synthesis.problem.closed_loop import DelaySystem
 
 __all__ = ["Analysis", "analysis_check"]
 

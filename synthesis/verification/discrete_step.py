@@ -1,4 +1,4 @@
-"""A frozen step of any discrete controller (:class:`contracts.controller.Controller`) against the
+"""A frozen step of any discrete controller (:class:`pressor.contracts.controller.Controller`) against the
 exact zero-order-hold discretisation of the first-order-plus-delay plant.
 
 The plant ``T dy/dt = −y + K u(t − τ)``, with τ = (D + f)·Ts, D integer, 0 ≤ f < 1 and a command
@@ -10,9 +10,9 @@ The step starts from rest (y = 0, no infusion before t = 0); the controller is s
 with the MAP ``baseline_mmhg + y`` and the target ``baseline_mmhg + step_mmhg`` and scheduled on
 the plant's own K, T, τ. Its command is clamped to [0, ``max_rate_ml_h``] as the runtime's
 supervisor clamps it, so the pump limit is part of the response. The scheduled Smith baseline
-(:mod:`synthesis.verification.smith_baseline`) and ``pressor verify --controller`` (a plugin) both
-run here, and the code generator's frozen-loop checks (:mod:`codegen.frozen_loop`,
-:func:`codegen.fixed_point.signal_peaks`) sample the same plant through :func:`sampled_fopdt`.
+(:mod:`pressor.synthesis.verification.smith_baseline`) and ``pressor verify --controller`` (a plugin) both
+run here, and the code generator's frozen-loop checks (:mod:`pressor.codegen.frozen_loop`,
+:func:`pressor.codegen.fixed_point.signal_peaks`) sample the same plant through :func:`sampled_fopdt`.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from contracts.controller import Controller
-from synthesis.verification.step_response import StepResponse
+from pressor.contracts.controller import Controller
+from pressor.synthesis.verification.step_response import StepResponse
 
 __all__ = ["SampledFopdt", "StepFailed", "discrete_step_response", "sampled_fopdt"]
 

@@ -1,15 +1,15 @@
 """The paper's PI baseline Gc(s) = 3 + 0.017/s on the synthesis side (continuous time).
 
-The gains are the runtime's (:mod:`baselines.pi`, the discrete PI with anti-windup that
+The gains are the runtime's (:mod:`pressor.baselines.pi`, the discrete PI with anti-windup that
 the bedside loop runs); this module gives the same controller the continuous-time forms the
 synthesis-side checks need:
 
 - :meth:`PIBaseline.as_output_feedback` — the same PI written in the LPV controller's interface
   (a ``DelayedController``-shaped object on y = [e; x_e]: Dk = [kp, ki], no states of its own), so
-  it can be closed with any plant model through :func:`synthesis.problem.closed_loop.close_loop`.
+  it can be closed with any plant model through :func:`pressor.synthesis.problem.closed_loop.close_loop`.
 - :meth:`PIBaseline.step_loop` — the PI loop on the plain first-order-plus-delay plant
   K e^{-tau s}/(T s + 1) (no input filter: the filter Omega/(s+Lambda) belongs to the LPV design)
-  for :func:`synthesis.verification.step_response.simulate_step`, i.e. the same step interface as
+  for :func:`pressor.synthesis.verification.step_response.simulate_step`, i.e. the same step interface as
   the LPV loop.
 
 With the nominal plant this reproduces the independent reference figures of docs/DESIGN-CHOICES.md
@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from baselines.pi import KI_ML_H_PER_MMHG_S, KP_ML_H_PER_MMHG
-from synthesis.problem.closed_loop import DelaySystem, OutputFeedback
-from synthesis.verification.step_response import StepLoop
+from pressor.baselines.pi import KI_ML_H_PER_MMHG_S, KP_ML_H_PER_MMHG
+from pressor.synthesis.problem.closed_loop import DelaySystem, OutputFeedback
+from pressor.synthesis.verification.step_response import StepLoop
 
 __all__ = ["PIBaseline"]
 

@@ -1,14 +1,14 @@
 """``pressor verify --controller SPEC``: the nominal step of a plugin controller.
 
 A plugin (``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]``, a ``pressor.controllers`` entry
-point; :mod:`runtime.inputs.controller_plugin`) comes without an artifact, so there is nothing to
+point; :mod:`pressor.runtime.inputs.controller_plugin`) comes without an artifact, so there is nothing to
 certify: no analysis LMI, no frozen-parameter delay stability. What can be checked is the
 nominal step of docs/DESIGN-CHOICES.md (K = 0.55 mmHg/(ml/h), T = 150 s, τ = 40 s, a +20 mmHg
 target step from rest, no noise): the plugin is stepped every Ts against the exact zero-order-hold
-plant (:mod:`synthesis.verification.discrete_step`) from a MAP of :data:`BASELINE_MMHG` (the
+plant (:mod:`pressor.synthesis.verification.discrete_step`) from a MAP of :data:`BASELINE_MMHG` (the
 ``nominal-step`` scenario's), its command clamped to [0, its ``max_rate_ml_h``] as the supervisor
 clamps it, and reported beside the PI and the scheduled Smith predictor of the shipped verification
-(:func:`synthesis.verification.verify.verify_artifact`). It passes when the step is stable and
+(:func:`pressor.synthesis.verification.verify.verify_artifact`). It passes when the step is stable and
 settles inside the 2 % band within the horizon, the rule the shipped design's step is held to; an
 exception or a non-finite command fails it.
 
@@ -20,16 +20,16 @@ from __future__ import annotations
 
 from typing import Any
 
-from contracts.controller import Controller
-from synthesis.verification.discrete_step import StepFailed, discrete_step_response
-from synthesis.verification.step_response import (
+from pressor.contracts.controller import Controller
+from pressor.synthesis.verification.discrete_step import StepFailed, discrete_step_response
+from pressor.synthesis.verification.step_response import (
     NOMINAL_K,
     NOMINAL_STEP_MMHG,
     NOMINAL_T_S,
     NOMINAL_TAU_S,
     response_metrics,
 )
-from synthesis.verification.verify import STEP_HORIZON_S, baseline_steps
+from pressor.synthesis.verification.verify import STEP_HORIZON_S, baseline_steps
 
 __all__ = ["BASELINE_MMHG", "CERTIFICATE_NOT_APPLICABLE", "verify_plugin_step"]
 

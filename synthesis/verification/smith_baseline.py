@@ -1,19 +1,19 @@
 """The scheduled Smith-predictor baseline's frozen step on the synthesis side (discrete time).
 
-The controller is the runtime's own (:class:`baselines.smith.SmithController`, the one
+The controller is the runtime's own (:class:`pressor.baselines.smith.SmithController`, the one
 ``--controller smith`` runs), stepped at its sample period Ts against the exact zero-order-hold
-discretisation of the first-order-plus-delay plant (:mod:`synthesis.verification.discrete_step`).
+discretisation of the first-order-plus-delay plant (:mod:`pressor.synthesis.verification.discrete_step`).
 The step starts from rest (y = 0, no infusion before t = 0); the command is clamped by the
 controller to the pump range, so unlike the linear LPV/PI steps the pump limit is part of the
-response. The result is a :class:`synthesis.verification.step_response.StepResponse` sampled at the
+response. The result is a :class:`pressor.synthesis.verification.step_response.StepResponse` sampled at the
 ticks, so the same metrics apply.
 """
 
 from __future__ import annotations
 
-from baselines.smith import LAMBDA_DEFAULT_S, SmithController
-from synthesis.verification.discrete_step import discrete_step_response
-from synthesis.verification.step_response import StepResponse
+from pressor.baselines.smith import LAMBDA_DEFAULT_S, SmithController
+from pressor.synthesis.verification.discrete_step import discrete_step_response
+from pressor.synthesis.verification.step_response import StepResponse
 
 __all__ = ["smith_step_response"]
 

@@ -14,7 +14,7 @@ exponential); the local error is O(h^3) in the delayed term only, so h = 0.05 s 
 0.1 s resolution the metrics are quoted to (a test halves h and compares).
 
 :func:`simulate_prefiltered_step` runs the two-degree-of-freedom structure of
-:mod:`synthesis.problem.reference`: the loop's reference is the prefilter's r_m(t) and the plant
+:mod:`pressor.synthesis.problem.reference`: the loop's reference is the prefilter's r_m(t) and the plant
 input gets the feedforward u_ff(t − τ) on top of the loop's command, both the closed-form
 continuous-time law; between grid samples they enter with a first-order hold (exact for the
 piecewise-exponential signals up to O(h^2), and exact at the step itself, which sits on the grid).
@@ -29,8 +29,8 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
-from synthesis.problem.closed_loop import DelaySystem
-from synthesis.problem.config import NOMINAL_RHO
+from pressor.synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.problem.config import NOMINAL_RHO
 
 __all__ = [
     "NOMINAL_K",
@@ -241,7 +241,7 @@ def simulate_prefiltered_step(
         Where the delayed feedforward enters the loop state (e.g. K/T on the MAP state).
     reference
         t (s) -> (u_ff(t) ml/h, r_m(t) − m0 mmHg), zero for t < 0
-        (:func:`synthesis.problem.reference.frozen_step_reference` with the design's parameters).
+        (:func:`pressor.synthesis.problem.reference.frozen_step_reference` with the design's parameters).
     step_mmhg, t_end_s, h_max_s
         As :func:`simulate_step`.
     """
@@ -261,14 +261,14 @@ def simulate_prefiltered_step(
 
 
 def response_metrics(response: StepResponse, max_rate_ml_h: float = 120.0) -> dict[str, object]:
-    """The metrics (docs/METRICS.md) of a noise-free step (computed by :mod:`contracts.metrics`).
+    """The metrics (docs/METRICS.md) of a noise-free step (computed by :mod:`pressor.contracts.metrics`).
 
     Returns the step metrics (``overshoot_pct``, ``rise_time_s``, ``settling_time_s``,
     ``steady_state_dev_mmhg``, ``iae_mmhg_s``; 2 % band) plus ``max_rate_ml_h``,
     ``drug_total_ml``, ``time_at_limit_pct`` and ``stable`` of the unsaturated command, and
     ``min_rate_ml_h`` (a negative value means the linear loop asked the pump to run backwards).
     """
-    from contracts.metrics import run_metrics, step_metrics
+    from pressor.contracts.metrics import run_metrics, step_metrics
 
     out: dict[str, object] = dict(
         step_metrics(response.t_s, response.map_mmhg, response.target_mmhg, 0.0, response.step_mmhg)

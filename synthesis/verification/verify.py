@@ -1,28 +1,28 @@
 """Independent a-posteriori verification of a controller artifact.
 
 Nothing here re-uses the synthesis LMI or its nodes as evidence. With the controller reconstructed
-from the artifact (:func:`synthesis.problem.reconstruct.controller_at`) and the plant model
-(:func:`synthesis.problem.model.plant_at`) the closed loop is rebuilt at every point of a grid that
+from the artifact (:func:`pressor.synthesis.problem.reconstruct.controller_at`) and the plant model
+(:func:`pressor.synthesis.problem.model.plant_at`) the closed loop is rebuilt at every point of a grid that
 refines each cell of the synthesis grid ``density`` times and always contains the cell midpoints
 (points the synthesis never saw), then:
 
 (a) ``analysis_lmi`` — the controller family's delay-dependent analysis LMI over the whole dense
-    grid (:meth:`synthesis.families.registry.Family.analysis`, run by
-    :mod:`synthesis.verification.analysis`): for the shipped family the Wirtinger analysis the
+    grid (:meth:`pressor.synthesis.families.registry.Family.analysis`, run by
+    :mod:`pressor.synthesis.verification.analysis`): for the shipped family the Wirtinger analysis the
     design ran, every dense point in one feasibility solve with the gain capped; for the alternative
     the Jensen analysis of Theorem 1 on a working set, gain capped. Certified = every LMI at every
     dense point and every rate vertex, and every P(rho_k), re-evaluated in floating point, is
     definite;
 (b) ``delay_stability`` — the rightmost characteristic roots of the frozen closed-loop delay system
     at every dense point (delays up to tau_max are on the grid), by the spectral method of
-    :mod:`synthesis.verification.delay_stability`;
+    :mod:`pressor.synthesis.verification.delay_stability`;
 (c) ``nominal_step`` — the frozen nominal step (K = 0.55, T = 150 s, tau = 40 s, +20 mmHg, no noise)
     of the LPV loop, of the PI baseline Gc(s) = 3 + 0.017/s and of the scheduled Smith predictor
     (``smith``: the discrete runtime controller at Ts = 0.1 s, lambda 30 s, pump clamped to
     the artifact's limit, against the exact ZOH plant with the delay;
-    :mod:`synthesis.verification.smith_baseline`), with the metric names of docs/METRICS.md, and
+    :mod:`pressor.synthesis.verification.smith_baseline`), with the metric names of docs/METRICS.md, and
     whether the paper's claim (overshoot < 1 %, settling < 200 s) holds for the LPV loop. When the
-    artifact carries an enabled ``reference`` prefilter (:mod:`synthesis.problem.reference`), the
+    artifact carries an enabled ``reference`` prefilter (:mod:`pressor.synthesis.problem.reference`), the
     LPV step is the shipped two-degree-of-freedom structure (the continuous-time prefilter law
     drives the loop's reference and adds its feedforward to the plant input); ``lpv.structure`` says
     which, and ``lpv_feedback_only`` keeps the certified loop's own step beside it.
@@ -39,15 +39,15 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.problem.closed_loop import DelaySystem, close_loop
-from synthesis.problem.model import plant_at
-from synthesis.problem.reconstruct import controller_at
-from synthesis.problem.reference import ReferenceConfig, frozen_step_reference
-from synthesis.verification.analysis import Analysis, analysis_check
-from synthesis.verification.delay_stability import rightmost_roots
-from synthesis.verification.pi_baseline import PIBaseline
-from synthesis.verification.smith_baseline import smith_step_response
-from synthesis.verification.step_response import (
+from pressor.synthesis.problem.closed_loop import DelaySystem, close_loop
+from pressor.synthesis.problem.model import plant_at
+from pressor.synthesis.problem.reconstruct import controller_at
+from pressor.synthesis.problem.reference import ReferenceConfig, frozen_step_reference
+from pressor.synthesis.verification.analysis import Analysis, analysis_check
+from pressor.synthesis.verification.delay_stability import rightmost_roots
+from pressor.synthesis.verification.pi_baseline import PIBaseline
+from pressor.synthesis.verification.smith_baseline import smith_step_response
+from pressor.synthesis.verification.step_response import (
     NOMINAL_K,
     NOMINAL_STEP_MMHG,
     NOMINAL_T_S,
@@ -180,7 +180,7 @@ def nominal_lpv_step(
     """The nominal step of the shipped structure: the certified loop alone, or with the prefilter.
 
     The frozen loop ``cl`` at ``rho`` = (K, T, tau); MAP is its state 0
-    (``synthesis.problem.model``), so the delayed feedforward enters there with gain K/T.
+    (``pressor.synthesis.problem.model``), so the delayed feedforward enters there with gain K/T.
     """
     loop = loop_from_closed_loop(cl)
     if not reference.enabled:
@@ -206,7 +206,7 @@ def verify_artifact(
     Parameters
     ----------
     artifact
-        A loaded :class:`synthesis.artifact.ControllerArtifact`.
+        A loaded :class:`pressor.synthesis.artifact.ControllerArtifact`.
     density
         Subdivisions of each synthesis-grid cell per axis (>= 2; midpoints always included).
     progress
@@ -231,7 +231,7 @@ def verify_with(
 ) -> VerificationReport:
     """:func:`verify_artifact` with check (a) run by ``analysis`` instead of the family's own.
 
-    The builder :mod:`synthesis.research` compares other formulations of check (a) with.
+    The builder :mod:`research.synthesis_forms` compares other formulations of check (a) with.
     """
     say = progress or (lambda _msg: None)
     cfg, box, rates, grid = _artifact_parts(artifact)
@@ -278,7 +278,7 @@ def verify_with(
     }
 
     # (a) analysis LMI over the dense grid (by controller family, see
-    # synthesis.verification.analysis)
+    # pressor.synthesis.verification.analysis)
     nominal = np.array([NOMINAL_K, NOMINAL_T_S, NOMINAL_TAU_S])
     in_box = bool(np.all((nominal >= box[:, 0]) & (nominal <= box[:, 1])))
     rho_step = nominal if in_box else np.clip(nominal, *box.T)

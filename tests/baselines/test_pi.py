@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from baselines.pi import PIController
-from contracts.controller import Controller
+from pressor.baselines.pi import PIController
+from pressor.contracts.controller import Controller
 
 
 def test_pi_satisfies_controller_interface():

@@ -2,7 +2,7 @@
 
 The reference below keeps every model sample in a numpy array indexed by tick and reads the delayed
 model output with ``np.interp`` on the time axis (zero before t = 0); the controller keeps a ring
-buffer and interpolates between lags. Both follow the law in ``baselines.smith``'s
+buffer and interpolates between lags. Both follow the law in ``pressor.baselines.smith``'s
 docstring: Kc = T/(K·λ), Ti = T, conditional integration, ZOH model on the command sent.
 """
 
@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from baselines.smith import SmithController
-from contracts.controller import Controller
+from pressor.baselines.smith import SmithController
+from pressor.contracts.controller import Controller
 
 TS = 0.1
 LAMBDA = 30.0

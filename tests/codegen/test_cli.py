@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from codegen import pipeline as pl
-from codegen.cli import main
+from pressor.codegen import pipeline as pl
+from pressor.codegen.cli import main
 
 
 def _run(capsys, argv: list[str]) -> tuple[int, list[str]]:

@@ -1,9 +1,9 @@
-"""The frozen-loop check tells a stable sampled loop from an unstable one (codegen.frozen_loop)."""
+"""The frozen-loop check tells a stable sampled loop from an unstable one (pressor.codegen.frozen_loop)."""
 
 from __future__ import annotations
 
-from codegen.discretise import DelayedControllerMatrices, discretise_node
-from codegen.frozen_loop import frozen_loop_matrices, unstable_root_count
+from pressor.codegen.discretise import DelayedControllerMatrices, discretise_node
+from pressor.codegen.frozen_loop import frozen_loop_matrices, unstable_root_count
 from tests.support.codegen_helpers import TS, example_controller
 
 

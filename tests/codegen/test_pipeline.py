@@ -15,8 +15,8 @@ import sys
 import numpy as np
 import pytest
 
-from codegen import pipeline as pl
-from codegen.tables import TabulationGrid, TabulationProof, build_tables, check_grid
+from pressor.codegen import pipeline as pl
+from pressor.codegen.tables import TabulationGrid, TabulationProof, build_tables, check_grid
 from tests.support.codegen_helpers import (
     BOX,
     HAND_GRID_REL_TOL,
@@ -114,7 +114,7 @@ def test_generated_module_imports_no_third_party_package(built, tmp_path):
         "import lpv_map_controller as m; "
         "c = m.Controller(); u = c.step(80.0, 90.0, 0.5, 150.0, 30.0); "
         "assert 0.0 < u <= m.MAX_RATE_ML_H; "
-        "bad = [k for k, v in sys.modules.items() if v is not None and k.split('.')[0] in ('numpy', 'scipy', 'codegen', 'synthesis')]; "
+        "bad = [k for k, v in sys.modules.items() if v is not None and k.split('.')[0] in ('numpy', 'scipy', 'pressor')]; "
         "assert not bad, bad; print('ok')"
     )
     res = subprocess.run(

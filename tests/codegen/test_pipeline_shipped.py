@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from codegen import pipeline as pl
-from codegen.discretise import discretise_node
-from codegen.emit_python import module_sha256
-from codegen.frozen_loop import frozen_loop_matrices, unstable_root_count
-from codegen.tables import interpolate
-from contracts.module_hash import module_text_sha256
-from runtime.inputs.controller_loader import ControllerSpecError, load_controller
+from pressor.codegen import pipeline as pl
+from pressor.codegen.discretise import discretise_node
+from pressor.codegen.emit_python import module_sha256
+from pressor.codegen.frozen_loop import frozen_loop_matrices, unstable_root_count
+from pressor.codegen.tables import interpolate
+from pressor.contracts.module_hash import module_text_sha256
+from pressor.runtime.inputs.controller_loader import ControllerSpecError, load_controller
 from tests.support.codegen_helpers import (
     CController,
     continuous_reference,
@@ -29,7 +29,7 @@ from tests.support.codegen_helpers import (
 )
 
 COMMITTED = Path(pl.REPO_ROOT) / "runtime" / "generated" / "lpv_map_controller.py"
-#: the double-precision C twin the in-process simulator steps (sim.native.controller)
+#: the double-precision C twin the in-process simulator steps (pressor.hil_sim.native.controller)
 COMMITTED_C = [COMMITTED.with_suffix(".h"), COMMITTED.with_suffix(".c")]
 pytestmark = pytest.mark.skipif(not pl.DEFAULT_ARTIFACT.is_file(), reason="no shipped design")
 

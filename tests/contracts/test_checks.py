@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from contracts.checks import allowed_range, check_int_range, check_range
+from pressor.contracts.checks import allowed_range, check_int_range, check_range
 
 
 @pytest.mark.parametrize(

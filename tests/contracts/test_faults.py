@@ -7,16 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from contracts.faults import (
+from pressor.contracts.faults import (
     CATALOGUE,
     FAULT_KINDS,
     FaultSpecError,
     fault_report,
     parse_fault,
 )
-from runtime.core.supervisor_config import Fault
-from sim.devices.device import main as device_main
-from sim.scenarios.scenario import ScenarioError, load_scenario_file
+from pressor.hil_sim.devices.device import main as device_main
+from pressor.hil_sim.scenarios.scenario import ScenarioError, load_scenario_file
+from pressor.runtime.core.supervisor_config import Fault
 from tests.support.sil_helpers import pressor
 
 REQUIRED = (

@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from contracts.metrics import aggregate, percentile_summary, run_metrics, stable_flag, step_metrics
+from pressor.contracts.metrics import (
+    aggregate,
+    percentile_summary,
+    run_metrics,
+    stable_flag,
+    step_metrics,
+)
 
 TS = 0.1
 

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from contracts.metrics import (
+from pressor.contracts.metrics import (
     aggregate,
     disturbance_metrics,
     event_labels,

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from link import MODE_AUTO, MODE_SAFE, read_tlog
-from link.dialect import pressor as mavlink
+from pressor.link import MODE_AUTO, MODE_SAFE, read_tlog
+from pressor.link.dialect import pressor as mavlink
 from tests.support.scripted_run import recorded_events, run_against_device
 from tests.support.sil_helpers import ROOT, bridged_ttys, pressor, rrd_columns
 

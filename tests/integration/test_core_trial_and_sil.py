@@ -9,16 +9,21 @@ import math
 import numpy as np
 import pytest
 
-from baselines.pi import PIController
-from contracts.faults import parse_faults
-from link import LINK_LOCKSTEP, Hello, PtyPair, RuntimeSession
-from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
-from runtime.core.supervisor import Supervisor
-from runtime.core.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
-from runtime.shell.loop import Loop
-from runtime.shell.trajectory import held_delivered_ml_h
-from sim.episode import simulate
-from sim.world import World
+from pressor.baselines.pi import PIController
+from pressor.contracts.faults import parse_faults
+from pressor.hil_sim.episode import simulate
+from pressor.hil_sim.world import World
+from pressor.link import LINK_LOCKSTEP, Hello, PtyPair, RuntimeSession
+from pressor.runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
+from pressor.runtime.core.supervisor import Supervisor
+from pressor.runtime.core.supervisor_config import (
+    Fault,
+    State,
+    SupervisorConfig,
+    supervisor_config_for,
+)
+from pressor.runtime.shell.loop import Loop
+from pressor.runtime.shell.trajectory import held_delivered_ml_h
 from tests.support.sil_helpers import spawn_device
 
 SCENARIO, SEED, DURATION_S, TS = "paper-tracking", 3, 120.0, 0.1

@@ -13,13 +13,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from baselines.pi import PIController
-from link import DeviceSession, RuntimeSession, Signing
-from link.dialect import pressor as mavlink
-from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
-from runtime.core.supervisor import Supervisor
-from runtime.core.supervisor_config import supervisor_config_for
-from sim.world import World
+from pressor.baselines.pi import PIController
+from pressor.hil_sim.world import World
+from pressor.link import DeviceSession, RuntimeSession, Signing
+from pressor.link.dialect import pressor as mavlink
+from pressor.runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from pressor.runtime.core.supervisor import Supervisor
+from pressor.runtime.core.supervisor_config import supervisor_config_for
 from tests.support.link_doubles import loop_pair
 
 MAX = 120.0

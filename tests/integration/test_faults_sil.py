@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from link import DROP_CAUSES
-from runtime.core.supervisor_config import Fault, State, SupervisorConfig
+from pressor.link import DROP_CAUSES
+from pressor.runtime.core.supervisor_config import Fault, State, SupervisorConfig
 from tests.support.sil_helpers import rrd_columns
 
 REENTRY_STEP = SupervisorConfig().reentry_step_ml_h

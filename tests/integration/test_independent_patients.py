@@ -17,7 +17,7 @@ from benchmarks.independent_patients import (
     run_patient,
     summary_lines,
 )
-from sim.patients.pkpd import (
+from pressor.hil_sim.patients.pkpd import (
     BOLUS_AT_S,
     HEMORRHAGE_AT_S,
     RANGES,

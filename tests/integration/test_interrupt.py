@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from link import (
+from pressor.link import (
     LINK_REALTIME,
     DeviceSession,
     ManualClock,
@@ -23,7 +23,7 @@ from link import (
     Signing,
     read_tlog,
 )
-from link.dialect import pressor as mavlink
+from pressor.link.dialect import pressor as mavlink
 from tests.support.sil_helpers import ROOT, poll_until_exit, rrd_columns, spawn_device
 
 ENV = dict(os.environ, CI="1", PYTHONPATH=str(ROOT))
@@ -90,8 +90,8 @@ def test_signal_stops_sil_keeping_recording_tlog_and_summary(tmp_path, sig):
 
 def _device_thread(pair: PtyPair, stop: threading.Event, key: Path) -> threading.Thread:
     """A simulated device (the project's world) driving the runtime from this process."""
-    from sim.devices.device import run_device
-    from sim.world import World
+    from pressor.hil_sim.devices.device import run_device
+    from pressor.hil_sim.world import World
 
     def run() -> None:
         clock = ManualClock()
@@ -143,7 +143,7 @@ def test_sigterm_stops_pressor_device_with_finished_heartbeat_and_valid_tlog(tmp
         "--signing-key", str(key),
     )  # fmt: skip
     ep = RuntimeSession(pair.leader_port(), clock=time.monotonic, signing=Signing.from_file(key))
-    from link import Hello
+    from pressor.link import Hello
 
     try:
         peer = ep.handshake(Hello("pi", link_mode=LINK_REALTIME), timeout_s=30)

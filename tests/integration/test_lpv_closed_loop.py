@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from contracts.metrics import step_metrics
-from runtime.inputs.controller_loader import load_controller
-from sim.episode import simulate
-from sim.world import World
+from pressor.contracts.metrics import step_metrics
+from pressor.hil_sim.episode import simulate
+from pressor.hil_sim.world import World
+from pressor.runtime.inputs.controller_loader import load_controller
 
 ROOT = Path(__file__).resolve().parents[2]
 HORIZON_S = 1500.0
@@ -23,7 +23,7 @@ HORIZON_S = 1500.0
 
 @pytest.fixture(scope="module")
 def verified_step() -> dict:
-    from synthesis.artifact import load_artifact
+    from pressor.synthesis.artifact import load_artifact
 
     artifact = load_artifact(ROOT / "synthesis" / "data" / "default_design.npz")
     return artifact.metadata["verification"]["nominal_step"]["lpv"]

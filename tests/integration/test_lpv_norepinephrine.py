@@ -9,17 +9,17 @@ from pathlib import Path
 
 import pytest
 
-from codegen import pipeline as pl
-from contracts.drug import DEFAULT_BINDING, DrugBinding, binding_of
-from pressor.sil import device_command, sil_config
-from runtime.inputs.controller_loader import (
+from pressor.codegen import pipeline as pl
+from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding, binding_of
+from pressor.hil_sim.episode import simulate
+from pressor.hil_sim.world import World
+from pressor.runtime.inputs.controller_loader import (
     LPV_DESIGNS,
     ControllerSpecError,
     controller_name,
     load_controller,
 )
-from sim.episode import simulate
-from sim.world import World
+from pressor.sil import device_command, sil_config
 
 ARTIFACT = Path(pl.REPO_ROOT) / "synthesis" / "data" / "norepinephrine_design.npz"
 COMMITTED = LPV_DESIGNS["norepinephrine"]

@@ -9,18 +9,18 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.schedule_sources import run_one
-from benchmarks.step_fit import CONCENTRATION_UG_ML, STEP_S, step_response_fit
-from codegen import pipeline as pl
-from contracts.drug import DEFAULT_BINDING, binding_of
-from runtime.inputs.controller_loader import (
+from pressor.codegen import pipeline as pl
+from pressor.contracts.drug import DEFAULT_BINDING, binding_of
+from pressor.hil_sim.patients.pkpd import IndependentPatient, draw_patient
+from pressor.runtime.inputs.controller_loader import (
     LPV_DESIGNS,
     ControllerSpecError,
     controller_name,
     load_controller,
 )
-from sim.patients.pkpd import IndependentPatient, draw_patient
-from synthesis.artifact import load_artifact
+from pressor.synthesis.artifact import load_artifact
+from research.schedule_sources import run_one
+from research.step_fit import CONCENTRATION_UG_ML, STEP_S, step_response_fit
 
 ARTIFACT = Path(pl.REPO_ROOT) / "synthesis" / "data" / "wide_delay_design.npz"
 COMMITTED = LPV_DESIGNS["wide-delay"]

@@ -29,15 +29,16 @@ ROOT = Path(__file__).resolve().parents[2]
 TS_S = 0.1  # the device's sample period = 1 / pressor run's default --rate (s)
 TARGET_MMHG = 70.0
 MAX_RATE_ML_H = 120.0  # the controllers' default maximum (docs/PROTOCOL.md, INFUSION_COMMAND)
+#: the project's import namespace, and its folders' bare names (importable inside a checkout)
 PROJECT_PACKAGES = {
+    "pressor",
     "contracts",
     "baselines",
     "link",
     "synthesis",
     "codegen",
     "runtime",
-    "sim",
-    "pressor",
+    "hil_sim",
 }
 
 
@@ -140,7 +141,7 @@ def test_protocol_device_modules_import_only_the_standard_library_pymavlink_and_
         top = {name.split(".")[0] for name in names - siblings}
         assert top & PROJECT_PACKAGES == set(), f"{module} imports the project"
         assert top - {"pymavlink", "__future__"} <= sys.stdlib_module_names, (module, top)
-        assert "link.dialect" not in source and "link/dialect" not in source, module
+        assert "pressor.link.dialect" not in source and "link/dialect" not in source, module
     assert checked == device_modules, "a protocol_device*.py module the device does not use"
 
 

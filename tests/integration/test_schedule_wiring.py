@@ -11,23 +11,23 @@ import threading
 import numpy as np
 import pytest
 
-from baselines.pi import PIController
-from contracts.metrics import step_metrics
-from link import DeviceSession, ManualClock, PtyPair, TickInputs, open_port
-from link.dialect import pressor as mavlink
-from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
-from runtime.core.scheduling import Schedule, ScheduleInput
-from runtime.core.supervisor import Supervisor
-from runtime.core.supervisor_config import Fault, State, supervisor_config_for
-from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
-from runtime.estimation.sources import make_schedule
-from runtime.inputs.controller_loader import load_controller
-from runtime.session import run_runtime
-from sim.devices.device import run_device
-from sim.episode import simulate
-from sim.scenarios.scenario import load_scenario
-from sim.trials.trial import run_patient
-from sim.world import World
+from pressor.baselines.pi import PIController
+from pressor.contracts.metrics import step_metrics
+from pressor.hil_sim.devices.device import run_device
+from pressor.hil_sim.episode import simulate
+from pressor.hil_sim.scenarios.scenario import load_scenario
+from pressor.hil_sim.trials.trial import run_patient
+from pressor.hil_sim.world import World
+from pressor.link import DeviceSession, ManualClock, PtyPair, TickInputs, open_port
+from pressor.link.dialect import pressor as mavlink
+from pressor.runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, LinkHealth
+from pressor.runtime.core.scheduling import Schedule, ScheduleInput
+from pressor.runtime.core.supervisor import Supervisor
+from pressor.runtime.core.supervisor_config import Fault, State, supervisor_config_for
+from pressor.runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
+from pressor.runtime.estimation.sources import make_schedule
+from pressor.runtime.inputs.controller_loader import load_controller
+from pressor.runtime.session import run_runtime
 from tests.support.sil_helpers import (
     assert_recording_equals_simulation,
     lockstep_run_config,
@@ -199,8 +199,8 @@ def test_trial_record_carries_estimation_errors_only_off_the_oracle():
 
 
 def test_schedule_option_defaults_estimated_for_run_and_oracle_for_sil_and_trial(tmp_path):
+    from pressor.runtime.cli import _run_parser
     from pressor.sil import sil_parser
-    from runtime.cli import _run_parser
 
     assert _run_parser().parse_args(["--port", "x"]).schedule == "estimated"
     assert sil_parser().parse_args([]).schedule == "oracle"
@@ -281,8 +281,8 @@ def test_the_summarys_settling_band_is_the_callers_not_the_devices_noise_announc
 
 
 def test_a_device_announcing_an_impossible_noise_is_refused_with_one_line():
-    from link import LINK_LOCKSTEP, Hello, LinkError
-    from link.counters import HelloRefused
+    from pressor.link import LINK_LOCKSTEP, Hello, LinkError
+    from pressor.link.counters import HelloRefused
 
     pair = PtyPair.open()
     device = DeviceSession(open_port(pair.follower_path), clock=ManualClock())

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.sensitivity_sweep import figures, level_rows, main
-from sim.cli import main as pressor_main
+from pressor.hil_sim.cli import main as pressor_main
 
 
 def _record(reachable: bool, stable: bool, mdpe: float, in_band: float | None, os_: float) -> dict:

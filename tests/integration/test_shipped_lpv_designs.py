@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from codegen import pipeline as pl
-from codegen.emit_python import module_sha256
-from contracts.module_hash import module_text_sha256
-from runtime.inputs.controller_loader import LPV_DESIGNS
-from synthesis.artifact import load_artifact
+from pressor.codegen import pipeline as pl
+from pressor.codegen.emit_python import module_sha256
+from pressor.contracts.module_hash import module_text_sha256
+from pressor.runtime.inputs.controller_loader import LPV_DESIGNS
+from pressor.synthesis.artifact import load_artifact
 
 DATA = Path(pl.REPO_ROOT) / "synthesis" / "data"
 #: ``lpv:NAME`` -> the artifact its committed module was generated from

@@ -7,9 +7,17 @@ import time
 
 import pytest
 
-import link.signing as signing
-from link import MODE_AUTO, DeviceSession, Hello, PtyPair, RuntimeSession, Signing, SigningMismatch
-from link.dialect import pressor as mavlink
+import pressor.link.signing as signing
+from pressor.link import (
+    MODE_AUTO,
+    DeviceSession,
+    Hello,
+    PtyPair,
+    RuntimeSession,
+    Signing,
+    SigningMismatch,
+)
+from pressor.link.dialect import pressor as mavlink
 from tests.support.link_doubles import SinkPort, collect
 from tests.support.sil_helpers import spawn_device
 

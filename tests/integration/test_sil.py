@@ -1,4 +1,4 @@
-"""`pressor sil` end to end: a real device process over a pty, compared with sim.episode.
+"""`pressor sil` end to end: a real device process over a pty, compared with pressor.hil_sim.episode.
 
 The test may import sim (the runtime may not): it is the independent reference.
 """
@@ -52,9 +52,9 @@ def test_sil_exits_0_and_prints_summary_and_replay_command(two_runs):
 
 
 def test_sil_trajectory_equals_in_process_simulator(two_runs):
-    from baselines.pi import PIController
-    from sim.episode import simulate
-    from sim.world import World
+    from pressor.baselines.pi import PIController
+    from pressor.hil_sim.episode import simulate
+    from pressor.hil_sim.world import World
 
     _, rrd, _ = two_runs[0]
     ref = simulate(World("paper-tracking", SEED, 0.1), PIController(0.1), float(DURATION_S))
@@ -110,9 +110,9 @@ def test_faults_lists_each_detected_kind_with_its_bound(tmp_path):
 
 def test_sil_with_shipped_lpv_over_30_min_equals_in_process_simulator(tmp_path):
     """The issue's done-when run: lpv, paper-tracking, patient seed 3, 1800 s, over a pty."""
-    from runtime.inputs.controller_loader import load_controller
-    from sim.episode import simulate
-    from sim.world import World
+    from pressor.hil_sim.episode import simulate
+    from pressor.hil_sim.world import World
+    from pressor.runtime.inputs.controller_loader import load_controller
 
     rrd, summary = tmp_path / "lpv.rrd", tmp_path / "lpv.json"
     proc = pressor(

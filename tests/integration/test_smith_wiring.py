@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from baselines.smith import SmithController
-from runtime.inputs.controller_loader import ControllerSpecError, load_controller
-from sim.cli import main as sim_main
+from pressor.baselines.smith import SmithController
+from pressor.hil_sim.cli import main as sim_main
+from pressor.runtime.inputs.controller_loader import ControllerSpecError, load_controller
 from tests.support.sil_helpers import assert_recording_equals_simulation, pressor
 
 
@@ -63,8 +63,8 @@ def test_trial_with_bad_lambda_exits_2_with_one_line(tmp_path: Path, capsys):
 
 
 def test_sil_with_smith_over_the_pty_equals_the_in_process_simulator(tmp_path: Path):
-    from sim.episode import simulate
-    from sim.world import World
+    from pressor.hil_sim.episode import simulate
+    from pressor.hil_sim.world import World
 
     rrd, summary = tmp_path / "s.rrd", tmp_path / "s.json"
     proc = pressor(

@@ -11,7 +11,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from link import (
+from pressor.hil_sim.devices.device import run_device
+from pressor.hil_sim.episode import simulate
+from pressor.hil_sim.world import World
+from pressor.link import (
     STATE_FINISHED,
     DeviceSession,
     Hello,
@@ -22,13 +25,10 @@ from link import (
     TickInputs,
     open_port,
 )
-from link.dialect import pressor as mavlink
-from runtime.estimation.sources import make_schedule
-from runtime.inputs.controller_loader import load_controller
-from runtime.session import run_runtime
-from sim.devices.device import run_device
-from sim.episode import simulate
-from sim.world import World
+from pressor.link.dialect import pressor as mavlink
+from pressor.runtime.estimation.sources import make_schedule
+from pressor.runtime.inputs.controller_loader import load_controller
+from pressor.runtime.session import run_runtime
 from tests.support.link_doubles import tick_inputs
 from tests.support.sil_helpers import lockstep_run_config
 

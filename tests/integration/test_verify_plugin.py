@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from baselines.smith import SmithController
 from pressor import cli
-from synthesis.verification.discrete_step import discrete_step_response
-from synthesis.verification.smith_baseline import smith_step_response
+from pressor.baselines.smith import SmithController
+from pressor.synthesis.verification.discrete_step import discrete_step_response
+from pressor.synthesis.verification.smith_baseline import smith_step_response
 
 PLUGINS = str(Path(__file__).resolve().parents[1] / "support" / "controller_plugins.py")
 CERTIFICATE = "certificate: not applicable (plugin controller)"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from runtime.record.blueprint import SERIES_COLORS
+from pressor.runtime.record.blueprint import SERIES_COLORS
 
 ROOT = Path(__file__).resolve().parents[2]
 CHROMIUM = Path("/usr/bin/chromium")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from link import (
+from pressor.link import (
     MODE_SAFE,
     STATE_FINISHED,
     STATE_RUNNING,
@@ -13,7 +13,7 @@ from link import (
     RuntimeSession,
     Signing,
 )
-from link.dialect import pressor as mavlink
+from pressor.link.dialect import pressor as mavlink
 from tests.support.link_doubles import FaultyPort, SinkPort, collect, drain, loop_pair, tick_inputs
 
 

@@ -11,15 +11,15 @@ from typing import Any
 
 import pytest
 
-from link import DeviceSession, RuntimeSession, Signing, generate, open_port
-from link.dialect import pressor as mavlink
+from pressor.link import DeviceSession, RuntimeSession, Signing, generate, open_port
+from pressor.link.dialect import pressor as mavlink
 from tests.support.link_doubles import tick_inputs
 
 
 def test_committed_module_matches_what_mavgen_generates_from_the_xml(tmp_path):
     fresh = generate.generate(generate.XML_PATH, tmp_path / "pressor.py")
     assert fresh.read_text() == generate.MODULE_PATH.read_text(), (
-        "link/dialect/pressor.py is stale: run `python -m link.generate`"
+        "link/dialect/pressor.py is stale: run `python -m pressor.link.generate`"
     )
 
 
@@ -149,7 +149,7 @@ def _xml_enum(name: str) -> dict[str, int]:
 
 def test_quality_and_pump_alarm_bits_on_both_ends_are_the_xml_enums():
     # contracts may not import link: the bits both ends use are held equal to the XML here
-    from contracts.faults import wire_bits
+    from pressor.contracts.faults import wire_bits
 
     quality = _xml_enum("PRESSOR_MAP_QUALITY")
     alarms = _xml_enum("PRESSOR_PUMP_ALARM")

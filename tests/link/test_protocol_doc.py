@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from link import PROTOCOL_VERSION
-from link.generate import XML_PATH
+from pressor.link import PROTOCOL_VERSION
+from pressor.link.generate import XML_PATH
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "PROTOCOL.md"
 #: what the unit column says for a field without a unit or an enum in the XML

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from link import (
+from pressor.link import (
     REFUSAL_DRUG,
     REFUSAL_PROTOCOL_VERSION,
     REFUSAL_SYSTEM_ID,

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from link import (
+from pressor.link import (
     MODE_AUTO,
     STATE_FINISHED,
     DeviceSession,
@@ -23,7 +23,7 @@ from link import (
     read_tlog,
     register_dialect_with_mavutil,
 )
-from link.dialect import pressor as mavlink
+from pressor.link.dialect import pressor as mavlink
 from tests.support.link_doubles import FaultyPort, collect, drain, loop_pair, tick_inputs
 
 
@@ -176,7 +176,7 @@ def test_a_retransmitted_tick_is_answered_again_with_the_same_command():
 
 def test_a_world_tick_and_pump_status_arrive_at_the_runtime_as_equal_messages():
     # one type per message on both ends: what the world builds is what the runtime receives
-    from sim.world import World
+    from pressor.hil_sim.world import World
 
     world = World("paper-tracking", 3, 0.1)
     a, b = loop_pair()

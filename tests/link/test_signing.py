@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from link import (
+from pressor.link import (
     MODE_AUTO,
     MODE_SAFE,
     DeviceSession,
@@ -12,7 +12,7 @@ from link import (
     RuntimeSession,
     Signing,
 )
-from link.dialect import pressor as mavlink
+from pressor.link.dialect import pressor as mavlink
 from tests.support.link_doubles import SinkPort, collect, drain, loop_pair
 
 

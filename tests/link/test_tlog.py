@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from link import (
+from pressor.link import (
     STATE_RUNNING,
     DeviceSession,
     Hello,

@@ -1,4 +1,4 @@
-"""Atomic file output (plumbing.files): the target changes only when the writer succeeds."""
+"""Atomic file output (pressor.plumbing.files): the target changes only when the writer succeeds."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from plumbing.files import AtomicFile, write_atomic
+from pressor.plumbing.files import AtomicFile, write_atomic
 
 
 def _leftovers(directory: Path) -> list[str]:

@@ -1,4 +1,4 @@
-"""plumbing.native_build: a C file compiled once into the per-user cache, or a reason why not."""
+"""pressor.plumbing.native_build: a C file compiled once into the per-user cache, or a reason why not."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import ctypes
 
 import pytest
 
-from plumbing import native_build as nb
+from pressor.plumbing import native_build as nb
 
 needs_cc = pytest.mark.skipif(nb.compiler() is None, reason="no C compiler")
 SOURCE = "double twice(double x) { return 2.0 * x; }\n"

@@ -1,4 +1,4 @@
-"""Cohort trials on a real Dask cluster on localhost give the local run's bytes (plumbing.parallel)."""
+"""Cohort trials on a real Dask cluster on localhost give the local run's bytes (pressor.plumbing.parallel)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from plumbing.parallel import BackendError, run_ordered
-from sim.cli import main
+from pressor.hil_sim.cli import main
+from pressor.plumbing.parallel import BackendError, run_ordered
 
 distributed = pytest.importorskip("distributed")
 
@@ -92,8 +92,8 @@ def test_a_worker_killed_mid_trial_costs_only_a_retry_not_the_records(tmp_path, 
                 os.kill(pids[0], signal.SIGKILL)
                 killed.append(pids[0])
 
-        from sim.scenarios.scenario import load_scenario
-        from sim.trials.trial import run_trial, summarize, write_outputs
+        from pressor.hil_sim.scenarios.scenario import load_scenario
+        from pressor.hil_sim.trials.trial import run_trial, summarize, write_outputs
 
         sc = load_scenario(str(scenario))
         records = run_trial(sc, "pi", 3, 6, progress=kill_one_worker, scheduler=c.scheduler_address)
@@ -106,7 +106,9 @@ def test_a_worker_killed_mid_trial_costs_only_a_retry_not_the_records(tmp_path, 
 def test_an_unreachable_scheduler_is_one_line_naming_the_address_and_exit_2(
     tmp_path, scenario, capsys, monkeypatch
 ):
-    monkeypatch.setattr("plumbing.parallel.DASK_CONNECT_TIMEOUT_S", 1.0)  # nothing listens on :9
+    monkeypatch.setattr(
+        "pressor.plumbing.parallel.DASK_CONNECT_TIMEOUT_S", 1.0
+    )  # nothing listens on :9
     argv = ["--controller", "pi", "--patients", "2", "--scenario", str(scenario)]
     rc = main("trial", [*argv, "--scheduler", "tcp://127.0.0.1:9", "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err.strip().splitlines()

@@ -1,10 +1,10 @@
-"""The one usage-error path of every command (plumbing.usage): one line on stderr, exit 2."""
+"""The one usage-error path of every command (pressor.plumbing.usage): one line on stderr, exit 2."""
 
 from __future__ import annotations
 
 import pytest
 
-from plumbing.usage import USAGE_EXIT, UsageError, UsageParser, run_command
+from pressor.plumbing.usage import USAGE_EXIT, UsageError, UsageParser, run_command
 
 
 def _parser() -> UsageParser:

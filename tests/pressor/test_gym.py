@@ -13,15 +13,15 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import pressor.gym
-from baselines.pi import PIController
-from contracts.faults import QUALITY_HELD, QUALITY_INVALID
-from contracts.metrics import run_metrics
 from pressor import api
+from pressor.baselines.pi import PIController
+from pressor.contracts.faults import QUALITY_HELD, QUALITY_INVALID
+from pressor.contracts.metrics import run_metrics
 from pressor.gym import MapEnv, MapReward, Ticks
 from pressor.gym.reward import COLUMNS
-from runtime.core.supervisor_config import Fault, State
-from sim.patients.cohort import cohort_seeds
-from sim.trials.trial import run_patient, scenario_events
+from pressor.hil_sim.patients.cohort import cohort_seeds
+from pressor.hil_sim.trials.trial import run_patient, scenario_events
+from pressor.runtime.core.supervisor_config import Fault, State
 
 TRAJECTORY_FIELDS = (
     "t_s",

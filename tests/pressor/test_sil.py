@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from plumbing.usage import UsageError
+from pressor.hil_sim.scenarios.scenario import SCENARIO_DIR, load_scenario
+from pressor.plumbing.usage import UsageError
 from pressor.sil import device_command, sil_config
-from sim.scenarios.scenario import SCENARIO_DIR, load_scenario
 
 
 def test_scenario_events_and_faults_come_from_the_simulators_scenario(tmp_path: Path):
@@ -61,7 +61,10 @@ def test_default_recording_name_names_controller_scenario_and_seed():
         (["--patient-seed", "-1"], "--patient-seed = -1: must be an integer in [0, 4294967295]"),
         (["--duration", "0"], "--duration = 0.0: must be a finite number in (0, 604800]"),
         (["--patient-model", "nope"], "--patient-model 'nope': unknown model; one of paper,"),
-        (["--patient-model", "sim.devices.pump:Pump"], "class 'Pump' of module 'sim.devices.pump'"),
+        (
+            ["--patient-model", "pressor.hil_sim.devices.pump:Pump"],
+            "class 'Pump' of module 'pressor.hil_sim.devices.pump'",
+        ),
         (["--scenario", "nominal-step", "--patient-model", "pkpd"], "fixes a frozen first-order"),
     ],
 )

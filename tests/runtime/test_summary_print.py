@@ -6,7 +6,7 @@ from __future__ import annotations
 import io
 import json
 
-from runtime.summary import print_summary, write_json
+from pressor.runtime.summary import print_summary, write_json
 
 TIMING = {
     k: 1.0

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from link import LinkCounters
-from runtime.shell.trajectory import LoopResult
-from runtime.summary import build_summary
+from pressor.link import LinkCounters
+from pressor.runtime.shell.trajectory import LoopResult
+from pressor.runtime.summary import build_summary
 
 UMAX = 120.0
 

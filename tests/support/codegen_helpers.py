@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from codegen import pipeline as pl
-from codegen.discretise import DelayedControllerMatrices, composite_continuous
-from codegen.tables import TabulationProof
+from pressor.codegen import pipeline as pl
+from pressor.codegen.discretise import DelayedControllerMatrices, composite_continuous
+from pressor.codegen.tables import TabulationProof
 
 BOX = np.array([[0.25, 1.0], [100.0, 200.0], [10.0, 45.0]])
 RATES = np.array([2e-4, 0.06, 0.1])

@@ -1,7 +1,7 @@
 """Test doubles for the link: in-process crossed ``loop://`` ports, a write-fault port, and a
 complete tick as the world would build it.
 
-Not shipped: the device's own link fault injection is :class:`sim.scenarios.faults.LinkFaultPort`.
+Not shipped: the device's own link fault injection is :class:`pressor.hil_sim.scenarios.faults.LinkFaultPort`.
 """
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from typing import Any
 
 import serial
 
-from link.messages import TickInputs
-from link.ports import DEFAULT_READ_TIMEOUT_S, PortWrapper
-from link.session import Session
+from pressor.link.messages import TickInputs
+from pressor.link.ports import DEFAULT_READ_TIMEOUT_S, PortWrapper
+from pressor.link.session import Session
 
 
 class CrossedPort(PortWrapper):

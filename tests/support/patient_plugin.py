@@ -1,6 +1,6 @@
-"""Patient models defined outside :mod:`sim`, loaded by ``--patient-model tests.support.patient_plugin:CLASS``.
+"""Patient models defined outside :mod:`pressor.hil_sim`, loaded by ``--patient-model tests.support.patient_plugin:CLASS``.
 
-:class:`FirstOrderPatient` satisfies :class:`sim.patients.patient_model.PatientModel`; the others
+:class:`FirstOrderPatient` satisfies :class:`pressor.hil_sim.patients.patient_model.PatientModel`; the others
 each lack one thing, for the error messages.
 """
 
@@ -11,7 +11,7 @@ from collections import deque
 from collections.abc import Mapping
 from typing import ClassVar
 
-from sim.patients.cohort import patient_rng
+from pressor.hil_sim.patients.cohort import patient_rng
 
 
 class FirstOrderPatient:

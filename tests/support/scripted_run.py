@@ -16,7 +16,7 @@ from pathlib import Path
 
 from rerun.chunk import RrdReader
 
-from link import (
+from pressor.link import (
     LINK_LOCKSTEP,
     STATE_FINISHED,
     DeviceSession,
@@ -26,8 +26,8 @@ from link import (
     Signing,
     open_port,
 )
-from link.dialect import pressor as mavlink
-from runtime.record.blueprint import EVENTS_ENTITY
+from pressor.link.dialect import pressor as mavlink
+from pressor.runtime.record.blueprint import EVENTS_ENTITY
 from tests.support.link_doubles import tick_inputs
 from tests.support.sil_helpers import ROOT, bridged_ttys
 

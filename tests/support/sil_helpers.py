@@ -19,8 +19,8 @@ os.environ["CI"] = "1"  # the rerun CLI writes analytics files otherwise
 import numpy as np  # noqa: E402
 from rerun.chunk import RrdReader  # noqa: E402
 
-from link import LinkClosedError, PtyPair, RuntimeSession  # noqa: E402
-from runtime.inputs.config import RunConfig  # noqa: E402
+from pressor.link import LinkClosedError, PtyPair, RuntimeSession  # noqa: E402
+from pressor.runtime.inputs.config import RunConfig  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -73,7 +73,7 @@ def rrd_columns(path: Path) -> dict[str, dict[int, float]]:
 def assert_recording_equals_simulation(rrd: Path, ref) -> np.ndarray:
     """Every tick of a SIL recording has the in-process simulation's MAP and command, bit for bit.
 
-    ``ref`` is a :class:`sim.episode.Trajectory`; returns the recorded commands (ml/h).
+    ``ref`` is a :class:`pressor.hil_sim.episode.Trajectory`; returns the recorded commands (ml/h).
     """
     cols = rrd_columns(rrd)
     n = ref.t_s.size

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import math
 
-from runtime.core.supervisor import Supervisor, SupervisorInput, SupervisorOutput
-from runtime.core.supervisor_config import SupervisorConfig
+from pressor.runtime.core.supervisor import Supervisor, SupervisorInput, SupervisorOutput
+from pressor.runtime.core.supervisor_config import SupervisorConfig
 
 #: the loop period (s) the rig ticks at
 TS = 0.1

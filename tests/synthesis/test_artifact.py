@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis.artifact import (
+from pressor.synthesis.artifact import (
     ArtifactError,
     default_artifact_path,
     load_artifact,
@@ -17,7 +17,7 @@ from synthesis.artifact import (
     save_artifact,
     with_verification,
 )
-from synthesis.problem.config import NOMINAL_RHO
+from pressor.synthesis.problem.config import NOMINAL_RHO
 
 
 @pytest.fixture(scope="module")

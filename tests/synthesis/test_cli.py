@@ -6,9 +6,9 @@ import shutil
 
 import pytest
 
-from synthesis import cli
-from synthesis.artifact import load_artifact
-from synthesis.problem.config_toml import theorem3_config_path
+from pressor.synthesis import cli
+from pressor.synthesis.artifact import load_artifact
+from pressor.synthesis.problem.config_toml import theorem3_config_path
 
 
 def test_bad_config_value_exits_2_with_one_line_naming_file_and_field(tmp_path, capsys):

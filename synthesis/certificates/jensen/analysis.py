@@ -27,14 +27,14 @@ g^2)::
 
 with Psi = [A Ad B], Gamma = [C Cd D]; the reported gamma is sqrt(mu).
 
-Choices (this module is independent of the synthesis LMI in :mod:`synthesis.families.theorem3.lmi`):
+Choices (this module is independent of the synthesis LMI in :mod:`pressor.synthesis.families.theorem3.lmi`):
 
 * ``P(rho)`` constant, affine, or quadratic in the normalised parameters rho_hat in [-1, 1]^s
   (quadratic = the synthesis basis ``P0 + sum rho_i P_i1 + 1/2 sum rho_i^2 P_i2``, so
   ``dP/dt = sum (P_i1 + rho_i P_i2) rho_i-dot``); Q, R constant. ``verify`` uses quadratic.
 * A constant state transform ``state_transform`` (a congruence: feasibility and gamma unchanged)
   may replace the default diagonal balancing; ``verify`` whitens then balances
-  (:func:`synthesis.certificates.state_transform.conditioning_transform`, which records the
+  (:func:`pressor.synthesis.certificates.state_transform.conditioning_transform`, which records the
   measurements).
 * ``gamma_cap``: feasibility form (gamma <= cap, maximise a common strictness margin t <= 1),
   more robust on the dense grid than minimising gamma; ``verify`` uses it.
@@ -43,7 +43,7 @@ Choices (this module is independent of the synthesis LMI in :mod:`synthesis.fami
   balancing of the centre system (powers of two); both leave the L2 gain unchanged.
 * Build and solve: each LMI's exact affine map is assembled densely a few points at a time
   (structural zeros stay exact) straight into Clarabel's PSD-triangle order, and Clarabel is
-  called on that conic data directly (:mod:`synthesis.solver.conic`, which also reports every
+  called on that conic data directly (:mod:`pressor.synthesis.solver.conic`, which also reports every
   iteration); going through cvxpy instead (one batched PSD constraint over a full-matrix map) costs
   far more time and memory (docs/notes/benchmarks.md, "Design measurements").
 * ``working_set=k``: the LMI (all rate vertices) is imposed only at k points spread over the grid
@@ -78,16 +78,16 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from synthesis.certificates.interface import AnalysisResult, checked_inputs
-from synthesis.certificates.jensen.lmi_map import (
+from pressor.synthesis.certificates.interface import AnalysisResult, checked_inputs
+from pressor.synthesis.certificates.jensen.lmi_map import (
     AnalysisProblem,
     bound_parts,
     lmi_map,
     p_map,
     sym_index,
 )
-from synthesis.certificates.state_transform import transform_of
-from synthesis.certificates.working_set import (
+from pressor.synthesis.certificates.state_transform import transform_of
+from pressor.synthesis.certificates.working_set import (
     BackOff,
     Formulation,
     Solution,
@@ -95,9 +95,9 @@ from synthesis.certificates.working_set import (
     first_points,
     solve_and_recheck,
 )
-from synthesis.problem.basis import basis_terms, term_parameters
-from synthesis.problem.closed_loop import DelaySystem
-from synthesis.solver.conic import solve_conic, svec_eye, unsvec
+from pressor.synthesis.problem.basis import basis_terms, term_parameters
+from pressor.synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.solver.conic import solve_conic, svec_eye, unsvec
 
 __all__ = ["analyse"]
 

@@ -1,9 +1,9 @@
 """The affine maps of the Theorem-1 analysis LMIs, in Clarabel's PSD-triangle order.
 
-The LMI of :mod:`synthesis.certificates.jensen.analysis` (solved form, rescaled by gamma) is affine
+The LMI of :mod:`pressor.synthesis.certificates.jensen.analysis` (solved form, rescaled by gamma) is affine
 in the decision vector ``x = [P terms, Q, R, mu]``. Each LMI's exact map ``svec(LMI) = F x + f0`` is
 assembled densely a few points at a time (structural zeros stay exact) straight into the order
-Clarabel's PSD cones use (:func:`synthesis.solver.conic.svec_rows`): :func:`lmi_map` for every rate
+Clarabel's PSD cones use (:func:`pressor.synthesis.solver.conic.svec_rows`): :func:`lmi_map` for every rate
 vertex (or the rate-bound form), :func:`bound_parts` for the rate-bound slacks, :func:`p_map` for
 P(rho_k), Q, R.
 """
@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from synthesis.solver.conic import svec_rows
+from pressor.synthesis.solver.conic import svec_rows
 
 __all__ = ["AnalysisProblem", "bound_parts", "lmi_map", "p_map", "sym_index"]
 
@@ -121,7 +121,7 @@ class AnalysisProblem:
     c: Array
     cd: Array
     d: Array
-    w_p: Array  # (m, n_p) P basis weights at every point (synthesis.problem.basis)
+    w_p: Array  # (m, n_p) P basis weights at every point (pressor.synthesis.problem.basis)
     dw_p: Array  # (m, n_p, s) their derivatives in rho_hat
     p_params: tuple[int | None, ...]  # the parameter each P basis term depends on
     vertices: Array  # (nv, s) rate signs
@@ -157,7 +157,7 @@ def lmi_map(
 ) -> tuple[sp.csr_matrix, Array]:
     """Affine map of the LMIs at ``points`` (all rate vertices of each, point-major order):
     ``svec(LMI) = F x + f0`` in Clarabel's PSD-triangle order (see
-    :func:`synthesis.solver.conic.svec_rows`).
+    :func:`pressor.synthesis.solver.conic.svec_rows`).
 
     ``bound``: one matrix per point, without dP/dt and with ``-(1 - dtau_max) Q`` (the rate-bound
     form adds the slack Z terms, :func:`bound_parts`).

@@ -1,8 +1,8 @@
 """Delay-dependent analysis LMI with an augmented (Wirtinger-based) Lyapunov-Krasovskii functional.
 
-Why a second analysis: the Jensen functional of :mod:`synthesis.certificates.jensen.analysis`
+Why a second analysis: the Jensen functional of :mod:`pressor.synthesis.certificates.jensen.analysis`
 (Theorem 1) is nearly tight for the shipped design but nearly blind to delay compensation: a Smith
-predictor in the controller class (:mod:`synthesis.families.smith.law`, loop gain 1.5) is infeasible
+predictor in the controller class (:mod:`pressor.synthesis.families.smith.law`, loop gain 1.5) is infeasible
 for it at frozen points with tau = 27.5 and 45 s and bounded at twice its exact norm at the nominal
 point, while this functional bounds the same loops at their exact frozen H-infinity norm (within
 solver accuracy; measured figures in docs/CERTIFICATE-STRUCTURE.md). Reference: Seuret & Gouaisbaut,
@@ -40,11 +40,11 @@ tied to the basis by equalities, so the PSD blocks stop coupling all basis terms
 ``p_params`` lets P depend on a subset of the parameters (fewer variables; a parameter P does not
 depend on and the delay does not depend on needs no rate vertex). Whatever the form, the certificate
 is the floating-point re-check of EVERY vertex LMI at EVERY grid point, P(rho_k) > 0, S > 0, R > 0.
-Clarabel is called on the conic data directly (:mod:`synthesis.solver.conic`, one progress line per
+Clarabel is called on the conic data directly (:mod:`pressor.synthesis.solver.conic`, one progress line per
 iteration). Scaling, state transform, strictness margins, the feasibility form (``gamma_cap``) and
 the working set (``working_set``) are those of the Jensen analysis; the result type is the same.
 
-K-scaled coordinates (``k_scaling``, :mod:`synthesis.certificates.wirtinger.k_scaling`): the same
+K-scaled coordinates (``k_scaling``, :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`): the same
 functional written in ``x~ = D(K) x`` (the ml/h states times K), i.e. ``V = xi~' P~(rho) xi~ + int
 x~'S~x~ + taubar int int dx~'R~ dx~`` with ``x~(s) = D(K(s)) x(s)`` inside the integrals: S, R
 constant in x~ are K(s)-dependent in x. x~ obeys a delay system whose matrices also depend on
@@ -86,11 +86,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from synthesis.certificates.interface import AnalysisResult, checked_inputs
-from synthesis.certificates.wirtinger.conic import build_conic, vertices_of
-from synthesis.certificates.wirtinger.k_scaling import KScaling
-from synthesis.certificates.wirtinger.lmi import WirtingerData, prepare, sym, vertex_lmis
-from synthesis.certificates.working_set import (
+from pressor.synthesis.certificates.interface import AnalysisResult, checked_inputs
+from pressor.synthesis.certificates.wirtinger.conic import build_conic, vertices_of
+from pressor.synthesis.certificates.wirtinger.k_scaling import KScaling
+from pressor.synthesis.certificates.wirtinger.lmi import WirtingerData, prepare, sym, vertex_lmis
+from pressor.synthesis.certificates.working_set import (
     BackOff,
     Formulation,
     Solution,
@@ -98,8 +98,8 @@ from synthesis.certificates.working_set import (
     first_points,
     solve_and_recheck,
 )
-from synthesis.problem.closed_loop import DelaySystem
-from synthesis.solver.conic import solve_conic
+from pressor.synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.solver.conic import solve_conic
 
 __all__ = ["analyse_wirtinger", "recheck_certificate"]
 
@@ -128,7 +128,7 @@ def analyse_wirtinger(
 ) -> AnalysisResult:
     """Solve the Wirtinger-based analysis LMI over a set of frozen closed loops.
 
-    Parameters are those of :func:`synthesis.certificates.jensen.analysis.analyse`, plus the ones
+    Parameters are those of :func:`pressor.synthesis.certificates.jensen.analysis.analyse`, plus the ones
     below. Every delay must be > 0 (the functional divides by tau) and <= ``tau_max_s``.
     ``working_set=k`` imposes the LMI at k spread points, re-checks every point and vertex in
     floating point and adds up to k failing points per round (with ``gamma_cap`` it stops as soon as
@@ -140,7 +140,7 @@ def analyse_wirtinger(
     rate_form
         "vertex" (every rate vertex of every imposed point) or "bound" (one LMI per point with
         rate slacks; sufficient for every vertex), see
-        :mod:`synthesis.certificates.wirtinger.conic`.
+        :mod:`pressor.synthesis.certificates.wirtinger.conic`.
     coupling
         "dense" (LMIs written in the P basis terms) or "per_point" (a copy of P(rho_k) and its
         rate terms per imposed point, tied by equalities): the same feasible set, a sparser solve.

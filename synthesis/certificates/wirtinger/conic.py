@@ -1,6 +1,6 @@
 """Conic data of the Wirtinger analysis LMI at a set of imposed points: two rate forms, two couplings.
 
-Rate forms (L0, M_i of :mod:`synthesis.certificates.wirtinger.lmi`; s' moving parameters):
+Rate forms (L0, M_i of :mod:`pressor.synthesis.certificates.wirtinger.lmi`; s' moving parameters):
 
 * ``"vertex"``: ``L0 + sum_i sigma_i M_i <= -eps I`` at every sigma in {-1, +1}^s' (2^s' PSD blocks
   of size 3n + n_w per point), the formulation measured in docs/CERTIFICATE-STRUCTURE.md.
@@ -12,9 +12,9 @@ Rate forms (L0, M_i of :mod:`synthesis.certificates.wirtinger.lmi`; s' moving pa
   implies every vertex LMI (and every rate inside the bounds); with one moving parameter and full
   Z it is equivalent to the vertex form (take Z = -L0 - eps I).
 
-K-scaled coordinates (``data.young``, :mod:`synthesis.certificates.wirtinger.k_scaling`): the bound
+K-scaled coordinates (``data.young``, :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`): the bound
 form takes the kappa and r directions by Young's inequality, one block of size big + 2 n_s per point
-(:func:`synthesis.certificates.wirtinger.analysis.analyse_wirtinger` gives the inequality and why it
+(:func:`pressor.synthesis.certificates.wirtinger.analysis.analyse_wirtinger` gives the inequality and why it
 suffices).
 
 Couplings of the P basis terms (the ~n_p (2n)(2n+1)/2 variables every point shares):
@@ -36,8 +36,13 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from synthesis.certificates.wirtinger.lmi import WirtingerData, local_map, point_maps, young_maps
-from synthesis.solver.conic import svec_eye, svec_rows
+from pressor.synthesis.certificates.wirtinger.lmi import (
+    WirtingerData,
+    local_map,
+    point_maps,
+    young_maps,
+)
+from pressor.synthesis.solver.conic import svec_eye, svec_rows
 
 __all__ = ["ConicData", "RATE_FORMS", "COUPLINGS", "build_conic", "vertices_of", "svec_of_triu"]
 
@@ -56,7 +61,7 @@ def vertices_of(data: WirtingerData) -> Array:
 
 def svec_of_triu(n: int) -> sp.csr_matrix:
     """Map from the upper-triangle entries of a symmetric n x n matrix (``np.triu_indices``
-    order, as :func:`synthesis.certificates.wirtinger.lmi.sym` reads them) to its Clarabel PSD
+    order, as :func:`pressor.synthesis.certificates.wirtinger.lmi.sym` reads them) to its Clarabel PSD
     triangle."""
     tri = np.zeros((n, n), dtype=np.int64)
     tri[np.triu_indices(n)] = np.arange(n * (n + 1) // 2)

@@ -3,7 +3,7 @@
 The scheduled Smith loop's gains scale like 1/K, so a Lyapunov functional that is constant (or
 polynomial) in the original state cannot follow it over K in [0.25, 1]. In the coordinates
 ``x~ = D(K) x`` with ``D = diag(d_j)``, ``d_j = K`` on the states that carry ml/h (in the closed
-loop of :func:`synthesis.problem.closed_loop.close_loop` with the Smith controller: the plant's
+loop of :func:`pressor.synthesis.problem.closed_loop.close_loop` with the Smith controller: the plant's
 infusion u and the controller's model input û) and 1 elsewhere, those states are in mmHg and the
 frozen loops look alike over the whole box (measured in docs/CERTIFICATE-STRUCTURE.md, section 2c).
 
@@ -17,7 +17,7 @@ with ``Pi = diag(1 on the scaled states)``, ``kappa = dK/dt / K`` (1/s) and
 ``|kappa| <= nu / K`` and ``|K(t) - K(t - tau)| <= nu tau_max``, so at a point with K(t) = K,
 ``r in [K / (K + nu tau_max), K / (K - nu tau_max)]``. Both enter the analysis as two more rate
 coordinates: kappa on the rate vertex of K itself (its sign is that of dK/dt), r on a vertex of its
-own (:mod:`synthesis.certificates.wirtinger.lmi`). The delayed output must not read a scaled state
+own (:mod:`pressor.synthesis.certificates.wirtinger.lmi`). The delayed output must not read a scaled state
 (``C_d Pi = 0``; true for the Smith loop, whose delayed output is the model output ŷ), so z does
 not depend on r.
 """
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.problem.closed_loop import DelaySystem
 
 __all__ = ["KScaling", "k_scaled_system", "k_terms"]
 

@@ -1,6 +1,6 @@
 """The Wirtinger-based analysis LMI split into its rate-free part and one term per moving parameter.
 
-The LMI of :mod:`synthesis.certificates.wirtinger.analysis` at a grid point rho_k and a rate vertex
+The LMI of :mod:`pressor.synthesis.certificates.wirtinger.analysis` at a grid point rho_k and a rate vertex
 sigma is affine in sigma::
 
     LMI(rho_k, sigma) = L0(rho_k) + sum_i sigma_i M_i(rho_k),     sigma in {-1, +1}^s
@@ -27,11 +27,11 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from synthesis.certificates.state_transform import transform_of
-from synthesis.certificates.wirtinger.k_scaling import KScaling, k_scaled_system, k_terms
-from synthesis.problem.basis import basis_terms
-from synthesis.problem.closed_loop import DelaySystem
-from synthesis.solver.conic import svec_rows
+from pressor.synthesis.certificates.state_transform import transform_of
+from pressor.synthesis.certificates.wirtinger.k_scaling import KScaling, k_scaled_system, k_terms
+from pressor.synthesis.problem.basis import basis_terms
+from pressor.synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.solver.conic import svec_rows
 
 __all__ = [
     "WirtingerData",
@@ -100,7 +100,7 @@ class WirtingerData:
     time_scale_s: float
     #: K-scaled coordinates only: (m, s', n, big) direction of Ga = [A Ad 0 B] at rate vertex
     #: sigma_i = +1 (kappa on the K vertex, r on the last one), see
-    #: :mod:`synthesis.certificates.wirtinger.k_scaling`
+    #: :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`
     dga: Array | None = None
     #: the same directions factored, ``Delta = U Phi``: (U (m, 2, n, n_s), Phi (2, n_s, big),
     #: position of the K vertex in ``moving``) for kappa and r (:func:`young_maps`)
@@ -150,11 +150,11 @@ def prepare(
     state_transform: Array | None,
     k_scaling: KScaling | None = None,
 ) -> WirtingerData:
-    """Scale time and state (:func:`synthesis.certificates.state_transform.transform_of`), build G1,
+    """Scale time and state (:func:`pressor.synthesis.certificates.state_transform.transform_of`), build G1,
     G0, Ga, Gz'Gz and the P basis; a parameter moves if its rate is > 0 and P or tau depends on it.
 
     With ``k_scaling`` the systems are first written in ``x~ = D(K) x``
-    (:func:`synthesis.certificates.wirtinger.k_scaling.k_scaled_system`; ``state_transform`` then
+    (:func:`pressor.synthesis.certificates.wirtinger.k_scaling.k_scaled_system`; ``state_transform`` then
     acts on x~), Ad is taken at the centre of each point's r interval, K moves whenever its rate
     bound is > 0, and r is one more moving coordinate (index ``s``, after the parameters) with no P
     or tau term.

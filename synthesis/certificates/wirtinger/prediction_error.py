@@ -1,7 +1,7 @@
 """The scheduled Smith law analysed in prediction-error coordinates, where the delay nearly cancels.
 
 Why. The Wirtinger analysis of the shipped law in the plant's own coordinates
-(:mod:`synthesis.families.smith.design`) sees a genuine delay loop, and certifies no delay box much
+(:mod:`pressor.synthesis.families.smith.design`) sees a genuine delay loop, and certifies no delay box much
 beyond τ = 60 s (docs/CERTIFICATE-STRUCTURE.md, §4). A Smith predictor cancels the delay; written
 in the coordinates of that cancellation, what is left of the delay is small, and the same analysis
 reaches τ = 200 s (§5).
@@ -14,7 +14,7 @@ whose state u (ml/h) is the infusion; g = K·Kc the loop gain, g_i = K·T·Ki = 
     exact:      u_a = Kc e_p + Ki q,  dq/dt = e_p                       Kc = g/K, Ki = g_i/(K T)
     trapezoid:  u_a = Kc e_p + Ki (x_e − τ(ŷ + ŷ(t − τ))/2),  dx_e/dt = r − MAP
 
-"trapezoid" is the shipped law (:mod:`synthesis.families.smith.law`, in the synthesis controller
+"trapezoid" is the shipped law (:mod:`pressor.synthesis.families.smith.law`, in the synthesis controller
 class); "exact" integrates the predicted error itself, ``q = x_e − ∫_{t−τ}^{t} ŷ``, a distributed
 delay outside that class (:func:`simulate_law` runs it).
 
@@ -32,7 +32,7 @@ the matrices depend on T and τ only (plus K̇/K on ũ), so the grid is two-dime
 enters only through the relative K rate ν_K/K_min.
 
 The analysis is the project's Wirtinger LMI
-(:func:`synthesis.certificates.wirtinger.analysis.analyse_wirtinger`, P affine in ρ̂ = (T, τ)) on these loops, each written at the vertices of K̇/K, α and β
+(:func:`pressor.synthesis.certificates.wirtinger.analysis.analyse_wirtinger`, P affine in ρ̂ = (T, τ)) on these loops, each written at the vertices of K̇/K, α and β
 (:func:`vertex_systems`). d is an additive output disturbance on MAP (mmHg) and z = e_p, so γ is
 the certified L2 gain from an output disturbance to the predicted error (dimensionless; a different
 channel from the shipped design's γ).
@@ -49,9 +49,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from synthesis.certificates.interface import AnalysisResult
-from synthesis.problem.closed_loop import DelaySystem
-from synthesis.problem.config import DesignConfig, ModelConfig
+from pressor.synthesis.certificates.interface import AnalysisResult
+from pressor.synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.problem.config import DesignConfig, ModelConfig
 
 __all__ = [
     "LAWS",
@@ -227,7 +227,7 @@ def vertex_systems(
     Returns
     -------
     (systems, rho_hat, rate_hat_per_s, dtau_drho_hat_s)
-        For :func:`synthesis.certificates.wirtinger.analysis.analyse_wirtinger`: ρ̂ = (T, τ)
+        For :func:`pressor.synthesis.certificates.wirtinger.analysis.analyse_wirtinger`: ρ̂ = (T, τ)
         normalised to [−1, 1], their rate bounds per s, and dτ/dρ̂ (s).
     """
     (t_lo, t_hi), (d_lo, d_hi) = box.t_range_s, box.tau_range_s
@@ -294,7 +294,7 @@ def certify(
     gamma_cap
         None: minimise γ; else the feasibility form at γ <= this.
     """
-    from synthesis.certificates.wirtinger.analysis import analyse_wirtinger
+    from pressor.synthesis.certificates.wirtinger.analysis import analyse_wirtinger
 
     if t_points < 2 or tau_points < 2 or not time_scale_s > 0:
         raise ValueError(

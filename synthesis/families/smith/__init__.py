@@ -1,5 +1,5 @@
 """The ``smith`` family (the shipped design): a closed-form scheduled Smith-predictor + PI law
-(:mod:`~synthesis.families.smith.law`), designed and certified by the Wirtinger analysis LMI in
-K-scaled coordinates (:mod:`~synthesis.families.smith.design`), registered as a family object
-(:mod:`~synthesis.families.smith.family`).
+(:mod:`~pressor.synthesis.families.smith.law`), designed and certified by the Wirtinger analysis LMI in
+K-scaled coordinates (:mod:`~pressor.synthesis.families.smith.design`), registered as a family object
+(:mod:`~pressor.synthesis.families.smith.family`).
 """

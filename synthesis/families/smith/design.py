@@ -1,11 +1,11 @@
 """The shipped family's design stage: certify the closed-form Smith law, package the artifact.
 
-There is no synthesis LMI for this family (:mod:`synthesis.families.smith.family`): the law is
-``SmithLPV(loop_gain, Ω, Λ).at(ρ)`` (:mod:`synthesis.families.smith.law`) and the design stage is
+There is no synthesis LMI for this family (:mod:`pressor.synthesis.families.smith.family`): the law is
+``SmithLPV(loop_gain, Ω, Λ).at(ρ)`` (:mod:`pressor.synthesis.families.smith.law`) and the design stage is
 the Wirtinger-based analysis LMI
-(:func:`synthesis.certificates.wirtinger.analysis.analyse_wirtinger`, one LMI per point with rate
+(:func:`pressor.synthesis.certificates.wirtinger.analysis.analyse_wirtinger`, one LMI per point with rate
 slacks, P(ρ) quadratic in ρ̂, S and R constant) written in K-scaled coordinates
-(:mod:`synthesis.certificates.wirtinger.k_scaling`: the ml/h states u and û times K, so S and R are
+(:mod:`pressor.synthesis.certificates.wirtinger.k_scaling`: the ml/h states u and û times K, so S and R are
 K(t)-dependent in the original state; docs/CERTIFICATE-STRUCTURE.md, section 2c) over the closed
 loops at the grid nodes. The law's gains scale like 1/K, which is why the functional is written in
 K-scaled coordinates. :func:`certify_smith` is that analysis on any set of points; the design
@@ -19,7 +19,7 @@ balanced (a constant congruence: feasibility and γ unchanged); time is scaled b
 
 Other formulations of the same analysis (:class:`WirtingerForm`: vertex form, working set,
 coupling, parameters of P, plain coordinates) are reached through :func:`certify_in_form` and
-:func:`design_in_form`, the builders :mod:`synthesis.research` calls; the shipped functions take
+:func:`design_in_form`, the builders :mod:`research.synthesis_forms` calls; the shipped functions take
 none of those options.
 """
 
@@ -31,20 +31,20 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.artifact import ControllerArtifact
-from synthesis.certificates.interface import AnalysisResult
-from synthesis.certificates.state_transform import conditioning_transform
-from synthesis.certificates.wirtinger.analysis import analyse_wirtinger, recheck_certificate
-from synthesis.certificates.wirtinger.conic import COUPLINGS, RATE_FORMS
-from synthesis.certificates.wirtinger.k_scaling import KScaling, k_scaled_system
-from synthesis.families.smith.family import NAME
-from synthesis.families.smith.law import SmithLPV
-from synthesis.families.smith.packaging import package_artifact
-from synthesis.problem.closed_loop import DelaySystem, close_loop
-from synthesis.problem.config import NOMINAL_RHO, DesignConfig, ModelConfig
-from synthesis.problem.model import I_U, dims, plant_at
-from synthesis.problem.reconstruct import scaling_of
-from synthesis.problem.scaling import Scaling
+from pressor.synthesis.artifact import ControllerArtifact
+from pressor.synthesis.certificates.interface import AnalysisResult
+from pressor.synthesis.certificates.state_transform import conditioning_transform
+from pressor.synthesis.certificates.wirtinger.analysis import analyse_wirtinger, recheck_certificate
+from pressor.synthesis.certificates.wirtinger.conic import COUPLINGS, RATE_FORMS
+from pressor.synthesis.certificates.wirtinger.k_scaling import KScaling, k_scaled_system
+from pressor.synthesis.families.smith.family import NAME
+from pressor.synthesis.families.smith.law import SmithLPV
+from pressor.synthesis.families.smith.packaging import package_artifact
+from pressor.synthesis.problem.closed_loop import DelaySystem, close_loop
+from pressor.synthesis.problem.config import NOMINAL_RHO, DesignConfig, ModelConfig
+from pressor.synthesis.problem.model import I_U, dims, plant_at
+from pressor.synthesis.problem.reconstruct import scaling_of
+from pressor.synthesis.problem.scaling import Scaling
 
 __all__ = [
     "COORDINATES",
@@ -115,7 +115,7 @@ class WirtingerForm:
         Indices into (K, T, τ) of the parameters P depends on (None: all three).
     coordinates
         "k_scaled" (the ml/h states u and û times K,
-        :mod:`synthesis.certificates.wirtinger.k_scaling`) or "plain" (the functional in the loops'
+        :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`) or "plain" (the functional in the loops'
         own states).
 
     Raises
@@ -205,7 +205,7 @@ def certify_in_form(
     p_dependence: str = P_DEPENDENCE,
     epsilon: float = 1e-6,
 ) -> AnalysisResult:
-    """:func:`certify_smith` written in ``form`` (the builder :mod:`synthesis.research` calls).
+    """:func:`certify_smith` written in ``form`` (the builder :mod:`research.synthesis_forms` calls).
 
     Raises
     ------
@@ -280,7 +280,7 @@ def recheck_smith_artifact(artifact: ControllerArtifact) -> tuple[bool, np.ndarr
     Returns
     -------
     (certified, margins)
-        As :func:`synthesis.certificates.wirtinger.analysis.recheck_certificate`: margins per grid
+        As :func:`pressor.synthesis.certificates.wirtinger.analysis.recheck_certificate`: margins per grid
         point.
 
     Raises
@@ -321,7 +321,7 @@ def design_smith(cfg: DesignConfig, progress: Progress | None = None) -> Control
 def design_in_form(
     cfg: DesignConfig, form: WirtingerForm, progress: Progress | None = None
 ) -> ControllerArtifact:
-    """:func:`design_smith` with the analysis written in ``form`` (for :mod:`synthesis.research`;
+    """:func:`design_smith` with the analysis written in ``form`` (for :mod:`research.synthesis_forms`;
     raises as it does)."""
     family = cfg.controller
     if family.structure != NAME or family.loop_gain is None:

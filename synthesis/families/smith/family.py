@@ -1,10 +1,10 @@
 """The "smith" controller family (the shipped one), as registered in ``families/registry.py``.
 
-The law is the scheduled Smith predictor + PI of :class:`synthesis.families.smith.law.SmithLPV` with
+The law is the scheduled Smith predictor + PI of :class:`pressor.synthesis.families.smith.law.SmithLPV` with
 one parameter, ``loop_gain`` = K·Kc = T/λ (dimensionless, in (0, 10]), fixed in closed form: there
-is no synthesis LMI. The design stage (:func:`synthesis.families.smith.design.design_smith`) is the
+is no synthesis LMI. The design stage (:func:`pressor.synthesis.families.smith.design.design_smith`) is the
 Wirtinger-based analysis LMI in K-scaled coordinates
-(:mod:`synthesis.certificates.wirtinger.k_scaling`) on the design grid, and the artifact stores its
+(:mod:`pressor.synthesis.certificates.wirtinger.k_scaling`) on the design grid, and the artifact stores its
 certificate (``P``, ``S``, ``R`` and the state ``transform`` it lives in, all in those coordinates,
 :func:`smith_coef_shapes`); its nodes are the law at the grid nodes. Check (a) of ``pressor verify``
 is the same analysis over every dense point in one feasibility solve with the L2 gain capped at
@@ -22,15 +22,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from synthesis.families.registry import Designed, Progress, SynthRequest
+from pressor.synthesis.families.registry import Designed, Progress, SynthRequest
 
 if TYPE_CHECKING:
-    from synthesis.artifact import ControllerArtifact
-    from synthesis.certificates.interface import AnalysisResult
-    from synthesis.families.smith.design import WirtingerForm
-    from synthesis.problem.closed_loop import DelaySystem
-    from synthesis.problem.config import DesignConfig
-    from synthesis.problem.reconstruct import DelayedController
+    from pressor.synthesis.artifact import ControllerArtifact
+    from pressor.synthesis.certificates.interface import AnalysisResult
+    from pressor.synthesis.families.smith.design import WirtingerForm
+    from pressor.synthesis.problem.closed_loop import DelaySystem
+    from pressor.synthesis.problem.config import DesignConfig
+    from pressor.synthesis.problem.reconstruct import DelayedController
 
 __all__ = [
     "FAMILY",
@@ -57,14 +57,14 @@ def smith_coef_shapes(n_plant: int) -> dict[str, tuple[int, ...]]:
     The closed loop has ``n = n_plant + SMITH_ORDER`` states; ``P`` (7, 2n, 2n) are the basis terms
     of P(ρ) on ξ = [x; ∫x], ``S``, ``R`` (n, n) the integral terms, all divided by γ, and
     ``transform`` (n, n) the state coordinates they live in (scaled time, see
-    :func:`synthesis.certificates.wirtinger.analysis.analyse_wirtinger`).
+    :func:`pressor.synthesis.certificates.wirtinger.analysis.analyse_wirtinger`).
     """
     n = n_plant + SMITH_ORDER
     return {"P": (SMITH_P_TERMS, 2 * n, 2 * n), "S": (n, n), "R": (n, n), "transform": (n, n)}
 
 
 class SmithFamily:
-    """The "smith" family's :class:`synthesis.families.registry.Family` object."""
+    """The "smith" family's :class:`pressor.synthesis.families.registry.Family` object."""
 
     name = NAME
     takes_loop_gain = True
@@ -85,13 +85,13 @@ class SmithFamily:
         self, cfg: DesignConfig, progress: Progress | None = None
     ) -> ControllerArtifact:
         """The certified artifact (``design.design_smith``); raises ``SmithDesignError``."""
-        from synthesis.families.smith.design import design_smith
+        from pressor.synthesis.families.smith.design import design_smith
 
         return design_smith(cfg, progress=progress)
 
     def design(self, cfg: DesignConfig, request: SynthRequest, progress: Progress) -> Designed:
         """Certify the law on the design grid (:meth:`certified_artifact`)."""
-        from synthesis.families.smith.design import SmithDesignError
+        from pressor.synthesis.families.smith.design import SmithDesignError
 
         try:
             art = self.certified_artifact(cfg, progress)
@@ -107,8 +107,8 @@ class SmithFamily:
 
     def controller_at(self, artifact: ControllerArtifact, rho: np.ndarray) -> DelayedController:
         """The closed-form law ``SmithLPV(loop_gain, Ω, Λ).at(ρ)``."""
-        from synthesis.families.smith.law import SmithLPV
-        from synthesis.problem.reconstruct import DelayedController
+        from pressor.synthesis.families.smith.law import SmithLPV
+        from pressor.synthesis.problem.reconstruct import DelayedController
 
         loop_gain = artifact.family.loop_gain
         assert loop_gain is not None
@@ -128,7 +128,7 @@ class SmithFamily:
         progress: Progress,
     ) -> AnalysisResult:
         """The design's Wirtinger analysis over every dense point, γ capped (module doc)."""
-        from synthesis.families.smith.design import SHIPPED_FORM
+        from pressor.synthesis.families.smith.design import SHIPPED_FORM
 
         return capped_analysis(
             SHIPPED_FORM, "smith family", artifact, systems, mesh, centre, p_dependence, progress
@@ -147,9 +147,9 @@ def capped_analysis(
 ) -> AnalysisResult:
     """Check (a) in ``form``: one feasibility solve over ``mesh``, γ capped at
     :data:`SMITH_GAMMA_CAP_FACTOR` × the artifact's (the family's analysis with the shipped form;
-    :mod:`synthesis.research` with its ablations). ``label`` names it in the progress line."""
-    from synthesis.families.smith.design import certify_in_form
-    from synthesis.problem.reconstruct import scaling_of
+    :mod:`research.synthesis_forms` with its ablations). ``label`` names it in the progress line."""
+    from pressor.synthesis.families.smith.design import certify_in_form
+    from pressor.synthesis.problem.reconstruct import scaling_of
 
     cap = SMITH_GAMMA_CAP_FACTOR * float(artifact.gamma)
     progress(f"analysis LMI (Wirtinger, {label}): gamma <= {cap:.4g}, {len(mesh)} points")

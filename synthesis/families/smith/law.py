@@ -1,12 +1,12 @@
 """A scheduled Smith predictor with a PI on the predicted output, written in the LPV controller class.
 
-The synthesis controller class (:class:`synthesis.problem.reconstruct.DelayedController`) is::
+The synthesis controller class (:class:`pressor.synthesis.problem.reconstruct.DelayedController`) is::
 
     dx_k/dt = Ak x_k + Adk x_k(t − τ) + Bk y,     u_a = Ck x_k + Cdk x_k(t − τ) + Dk y
 
 with ``y = [e (mmHg), x_e (mmHg·s)]`` and the input filter ``u = Ω/(s + Λ) u_a`` part of the plant
-(:mod:`synthesis.problem.model`). This module writes the control engineer's alternative in that
-class, so that the same closed-loop tools (:func:`synthesis.problem.closed_loop.close_loop`, the
+(:mod:`pressor.synthesis.problem.model`). This module writes the control engineer's alternative in that
+class, so that the same closed-loop tools (:func:`pressor.synthesis.problem.closed_loop.close_loop`, the
 analysis LMI, the frozen-delay roots, the step simulation) apply to it unchanged.
 
 Law at a frozen ρ = (K, T, τ). The controller state ``x_k = [û (ml/h), ŷ (mmHg)]`` is the
@@ -27,7 +27,7 @@ eigenvalue at 0, and no strict Lyapunov certificate exists. The trapezoid keeps 
 integrator, so the closed loop can be asymptotically stable.
 
 Tuning: ``Kc = T/(K λ)``, ``Ti = T`` (``Ki = Kc/Ti = 1/(K λ)``), the rule of
-:mod:`baselines.smith`; the PI zero cancels the model's T pole and the delay-free loop is
+:mod:`pressor.baselines.smith`; the PI zero cancels the model's T pole and the delay-free loop is
 ``1/(λ s (s/Λ + 1) + 1)`` when Ω = Λ. The closed-loop time constant is scheduled as
 ``λ = T / loop_gain``: ``loop_gain = K·Kc`` is then the same at every ρ, which is what the
 closed-loop dynamics depend on (a fixed λ makes the loop faster, relative to the plant, where T is
@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from synthesis.problem.closed_loop import OutputFeedback
+from pressor.synthesis.problem.closed_loop import OutputFeedback
 
 __all__ = ["SmithLPV"]
 
@@ -81,7 +81,7 @@ class SmithLPV:
         """The controller matrices at ρ = (K [mmHg/(ml/h)], T [s], τ [s]), physical units.
 
         Returns the matrices (states û ml/h, ŷ mmHg) in the form
-        :func:`synthesis.problem.closed_loop.close_loop` accepts.
+        :func:`pressor.synthesis.problem.closed_loop.close_loop` accepts.
         """
         k, t_s, tau_s = (float(v) for v in np.asarray(rho, dtype=float).reshape(3))
         if not (np.isfinite(tau_s) and tau_s >= 0.0):

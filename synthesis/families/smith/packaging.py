@@ -1,7 +1,7 @@
 """Package a certified Smith design as an artifact, whichever analysis certified it.
 
-Both Smith families (:mod:`synthesis.families.smith.design`,
-:mod:`synthesis.families.smith.pe_family`) store the same law at the design grid's nodes and differ
+Both Smith families (:mod:`pressor.synthesis.families.smith.design`,
+:mod:`pressor.synthesis.families.smith.pe_family`) store the same law at the design grid's nodes and differ
 only in the certificate and in how the metadata names it.
 """
 
@@ -11,12 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.artifact import FORMAT_VERSION, ControllerArtifact, make_artifact
-from synthesis.certificates.interface import AnalysisResult
-from synthesis.families.smith.law import SmithLPV
-from synthesis.problem.config import DesignConfig
-from synthesis.problem.model import dims
-from synthesis.problem.scaling import Scaling
+from pressor.synthesis.artifact import FORMAT_VERSION, ControllerArtifact, make_artifact
+from pressor.synthesis.certificates.interface import AnalysisResult
+from pressor.synthesis.families.smith.law import SmithLPV
+from pressor.synthesis.problem.config import DesignConfig
+from pressor.synthesis.problem.model import dims
+from pressor.synthesis.problem.scaling import Scaling
 
 __all__ = ["package_artifact"]
 

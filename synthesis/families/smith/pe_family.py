@@ -1,9 +1,9 @@
 """The "smith-pe" family: the shipped Smith law, certified in prediction-error coordinates.
 
 Same law, nodes and generated module as the "smith" family
-(:class:`synthesis.families.smith.law.SmithLPV`); only the certificate differs. Its design stage
+(:class:`pressor.synthesis.families.smith.law.SmithLPV`); only the certificate differs. Its design stage
 and check (a) of ``pressor verify`` are the Wirtinger analysis of the loop written in the
-coordinates of the Smith cancellation (:mod:`synthesis.certificates.wirtinger.prediction_error`,
+coordinates of the Smith cancellation (:mod:`pressor.synthesis.certificates.wirtinger.prediction_error`,
 law "trapezoid"), which reaches delay boxes the plant-coordinate analysis cannot
 (docs/CERTIFICATE-STRUCTURE.md, §5: 200 s at rates 5e-5 / 0.01 / 0.01). The design grid's T and τ
 point counts are the analysis grid (K drops out in K-scaled coordinates); check (a) re-solves on
@@ -18,14 +18,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from synthesis.families.registry import Progress
-from synthesis.families.smith.family import SMITH_GAMMA_CAP_FACTOR, SmithFamily
+from pressor.synthesis.families.registry import Progress
+from pressor.synthesis.families.smith.family import SMITH_GAMMA_CAP_FACTOR, SmithFamily
 
 if TYPE_CHECKING:
-    from synthesis.artifact import ControllerArtifact
-    from synthesis.certificates.interface import AnalysisResult
-    from synthesis.problem.closed_loop import DelaySystem
-    from synthesis.problem.config import DesignConfig
+    from pressor.synthesis.artifact import ControllerArtifact
+    from pressor.synthesis.certificates.interface import AnalysisResult
+    from pressor.synthesis.problem.closed_loop import DelaySystem
+    from pressor.synthesis.problem.config import DesignConfig
 
 __all__ = ["FAMILY", "NAME", "SmithPEFamily", "design_smith_pe"]
 
@@ -35,14 +35,14 @@ PE_P_TERMS = 3
 
 
 class SmithPEFamily(SmithFamily):
-    """The "smith-pe" family's :class:`synthesis.families.registry.Family` object."""
+    """The "smith-pe" family's :class:`pressor.synthesis.families.registry.Family` object."""
 
     name = NAME
     analysis_name = "prediction-error analysis"
 
     def coefficient_shapes(self, n_plant: int, ny: int) -> dict[str, tuple[tuple[int, ...], ...]]:
         """The prediction-error certificate: P (3, 8, 8), S, R and transform (4, 4)."""
-        from synthesis.certificates.wirtinger.prediction_error import N_STATES as n
+        from pressor.synthesis.certificates.wirtinger.prediction_error import N_STATES as n
 
         return {
             "P": ((PE_P_TERMS, 2 * n, 2 * n),),
@@ -67,7 +67,10 @@ class SmithPEFamily(SmithFamily):
         progress: Progress,
     ) -> AnalysisResult:
         """Check (a): the same analysis on the mesh's T × τ counts, γ capped (module doc)."""
-        from synthesis.certificates.wirtinger.prediction_error import PredictionErrorBox, certify
+        from pressor.synthesis.certificates.wirtinger.prediction_error import (
+            PredictionErrorBox,
+            certify,
+        )
 
         loop_gain = artifact.family.loop_gain
         assert loop_gain is not None
@@ -89,9 +92,12 @@ def design_smith_pe(cfg: DesignConfig, progress: Progress | None = None) -> Cont
     SmithDesignError
         If the analysis does not certify the law on the design grid's T × τ.
     """
-    from synthesis.certificates.wirtinger.prediction_error import PredictionErrorBox, certify
-    from synthesis.families.smith.design import SmithDesignError
-    from synthesis.families.smith.packaging import package_artifact
+    from pressor.synthesis.certificates.wirtinger.prediction_error import (
+        PredictionErrorBox,
+        certify,
+    )
+    from pressor.synthesis.families.smith.design import SmithDesignError
+    from pressor.synthesis.families.smith.packaging import package_artifact
 
     say = progress or (lambda _msg: None)
     box = PredictionErrorBox.from_config(cfg, law="trapezoid")

@@ -1,15 +1,15 @@
 """The "theorem3" controller family (the alternative), as registered in ``families/registry.py``.
 
 The full-order controller of the paper's Theorem 3, synthesised by the LMIs of
-:mod:`synthesis.families.theorem3.lmi` (Jensen functional;
-:func:`synthesis.families.theorem3.synthesize.synthesize`, optionally after the (λ2, λ3) line search
-of :mod:`synthesis.families.theorem3.line_search`). The artifact's coefficients are the decision
+:mod:`pressor.synthesis.families.theorem3.lmi` (Jensen functional;
+:func:`pressor.synthesis.families.theorem3.synthesize.synthesize`, optionally after the (λ2, λ3) line search
+of :mod:`pressor.synthesis.families.theorem3.line_search`). The artifact's coefficients are the decision
 variables (:func:`coef_shapes`) and the controller is reconstructed from them
-(:mod:`synthesis.problem.reconstruct`). A design file or an artifact without a ``controller`` entry
+(:mod:`pressor.synthesis.problem.reconstruct`). A design file or an artifact without a ``controller`` entry
 is this family.
 
 Check (a) of ``pressor verify`` is the delay-dependent analysis LMI of
-:mod:`synthesis.certificates.jensen.analysis` (Theorem 1, Jensen functional), in state coordinates
+:mod:`pressor.synthesis.certificates.jensen.analysis` (Theorem 1, Jensen functional), in state coordinates
 whitened by the centre point's own Lyapunov matrix and balanced, in feasibility form with the L2
 gain capped at :data:`JENSEN_GAMMA_CAP_FACTOR` x the synthesis γ, in the rate-bound form on a
 working set (as many points as the synthesis grid has nodes, grown by the failing ones), the
@@ -25,14 +25,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from synthesis.families.registry import Designed, Progress, SynthRequest
+from pressor.synthesis.families.registry import Designed, Progress, SynthRequest
 
 if TYPE_CHECKING:
-    from synthesis.artifact import ControllerArtifact
-    from synthesis.certificates.interface import AnalysisResult
-    from synthesis.problem.closed_loop import DelaySystem
-    from synthesis.problem.config import DesignConfig
-    from synthesis.problem.reconstruct import DelayedController
+    from pressor.synthesis.artifact import ControllerArtifact
+    from pressor.synthesis.certificates.interface import AnalysisResult
+    from pressor.synthesis.problem.closed_loop import DelaySystem
+    from pressor.synthesis.problem.config import DesignConfig
+    from pressor.synthesis.problem.reconstruct import DelayedController
 
 __all__ = [
     "COEF_NAMES",
@@ -60,7 +60,7 @@ def coef_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
     """Decision coefficients: name -> (rows, cols) for a generalised plant of order ``n``.
 
     n = 3 for the default model; frequency weights add states
-    (:func:`synthesis.problem.model.dims`).
+    (:func:`pressor.synthesis.problem.model.dims`).
     """
     n2 = 2 * n
     return {
@@ -79,7 +79,7 @@ def coef_shapes(n: int, ny: int = 2) -> dict[str, tuple[int, int]]:
 
 
 class Theorem3Family:
-    """The "theorem3" family's :class:`synthesis.families.registry.Family` object."""
+    """The "theorem3" family's :class:`pressor.synthesis.families.registry.Family` object."""
 
     name = NAME
     takes_loop_gain = False
@@ -101,16 +101,16 @@ class Theorem3Family:
 
         Raises
         ------
-        plumbing.usage.UsageError
+        pressor.plumbing.usage.UsageError
             If the line search's Dask scheduler cannot be used.
         """
-        from synthesis.families.theorem3.synthesize import SynthesisError, synthesize
+        from pressor.synthesis.families.theorem3.synthesize import SynthesisError, synthesize
 
         extra: dict[str, Any] = {}
         if request.lambda_search:
-            from plumbing.parallel import BackendError
-            from plumbing.usage import UsageError
-            from synthesis.families.theorem3.line_search import search
+            from pressor.plumbing.parallel import BackendError
+            from pressor.plumbing.usage import UsageError
+            from pressor.synthesis.families.theorem3.line_search import search
 
             try:
                 best, pts = search(
@@ -141,9 +141,13 @@ class Theorem3Family:
     def controller_at(self, artifact: ControllerArtifact, rho: np.ndarray) -> DelayedController:
         """Reconstructed from the decision variables.
 
-        (:func:`synthesis.problem.reconstruct.controllers_at`)
+        (:func:`pressor.synthesis.problem.reconstruct.controllers_at`)
         """
-        from synthesis.problem.reconstruct import DelayedController, controllers_at, scaling_of
+        from pressor.synthesis.problem.reconstruct import (
+            DelayedController,
+            controllers_at,
+            scaling_of,
+        )
 
         r = np.asarray(rho, dtype=float)
         k = controllers_at(
@@ -183,12 +187,12 @@ def jensen_analysis(
 ) -> AnalysisResult:
     """The Jensen analysis LMI of check (a) over the frozen loops ``systems`` at ``mesh`` (G, 3).
 
-    ``all_points_at_once`` (:mod:`synthesis.research` only) imposes every point and rate vertex in
+    ``all_points_at_once`` (:mod:`research.synthesis_forms` only) imposes every point and rate vertex in
     one solve instead of the rate-bound form on a working set; the verdict is the same re-check.
     """
-    from synthesis.certificates.jensen.analysis import analyse
-    from synthesis.certificates.state_transform import conditioning_transform
-    from synthesis.problem.reconstruct import scaling_of
+    from pressor.synthesis.certificates.jensen.analysis import analyse
+    from pressor.synthesis.certificates.state_transform import conditioning_transform
+    from pressor.synthesis.problem.reconstruct import scaling_of
 
     box = np.asarray(artifact.box, dtype=float)
     rates = np.asarray(artifact.rate_bounds, dtype=float)

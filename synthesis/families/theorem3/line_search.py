@@ -4,7 +4,7 @@ With λ2, λ3 fixed the synthesis condition is an LMI; γ*(λ2, λ3) is not conv
 search is a plain grid over the candidate lists of the design config (``[line_search]``), one SDP
 per point, keeping the smallest γ among solves that reached "optimal". The points are independent:
 they run in this process, in local worker processes (``jobs``) or on a Dask cluster
-(``scheduler``, :mod:`plumbing.parallel`), with the same result.
+(``scheduler``, :mod:`pressor.plumbing.parallel`), with the same result.
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from plumbing.parallel import run_ordered
-from synthesis.families.theorem3 import lmi, lmi_solve
-from synthesis.problem.config import DesignConfig
+from pressor.plumbing.parallel import run_ordered
+from pressor.synthesis.families.theorem3 import lmi, lmi_solve
+from pressor.synthesis.problem.config import DesignConfig
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ time-varying ρ (for each *frozen* ρ the congruence is still exact). Three opti
 * ``"x"`` — **Y constant, X(ρ) in the basis** (**the shipped default**), factorisation ``M = I,
   N = I − X(ρ)Y`` (smooth, no SVD): Π1 is constant, the slack 𝒳(ρ) may vary freely (Finsler needs
   no derivative of it), so the rate-bounded L2-gain bound γ holds as written (γ ≈ 13.5 on 3×3×3).
-  Independently, :mod:`synthesis.verification.verify` certifies the reconstructed closed loop with
+  Independently, :mod:`pressor.synthesis.verification.verify` certifies the reconstructed closed loop with
   the Theorem-1 analysis LMI (P quadratic in ρ, all rate vertices) on the 5×5×5 grid incl. cell
   midpoints, re-checked in floating point. Cost: a slow nominal step (overshoot ≈ 1.9 %, settling ≈
   465 s, slower than the PI's 418.8 s); ξ (0.015–0.12), φ, η and λ did not speed it up (φ only
@@ -47,7 +47,7 @@ time-varying ρ (for each *frozen* ρ the congruence is still exact). Three opti
   points fail the re-check), so it is not shipped.
 
 Between grid nodes nothing is certified by the synthesis itself;
-:func:`synthesis.research.theorem3_certificate.certificate_margins` evaluates the synthesis
+:func:`research.synthesis_forms.theorem3_certificate.certificate_margins` evaluates the synthesis
 certificate at arbitrary points.
 
 Other choices
@@ -60,9 +60,9 @@ Other choices
   implies the vertex conditions (sufficient, slightly more conservative) with one large LMI per node
   instead of eight.
 * Strict inequalities become ``⪯ −εI`` / ``⪰ εI``.
-* λ2, λ3 are fixed (line search in :mod:`synthesis.families.theorem3.line_search`), making the
+* λ2, λ3 are fixed (line search in :mod:`pressor.synthesis.families.theorem3.line_search`), making the
   problem an SDP.
-* Everything is in the scaled coordinates of :mod:`synthesis.problem.scaling`.
+* Everything is in the scaled coordinates of :mod:`pressor.synthesis.problem.scaling`.
 
 Build
 -----
@@ -70,8 +70,8 @@ The LMI is one numeric function of the decision vector, vectorised over grid poi
 vertices (:func:`lmi_blocks`). Because it is affine, evaluating it at 0 and at unit vectors (in
 chunks) gives its exact sparse affine map ``vec F(x) = F0 + A x``; cvxpy receives that as a single
 batched PSD constraint ``reshape(b − A x, (N, m, m)) ⪰ 0`` and compiles in well under a second
-(:mod:`synthesis.families.theorem3.lmi_solve`); the decision vector's layout is
-:mod:`synthesis.families.theorem3.lmi_layout`.
+(:mod:`pressor.synthesis.families.theorem3.lmi_solve`); the decision vector's layout is
+:mod:`pressor.synthesis.families.theorem3.lmi_layout`.
 """
 
 from __future__ import annotations
@@ -83,11 +83,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from synthesis.families.theorem3.lmi_layout import Layout
-from synthesis.problem import basis
-from synthesis.problem.config import DesignConfig
-from synthesis.problem.model import N_STATE, dims, plant_batch
-from synthesis.problem.scaling import Scaling
+from pressor.synthesis.families.theorem3.lmi_layout import Layout
+from pressor.synthesis.problem import basis
+from pressor.synthesis.problem.config import DesignConfig
+from pressor.synthesis.problem.model import N_STATE, dims, plant_batch
+from pressor.synthesis.problem.scaling import Scaling
 
 N2 = 2 * N_STATE  # closed-loop order of the shipped ("integral") plant
 

@@ -2,7 +2,7 @@
 
 Every matrix (P̃, Q̃, R̃, X, Y, the transformed controller Â, Âd, B̂, Ĉ, Ĉd, Dk, γ, the per-node
 levels γ_g and, in the "bound" rate mode, the slacks Z) is a :class:`Block` of basis coefficients;
-:class:`Layout` packs and unpacks them (see :mod:`synthesis.families.theorem3.lmi` for the LMI
+:class:`Layout` packs and unpacks them (see :mod:`pressor.synthesis.families.theorem3.lmi` for the LMI
 itself).
 """
 
@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from synthesis.problem import basis
-from synthesis.problem.model import N_STATE, PlantDims
+from pressor.synthesis.problem import basis
+from pressor.synthesis.problem.model import N_STATE, PlantDims
 
 __all__ = ["Block", "Layout"]
 

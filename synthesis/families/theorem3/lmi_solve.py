@@ -1,7 +1,7 @@
 """Solving the Theorem-3 synthesis LMI: one batched SDP in cvxpy, Clarabel underneath.
 
 :func:`solve` receives the exact sparse affine maps of the LMI and of the positivity set
-(:func:`synthesis.families.theorem3.lmi.affine_map`) as single batched PSD constraints, minimises γ
+(:func:`pressor.synthesis.families.theorem3.lmi.affine_map`) as single batched PSD constraints, minimises γ
 and optionally backs off to a better-conditioned solution (``solver.backoff``).
 """
 
@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from synthesis.families.theorem3.lmi import Problem, affine_map, positivity, synthesis_lmi
-from synthesis.families.theorem3.lmi_layout import Layout
+from pressor.synthesis.families.theorem3.lmi import Problem, affine_map, positivity, synthesis_lmi
+from pressor.synthesis.families.theorem3.lmi_layout import Layout
 
 __all__ = ["DEFAULT_SOLVER_OPTS", "SolveResult", "solve"]
 
@@ -46,7 +46,7 @@ def _run(
 
     import cvxpy as cp
 
-    from synthesis.solver.conic import solve_cvxpy
+    from pressor.synthesis.solver.conic import solve_cvxpy
 
     t0 = time.perf_counter()
     try:

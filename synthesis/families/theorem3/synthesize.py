@@ -2,7 +2,7 @@
 
 Named stages (CVXPYgen style): :func:`build`, :func:`solve_design`, :func:`to_artifact`;
 :func:`synthesize` runs them, with the optional (λ2, λ3) line search of
-:mod:`synthesis.families.theorem3.line_search` in front.
+:mod:`pressor.synthesis.families.theorem3.line_search` in front.
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from synthesis.artifact import FORMAT_VERSION, ControllerArtifact, make_artifact
-from synthesis.families.theorem3 import lmi, lmi_solve
-from synthesis.families.theorem3.family import COEF_NAMES
-from synthesis.problem import basis
-from synthesis.problem.config import DesignConfig
-from synthesis.problem.reconstruct import controllers_at
+from pressor.synthesis.artifact import FORMAT_VERSION, ControllerArtifact, make_artifact
+from pressor.synthesis.families.theorem3 import lmi, lmi_solve
+from pressor.synthesis.families.theorem3.family import COEF_NAMES
+from pressor.synthesis.problem import basis
+from pressor.synthesis.problem.config import DesignConfig
+from pressor.synthesis.problem.reconstruct import controllers_at
 
 Progress = Callable[[str], None]
 

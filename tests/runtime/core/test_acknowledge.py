@@ -1,6 +1,6 @@
 """The clinician's acknowledgement: the supervisor resumes from HOLD or FAILSAFE only when the
-fault has cleared (runtime.core.supervisor_io), and the ``ack`` line on stdin or in the target file
-reaches it (runtime.inputs.target_source). The real ``pressor run`` paths are in
+fault has cleared (pressor.runtime.core.supervisor_io), and the ``ack`` line on stdin or in the target file
+reaches it (pressor.runtime.inputs.target_source). The real ``pressor run`` paths are in
 tests/runtime/inputs/test_clinician.py."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import math
 import os
 from pathlib import Path
 
-from runtime.core.supervisor_config import State, SupervisorConfig
-from runtime.inputs.clinician import ClinicianInput, read_target_file, split_ack
-from runtime.inputs.target_source import TargetSource
+from pressor.runtime.core.supervisor_config import State, SupervisorConfig
+from pressor.runtime.inputs.clinician import ClinicianInput, read_target_file, split_ack
+from pressor.runtime.inputs.target_source import TargetSource
 from tests.support.link_doubles import tick_inputs
 from tests.support.supervisor_rig import TS, Rig
 

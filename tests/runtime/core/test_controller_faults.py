@@ -10,11 +10,11 @@ import math
 
 import pytest
 
-from link import TickInputs
-from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, ControllerError
-from runtime.core.supervisor import Supervisor, SupervisorInput
-from runtime.core.supervisor_config import Fault, State, SupervisorConfig
-from runtime.inputs.controller_loader import load_controller
+from pressor.link import TickInputs
+from pressor.runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore, ControllerError
+from pressor.runtime.core.supervisor import Supervisor, SupervisorInput
+from pressor.runtime.core.supervisor_config import Fault, State, SupervisorConfig
+from pressor.runtime.inputs.controller_loader import load_controller
 from tests.support.link_doubles import tick_inputs
 from tests.support.supervisor_rig import TS, Rig, good_inputs
 

@@ -2,7 +2,7 @@
 
 Each rule has a run with the quantized monitor on a steady patient (must not fire) and one with the
 real fault (must fire within its documented latency). The monitor is the simulator's
-(:mod:`sim.devices.sensor`, repeating its value with ``QUALITY_HELD`` between updates) driven through
+(:mod:`pressor.hil_sim.devices.sensor`, repeating its value with ``QUALITY_HELD`` between updates) driven through
 the runtime's closed-loop core in process, as ``pressor trial`` and a lockstep ``pressor sil`` run.
 """
 
@@ -13,16 +13,21 @@ import math
 import numpy as np
 import pytest
 
-from baselines.pi import PIController
-from contracts.faults import QUALITY_HELD, QUALITY_WAVEFORM, parse_faults
-from link.messages import TickInputs
-from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
-from runtime.core.flatline import FlatlineRules, grain_mmhg, stuck_samples
-from runtime.core.supervisor import Supervisor, SupervisorInput
-from runtime.core.supervisor_config import Fault, State, SupervisorConfig, supervisor_config_for
-from sim.episode import simulate
-from sim.scenarios.scenario import parse_scenario
-from sim.world import World
+from pressor.baselines.pi import PIController
+from pressor.contracts.faults import QUALITY_HELD, QUALITY_WAVEFORM, parse_faults
+from pressor.hil_sim.episode import simulate
+from pressor.hil_sim.scenarios.scenario import parse_scenario
+from pressor.hil_sim.world import World
+from pressor.link.messages import TickInputs
+from pressor.runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from pressor.runtime.core.flatline import FlatlineRules, grain_mmhg, stuck_samples
+from pressor.runtime.core.supervisor import Supervisor, SupervisorInput
+from pressor.runtime.core.supervisor_config import (
+    Fault,
+    State,
+    SupervisorConfig,
+    supervisor_config_for,
+)
 from tests.support.supervisor_rig import good_inputs
 
 TS = 0.1
@@ -155,7 +160,7 @@ class Recording:
         self.seen: list[tuple[float, int]] = []
 
     def update(self, inputs):
-        from runtime.core.scheduling import OracleSchedule
+        from pressor.runtime.core.scheduling import OracleSchedule
 
         self.seen.append((inputs.map_mmhg, inputs.quality))
         return OracleSchedule().update(inputs)

@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from runtime.core.supervisor import Supervisor, SupervisorInput
-from runtime.core.supervisor_config import Fault, State, SupervisorConfig
+from pressor.runtime.core.supervisor import Supervisor, SupervisorInput
+from pressor.runtime.core.supervisor_config import Fault, State, SupervisorConfig
 from tests.support.supervisor_rig import GOOD_MAP, TS, Rig, good_inputs
 
 BOX = ((0.45, 0.66), (100.0, 200.0), (10.0, 35.0))

@@ -14,15 +14,15 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from runtime.estimation.estimator import DelayBankEstimator
-from runtime.estimation.settings import (
+from pressor.runtime.estimation.estimator import DelayBankEstimator
+from pressor.runtime.estimation.settings import (
     DEFAULT_SETTINGS,
     DESIGN_BOX,
     ESTIMATE_BOX,
     NOMINAL_PLANT,
     EstimatorSettings,
 )
-from runtime.generated import lpv_map_controller as shipped
+from pressor.runtime.generated import lpv_map_controller as shipped
 
 TS = 0.1
 
@@ -166,8 +166,8 @@ def test_health_check_never_reports_a_negative_gain():
 
 
 def test_prior_is_the_projects_nominal_patient_and_the_box_the_default_design():
-    from synthesis.problem.config import NOMINAL_RHO
-    from synthesis.problem.config_toml import load_config
+    from pressor.synthesis.problem.config import NOMINAL_RHO
+    from pressor.synthesis.problem.config_toml import load_config
 
     assert NOMINAL_PLANT == NOMINAL_RHO
     est = DelayBankEstimator(TS)

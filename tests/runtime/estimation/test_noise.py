@@ -1,4 +1,4 @@
-"""The monitor-noise estimate of a window mean (runtime.estimation.noise)."""
+"""The monitor-noise estimate of a window mean (pressor.runtime.estimation.noise)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from runtime.estimation.noise import WindowNoise
+from pressor.runtime.estimation.noise import WindowNoise
 
 
 @pytest.mark.parametrize("sigma_mmhg", [0.2, 0.7])

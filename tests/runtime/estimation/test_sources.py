@@ -8,13 +8,13 @@ import sys
 
 import pytest
 
-from contracts.faults import QUALITY_INVALID, QUALITY_WAVEFORM
-from runtime.core.estimate import Estimate
-from runtime.core.scheduling import NominalSchedule, OracleSchedule, ScheduleInput
-from runtime.estimation.estimator import DelayBankEstimator
-from runtime.estimation.gate import SampleGate
-from runtime.estimation.settings import NOMINAL_PLANT, EstimatorSettings
-from runtime.estimation.sources import SOURCES, EstimatedSchedule, make_schedule
+from pressor.contracts.faults import QUALITY_INVALID, QUALITY_WAVEFORM
+from pressor.runtime.core.estimate import Estimate
+from pressor.runtime.core.scheduling import NominalSchedule, OracleSchedule, ScheduleInput
+from pressor.runtime.estimation.estimator import DelayBankEstimator
+from pressor.runtime.estimation.gate import SampleGate
+from pressor.runtime.estimation.settings import NOMINAL_PLANT, EstimatorSettings
+from pressor.runtime.estimation.sources import SOURCES, EstimatedSchedule, make_schedule
 
 #: MAP 60 mmHg, good quality, nothing delivered, no scheduling parameters from the device
 NO_DEVICE_AT_60 = ScheduleInput(60.0, 0, 0.0, math.nan, math.nan, math.nan, False)
@@ -206,8 +206,8 @@ def test_make_schedule_builds_each_named_source():
 
 def test_estimation_imports_no_numpy_solver_or_simulator():
     code = (
-        "import sys, runtime.estimation.sources\n"
-        "print(sorted(m for m in ('numpy', 'scipy', 'cvxpy', 'sim', 'synthesis', 'link')"
+        "import sys, pressor.runtime.estimation.sources\n"
+        "print(sorted(m for m in ('numpy', 'scipy', 'cvxpy', 'pressor.hil_sim', 'pressor.synthesis', 'pressor.link')"
         " if m in sys.modules))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

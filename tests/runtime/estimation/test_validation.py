@@ -10,18 +10,18 @@ import random
 import numpy as np
 import pytest
 
-from link import PumpStatus, TickInputs
-from runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
-from runtime.core.scheduling import NominalSchedule, ScheduleInput
-from runtime.core.supervisor import Supervisor
-from runtime.core.supervisor_config import Fault, supervisor_config_for
-from runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
-from runtime.estimation.sources import SOURCES, make_schedule
-from runtime.estimation.validated import DESIGN_RATES, ValidatedSchedule
-from runtime.estimation.validation import ModelBank
-from runtime.inputs.controller_loader import load_controller
-from sim.episode import simulate
-from sim.world import World
+from pressor.hil_sim.episode import simulate
+from pressor.hil_sim.world import World
+from pressor.link import PumpStatus, TickInputs
+from pressor.runtime.core.closed_loop import CLEAN_LINK, ClosedLoopCore
+from pressor.runtime.core.scheduling import NominalSchedule, ScheduleInput
+from pressor.runtime.core.supervisor import Supervisor
+from pressor.runtime.core.supervisor_config import Fault, supervisor_config_for
+from pressor.runtime.estimation.settings import DESIGN_BOX, NOMINAL_PLANT
+from pressor.runtime.estimation.sources import SOURCES, make_schedule
+from pressor.runtime.estimation.validated import DESIGN_RATES, ValidatedSchedule
+from pressor.runtime.estimation.validation import ModelBank
+from pressor.runtime.inputs.controller_loader import load_controller
 
 TS = 0.1
 WINDOW_S = 2.0

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from link import (
+from pressor.link import (
     LINK_LOCKSTEP,
     REFUSAL_CONCENTRATION,
     REFUSAL_DRUG,

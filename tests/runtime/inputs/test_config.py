@@ -1,4 +1,4 @@
-"""The runtime's typed run configuration (runtime.inputs.config): checked once, at the command
+"""The runtime's typed run configuration (pressor.runtime.inputs.config): checked once, at the command
 line."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from plumbing.usage import UsageError, UsageParser
-from runtime.inputs.config import RunConfig, add_run_options, run_config
+from pressor.plumbing.usage import UsageError, UsageParser
+from pressor.runtime.inputs.config import RunConfig, add_run_options, run_config
 
 
 def _config(*argv: str, ticks: int = 0) -> RunConfig:

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from contracts.module_hash import module_text_sha256
-from runtime.inputs.controller_loader import (
+from pressor.contracts.module_hash import module_text_sha256
+from pressor.runtime.inputs.controller_loader import (
     UNCERTIFIED_MARK,
     ControllerSpecError,
     load_controller,
@@ -24,7 +24,7 @@ def _research_build(tmp_path: Path) -> Path:
     text = shipped.read_text(encoding="utf-8")
     text = re.sub(
         r"^GENERATION_COMMAND = '[^']*'",
-        f"GENERATION_COMMAND = '{UNCERTIFIED_MARK}benchmarks/designs/wide_delay.toml'",
+        f"GENERATION_COMMAND = '{UNCERTIFIED_MARK}research/designs/wide_delay.toml'",
         text,
         count=1,
         flags=re.MULTILINE,

@@ -1,4 +1,4 @@
-"""Plugin controllers (runtime.inputs.controller_plugin): loading, the protocol check's messages,
+"""Plugin controllers (pressor.runtime.inputs.controller_plugin): loading, the protocol check's messages,
 entry points, supervision in-process (clamp, alarm, a raising controller) and byte-identical
 trials."""
 
@@ -11,10 +11,14 @@ import numpy as np
 import pytest
 
 from pressor import api
-from runtime.core.closed_loop import ControllerError
-from runtime.core.supervisor_config import Fault, State
-from runtime.inputs.controller_loader import ControllerSpecError, controller_name, load_controller
-from runtime.inputs.controller_plugin import refresh_entry_points, split_controller_list
+from pressor.runtime.core.closed_loop import ControllerError
+from pressor.runtime.core.supervisor_config import Fault, State
+from pressor.runtime.inputs.controller_loader import (
+    ControllerSpecError,
+    controller_name,
+    load_controller,
+)
+from pressor.runtime.inputs.controller_plugin import refresh_entry_points, split_controller_list
 
 SUPPORT = Path(__file__).resolve().parents[2] / "support"
 PLUGINS = str(SUPPORT / "controller_plugins.py")
@@ -122,7 +126,7 @@ def test_a_runaway_plugin_is_clamped_and_alarmed(short):
 
 
 def test_a_raising_plugin_is_a_clean_error_in_process_and_across_workers(short, capsys):
-    from sim.cli import main
+    from pressor.hil_sim.cli import main
 
     with pytest.raises(ControllerError, match=r"'Raises'.*tick 19.*ZeroDivisionError"):
         api.trial(f"{PLUGINS}:Raises", short, n_patients=2)
@@ -137,7 +141,7 @@ def test_a_raising_plugin_is_a_clean_error_in_process_and_across_workers(short, 
 def test_plugin_trials_are_byte_identical_in_process_across_workers_and_the_command(
     short, tmp_path
 ):
-    from sim.cli import main
+    from pressor.hil_sim.cli import main
 
     spec = f"{PLUGINS}:PlainPI:kp=0.6"
     one = api.trial(spec, short, n_patients=4, seed=2).write(tmp_path / "api1")

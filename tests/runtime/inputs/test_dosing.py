@@ -14,14 +14,25 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from contracts.drug import DEFAULT_BINDING, DrugBinding, binding_of, dose_ug_kg_min, dose_ug_min
-from plumbing.usage import UsageError
-from runtime.core.dose_guard import DOSE_HARD_LIMIT, DOSE_HOUR_LIMIT, DOSE_SOFT_LIMIT, DoseGuard
-from runtime.core.supervisor import Supervisor, SupervisorInput
-from runtime.core.supervisor_config import Fault, State, SupervisorConfig
-from runtime.inputs.clinician import ClinicianInput
-from runtime.inputs.dosing import bind_syringe, dose_summary, parse_weight
-from runtime.inputs.drug_library import (
+from pressor.contracts.drug import (
+    DEFAULT_BINDING,
+    DrugBinding,
+    binding_of,
+    dose_ug_kg_min,
+    dose_ug_min,
+)
+from pressor.plumbing.usage import UsageError
+from pressor.runtime.core.dose_guard import (
+    DOSE_HARD_LIMIT,
+    DOSE_HOUR_LIMIT,
+    DOSE_SOFT_LIMIT,
+    DoseGuard,
+)
+from pressor.runtime.core.supervisor import Supervisor, SupervisorInput
+from pressor.runtime.core.supervisor_config import Fault, State, SupervisorConfig
+from pressor.runtime.inputs.clinician import ClinicianInput
+from pressor.runtime.inputs.dosing import bind_syringe, dose_summary, parse_weight
+from pressor.runtime.inputs.drug_library import (
     WEIGHT_MAX_KG,
     WEIGHT_MIN_KG,
     DoseLimits,
@@ -167,10 +178,10 @@ def test_bind_syringe_takes_the_design_and_refuses_what_the_library_does_not_all
 
 
 def test_the_shipped_module_carries_the_binding_of_the_design_toml():
-    import runtime.generated.lpv_map_controller as mod
-    from runtime.inputs.controller_loader import load_controller
-    from synthesis.artifact import default_artifact_path, load_artifact
-    from synthesis.problem.config_toml import default_config_path, load_config
+    import pressor.runtime.generated.lpv_map_controller as mod
+    from pressor.runtime.inputs.controller_loader import load_controller
+    from pressor.synthesis.artifact import default_artifact_path, load_artifact
+    from pressor.synthesis.problem.config_toml import default_config_path, load_config
 
     toml = load_config().drug
     with open(default_config_path(), "rb") as fh:
@@ -274,8 +285,8 @@ def test_library_path_is_package_data():
     ],
 )
 def test_design_toml_drug_section_is_checked_naming_the_field(drug, field):
-    from synthesis.problem.config import ConfigError
-    from synthesis.problem.config_toml import parse_config
+    from pressor.synthesis.problem.config import ConfigError
+    from pressor.synthesis.problem.config_toml import parse_config
 
     with pytest.raises(ConfigError, match=f"field '{field}'"):
         parse_config({"drug": drug}, source="d.toml")
@@ -285,11 +296,11 @@ def test_design_toml_drug_section_is_checked_naming_the_field(drug, field):
 
 
 def test_artifact_metadata_drug_is_checked_and_absent_reads_as_the_default():
-    from synthesis.artifact import ArtifactError, drug_of, make_artifact
+    from pressor.synthesis.artifact import ArtifactError, drug_of, make_artifact
 
     assert drug_of({}) == drug_of({"design": {}}) == DEFAULT_BINDING
     assert drug_of({"design": {"drug": {"name": "x", "concentration_ug_ml": 2.0}}}).name == "x"
-    from synthesis.artifact import default_artifact_path, load_artifact
+    from pressor.synthesis.artifact import default_artifact_path, load_artifact
 
     art = load_artifact(default_artifact_path())
     meta = {**art.metadata, "design": {**art.metadata["design"], "drug": {"name": ""}}}

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from runtime.inputs.clinician import ClinicianInput
-from runtime.inputs.target_source import TargetSource
+from pressor.runtime.inputs.clinician import ClinicianInput
+from pressor.runtime.inputs.target_source import TargetSource
 from tests.support.link_doubles import tick_inputs
 
 

@@ -9,8 +9,8 @@ from typing import Any
 import pytest
 from rerun.chunk import RrdReader
 
-from runtime.generated import lpv_map_controller as lpv
-from runtime.record.blueprint import (
+from pressor.runtime.generated import lpv_map_controller as lpv
+from pressor.runtime.record.blueprint import (
     BOX_ENTITIES,
     DISTURBANCE_MARKERS,
     FAULT_MARKERS,

@@ -12,8 +12,8 @@ os.environ.setdefault("CI", "1")  # the rerun CLI writes analytics files otherwi
 
 from rerun.chunk import RrdReader  # noqa: E402
 
-from runtime.record.blueprint import EVENTS_ENTITY  # noqa: E402
-from runtime.record.recorder import CHANNEL_INDEX, CHANNELS, Recorder  # noqa: E402
+from pressor.runtime.record.blueprint import EVENTS_ENTITY  # noqa: E402
+from pressor.runtime.record.recorder import CHANNEL_INDEX, CHANNELS, Recorder  # noqa: E402
 
 
 def read_columns(path) -> dict[str, dict[int, float]]:

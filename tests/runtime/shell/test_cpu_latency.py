@@ -1,4 +1,4 @@
-"""CPU wake-up latency request (runtime.shell.cpu_latency): the request, its option, its report."""
+"""CPU wake-up latency request (pressor.runtime.shell.cpu_latency): the request, its option, its report."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from plumbing.usage import UsageError, UsageParser
-from runtime.inputs.config import add_run_options
-from runtime.shell.cpu_latency import QOS_DEVICE, CpuLatencyRequest
+from pressor.plumbing.usage import UsageError, UsageParser
+from pressor.runtime.inputs.config import add_run_options
+from pressor.runtime.shell.cpu_latency import QOS_DEVICE, CpuLatencyRequest
 from tests.support.sil_helpers import pressor
 
 

@@ -15,8 +15,8 @@ import pytest
 
 os.environ.setdefault("CI", "1")
 
-from baselines.pi import PIController  # noqa: E402
-from link import (  # noqa: E402
+from pressor.baselines.pi import PIController  # noqa: E402
+from pressor.link import (  # noqa: E402
     LINK_LOCKSTEP,
     STATE_FINISHED,
     DeviceSession,
@@ -26,9 +26,9 @@ from link import (  # noqa: E402
     RuntimeSession,
     Signing,
 )
-from runtime.core.supervisor import Supervisor  # noqa: E402
-from runtime.core.supervisor_config import State, supervisor_config_for  # noqa: E402
-from runtime.shell.loop import DeviceStalled, Loop  # noqa: E402
+from pressor.runtime.core.supervisor import Supervisor  # noqa: E402
+from pressor.runtime.core.supervisor_config import State, supervisor_config_for  # noqa: E402
+from pressor.runtime.shell.loop import DeviceStalled, Loop  # noqa: E402
 from tests.support.link_doubles import loop_pair, tick_inputs  # noqa: E402
 
 TS = 0.1
@@ -208,8 +208,8 @@ def test_realtime_watchdogs_flag_stale_sample_then_link_loss_and_failsafe():
 
 
 def test_supervisor_config_reads_design_envelope_from_generated_module_constants(tmp_path):
-    from contracts.module_hash import MODULE_SHA_PREFIX, module_text_sha256
-    from runtime.inputs.controller_loader import load_generated_module
+    from pressor.contracts.module_hash import MODULE_SHA_PREFIX, module_text_sha256
+    from pressor.runtime.inputs.controller_loader import load_generated_module
 
     src = tmp_path / "fake_gen.py"
     text = (

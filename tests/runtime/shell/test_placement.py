@@ -1,4 +1,4 @@
-"""CPU placement of the lockstep ends (runtime.shell.placement), used by pressor sil and pressor
+"""CPU placement of the lockstep ends (pressor.runtime.shell.placement), used by pressor sil and pressor
 device."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ import threading
 
 import pytest
 
-from plumbing.usage import UsageError
+from pressor.hil_sim.devices.device import main as device_main
+from pressor.plumbing.usage import UsageError
+from pressor.runtime.shell.placement import Pinned, lockstep_cpus, parse_cpu
 from pressor.sil import sil_parser
-from runtime.shell.placement import Pinned, lockstep_cpus, parse_cpu
-from sim.devices.device import main as device_main
 
 
 def test_sil_cpu_option_takes_one_or_two_allowed_cpus():

@@ -6,7 +6,7 @@ import io
 import os
 import select
 
-from runtime.shell.progress import TerminalProgress
+from pressor.runtime.shell.progress import TerminalProgress
 
 
 def read_all(fd: int) -> str:

@@ -7,8 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from runtime.shell.clock import MonotonicClock, PeriodicSchedule, VirtualClock
-from runtime.shell.timing import TimingStats
+from pressor.runtime.shell.clock import MonotonicClock, PeriodicSchedule, VirtualClock
+from pressor.runtime.shell.timing import TimingStats
 
 
 def test_virtual_clock_follows_device_time_and_refuses_to_run_backwards():

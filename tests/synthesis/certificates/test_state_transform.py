@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthesis.certificates.state_transform import transform_of, whitening_transform
-from synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.certificates.state_transform import transform_of, whitening_transform
+from pressor.synthesis.problem.closed_loop import DelaySystem
 
 
 def test_whitening_maps_the_lyapunov_matrix_to_identity() -> None:

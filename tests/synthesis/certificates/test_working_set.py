@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from synthesis.certificates.working_set import (
+from pressor.synthesis.certificates.working_set import (
     BackOff,
     Formulation,
     Steps,

@@ -1,4 +1,4 @@
-"""The family registry (:mod:`synthesis.families.registry`): one object per name, every call site
+"""The family registry (:mod:`pressor.synthesis.families.registry`): one object per name, every call site
 through it."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis.families.registry import (
+from pressor.synthesis.families.registry import (
     DEFAULT_STRUCTURE,
     ControllerFamily,
     family_named,
@@ -66,8 +66,8 @@ def test_loop_gain_only_for_a_family_that_takes_it():
 
 
 def test_controller_at_goes_through_the_family(monkeypatch):
-    from synthesis.artifact import default_artifact_path, load_artifact
-    from synthesis.problem.reconstruct import controller_at
+    from pressor.synthesis.artifact import default_artifact_path, load_artifact
+    from pressor.synthesis.problem.reconstruct import controller_at
 
     art = load_artifact(default_artifact_path())
     seen = []

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthesis.problem.basis import (
+from pressor.synthesis.problem.basis import (
     basis_derivatives,
     basis_terms,
     basis_weights,

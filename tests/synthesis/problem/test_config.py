@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis.problem.config import NOMINAL_RHO, ConfigError
-from synthesis.problem.config_toml import load_config
+from pressor.synthesis.problem.config import NOMINAL_RHO, ConfigError
+from pressor.synthesis.problem.config_toml import load_config
 
 
 def _write(tmp_path: Path, text: str) -> Path:

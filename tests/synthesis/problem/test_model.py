@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from synthesis.problem.config_toml import load_config
-from synthesis.problem.model import plant_at, plant_batch
-from synthesis.problem.scaling import Scaling
+from pressor.synthesis.problem.config_toml import load_config
+from pressor.synthesis.problem.model import plant_at, plant_batch
+from pressor.synthesis.problem.scaling import Scaling
 
 CFG = load_config().model
 

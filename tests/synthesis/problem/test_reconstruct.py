@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthesis.families.theorem3 import lmi
-from synthesis.families.theorem3.synthesize import synthesize
-from synthesis.problem.config_toml import load_config, theorem3_config_path
-from synthesis.problem.reconstruct import controller_at, scaling_of
-from synthesis.research import theorem3_certificate
+from pressor.synthesis.families.theorem3 import lmi
+from pressor.synthesis.families.theorem3.synthesize import synthesize
+from pressor.synthesis.problem.config_toml import load_config, theorem3_config_path
+from pressor.synthesis.problem.reconstruct import controller_at, scaling_of
+from research.synthesis_forms import theorem3_certificate
 
 
 @pytest.fixture(scope="module")

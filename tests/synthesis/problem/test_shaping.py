@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis.artifact import load_artifact, save_artifact
-from synthesis.families.theorem3 import lmi, lmi_solve
-from synthesis.families.theorem3.synthesize import synthesize
-from synthesis.problem.config import ConfigError
-from synthesis.problem.config_toml import load_config, parse_config
-from synthesis.problem.model import dims, plant_at
-from synthesis.problem.reconstruct import controller_at
+from pressor.synthesis.artifact import load_artifact, save_artifact
+from pressor.synthesis.families.theorem3 import lmi, lmi_solve
+from pressor.synthesis.families.theorem3.synthesize import synthesize
+from pressor.synthesis.problem.config import ConfigError
+from pressor.synthesis.problem.config_toml import load_config, parse_config
+from pressor.synthesis.problem.model import dims, plant_at
+from pressor.synthesis.problem.reconstruct import controller_at
 
 RHO = (0.55, 150.0, 40.0)
 W = np.array([1e-4, 3e-3, 0.02, 0.3])  # rad/s

@@ -8,7 +8,7 @@ import sys
 
 PROBE = (
     "import os{pre}\n"
-    "from synthesis.solver.blas_threads import single_blas_thread\n"
+    "from pressor.synthesis.solver.blas_threads import single_blas_thread\n"
     "print(single_blas_thread(), os.environ.get('OPENBLAS_NUM_THREADS'))\n"
 )
 

@@ -9,12 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthesis.artifact import default_artifact_path, load_artifact
-from synthesis.certificates.wirtinger.analysis import analyse_wirtinger
-from synthesis.families.smith.design import design_smith, recheck_smith_artifact
-from synthesis.problem.closed_loop import DelaySystem
-from synthesis.problem.config_toml import load_config
-from synthesis.solver.kkt import (
+from pressor.synthesis.artifact import default_artifact_path, load_artifact
+from pressor.synthesis.certificates.wirtinger.analysis import analyse_wirtinger
+from pressor.synthesis.families.smith.design import design_smith, recheck_smith_artifact
+from pressor.synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.problem.config_toml import load_config
+from pressor.synthesis.solver.kkt import (
     DEFAULT_KKT_CHAIN,
     KKT_METHODS,
     KktAttempt,

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from scipy.special import lambertw
 
-from synthesis.verification.delay_stability import (
+from pressor.synthesis.verification.delay_stability import (
     chebyshev_differentiation,
     rightmost_roots,
     spectral_abscissa,
 )
-from synthesis.verification.pi_baseline import PIBaseline
+from pressor.synthesis.verification.pi_baseline import PIBaseline
 
 
 @pytest.mark.parametrize("a_tau", [0.5, 1.2, 1.50, 1.55])

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from synthesis.verification.discrete_step import sampled_fopdt
+from pressor.synthesis.verification.discrete_step import sampled_fopdt
 
 
 @pytest.mark.parametrize(("k", "t_s", "tau_s"), [(0.55, 150.0, 40.05), (0.1, 40.0, 12.37)])

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from synthesis.verification.smith_baseline import smith_step_response
-from synthesis.verification.step_response import response_metrics
+from pressor.synthesis.verification.smith_baseline import smith_step_response
+from pressor.synthesis.verification.step_response import response_metrics
 
 
 def test_plant_response_equals_a_fine_continuous_simulation_with_a_fractional_delay():

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baselines.pi import PIController
-from synthesis.verification.pi_baseline import PIBaseline
-from synthesis.verification.step_response import StepLoop, response_metrics, simulate_step
+from pressor.baselines.pi import PIController
+from pressor.synthesis.verification.pi_baseline import PIBaseline
+from pressor.synthesis.verification.step_response import StepLoop, response_metrics, simulate_step
 
 # docs/DESIGN-CHOICES.md: PI baseline, nominal plant, +20 mmHg, no noise, computed two independent ways
 REF_OVERSHOOT_PCT = 0.0

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis.problem.closed_loop import close_loop
-from synthesis.verification.delay_stability import spectral_abscissa
-from synthesis.verification.pi_baseline import PIBaseline
-from synthesis.verification.verify import dense_axes
-from synthesis.verify_cli import DEFAULT_ARTIFACT, main
+from pressor.synthesis.problem.closed_loop import close_loop
+from pressor.synthesis.verification.delay_stability import spectral_abscissa
+from pressor.synthesis.verification.pi_baseline import PIBaseline
+from pressor.synthesis.verification.verify import dense_axes
+from pressor.synthesis.verify_cli import DEFAULT_ARTIFACT, main
 
 STEP_NAMES = ("overshoot_pct", "rise_time_s", "settling_time_s", "steady_state_dev_mmhg")
 
@@ -114,7 +114,7 @@ def test_shipped_design_report_has_step_metrics_for_lpv_pi_and_smith(tmp_path: P
 
 
 def test_shipped_artifact_embeds_a_passing_report_with_quadratic_p_on_unseen_points() -> None:
-    from synthesis.artifact import default_artifact_path, load_artifact
+    from pressor.synthesis.artifact import default_artifact_path, load_artifact
 
     art = load_artifact(default_artifact_path())
     rep = art.metadata["verification"]

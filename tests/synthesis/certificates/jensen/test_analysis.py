@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthesis.certificates.jensen.analysis import analyse
-from synthesis.certificates.state_transform import conditioning_transform
-from synthesis.problem.closed_loop import DelaySystem
-from synthesis.verification.pi_baseline import PIBaseline
+from pressor.synthesis.certificates.jensen.analysis import analyse
+from pressor.synthesis.certificates.state_transform import conditioning_transform
+from pressor.synthesis.problem.closed_loop import DelaySystem
+from pressor.synthesis.verification.pi_baseline import PIBaseline
 
 
 def _scalar(a: float, ad: float, tau: float) -> DelaySystem:

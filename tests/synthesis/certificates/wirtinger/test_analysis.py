@@ -7,13 +7,13 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from synthesis.certificates.interface import AnalysisResult
-from synthesis.certificates.jensen.analysis import analyse
-from synthesis.certificates.wirtinger.analysis import analyse_wirtinger
-from synthesis.families.smith.law import SmithLPV
-from synthesis.problem.closed_loop import DelaySystem, close_loop
-from synthesis.problem.config_toml import parse_config
-from synthesis.problem.model import plant_at
+from pressor.synthesis.certificates.interface import AnalysisResult
+from pressor.synthesis.certificates.jensen.analysis import analyse
+from pressor.synthesis.certificates.wirtinger.analysis import analyse_wirtinger
+from pressor.synthesis.families.smith.law import SmithLPV
+from pressor.synthesis.problem.closed_loop import DelaySystem, close_loop
+from pressor.synthesis.problem.config_toml import parse_config
+from pressor.synthesis.problem.model import plant_at
 
 
 def _scalar(a: float, ad: float, tau: float) -> DelaySystem:

@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synthesis.certificates.interface import AnalysisResult
-from synthesis.certificates.wirtinger.analysis import analyse_wirtinger
-from synthesis.certificates.wirtinger.k_scaling import KScaling, k_scaled_system, k_terms
-from synthesis.families.smith.law import SmithLPV
-from synthesis.problem.closed_loop import DelaySystem, close_loop
-from synthesis.problem.config_toml import parse_config
-from synthesis.problem.model import I_U, plant_at
+from pressor.synthesis.certificates.interface import AnalysisResult
+from pressor.synthesis.certificates.wirtinger.analysis import analyse_wirtinger
+from pressor.synthesis.certificates.wirtinger.k_scaling import KScaling, k_scaled_system, k_terms
+from pressor.synthesis.families.smith.law import SmithLPV
+from pressor.synthesis.problem.closed_loop import DelaySystem, close_loop
+from pressor.synthesis.problem.config_toml import parse_config
+from pressor.synthesis.problem.model import I_U, plant_at
 
 BOX = np.array([[0.25, 1.0], [100.0, 200.0], [10.0, 45.0]])
 HALF = 0.5 * (BOX[:, 1] - BOX[:, 0])

@@ -8,16 +8,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from synthesis.certificates.wirtinger.prediction_error import (
+from pressor.synthesis.certificates.wirtinger.prediction_error import (
     PredictionErrorBox,
     certify,
     loop_matrices,
     perturbation_bounds,
     simulate_law,
 )
-from synthesis.problem.config_toml import load_config
+from pressor.synthesis.problem.config_toml import load_config
 
-#: the wide-delay research design's box (benchmarks/designs/wide_delay.toml) at delay60's rates
+#: the wide-delay research design's box (research/designs/wide_delay.toml) at delay60's rates
 WIDE = PredictionErrorBox(
     k_min=0.15,
     t_range_s=(100.0, 700.0),
@@ -132,7 +132,7 @@ def test_law_rejects_a_disturbance_on_a_plant_moving_at_the_certified_rates():
 
 
 def test_box_of_the_wide_delay_design_file():
-    box = PredictionErrorBox.from_config(load_config("benchmarks/designs/wide_delay.toml"))
+    box = PredictionErrorBox.from_config(load_config("research/designs/wide_delay.toml"))
     assert (box.k_min, box.t_range_s, box.tau_range_s) == (0.15, (100.0, 700.0), (10.0, 200.0))
     assert box.loop_gain == 3.0
 

@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from synthesis.artifact import default_artifact_path, load_artifact
-from synthesis.families.smith.design import design_smith, recheck_smith_artifact
-from synthesis.problem.config_toml import load_config
+from pressor.synthesis.artifact import default_artifact_path, load_artifact
+from pressor.synthesis.families.smith.design import design_smith, recheck_smith_artifact
+from pressor.synthesis.problem.config_toml import load_config
 
 
 @pytest.fixture(scope="module")

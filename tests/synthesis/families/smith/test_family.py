@@ -8,22 +8,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from synthesis import cli
-from synthesis.artifact import (
+from pressor.synthesis import cli
+from pressor.synthesis.artifact import (
     ArtifactError,
     default_artifact_path,
     load_artifact,
     make_artifact,
     save_artifact,
 )
-from synthesis.families.registry import ControllerFamily
-from synthesis.families.smith.design import SmithDesignError, design_smith
-from synthesis.families.smith.family import smith_coef_shapes
-from synthesis.families.smith.law import SmithLPV
-from synthesis.problem.config import ConfigError
-from synthesis.problem.config_toml import load_config, parse_config
-from synthesis.problem.reconstruct import controller_at
-from synthesis.verify_cli import main as verify_main
+from pressor.synthesis.families.registry import ControllerFamily
+from pressor.synthesis.families.smith.design import SmithDesignError, design_smith
+from pressor.synthesis.families.smith.family import smith_coef_shapes
+from pressor.synthesis.families.smith.law import SmithLPV
+from pressor.synthesis.problem.config import ConfigError
+from pressor.synthesis.problem.config_toml import load_config, parse_config
+from pressor.synthesis.problem.reconstruct import controller_at
+from pressor.synthesis.verify_cli import main as verify_main
 
 SMITH_2 = '[controller]\nstructure = "smith"\nloop_gain = 2.0\n[grid]\npoints = [2, 2, 2]\n'
 

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from synthesis.families.smith.law import SmithLPV
-from synthesis.problem.closed_loop import close_loop
-from synthesis.problem.config_toml import parse_config
-from synthesis.problem.model import plant_at
-from synthesis.verification.delay_stability import rightmost_roots
-from synthesis.verification.step_response import loop_from_closed_loop, simulate_step
+from pressor.synthesis.families.smith.law import SmithLPV
+from pressor.synthesis.problem.closed_loop import close_loop
+from pressor.synthesis.problem.config_toml import parse_config
+from pressor.synthesis.problem.model import plant_at
+from pressor.synthesis.verification.delay_stability import rightmost_roots
+from pressor.synthesis.verification.step_response import loop_from_closed_loop, simulate_step
 
 MODEL = parse_config({}).model  # the shipped model: omega = lambda = 0.1 1/s
 

@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from synthesis.families.registry import SynthRequest, family_named
-from synthesis.families.smith.law import SmithLPV
-from synthesis.problem.config_toml import load_config
-from synthesis.verification.verify import verify_artifact
+from pressor.synthesis.families.registry import SynthRequest, family_named
+from pressor.synthesis.families.smith.law import SmithLPV
+from pressor.synthesis.problem.config_toml import load_config
+from pressor.synthesis.verification.verify import verify_artifact
 
 DESIGN = "synthesis/data/wide_delay_design.toml"
 

@@ -6,8 +6,8 @@ from dataclasses import replace
 
 import pytest
 
-from synthesis.families.theorem3.line_search import search
-from synthesis.problem.config_toml import load_config
+from pressor.synthesis.families.theorem3.line_search import search
+from pressor.synthesis.problem.config_toml import load_config
 
 distributed = pytest.importorskip("distributed")
 

@@ -7,9 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from synthesis.families.theorem3 import lmi
-from synthesis.problem.config_toml import load_config
-from synthesis.research import naive_lmi
+from pressor.synthesis.families.theorem3 import lmi
+from pressor.synthesis.problem.config_toml import load_config
+from research.synthesis_forms import naive_lmi
 
 
 def _cfg(grid=(2, 2, 2), **solver):

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from synthesis.families.theorem3 import lmi
-from synthesis.problem.config_toml import load_config
+from pressor.synthesis.families.theorem3 import lmi
+from pressor.synthesis.problem.config_toml import load_config
 
 
 def test_layout_pack_inverts_unpack():

@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from synthesis.families.theorem3 import lmi, lmi_solve
-from synthesis.problem.config_toml import load_config, theorem3_config_path
-from synthesis.research import naive_lmi
+from pressor.synthesis.families.theorem3 import lmi, lmi_solve
+from pressor.synthesis.problem.config_toml import load_config, theorem3_config_path
+from research.synthesis_forms import naive_lmi
 
 
 def _cfg():
@@ -39,7 +39,7 @@ def test_rate_bound_mode_implies_every_rate_vertex():
     assert np.linalg.eigvalsh(F).max() < 0.0
 
 
-# slow: the naive formulation is a research ablation (synthesis.research), not the shipped path
+# slow: the naive formulation is a research ablation (research.synthesis_forms), not the shipped path
 @pytest.mark.slow
 def test_naive_and_batched_formulations_reach_the_same_gamma():
     prob = lmi.make_problem(_cfg())

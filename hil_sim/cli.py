@@ -1,0 +1,248 @@
+"""``pressor scenarios`` and ``pressor trial``: the named scenarios and the in-silico cohort trial.
+
+``pressor trial --controller lpv|pi|smith[:LAMBDA_S]|PATH|MODULE:CLASS[:ARGS] --patients N --seed S --scenario NAME [--schedule oracle|estimated|nominal|validated] [--patient-model NAME|MODULE:CLASS] [--sensitivity F] [--jobs J | --scheduler ADDRESS] --out DIR``
+prints a progress bar (stderr), then a table of the median and 90th percentile of each §3 metric
+(reachable patients; unreachable ones counted and listed apart) and of each disturbance event's
+peak |deviation|, recovery time and IAE (reachable patients; ``docs/METRICS.md``), and writes ``DIR/patients.json``,
+``DIR/patients.csv`` and ``DIR/summary.json`` atomically. Same arguments → identical files, whatever
+``--jobs``. Exit 0 on completion, 1 when a controller raised (one line naming it, the patient and
+the tick: :class:`pressor.runtime.core.closed_loop.ControllerError`), 2 on bad usage or input (one line
+naming field, value and range). A plugin controller (:mod:`pressor.runtime.inputs.controller_plugin`) is
+named by ``MODULE:CLASS[:ARGS]``, ``FILE.py:CLASS[:ARGS]`` or an installed entry point's name.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from pressor.contracts.checks import check_int_range, check_range
+from pressor.hil_sim.patients.patient_model import add_patient_model_option
+from pressor.plumbing.usage import UsageError, UsageParser, run_command, usage_exit
+
+
+def _scenarios(argv: Sequence[str]) -> int:
+    from pressor.hil_sim.scenarios.scenario import (
+        SCENARIO_DIR,
+        ScenarioError,
+        load_scenario,
+        scenario_names,
+    )
+
+    UsageParser(
+        prog="pressor scenarios",
+        description="list the named scenarios: name, file, description (any other .toml file"
+        " with the same fields can be passed by path: --scenario path/to/file.toml)",
+    ).parse_args(argv)
+    names = scenario_names()
+    width = max(len(n) for n in names)
+    files = {name: str(SCENARIO_DIR / f"{name}.toml") for name in names}
+    file_width = max(len(f) for f in files.values())
+    for name in names:
+        try:
+            desc = load_scenario(name).description
+        except ScenarioError as exc:
+            desc = f"INVALID: {exc}"
+        print(f"{name:<{width}}  {files[name]:<{file_width}}  {desc}")
+    return 0
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "-"
+    return f"{v:.4g}" if abs(v) < 1e4 else f"{v:.0f}"
+
+
+def format_table(summary: dict[str, Any]) -> str:
+    """The terminal table: median and the bad 10 % tail of every metric, reachable patients first.
+
+    The tail is p90 for errors and times and p10 where higher is better (time in band).
+    """
+    from pressor.contracts.metrics import HIGHER_IS_BETTER, RUN_METRICS
+
+    m = summary["metrics"]
+    model = f" patient_model={summary['patient_model']}" if "patient_model" in summary else ""
+    lines = [
+        f"trial: controller={summary['controller']} scenario={summary['scenario']}{model}"
+        f" seed={summary['cohort_seed']} patients={summary['n_patients']}"
+        f" (reachable {m['n_reachable']}, unreachable {m['n_unreachable']},"
+        f" unstable {m['n_unstable']})",
+        f"{'metric':<24}{'median':>10}{'worst 10%':>10}{'n':>5}{'null':>5}"
+        f" | {'unreach. median':>15}{'worst 10%':>10}",
+    ]
+    for key in RUN_METRICS:
+        r = m["reachable"][key]
+        u = m["unreachable"][key]
+        tail = "p10" if key in HIGHER_IS_BETTER else "p90"
+        lines.append(
+            f"{key:<24}{_fmt(r['median']):>10}{_fmt(r[tail]):>10}{r['n']:>5}{r['n_null']:>5}"
+            f" | {_fmt(u['median']):>15}{_fmt(u[tail]):>10}"
+        )
+    for label, d in m["disturbances"].items():
+        lines.append(f"{label} at {_fmt(d['start_s'])} s (reachable patients):")
+        for key in ("peak_abs_deviation_mmhg", "recovery_s", "iae_mmhg_s"):
+            r = d[key]
+            lines.append(
+                f"  {key:<22}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}{r['n']:>5}{r['n_null']:>5}"
+            )
+    if "estimation" in summary:
+        e = summary["estimation"]
+        lines.append(
+            f"schedule {summary['schedule']}: median second-half error K {_fmt(e['K_rel_err_pct'])} %,"
+            f" T {_fmt(e['T_rel_err_pct'])} %, tau {_fmt(e['tau_abs_err_s'])} s"
+        )
+    if summary["unreachable_patient_seeds"]:
+        lines.append(f"unreachable patient seeds: {summary['unreachable_patient_seeds']}")
+    if summary["unstable_patient_seeds"]:
+        lines.append(f"unstable patient seeds: {summary['unstable_patient_seeds']}")
+    return "\n".join(lines)
+
+
+def _progress_bar(done: int, total: int) -> None:
+    width = 30
+    filled = int(width * done / total)
+    end = "\n" if done == total else ""
+    print(
+        f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} patients",
+        end=end,
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def _trial(argv: Sequence[str]) -> int:
+    from pressor.runtime.estimation.sources import SOURCES
+    from pressor.runtime.inputs.config import ORACLE_DEFAULT_WHY, SCHEDULE_HELP
+
+    p = UsageParser(prog="pressor trial", description="in-silico cohort trial of a controller")
+    p.add_argument(
+        "--controller",
+        default="pi",
+        help="pi | smith[:LAMBDA_S] (Smith predictor, lambda 30 s) | lpv | PATH to a generated "
+        "module | a plugin class MODULE:CLASS[:ARGS] or FILE.py:CLASS[:ARGS] or an installed "
+        "'pressor.controllers' entry point NAME[:ARGS] (ARGS: key=value,...); several, "
+        "comma-separated (lpv,pi,smith), run the same cohort under each and compare them per "
+        "patient (default: %(default)s)",
+    )
+    p.add_argument(
+        "--report",
+        action="store_true",
+        help="also write OUT/report.html (plots, paired table) and the per-patient trajectories",
+    )
+    p.add_argument("--patients", type=int, default=20, help="cohort size N (1..100000)")
+    p.add_argument("--seed", type=int, default=1, help="cohort seed S (>= 0)")
+    p.add_argument("--scenario", default="paper-disturbance", help="scenario name or .toml path")
+    p.add_argument(
+        "--jobs", type=int, default=1, help="local worker processes, 1..64 (default: %(default)s)"
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the patients on a running Dask cluster, e.g. tcp://127.0.0.1:8786 "
+        "(default: local processes, see --jobs); same records either way",
+    )
+    p.add_argument(
+        "--schedule", choices=SOURCES, default="oracle", help=f"{SCHEDULE_HELP}{ORACLE_DEFAULT_WHY}"
+    )
+    p.add_argument("--rate", type=float, default=10.0, help="loop rate in Hz (default 10)")
+    add_patient_model_option(p)
+    p.add_argument(
+        "--sensitivity",
+        type=float,
+        default=1.0,
+        metavar="F",
+        help="scale every patient's drug sensitivity by F (dimensionless, 0.05..20): the patient"
+        " responds to each delivered ml/h as the model's responds to F ml/h, so its K is F times"
+        " the model's, T and tau unchanged (hil_sim/patients/sensitivity.py); 1 runs the model as drawn"
+        " (default: %(default)g)",
+    )
+    p.add_argument("--out", required=True, type=Path, help="output directory")
+    args = p.parse_args(argv)
+    try:
+        check_int_range("--patients", args.patients, 1, 100000)
+        check_int_range("--seed", args.seed, 0, 9_000_000_000_000)
+        check_int_range("--jobs", args.jobs, 1, 64)
+        check_range("--rate", args.rate, 0.1, 1000.0, unit="Hz")
+        check_range("--sensitivity", args.sensitivity, 0.05, 20.0, unit="(dimensionless)")
+    except ValueError as e:
+        p.error(str(e))
+
+    from pressor.hil_sim.patients.patient_model import PatientModelError, check_model_for_scenario
+    from pressor.hil_sim.patients.sensitivity import with_sensitivity
+    from pressor.hil_sim.scenarios.scenario import ScenarioError, load_scenario
+    from pressor.hil_sim.trials.paired import compare_controllers, format_comparison
+    from pressor.hil_sim.trials.report import write_report
+    from pressor.hil_sim.trials.trial import controller_dir_name, run_cohort, write_outputs
+    from pressor.plumbing.files import write_atomic
+    from pressor.plumbing.parallel import BackendError
+    from pressor.runtime.core.closed_loop import ControllerError
+    from pressor.runtime.inputs.controller_loader import ControllerSpecError, load_controller
+    from pressor.runtime.inputs.controller_plugin import split_controller_list
+
+    period = 1.0 / args.rate
+    try:
+        scenario = load_scenario(args.scenario)
+        patient_model = with_sensitivity(args.patient_model, args.sensitivity)
+        check_model_for_scenario(patient_model, scenario.name, scenario.frozen is not None)
+    except (ScenarioError, PatientModelError) as exc:
+        raise UsageError(str(exc)) from None
+    specs = split_controller_list(args.controller)
+    if "" in specs or len(set(specs)) != len(specs):
+        raise UsageError(
+            f"field '--controller' = {args.controller!r}: name each controller once, comma-separated"
+        )
+    for spec in specs:
+        try:
+            load_controller(spec, period)
+        except ControllerSpecError as exc:
+            raise UsageError(str(exc)) from None
+    records: dict[str, list[dict[str, Any]]] = {}
+    trajectories: dict[str, dict[str, Any]] = {}
+    for spec in specs:
+        out = args.out if len(specs) == 1 else args.out / controller_dir_name(spec)
+        try:
+            records[spec], summary, trajectory = run_cohort(
+                scenario,
+                spec,
+                args.seed,
+                args.patients,
+                traced=args.report,
+                jobs=args.jobs,
+                sample_period_s=period,
+                progress=_progress_bar,
+                scheduler=args.scheduler,
+                schedule=args.schedule,
+                patient_model=patient_model,
+            )
+        except ControllerError as exc:  # a plugin that raised: one line, exit 1
+            print(f"pressor trial: {exc}", file=sys.stderr)
+            return 1
+        except (ValueError, BackendError) as exc:  # e.g. a rate the patient step does not divide
+            raise UsageError(str(exc)) from None
+        if trajectory is not None:
+            trajectories[spec] = trajectory
+        write_outputs(out, records[spec], summary)
+        print(format_table(summary))
+        print(f"wrote {out / 'patients.json'}, {out / 'patients.csv'}, {out / 'summary.json'}")
+    comparison = compare_controllers(records) if len(specs) > 1 else {}
+    if comparison:
+        write_atomic(args.out / "comparison.json", json.dumps(comparison, indent=1) + "\n")
+        print(format_comparison(comparison))
+        print(f"wrote {args.out / 'comparison.json'}")
+    if args.report:
+        title = f"{scenario.name}: {', '.join(specs)}; cohort seed {args.seed}, {args.patients} patients"
+        path = write_report(args.out, title, records, trajectories, comparison)
+        print(f"report: {path}")
+    return 0
+
+
+def main(command: str, argv: list[str]) -> int:
+    """Entry point for the dispatcher: ``scenarios`` or ``trial`` (exit 2 on bad usage or input)."""
+    handlers = {"scenarios": _scenarios, "trial": _trial}
+    if command not in handlers:
+        return usage_exit("pressor.hil_sim.cli", f"unknown command {command!r}")
+    return run_command(f"pressor {command}", handlers[command], argv)

@@ -1,0 +1,387 @@
+"""In-silico cohort trial: one controller, one scenario, n seeded patients, §3 metrics.
+
+Each patient runs in the pure in-process simulator (:func:`pressor.hil_sim.episode.simulate`) with a
+fresh controller from :func:`pressor.runtime.inputs.controller_loader.load_controller`. Patients are
+independent, so the worker processes (``jobs``) or the Dask cluster (``scheduler``) change only the
+wall time: results are collected in patient order and every output file is byte-identical whatever
+``jobs`` is.
+
+Metrics judge the *true* MAP (what the patient experiences; a flushed or disconnected line must not
+count as hypertension), with the settling band chosen by whether the scenario's monitor is noisy
+(docs/METRICS.md). ``reachable`` compares the largest ΔMAP the scenario asks for (target step minus
+disturbances) with the largest steady-state ΔMAP the pump's maximum rate gives at this patient's
+sensitivity (the model's ``max_delta_map_mmhg``; the paper model: max over i ≤ max of
+k0·i·e^(−k1·i)): a patient whose shortfall exceeds the metrics' band
+(:func:`pressor.contracts.metrics.reachable_band_mmhg`) is unreachable.
+
+``patient_model`` picks the patient model (:mod:`pressor.hil_sim.patients.patient_model`: a registry name or
+``MODULE:CLASS``, resolved again in each worker process from that string); the records and the
+summary of a model other than the default ``paper`` carry its name as ``patient_model`` (the
+default's keep their bytes) and its own ``coefficients`` with their units.
+
+The scenario's hemorrhages and boluses are the disturbance events the metrics split the run at
+(``docs/METRICS.md``): the step metrics stop at the first one and each gets a record in the
+patient's ``disturbances`` list; a sinusoid is background, not an event. ``patients.csv`` flattens
+the records into ``LABEL_start_s``, ``LABEL_peak_deviation_mmhg``, ``LABEL_recovery_s`` and
+``LABEL_iae_mmhg_s`` columns, LABEL being the kind (``hemorrhage``, ``bolus``; ``hemorrhage_2``
+for a second one).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import re
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pressor.contracts.metrics import (
+    EVENT_KINDS,
+    EVENT_METRICS,
+    RUN_METRICS,
+    Event,
+    aggregate,
+    event_labels,
+    run_metrics,
+)
+from pressor.hil_sim.episode import Trajectory, simulate
+from pressor.hil_sim.native.controller import native_twin
+from pressor.hil_sim.native.estimator import native_schedule
+from pressor.hil_sim.native.patient import native_patient
+from pressor.hil_sim.patients.cohort import cohort_seeds
+from pressor.hil_sim.patients.patient_model import DEFAULT_PATIENT_MODEL, load_patient_model
+from pressor.hil_sim.scenarios.scenario import Scenario
+from pressor.hil_sim.world import World
+from pressor.plumbing.files import write_atomic
+from pressor.plumbing.parallel import run_ordered
+from pressor.runtime.core.closed_loop import ControllerError
+from pressor.runtime.estimation.sources import make_schedule
+from pressor.runtime.inputs.controller_loader import load_controller
+
+
+def controller_dir_name(spec: str) -> str:
+    """A file-name-safe name for a controller spec (``smith:45`` -> ``smith_45``, a path -> stem)."""
+    base = Path(spec).stem if spec.endswith(".py") else spec
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", base)
+
+
+def scenario_events(scenario: Scenario) -> list[Event]:
+    """The scenario's disturbance events ``(kind, start_s)``: its hemorrhages and boluses."""
+    return [(d.kind, d.start_s) for d in scenario.disturbances if d.kind in EVENT_KINDS]
+
+
+#: sample period (s) of the trajectories kept for a report (the loop's 10 Hz thinned to 1 Hz)
+REPORT_SAMPLE_S = 1.0
+
+
+def estimation_errors(traj: Trajectory) -> dict[str, float]:
+    """How far the schedule was from the simulator's truth: the median absolute errors over the
+    second half of the run of K (% of K), T (% of T) and τ (s)."""
+    half = traj.t_s.size // 2
+    return {
+        "K_rel_err_pct": float(
+            np.median(np.abs(traj.sched_K[half:] - traj.K[half:]) / traj.K[half:] * 100.0)
+        ),
+        "T_rel_err_pct": float(
+            np.median(np.abs(traj.sched_T_s[half:] - traj.T_s[half:]) / traj.T_s[half:] * 100.0)
+        ),
+        "tau_abs_err_s": float(np.median(np.abs(traj.sched_tau_s[half:] - traj.tau_s[half:]))),
+    }
+
+
+def run_patient(
+    scenario: Scenario,
+    controller_spec: str,
+    patient_seed: int,
+    sample_period_s: float = 0.1,
+    schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
+) -> dict[str, Any]:
+    """Simulate one patient and return its JSON-ready record (seed, coefficients, metrics).
+
+    ``schedule`` names the scheduling source (:func:`pressor.runtime.estimation.sources.make_schedule`),
+    run by the runtime's core exactly as ``pressor run``/``sil`` run it; when it is not the oracle
+    the record gains ``estimation`` (:func:`estimation_errors`). ``patient_model`` names the
+    patient model (:mod:`pressor.hil_sim.patients.patient_model`).
+    """
+    return _simulate_patient(
+        scenario, controller_spec, patient_seed, sample_period_s, schedule, patient_model
+    )[0]
+
+
+def _simulate_patient(
+    scenario: Scenario,
+    controller_spec: str,
+    patient_seed: int,
+    sample_period_s: float,
+    schedule: str,
+    patient_model: str = DEFAULT_PATIENT_MODEL,
+) -> tuple[dict[str, Any], Trajectory]:
+    world = World(scenario, patient_seed, sample_period_s, patient_model=patient_model)
+    world.patient = native_patient(world.patient)  # before its first step
+    controller = native_twin(load_controller(controller_spec, sample_period_s))
+    try:
+        source = native_schedule(make_schedule(schedule, sample_period_s))
+        traj = simulate(world, controller, schedule=source)
+    except ControllerError as exc:  # name the patient too (the message crosses processes)
+        raise ControllerError(
+            f"--controller {controller_spec!r}, patient seed {patient_seed}: {exc}"
+        ) from None
+    has_step = scenario.step_mmhg != 0.0
+    metrics = run_metrics(
+        traj.t_s,
+        traj.map_true_mmhg,
+        traj.target_mmhg,
+        traj.rate_ml_h,
+        max_rate_ml_h=scenario.pump.max_rate_ml_h,
+        step_time_s=scenario.step_time_s if has_step else None,
+        step_mmhg=scenario.step_mmhg if has_step else None,
+        noisy=scenario.noisy,
+        reachable=world.reachable(),
+        map_true_mmhg=traj.map_true_mmhg,
+        events=scenario_events(scenario),
+    )
+    record: dict[str, Any] = {"patient_seed": int(patient_seed)}
+    if patient_model != DEFAULT_PATIENT_MODEL:  # the default's records keep their bytes
+        record["patient_model"] = patient_model
+    record["coefficients"] = world.patient.coefficients()
+    record["schedule_range"] = _schedule_range(traj)
+    record["required_delta_mmhg"] = world.required_delta_mmhg()
+    record["max_delta_mmhg"] = world.patient.max_delta_map_mmhg(scenario.pump.max_rate_ml_h)
+    record.update(metrics)
+    record["commands_out_of_range"] = int(world.pump.commands_out_of_range)
+    if schedule != "oracle":  # oracle records keep their bytes
+        record["estimation"] = estimation_errors(traj)
+    return record, traj
+
+
+def _schedule_range(traj: Trajectory) -> dict[str, list[float]]:
+    """The patient's true K (mmHg/(ml/h)), T (s) and τ (s) over the run, as [min, max] each."""
+    return {
+        name: [float(np.min(values)), float(np.max(values))]
+        for name, values in (
+            ("K_mmhg_per_ml_h", traj.K),
+            ("T_s", traj.T_s),
+            ("tau_s", traj.tau_s),
+        )
+    }
+
+
+Task = tuple[Scenario, str, int, float, str, str]
+
+
+def _worker(args: Task) -> dict[str, Any]:
+    return run_patient(*args)
+
+
+def _worker_traced(args: Task) -> tuple[dict[str, Any], dict]:
+    record, traj = _simulate_patient(*args)
+    every = max(1, int(round(REPORT_SAMPLE_S / args[3])))
+    thinned = {
+        "t_s": traj.t_s[::every],
+        "map_true_mmhg": traj.map_true_mmhg[::every],
+        "target_mmhg": traj.target_mmhg[::every],
+        "rate_ml_h": traj.rate_ml_h[::every],
+    }
+    return record, thinned
+
+
+def run_trial(
+    scenario: Scenario,
+    controller_spec: str,
+    cohort_seed: int,
+    n_patients: int,
+    jobs: int = 1,
+    sample_period_s: float = 0.1,
+    progress: Callable[[int, int], None] | None = None,
+    scheduler: str | None = None,
+    schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
+) -> list[dict[str, Any]]:
+    """Run the cohort ``(cohort_seed, n_patients)``; records in patient order.
+
+    Parameters
+    ----------
+    scenario
+        The scenario every patient runs.
+    controller_spec
+        ``pi``, ``lpv`` or a path to a generated module.
+    cohort_seed, n_patients
+        The cohort (:func:`pressor.hil_sim.patients.cohort.cohort_seeds`).
+    jobs
+        Local worker processes (≥ 1); does not change the results.
+    progress
+        Called with (done, total) after each patient.
+    scheduler
+        Address of a Dask scheduler (``tcp://HOST:PORT``) to run the patients on instead of local
+        processes (:mod:`pressor.plumbing.parallel`); does not change the results.
+    schedule
+        The scheduling source (``oracle``, ``estimated``, ``nominal``, ``validated``;
+        :func:`run_patient`).
+    patient_model
+        The patient model, a registry name or ``MODULE:CLASS`` (:mod:`pressor.hil_sim.patients.patient_model`);
+        every worker must be able to import it.
+    """
+    tasks = _tasks(
+        scenario, controller_spec, cohort_seed, n_patients, sample_period_s, schedule, patient_model
+    )
+    return run_ordered(_worker, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
+
+
+def _tasks(
+    scenario: Scenario,
+    spec: str,
+    cohort_seed: int,
+    n_patients: int,
+    sample_period_s: float,
+    schedule: str,
+    patient_model: str,
+) -> list[Task]:
+    return [
+        (scenario, spec, s, sample_period_s, schedule, patient_model)
+        for s in cohort_seeds(cohort_seed, n_patients)
+    ]
+
+
+def run_trial_traced(
+    scenario: Scenario,
+    controller_spec: str,
+    cohort_seed: int,
+    n_patients: int,
+    jobs: int = 1,
+    sample_period_s: float = 0.1,
+    progress: Callable[[int, int], None] | None = None,
+    scheduler: str | None = None,
+    schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
+) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+    """:func:`run_trial` that also keeps every patient's trajectory, thinned to 1 Hz, for a report.
+
+    Returns
+    -------
+    records, trajectories
+        The records (as :func:`run_trial` returns them) and the arrays
+        :data:`pressor.hil_sim.trials.report.TRAJECTORY_KEYS` names: ``t_s`` (ticks,), ``map_true_mmhg``,
+        ``target_mmhg``, ``rate_ml_h`` (patients × ticks; mmHg, mmHg, ml/h) and ``patient_seed``.
+    """
+    tasks = _tasks(
+        scenario, controller_spec, cohort_seed, n_patients, sample_period_s, schedule, patient_model
+    )
+    runs = run_ordered(_worker_traced, tasks, jobs=jobs, scheduler=scheduler, progress=progress)
+    records = [r for r, _ in runs]
+    arrays = {
+        key: np.stack([tr[key] for _, tr in runs])
+        for key in ("map_true_mmhg", "target_mmhg", "rate_ml_h")
+    }
+    arrays["t_s"] = runs[0][1]["t_s"]
+    arrays["patient_seed"] = np.array([r["patient_seed"] for r in records], dtype=np.int64)
+    return records, arrays
+
+
+def run_cohort(
+    scenario: Scenario,
+    controller_spec: str,
+    cohort_seed: int,
+    n_patients: int,
+    *,
+    traced: bool = False,
+    **options: Any,
+) -> tuple[list[dict[str, Any]], dict[str, Any], dict[str, np.ndarray] | None]:
+    """What ``pressor trial`` and :func:`pressor.api.trial` run for one controller.
+
+    ``options`` are :func:`run_trial`'s (``jobs``, ``sample_period_s``, ``progress``,
+    ``scheduler``, ``schedule``, ``patient_model``). Returns the records, the summary
+    (:func:`summarize`) and, when ``traced``, the trajectories of :func:`run_trial_traced`.
+    """
+    run = run_trial_traced if traced else run_trial
+    result = run(scenario, controller_spec, cohort_seed, n_patients, **options)
+    records, trajectories = result if traced else (result, None)
+    summary = summarize(
+        records,
+        scenario,
+        controller_spec,
+        cohort_seed,
+        options.get("schedule", "oracle"),
+        options.get("patient_model", DEFAULT_PATIENT_MODEL),
+    )
+    return records, summary, trajectories
+
+
+def summarize(
+    records: Sequence[dict[str, Any]],
+    scenario: Scenario,
+    controller_spec: str,
+    cohort_seed: int,
+    schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
+) -> dict[str, Any]:
+    """The ``summary.json`` document: trial identity and the aggregated metrics; with a schedule
+    other than the oracle also ``schedule`` and ``estimation`` (median over patients of each
+    record's ``estimation`` figure); with a patient model other than ``paper`` also
+    ``patient_model``. ``coefficient_units`` gives the unit of every coefficient of the records."""
+    units = load_patient_model(patient_model).coefficient_units
+    doc: dict[str, Any] = {"scenario": scenario.name, "controller": controller_spec}
+    if patient_model != DEFAULT_PATIENT_MODEL:  # the default's summaries keep their bytes
+        doc["patient_model"] = patient_model
+    doc |= {
+        "cohort_seed": int(cohort_seed),
+        "n_patients": len(records),
+        "unreachable_patient_seeds": [r["patient_seed"] for r in records if not r["reachable"]],
+        "unstable_patient_seeds": [r["patient_seed"] for r in records if not r["stable"]],
+        "coefficient_units": {k: units[k] for k in (records[0]["coefficients"] if records else {})},
+        "metrics": aggregate(records),
+    }
+    if schedule != "oracle":  # oracle summaries keep their bytes
+        doc["schedule"] = schedule
+        doc["estimation"] = {
+            key: float(np.median([r["estimation"][key] for r in records]))
+            for key in ("K_rel_err_pct", "T_rel_err_pct", "tau_abs_err_s")
+        }
+    return doc
+
+
+_EVENT_COLUMNS = ("start_s",) + EVENT_METRICS
+
+
+def _csv_text(records: Sequence[dict[str, Any]], units: dict[str, str]) -> str:
+    coeff_keys = list(records[0]["coefficients"]) if records else []
+    scalar_keys = (
+        ["required_delta_mmhg", "max_delta_mmhg"]
+        + list(RUN_METRICS)
+        + ["reachable", "stable", "commands_out_of_range"]
+    )
+    # Every patient of a trial runs the same scenario, so the first one's events name the columns.
+    labels = event_labels([d["kind"] for d in records[0]["disturbances"]]) if records else []
+    ranges = list(records[0]["schedule_range"]) if records else []
+    header = (
+        ["patient_seed"]
+        + [f"{k} ({units[k]})" for k in coeff_keys]
+        + [f"{name}_{end}" for name in ranges for end in ("min", "max")]
+        + scalar_keys
+        + [f"{label}_{col}" for label in labels for col in _EVENT_COLUMNS]
+    )
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(header)
+    for r in records:
+        row = [r["patient_seed"]] + [r["coefficients"][k] for k in coeff_keys]
+        row += [v for name in ranges for v in r["schedule_range"][name]]
+        row += [r[k] for k in scalar_keys]
+        row += [d[col] for d in r["disturbances"] for col in _EVENT_COLUMNS]
+        writer.writerow(["" if v is None else repr(v) if isinstance(v, float) else v for v in row])
+    return buf.getvalue()
+
+
+def write_outputs(
+    out_dir: Path, records: Sequence[dict[str, Any]], summary: dict[str, Any]
+) -> None:
+    """Write ``patients.json``, ``patients.csv`` and ``summary.json`` atomically into ``out_dir``
+    (the CSV's coefficient units from the summary's ``coefficient_units``)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_atomic(out_dir / "patients.json", json.dumps(list(records), indent=1) + "\n")
+    write_atomic(out_dir / "patients.csv", _csv_text(records, summary["coefficient_units"]))
+    write_atomic(out_dir / "summary.json", json.dumps(summary, indent=1) + "\n")

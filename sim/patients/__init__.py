@@ -1,7 +1,0 @@
-"""Simulated patients: the seed paper's nonlinear patient (the default), the independent PK/PD,
-phenylephrine and norepinephrine models (their shared delay line and counter-regulation:
-:mod:`~sim.patients.drug_patient`), the :class:`~sim.patients.patient_model.PatientModel`
-protocol a plugin satisfies, seeded cohort draws, sensitivity scaling, and the true-MAP log.
-
-Imports no other part of ``sim``: the bottom layer.
-"""

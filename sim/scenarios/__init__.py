@@ -1,4 +1,0 @@
-"""Scenarios: the named TOML files beside :mod:`sim.scenarios.scenario` (target step, monitor,
-pump, disturbances, faults), their loader and validation, the disturbance shapes and the fault
-injectors (world faults, link faults).
-"""
