@@ -14,7 +14,7 @@ from pressor.synthesis.problem.config_toml import load_config
 from research.schedule_labels import make_source
 from research.step_fit import apparent_fopdt
 
-DESIGNS = Path(__file__).parents[2] / "benchmarks" / "designs"
+DESIGNS = Path(__file__).parents[2] / "research" / "designs"
 
 
 def _patient(q_l_min: float) -> PatientParams:

@@ -16,7 +16,7 @@ from pressor.synthesis.problem.reconstruct import controller_at
 from research.uncertified_module import uncertified_design
 
 ROOT = Path(__file__).parents[2]
-DESIGNS = ROOT / "benchmarks" / "designs"
+DESIGNS = ROOT / "research" / "designs"
 
 
 def test_research_build_is_the_shipped_law_at_a_point_both_boxes_hold():

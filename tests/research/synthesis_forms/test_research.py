@@ -123,7 +123,7 @@ def test_the_default_form_is_the_shipped_certificate(loop_gain_2):
 
 
 def test_every_registered_family_has_its_straightforward_cases():
-    from pressor.synthesis import research
+    import research.synthesis_forms as research
     from pressor.synthesis.families.registry import family_named, structures
 
     kinds = {type(family_named(name)) for name in structures()}
