@@ -154,7 +154,7 @@ def emit_c(
 
 
 def _reference_fields(spec: EmitSpec) -> str:
-    """State of the two-degree-of-freedom prefilter (synthesis.problem.reference), when the design
+    """State of the two-degree-of-freedom prefilter (pressor.synthesis.problem.reference), when the design
     has one."""
     if spec.reference is None:
         return ""

@@ -109,7 +109,7 @@ def _reference_doc(spec: EmitSpec) -> str:
     if spec.reference is None:
         return ""
     lam, frac, k_min = spec.reference
-    return f"""Two degrees of freedom (synthesis.problem.reference; lambda {lam!r} s, pump fraction
+    return f"""Two degrees of freedom (pressor.synthesis.problem.reference; lambda {lam!r} s, pump fraction
 {frac!r}, K floor {k_min!r} mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
 MAP after reset generates the reference MAP r_m and the feedforward
 u_ff = clamp((p + T (dr - p) / lambda) / K, 0, cap), with p = y0 + y_m - y0(t - tau) (Smith
@@ -206,7 +206,7 @@ class ControllerStatus:
 
 
 class Controller:
-    """The scheduled LPV controller (contracts.controller.Controller protocol).
+    """The scheduled LPV controller (pressor.contracts.controller.Controller protocol).
 
     Parameters
     ----------

@@ -26,7 +26,7 @@ def _clamp_lines(var: str, src: str, i: int, lo: str = "") -> list[str]:
 
 
 def _reference_lines() -> list[str]:
-    """The prefilter (synthesis.problem.reference), in double in both modes; sets e = r_m - MAP,
+    """The prefilter (pressor.synthesis.problem.reference), in double in both modes; sets e = r_m - MAP,
     uff."""
     L = []
     L.append("        if not self._anchored:")

@@ -2,8 +2,12 @@
 
 ``load -> tabulate (discretise every node, choose and prove the grid) -> quantise (scale, Q-formats)
 -> emit``. Every intermediate carries a sha256 of its content; the emitted files carry the artifact
-sha256, a content hash (artifact sha256 + options + the codegen sources) and the generation command.
-Generation is deterministic: the same artifact and options give byte-identical files, and
+sha256, a content hash (artifact sha256 + options + the codegen sources), the sha256 of the
+emitted tables (``TABLES_SHA256``, :func:`array_hash` of the integer and float tables) and the
+generation command. Generation is deterministic: the same artifact and options give byte-identical
+files, on every CPU. The float tables are the correctly rounded exact ZOH discretisation, computed
+without BLAS or SIMD (:mod:`pressor.codegen.discretise`); the grid and the scaling are decisions taken from
+them (error thresholds, stability counts, powers of two), and the emitters write exact literals.
 :func:`generate` skips all work when the file in the output directory already records the same
 content hash.
 """

@@ -20,7 +20,9 @@ step stays division-free: it finds the cell by a bounded binary search over the 
 multiplies by the stored reciprocal of that cell's width. Clamping and rate limiting act on the
 physical rho, never on a transformed coordinate.
 
-The frozen-loop stability test is :mod:`pressor.codegen.frozen_loop`.
+The frozen-loop stability test is :mod:`pressor.codegen.frozen_loop`. The node matrices come from
+:func:`pressor.codegen.discretise.discretise_node`, the same bits on every CPU; the checks here only decide
+where nodes go.
 """
 
 from __future__ import annotations
@@ -87,8 +89,12 @@ class TabulationGrid:
         log K spread the interpolation error evenly where equal steps in K would crowd it at low K.
         """
         box = np.asarray(box, float)
-        k = np.exp(np.linspace(math.log(box[0, 0]), math.log(box[0, 1]), int(counts[0])))
-        k[0], k[-1] = box[0, 0], box[0, 1]  # exact end points (clamp limits)
+        logs = np.linspace(math.log(box[0, 0]), math.log(box[0, 1]), int(counts[0]))
+        # math.exp, not np.exp: numpy's float64 exp has an AVX-512 kernel of its own and uses the
+        # C library's elsewhere, so the last bit of a node (where the tables are computed) could
+        # depend on the vector width; math.exp is the C library's on every CPU.
+        k = [math.exp(x) for x in logs.tolist()]
+        k[0], k[-1] = float(box[0, 0]), float(box[0, 1])  # exact end points (clamp limits)
         rest = [np.linspace(box[i, 0], box[i, 1], int(counts[i])) for i in (1, 2)]
         return cls(tuple(tuple(float(x) for x in ax) for ax in (k, *rest)))  # type: ignore[arg-type]
 
