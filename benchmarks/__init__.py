@@ -1,4 +1,4 @@
-"""Benchmarks that print their figures (docs/notes/benchmarks.md lists them with their last results).
+"""Benchmarks that print their figures (benchmarks/README.md: each one, its command, last result).
 
 Each runs from the project root as a module, ``python -m benchmarks.NAME [--help]``, so the
 project's packages and the shared test doubles (``tests.support``) import without path set-up.

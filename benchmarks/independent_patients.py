@@ -6,7 +6,7 @@ a haemorrhage-like drop at 20 min and a fluid-bolus-like rise at 40 min) is play
 of ``tests/support/protocol_device.py`` (written from docs/PROTOCOL.md alone) on a pty, signed, in
 lockstep, against a real ``pressor run --controller SPEC`` with its default estimated schedule (a
 real monitor sends no K, T, tau), or with ``--device-fit`` on the K, T, tau the device sends: each
-patient's least-squares FOPDT of its 10 min open-loop step (docs/ESTIMATION.md, "The frontier,
+patient's least-squares FOPDT of its 10 min open-loop step (docs/notes/estimation.md, "The frontier,
 revisited"). The device announces phenylephrine at 100 µg/ml, the runtime's
 defaults. Of :mod:`pressor.hil_sim` only the patient model's module is used (its world, device and paper
 model are not)::

@@ -1,6 +1,6 @@
 """Experimental schedules on a fit from outside the loop (:mod:`research.schedule_sources`, run
 when named in its ``--runs``): a fit held, and its K moved afterwards. Not shipped, kept so that
-the figures docs/ESTIMATION.md gives for them reproduce.
+the figures docs/notes/estimation.md gives for them reproduce.
 
 :func:`clamped` puts (K, T, τ) inside a design box (``lpv-truth``, ``lpv-stepfit``, ...).
 :class:`KHandover` (``stepfit-twok:...``) moves the fit's K to the incremental one from a given

@@ -14,7 +14,7 @@ slower rates, the shipped law (the integral written as the trapezoid ``τ(ŷ + �
 artifact or generated module of either exists on that box. This module runs both laws in plain
 Python behind the same prefilter, so they are compared with everything else equal; with
 ``law="trapezoid"`` it reproduces the research build of ``research/designs/wide_delay.toml``
-(docs/ESTIMATION.md).
+(docs/notes/estimation.md).
 
 Per tick of Ts (s), physical units (MAP mmHg, rates ml/h, K mmHg/(ml/h), T and τ s):
 
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 #: the scheduling box (K mmHg/(ml/h), T s, τ s) of research/designs/wide_delay.toml
 GRID_LO = (0.15, 100.0, 10.0)
 GRID_HI = (3.0, 700.0, 200.0)
-#: the rates at which the exact law is certified at τ̄ = 200 s (per s; docs/CERTIFICATE-STRUCTURE.md
+#: the rates at which the exact law is certified at τ̄ = 200 s (per s; docs/notes/certificate-structure.md
 #: §5; the trapezoid needs 5e-5 / 0.01 / 0.01)
 RATE_BOUNDS = (2e-4, 0.03, 0.05)
 LOOP_GAIN = 3.0

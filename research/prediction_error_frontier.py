@@ -12,7 +12,7 @@ mmHg/(ml/h)), T box 100-700 s, τ from 10 s, loop gain 3 and filter (Ω = Λ = 0
 law, τ̄ and rates of the row. ``--verify`` also runs the check ``pressor verify`` runs on a
 design: the same analysis on a 5 x 5 grid with γ capped at twice the design's. ``--config``
 takes one design file's box, rates, loop gain and filter instead. The figures are in
-docs/CERTIFICATE-STRUCTURE.md, §5.
+docs/notes/certificate-structure.md, §5.
 """
 
 from __future__ import annotations

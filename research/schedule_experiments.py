@@ -1,5 +1,5 @@
 """Experimental scheduling sources of :mod:`research.schedule_sources` (run when named in its
-``--runs``): not shipped, kept so that the figures docs/ESTIMATION.md gives for them reproduce.
+``--runs``): not shipped, kept so that the figures docs/notes/estimation.md gives for them reproduce.
 
 :class:`LimitedFit` (``lpv-fit-hold`` / ``lpv-fit-slew``) box-clamps the ``estimated`` source's
 schedule, jumps once and then slews; :class:`GatedFit` (``lpv-gate-*``) schedules on the fit only

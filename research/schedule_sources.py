@@ -41,7 +41,7 @@ Experiments, run when named in ``--runs``:
   (:class:`research.schedule_experiments.OnsetSwitch`: ``short`` for good if the MAP rises
   ``rise`` mmHg within ``by`` s of the infusion's start, else the fixed long-delay ``long``).
 
-Figures in ``docs/ESTIMATION.md`` ("The frontier on patients outside the model class", "A held-out
+Figures in ``docs/notes/estimation.md`` ("The frontier on patients outside the model class", "A held-out
 gate on the fit", "The frontier, revisited", "The start schedule decides before any data", "A
 realistic device's fit, and the loop gain"). ``--lpv PATH`` runs every LPV label on another
 generated module (a design with a wider box or another prefilter, ``research/designs/``);

@@ -8,7 +8,7 @@ certificate) through the research entry :func:`research.synthesis_forms.certify_
 the formulation options the shipped :func:`pressor.synthesis.families.smith.design.certify_smith` does not:
 all rate vertices or one LMI per point, working set, coupling, parameters of P, coordinates. Prints
 the certificate verdict, γ, the smallest re-checked margin, wall and CPU time and peak RSS (figures
-in docs/CERTIFICATE-STRUCTURE.md)::
+in docs/notes/certificate-structure.md)::
 
     python -m research.smith_certificate --loop-gain 2 --grid 3,3,3 [--p-dependence quadratic]
     python -m research.smith_certificate --loop-gain 2 --grid 5,5,5 --working-set 27 --gamma-cap

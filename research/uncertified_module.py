@@ -5,7 +5,7 @@ Usage::
     python -m research.uncertified_module research/designs/wide_delay.toml --out wide_delay
 
 ``pressor synth`` writes an artifact only when the Wirtinger analysis certifies the design, and the
-analysis does not certify the shipped law with delays much beyond 45 s (docs/ESTIMATION.md, "The
+analysis does not certify the shipped law with delays much beyond 45 s (docs/notes/estimation.md, "The
 frontier, revisited"). To measure what such a box would be worth before a certificate exists, this
 runs codegen's own stages (:func:`pressor.codegen.pipeline.tabulate`, ``quantise``, ``emit``) on the
 closed-form law ``SmithLPV(loop_gain, Ω, Λ).at(ρ)`` of the config, with no analysis at all. The

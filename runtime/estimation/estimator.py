@@ -69,7 +69,7 @@ kept out by :class:`pressor.runtime.estimation.gate.SampleGate`; a window with f
 accepted is not fitted (the models still simulate through it).
 
 The tuning evidence (q_c, memory, drift prior) and the known limits (what a settled loop cannot
-tell): ``docs/ESTIMATION.md``.
+tell): ``docs/notes/estimation.md``.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 :class:`EstimatorSettings` holds everything :class:`pressor.runtime.estimation.estimator.DelayBankEstimator`
 can be tuned by; the estimator itself takes only the settings, the loop's tick period and the
 sample gate (which are the loop's, not the estimator's). What each setting does to the fit: the
-estimator's module docstring; the tuning evidence: ``docs/ESTIMATION.md``.
+estimator's module docstring; the tuning evidence: ``docs/notes/estimation.md``.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ DESIGN_RATES: tuple[float, float, float] = tuple(float(r) for r in shipped.RATE_
 #: T (s), τ (s). Its estimates' ``in_box`` and the estimated source's caution (which stops at its K
 #: high and T low edges) refer to it; it clamps nothing (the controller clamps to its box). It is
 #: the box the estimator was tuned in, narrower in K and T than the certified box: widened to it,
-#: the estimated schedule measured worse on both independent models (docs/ESTIMATION.md, "The
+#: the estimated schedule measured worse on both independent models (docs/notes/estimation.md, "The
 #: estimator's range and the certified box").
 ESTIMATE_BOX: tuple[tuple[float, float], ...] = ((0.25, 1.0), (100.0, 200.0), (10.0, 45.0))
 #: the T-drift prior: T rises this many s per (ml/h)·s of infusion (the literature patient model's

@@ -11,7 +11,7 @@
     step does not overshoot a sensitive patient; once learned (σ_K ≈ 2–5 %, σ_T ≈ 5–10 %) it is
     at most 0.06 σ_K and 0.13 σ_T. A T below the design box is then projected onto the box's low
     edge at the same K/T (:meth:`EstimatedSchedule.keep_slope`). Tuned on cohort seed 11
-    (``docs/ESTIMATION.md``; the held-out figures are in ``docs/notes/cohort-evidence.md``).
+    (``docs/notes/estimation.md``; the held-out figures are in ``docs/notes/cohort-evidence.md``).
 :func:`make_schedule`
     The source named by ``--schedule``: oracle and nominal from :mod:`pressor.runtime.core.scheduling`
     (the protocol, :class:`~pressor.runtime.core.scheduling.Schedule`), estimated from here, validated
@@ -104,7 +104,7 @@ class EstimatedSchedule:
         Moving along the line of constant K/T keeps what the data say and gives the smallest K a
         patient with T ≥ T_lo can have: always towards the low-gain side. Cohort seed 11: step
         overshoot 9.9 % → 6.4 % (45 patients), IAE unchanged; bedside monitor IAE ÷ oracle
-        1.67 → 1.54 (``docs/ESTIMATION.md``).
+        1.67 → 1.54 (``docs/notes/estimation.md``).
         """
         if self._keep_slope and T_s < self._T_lo:
             return K * self._T_lo / T_s, self._T_lo

@@ -5,7 +5,7 @@ model of a bank of fixed FOPDT models (:class:`pressor.runtime.estimation.valida
 that model predicts the measured MAP's 60 s changes better than the nominal one by a relative and
 a statistical margin, at a fraction of the certified rates and inside the design box, so the
 source itself never raises ``SCHED_RATE`` or ``SCHED_OUT_OF_BOX``. The evidence behind it and the
-reason it is not the default are in the class docstring and ``docs/ESTIMATION.md``, "Adaptation
+reason it is not the default are in the class docstring and ``docs/notes/estimation.md``, "Adaptation
 that cannot make things worse".
 """
 
@@ -35,7 +35,7 @@ class ValidatedSchedule:
     source itself can raise neither ``SCHED_RATE`` nor ``SCHED_OUT_OF_BOX``. The device's values
     are ignored. The online FOPDT fit (:class:`DelayBankEstimator`) still runs: its report is
     ``Schedule.estimate`` (what the recorder and the trials' error summaries show) and its health
-    is ``healthy``; it does not set the schedule. Why (evidence in ``docs/ESTIMATION.md``,
+    is ``healthy``; it does not set the schedule. Why (evidence in ``docs/notes/estimation.md``,
     "Adaptation that cannot make things worse"): on patients outside the FOPDT class the fit chased
     the unmodelled dynamics with K, T, τ, and scheduling on it
     (:class:`~pressor.runtime.estimation.sources.EstimatedSchedule`) was worse than the nominal schedule;

@@ -5,7 +5,7 @@ Why a second analysis: the Jensen functional of :mod:`pressor.synthesis.certific
 predictor in the controller class (:mod:`pressor.synthesis.families.smith.law`, loop gain 1.5) is infeasible
 for it at frozen points with tau = 27.5 and 45 s and bounded at twice its exact norm at the nominal
 point, while this functional bounds the same loops at their exact frozen H-infinity norm (within
-solver accuracy; measured figures in docs/CERTIFICATE-STRUCTURE.md). Reference: Seuret & Gouaisbaut,
+solver accuracy; measured figures in docs/notes/certificate-structure.md). Reference: Seuret & Gouaisbaut,
 "Wirtinger-based integral inequality: application to time-delay systems", Automatica 49 (2013),
 extended here to the LPV grid, a parameter-dependent P and a delay tau(rho) that moves with rho.
 

@@ -3,7 +3,7 @@
 Rate forms (L0, M_i of :mod:`pressor.synthesis.certificates.wirtinger.lmi`; s' moving parameters):
 
 * ``"vertex"``: ``L0 + sum_i sigma_i M_i <= -eps I`` at every sigma in {-1, +1}^s' (2^s' PSD blocks
-  of size 3n + n_w per point), the formulation measured in docs/CERTIFICATE-STRUCTURE.md.
+  of size 3n + n_w per point), the formulation measured in docs/notes/certificate-structure.md.
 * ``"bound"``: one LMI per point, ``L0 + sum_i E_i' Z_i E_i <= -eps I`` with symmetric slacks
   ``Z_i >= M_i`` and ``Z_i >= -M_i`` restricted to the rows and columns ``E_i`` where M_i can be
   nonzero (2n for a parameter that only moves P; 3n for the delay, whose rate also multiplies P

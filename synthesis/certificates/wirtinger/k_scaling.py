@@ -5,7 +5,7 @@ polynomial) in the original state cannot follow it over K in [0.25, 1]. In the c
 ``x~ = D(K) x`` with ``D = diag(d_j)``, ``d_j = K`` on the states that carry ml/h (in the closed
 loop of :func:`pressor.synthesis.problem.closed_loop.close_loop` with the Smith controller: the plant's
 infusion u and the controller's model input û) and 1 elsewhere, those states are in mmHg and the
-frozen loops look alike over the whole box (measured in docs/CERTIFICATE-STRUCTURE.md, section 2c).
+frozen loops look alike over the whole box (measured in docs/notes/certificate-structure.md, section 2c).
 
 With K = K(t) moving, the x~ system is, for ``dx/dt = A x + Ad x(t - tau) + B w``::
 

@@ -2,7 +2,7 @@
 
 Why. The Wirtinger analysis of the shipped law in the plant's own coordinates
 (:mod:`pressor.synthesis.families.smith.design`) sees a genuine delay loop, and certifies no delay box much
-beyond τ = 60 s (docs/CERTIFICATE-STRUCTURE.md, §4). A Smith predictor cancels the delay; written
+beyond τ = 60 s (docs/notes/certificate-structure.md, §4). A Smith predictor cancels the delay; written
 in the coordinates of that cancellation, what is left of the delay is small, and the same analysis
 reaches τ = 200 s (§5).
 

@@ -6,7 +6,7 @@ the Wirtinger-based analysis LMI
 (:func:`pressor.synthesis.certificates.wirtinger.analysis.analyse_wirtinger`, one LMI per point with rate
 slacks, P(ρ) quadratic in ρ̂, S and R constant) written in K-scaled coordinates
 (:mod:`pressor.synthesis.certificates.wirtinger.k_scaling`: the ml/h states u and û times K, so S and R are
-K(t)-dependent in the original state; docs/CERTIFICATE-STRUCTURE.md, section 2c) over the closed
+K(t)-dependent in the original state; docs/notes/certificate-structure.md, section 2c) over the closed
 loops at the grid nodes. The law's gains scale like 1/K, which is why the functional is written in
 K-scaled coordinates. :func:`certify_smith` is that analysis on any set of points; the design
 (:func:`design_smith`, the design grid, minimum γ at the strictness :data:`DESIGN_EPSILON`, one

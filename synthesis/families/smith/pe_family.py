@@ -5,7 +5,7 @@ Same law, nodes and generated module as the "smith" family
 and check (a) of ``pressor verify`` are the Wirtinger analysis of the loop written in the
 coordinates of the Smith cancellation (:mod:`pressor.synthesis.certificates.wirtinger.prediction_error`,
 law "trapezoid"), which reaches delay boxes the plant-coordinate analysis cannot
-(docs/CERTIFICATE-STRUCTURE.md, §5: 200 s at rates 5e-5 / 0.01 / 0.01). The design grid's T and τ
+(docs/notes/certificate-structure.md, §5: 200 s at rates 5e-5 / 0.01 / 0.01). The design grid's T and τ
 point counts are the analysis grid (K drops out in K-scaled coordinates); check (a) re-solves on
 the verification mesh's T and τ counts with γ capped at :data:`SMITH_GAMMA_CAP_FACTOR` × the
 artifact's. The artifact stores the certificate (``P`` affine in (T, τ): 3 terms on ξ = [x; ∫x],

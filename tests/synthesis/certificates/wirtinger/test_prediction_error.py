@@ -37,7 +37,7 @@ def _triangle(lo: float, hi: float, rate: float, t: float, phase: float = 0.0) -
 
 
 def test_certifies_the_exact_law_on_a_200_s_delay_box():
-    # docs/CERTIFICATE-STRUCTURE.md §4: in the plant's coordinates the analysis fails from
+    # docs/notes/certificate-structure.md §4: in the plant's coordinates the analysis fails from
     # tau = 80 s at these rates
     cert = certify(WIDE, t_points=2, tau_points=2)
     assert cert.certified, cert.status
