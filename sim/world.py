@@ -238,13 +238,15 @@ class World:
         need = [self.target_at(x) - self.baseline_mmhg - self.disturbance(x) for x in t]
         return float(max(need)) if need else 0.0
 
-    def reachable(self) -> bool:
-        """Whether the pump's maximum rate can bring MAP within the metrics' band of the target at
-        this patient's sensitivity (:func:`contracts.metrics.reachable_band_mmhg`: the scenario's
-        settling band, or the clinical band without a target step)."""
+    def reachable(self, max_rate_ml_h: float | None = None) -> bool:
+        """Whether the pump's maximum rate (or ``max_rate_ml_h``, ml/h: a lower dose limit) can
+        bring MAP within the metrics' band of the target at this patient's sensitivity
+        (:func:`contracts.metrics.reachable_band_mmhg`: the scenario's settling band, or the
+        clinical band without a target step)."""
         from contracts.metrics import reachable_band_mmhg
 
         sc = self.scenario
         band = reachable_band_mmhg(sc.step_mmhg if sc.step_mmhg != 0.0 else None, sc.noisy)
-        achievable = self.patient.max_delta_map_mmhg(sc.pump.max_rate_ml_h)
+        top = sc.pump.max_rate_ml_h if max_rate_ml_h is None else max_rate_ml_h
+        achievable = self.patient.max_delta_map_mmhg(top)
         return self.required_delta_mmhg() - band <= achievable
