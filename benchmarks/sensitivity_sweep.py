@@ -38,13 +38,14 @@ harm). Per row: unstable patients; step overshoot (% of the step and mmHg: media
 longest stretch above target + 10 mmHg (s) and the patients with one longer than 30 s; time to
 first enter ±5 mmHg (median / p90, never-arrived patients ranked last); time below target − 5 mmHg
 and time within ±5 mmHg after that entry (%); MDPE, MDAPE, wobble (%) and divergence (%/h) over
-the whole period after the step; IAE; patients the hourly dose limit cut.
+the whole period after the step; IAE; patients the hourly dose limit cut; patients the supervisor
+put in HOLD or FAILSAFE (a clean run should have none).
 
 Printed (stdout): per model a table of who reaches the target per level and the figures table, as
 each model finishes; the JSON (``--json``, and ``OUT/sweep.json`` with ``--out``) holds every
 figure. Both are deterministic: the same arguments give the same bytes whatever ``--jobs``. The
-throughput (patient-hours per wall minute, and per CPU minute of the workers: per busy core) goes
-to stderr with the progress.
+throughput (patient-hours per wall minute, and per CPU minute of the workers: per busy core, in
+total and per model and controller) goes to stderr with the progress.
 
 With ``--out DIR`` each (model, level, controller, syringe) cohort writes
 ``DIR/MODEL/xF/CONTROLLER/SYRINGE/`` (``patients.json``, ``patients.csv``, ``summary.json``,
@@ -61,6 +62,8 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from benchmarks.sweep_figures import (
     HEADER,
@@ -81,13 +84,14 @@ from benchmarks.sweep_plan import (
 from plumbing.files import write_atomic
 from plumbing.parallel import run_ordered
 from runtime.core.dose_guard import DoseLimits
+from runtime.core.supervisor_config import State
 from runtime.estimation.sources import SOURCES
 from runtime.inputs.drug_library import load_library
 from sim.patients.cohort import cohort_seeds
 from sim.patients.patient_model import PatientModelError
 from sim.patients.sensitivity import check_factor
 from sim.scenarios.scenario import Scenario, load_scenario
-from sim.trials.trial import controller_dir_name, run_patient, summarize, write_outputs
+from sim.trials.trial import _simulate_patient, controller_dir_name, summarize, write_outputs
 
 #: sensitivity levels (× the model's; dimensionless)
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
@@ -99,9 +103,12 @@ Task = tuple[Scenario, str, int, float, str, str, DoseLimits]
 
 
 def _run_one(task: Task) -> tuple[dict[str, Any], float]:
-    """One patient's record and the CPU time (s) its worker spent on it."""
+    """One patient's record, with ``held_s`` (s the supervisor spent in HOLD or FAILSAFE, where
+    the controller does not act), and the CPU time (s) its worker spent on it."""
     t0 = time.process_time()
-    record = run_patient(*task)
+    record, traj = _simulate_patient(*task)
+    held = np.count_nonzero((traj.state == State.HOLD) | (traj.state == State.FAILSAFE))
+    record["held_s"] = float(held * SAMPLE_PERIOD_S)
     return record, time.process_time() - t0
 
 
@@ -136,30 +143,40 @@ def _reuse(path: Path, identity: dict[str, Any]) -> list[dict[str, Any]] | None:
 
 
 class Throughput:
-    """Simulated patient-hours against wall and worker CPU time (s), for the stderr report."""
+    """Simulated patient-hours against wall and worker CPU time (s), for the stderr report.
+
+    Per core is per CPU minute of the workers: on a shared host the wall time also counts the
+    other processes' use of the cores, the CPU time only this sweep's.
+    """
 
     def __init__(self) -> None:
-        self.patient_hours = 0.0
         self.wall_s = 0.0
-        self.cpu_s = 0.0
+        #: (model, controller) -> [patient-hours, worker CPU s]
+        self.by_run: dict[tuple[str, str], list[float]] = {}
 
-    def add(self, patient_hours: float, wall_s: float, cpu_s: float) -> None:
-        """Count one batch."""
-        self.patient_hours += patient_hours
+    def add(self, wall_s: float, runs: list[tuple[str, str, float, float]]) -> None:
+        """Count one batch: its wall time (s) and per run (model, controller, patient-hours,
+        CPU s)."""
         self.wall_s += wall_s
-        self.cpu_s += cpu_s
+        for model, controller, hours, cpu in runs:
+            acc = self.by_run.setdefault((model, controller), [0.0, 0.0])
+            acc[0] += hours
+            acc[1] += cpu
 
     def report(self, jobs: int) -> str:
-        """``N patient-hours in W s: X per wall minute (jobs J), Y per CPU minute (per core)``."""
-        if self.wall_s <= 0.0 or self.cpu_s <= 0.0:
+        """The totals, then patient-hours per CPU minute for each model and controller."""
+        hours = sum(h for h, _ in self.by_run.values())
+        cpu = sum(c for _, c in self.by_run.values())
+        if self.wall_s <= 0.0 or cpu <= 0.0:
             return "throughput: nothing ran (every cohort reused)"
-        per_wall = self.patient_hours / (self.wall_s / 60.0)
-        per_cpu = self.patient_hours / (self.cpu_s / 60.0)
-        return (
-            f"throughput: {self.patient_hours:.1f} patient-hours in {self.wall_s:.1f} s wall:"
-            f" {per_wall:.1f} patient-hours per wall minute with {jobs} job(s),"
-            f" {per_cpu:.1f} per CPU minute of the workers (per busy core)"
-        )
+        lines = [
+            f"throughput: {hours:.1f} patient-hours in {self.wall_s:.1f} s wall:"
+            f" {hours / (self.wall_s / 60.0):.1f} patient-hours per wall minute with {jobs}"
+            f" job(s), {hours / (cpu / 60.0):.1f} per CPU minute of the workers (per busy core)"
+        ]
+        for (model, controller), (h, c) in self.by_run.items():
+            lines.append(f"  {model} {controller}: {h / (c / 60.0):.1f} per CPU minute")
+        return "\n".join(lines)
 
 
 def run_level(
@@ -241,7 +258,9 @@ def _run_pending(
         _run_one, tasks, jobs=args.jobs, scheduler=args.scheduler, progress=progress
     )
     wall = time.perf_counter() - t0
-    meter.add(len(tasks) * scenario.duration_s / 3600.0, wall, sum(cpu for _, cpu in results))
+    hours = scenario.duration_s / 3600.0
+    owners = [(job["model"], job["controller"]) for job in jobs for _ in job["seeds"]]
+    meter.add(wall, [(m, c, hours, cpu) for (m, c), (_, cpu) in zip(owners, results, strict=True)])
     print(f"{label}: {wall:.1f} s wall", file=sys.stderr, flush=True)
     start = 0
     for job in jobs:

@@ -49,7 +49,8 @@ def row_figures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
         ``worst``; ``time_in_band_pct`` (% after arrival, never-arrived counted 0): ``median``,
         ``p10``, ``worst``; medians ``mdpe_pct``, ``mdape_pct``, ``wobble_pct`` (%),
         ``divergence_pct_per_h`` (%/h), ``iae_mmhg_s`` (mmHg·s); ``hour_limited`` (patients whose
-        command the hourly dose limit cut at least once; 0 without dose limits).
+        command the hourly dose limit cut at least once; 0 without dose limits); ``held``
+        (patients the supervisor put in HOLD or FAILSAFE for at least one tick).
     """
     n = len(records)
     longest = [r["longest_above_10_mmhg_s"] for r in records]
@@ -77,6 +78,7 @@ def row_figures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "divergence_pct_per_h": _median([r["divergence_pct_per_h"] for r in records]),
         "iae_mmhg_s": _median([r["iae_mmhg_s"] for r in records]),
         "hour_limited": sum(1 for r in records if r.get("dose", {}).get("hour_limited_s", 0) > 0),
+        "held": sum(1 for r in records if r.get("held_s", 0) > 0),
     }
 
 
@@ -111,9 +113,9 @@ HEADER = (
     " | longest above target + 10 mmHg, s (median / p90 / max) | > 30 s above target + 10 mmHg"
     " | to ±5 mmHg, s (median / p90) | below −5 mmHg after entry, % (median / p90 / max)"
     " | in ±5 mmHg after entry, % (median / p10 / min) | MDPE % | MDAPE % | wobble %"
-    " | divergence %/h | IAE mmHg·s | hour-limited |\n"
+    " | divergence %/h | IAE mmHg·s | hour-limited | HOLD/FAILSAFE |\n"
     "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
-    " ---: | ---: | ---: | ---: | ---: |"
+    " ---: | ---: | ---: | ---: | ---: | ---: |"
 )
 
 
@@ -129,7 +131,7 @@ def format_row(level: float, controller: str, syringe: str, fig: dict[str, Any])
         f" | {_triple(fig['time_in_band_pct'], 'p10')} | {_num(fig['mdpe_pct'], 2)}"
         f" | {_num(fig['mdape_pct'], 2)} | {_num(fig['wobble_pct'], 2)}"
         f" | {_num(fig['divergence_pct_per_h'], 2)} | {_num(fig['iae_mmhg_s'], 0)}"
-        f" | {fig['hour_limited']} |"
+        f" | {fig['hour_limited']} | {fig['held']} |"
     )
 
 

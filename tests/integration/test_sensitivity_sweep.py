@@ -42,7 +42,8 @@ def test_row_figures_rank_harm_as_counted_by_hand():
         _record(step_overshoot_pct=0.0, step_overshoot_mmhg=0.0, longest_above_10_mmhg_s=0.0,
                 time_to_band_s=300.0, time_below_pct=2.0, time_in_band_pct=98.0),
         _record(step_overshoot_pct=10.0, step_overshoot_mmhg=2.0, longest_above_10_mmhg_s=12.0,
-                time_to_band_s=200.0, time_below_pct=0.0, time_in_band_pct=100.0, stable=False),
+                time_to_band_s=200.0, time_below_pct=0.0, time_in_band_pct=100.0, stable=False,
+                held_s=0.1),
         _record(step_overshoot_pct=50.0, step_overshoot_mmhg=10.0, longest_above_10_mmhg_s=31.0,
                 time_to_band_s=100.0, time_below_pct=4.0, time_in_band_pct=90.0,
                 dose={"hour_limited_s": 12.5}),
@@ -50,7 +51,7 @@ def test_row_figures_rank_harm_as_counted_by_hand():
                 time_to_band_s=None, time_below_pct=None, time_in_band_pct=None),
     ]  # fmt: skip
     fig = row_figures(records)
-    assert (fig["patients"], fig["unstable"], fig["hour_limited"]) == (4, 1, 1)
+    assert (fig["patients"], fig["unstable"], fig["hour_limited"], fig["held"]) == (4, 1, 1, 1)
     # overshoot 0, 10, 50, 200 %: median (10 + 50)/2; p90 at position 2.7 = 50 + 0.7·150
     assert fig["step_overshoot_pct"] == {"median": 30.0, "p90": pytest.approx(155.0), "worst": 200}
     assert fig["step_overshoot_mmhg"] == {"median": 6.0, "p90": pytest.approx(31.0), "worst": 40}
@@ -72,7 +73,7 @@ def test_row_figures_rank_harm_as_counted_by_hand():
     assert row == (
         "| 2× | pi | 100 | 4 | 1 | 30.0 / 155.0 / 200.0 | 6.0 / 31.0 / 40.0 | 22 / 289 / 400"
         " | 2 (50.0 %) | 250 / never (1 never) | 2.0 / 3.6 / 4.0 | 94.0 / 27.0 / 0.0 | 0.00"
-        " | 1.00 | 1.00 | -1.00 | 1000 | 1 |"
+        " | 1.00 | 1.00 | -1.00 | 1000 | 1 | 1 |"
     )
     assert row.count("|") == HEADER.splitlines()[0].count("|")
 
