@@ -41,8 +41,10 @@ and time within ±5 mmHg after that entry (%); MDPE, MDAPE, wobble (%) and diver
 the whole period after the step; IAE; patients the hourly dose limit cut; patients the supervisor
 put in HOLD or FAILSAFE (a clean run should have none).
 
-Printed (stdout): per model a table of who reaches the target per level and the figures table, as
-each model finishes; the JSON (``--json``, and ``OUT/sweep.json`` with ``--out``) holds every
+Printed (stdout), as each model finishes: per model a table of who reaches the target per level,
+a headline table of issue 41's figures over every patient brought to the target (the standard
+syringe's and the switched together: the README's results table), and the full table with every
+group apart; the JSON (``--json``, and ``OUT/sweep.json`` with ``--out``) holds every
 figure. Both are deterministic: the same arguments give the same bytes whatever ``--jobs``. The
 throughput (patient-hours per wall minute, and per CPU minute of the workers: per busy core, in
 total and per model and controller) goes to stderr with the progress.
@@ -67,7 +69,9 @@ import numpy as np
 
 from benchmarks.sweep_figures import (
     HEADER,
+    HEADLINE_HEADER,
     REACH_HEADER,
+    format_headline_row,
     format_reach_row,
     format_row,
     row_figures,
@@ -205,8 +209,11 @@ def run_level(
             jobs.append(job)
     _run_pending(args, scenario, [j for j in jobs if j["records"] is None], meter)
     rows = []
+    responders: dict[str, list[dict[str, Any]]] = {c: [] for c in controllers}
     for job in jobs:
         by_seed = {r["patient_seed"]: r for r in job["records"]}
+        reached = plan["standard"] if job["syringe"] is standard else plan["switched"]
+        responders[job["controller"]] += [by_seed[s] for s in reached]
         if job["syringe"] is standard:
             groups = [("standard", plan["standard"]), ("non-responders", plan["non_responders"])]
         else:
@@ -231,7 +238,12 @@ def run_level(
         "stronger_syringe_ug_ml": None if stronger is None else stronger.concentration_ug_ml,
         "shortfall_mmhg": shortfall_figures(plan["shortfall_mmhg"]),
     }
-    return {"reach": reach, "rows": rows}
+    headline = [
+        {"controller": c, "figures": row_figures(responders[c])}
+        for c in controllers
+        if responders[c]
+    ]
+    return {"reach": reach, "rows": rows, "responders": headline}
 
 
 def _run_pending(
@@ -291,6 +303,17 @@ def model_tables(model: str, result: dict[str, Any]) -> str:
         "",
         REACH_HEADER,
         *(format_reach_row(lv["level"], lv["reach"]) for lv in result["levels"]),
+        "",
+        "Every patient brought to the target (the standard syringe's and the switched together):",
+        "",
+        HEADLINE_HEADER,
+        *(
+            format_headline_row(lv["level"], row["controller"], row["figures"])
+            for lv in result["levels"]
+            for row in lv["responders"]
+        ),
+        "",
+        "Every group apart (the switched and the non-responders marked):",
         "",
         HEADER,
     ]

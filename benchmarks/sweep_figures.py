@@ -154,3 +154,23 @@ def format_reach_row(level: float, reach: dict[str, Any]) -> str:
         f"| {level:g}× | {reach['patients']} | {reach['standard']} | {switched_text}"
         f" | {reach['non_responders']} | {_num(short['median'])} / {_num(short['worst'])} |"
     )
+
+
+HEADLINE_HEADER = (
+    "| level | controller | responders | unstable | step overshoot %, p90 / max"
+    " | > 30 s above target + 10 mmHg, % of patients | to ±5 mmHg, s (median / p90)"
+    " | in ±5 mmHg after entry, % (median) | IAE mmHg·s (median) |\n"
+    "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+)
+
+
+def format_headline_row(level: float, controller: str, fig: dict[str, Any]) -> str:
+    """One Markdown row of :data:`HEADLINE_HEADER`: issue 41's figures over every patient brought
+    to the target (the standard syringe's and the switched ones together)."""
+    os_ = fig["step_overshoot_pct"]
+    return (
+        f"| {level:g}× | {controller} | {fig['patients']} | {fig['unstable']}"
+        f" | {_num(os_['p90'])} / {_num(os_['worst'])}"
+        f" | {_num(fig['above_10_mmhg_over_30_s_pct'])} | {_to_band(fig['time_to_band_s'])}"
+        f" | {_num(fig['time_in_band_pct']['median'])} | {_num(fig['iae_mmhg_s'], 0)} |"
+    )

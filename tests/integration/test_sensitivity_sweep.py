@@ -11,7 +11,13 @@ from typing import Any
 import pytest
 
 from benchmarks.sensitivity_sweep import main
-from benchmarks.sweep_figures import HEADER, format_row, row_figures
+from benchmarks.sweep_figures import (
+    HEADER,
+    HEADLINE_HEADER,
+    format_headline_row,
+    format_row,
+    row_figures,
+)
 from benchmarks.sweep_plan import reach_plan, syringes
 from runtime.inputs.drug_library import DrugEntry, load_library
 from sim.patients.cohort import cohort_seeds
@@ -76,6 +82,11 @@ def test_row_figures_rank_harm_as_counted_by_hand():
         " | 1.00 | 1.00 | -1.00 | 1000 | 1 | 1 |"
     )
     assert row.count("|") == HEADER.splitlines()[0].count("|")
+    headline = format_headline_row(2.0, "pi", fig)
+    assert headline == (
+        "| 2× | pi | 4 | 1 | 155.0 / 200.0 | 50.0 | 250 / never (1 never) | 94.0 | 1000 |"
+    )
+    assert headline.count("|") == HEADLINE_HEADER.splitlines()[0].count("|")
 
 
 def test_the_stronger_syringe_is_the_weakest_that_reaches_the_hard_limit():
@@ -151,6 +162,11 @@ def test_the_sweep_reports_every_column_counts_non_responders_and_repeats_itself
             )
             if plan[k]
         }  # fmt: skip
+        # the headline counts every patient brought to the target, with either syringe
+        reached = len(plan["standard"]) + len(plan["switched"])
+        assert [h["figures"]["patients"] for h in level["responders"]] == (
+            [reached] if reached else []
+        )
     # norepinephrine at 0.2× on this cohort has all three groups (the test needs them)
     ne = doc["models"]["norepinephrine"]["levels"][0]
     assert {r["group"] for r in ne["rows"]} == {"standard", "switched", "non-responders"}
@@ -159,9 +175,12 @@ def test_the_sweep_reports_every_column_counts_non_responders_and_repeats_itself
     assert switched["syringe_ug_ml"] == 64.0
     # every table row has every column, and names the switched and the non-responders
     n_cols = HEADER.splitlines()[0].count("|")
-    rows = [line for line in out.splitlines() if line.startswith("| 0.2× | pi |")]
+    lines = [line for line in out.splitlines() if line.startswith("| 0.2× | pi |")]
+    rows = [line for line in lines if line.count("|") == n_cols]
+    headlines = [line for line in lines if line not in rows]
     assert len(rows) == sum(len(m["levels"][0]["rows"]) for m in doc["models"].values())
-    assert all(line.count("|") == n_cols for line in rows)
+    assert len(headlines) == sum(len(m["levels"][0]["responders"]) for m in doc["models"].values())
+    assert all(h.count("|") == HEADLINE_HEADER.splitlines()[0].count("|") for h in headlines)
     assert any("64 (switched)" in line for line in rows)
     assert any("(non-responders)" in line for line in rows)
     assert "throughput:" in err and "per CPU minute" in err
