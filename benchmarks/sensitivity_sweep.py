@@ -1,41 +1,58 @@
-"""Responsiveness sweep: the same cohort at several drug-sensitivity levels, per controller.
+"""Responsiveness sweep: what harms, per patient model, drug-sensitivity level and controller.
 
 Usage::
 
-    python -m benchmarks.sensitivity_sweep                        # 250 patients, 7 levels
+    python -m benchmarks.sensitivity_sweep                        # 250 patients, 7 levels, 4 models
     python -m benchmarks.sensitivity_sweep --patients 20 --out sweep/ --jobs 2
-    python -m benchmarks.sensitivity_sweep --levels 0.1,10 --controllers lpv --seed 7
+    python -m benchmarks.sensitivity_sweep --models norepinephrine --levels 0.1,10 --seed 7
 
 Every patient of the cohort ``(--seed, --patients)`` runs the scenario (default
 ``paper-disturbance``) at each sensitivity level f (default 0.1, 0.2, 0.5, 1, 2, 5, 10 × the
-model's, the seven responsiveness levels of published closed-loop vasopressor robustness tests)
-under each controller (default ``lpv``, ``pi``, ``smith``), all on one scheduling source (default
-``estimated``, the runtime's own; the PI ignores it). A level is the patient model
-``MODEL@sensitivity=f`` (:mod:`pressor.hil_sim.patients.sensitivity`: the patient responds to each delivered
-ml/h as the model's responds to f ml/h, so K is f × the model's); level 1 is the unwrapped model,
-so its records are ``pressor trial``'s bytes. Every cohort runs through
-:func:`pressor.hil_sim.trials.trial.run_cohort`, the code path of ``pressor trial`` (``--jobs`` local processes
-or ``--scheduler`` a Dask cluster; the results do not depend on either), with progress on stderr.
+model's: the seven levels of published robustness tests of closed-loop vasopressor systems) under
+each controller, for each patient model (default ``paper``, ``pkpd``, ``phenylephrine-2c``,
+``norepinephrine``; docs/PATIENTS.md). A level is the model ``MODEL@sensitivity=f``
+(:mod:`pressor.hil_sim.patients.sensitivity`: each delivered ml/h acts as f ml/h). Each model is played with
+its drug (:data:`MODEL_DRUG`); ``lpv`` in ``--controllers`` is that drug's shipped design
+(:data:`DRUG_LPV`: ``lpv`` for phenylephrine, ``lpv:norepinephrine``), the others run as named
+(the PI and the Smith predictor have no drug: their gains are in ml/h of phenylephrine's 100 µg/ml
+syringe, and ``pressor run`` refuses a norepinephrine device for them, docs/DRUGS.md; here, in
+process, they run unretuned). All controllers use one scheduling source (``--schedule``, default
+``estimated``, the runtime's own; the PI ignores it).
 
-Printed (stdout, a Markdown table as each level finishes): per level and controller one row for
-the reachable patients and one for the unreachable ones (a group without a patient has no row):
+**Syringe and dose limits.** A clinician picks them before knowing the patient's sensitivity, so
+every level uses the drug library's (``runtime/inputs/drug_library.toml``) standard syringe (its
+first concentration), the scenario's pump and the library's limits, which the supervisor enforces
+as under ``pressor run`` (hard, soft and hourly; :mod:`pressor.runtime.core.dose_guard`), per-kg limits at
+:data:`REFERENCE_WEIGHT_KG`. A patient the standard syringe cannot bring to the target within the
+smaller of the pump's maximum and the hard dose limit runs with the library's stronger syringe
+(:func:`stronger_syringe`) when that one can, as a clinician would switch to it; the controllers
+are not told (today's designs count ml/h of their own syringe, and ``pressor run`` refuses
+another). A patient no syringe of the library can bring to the target within the hard dose limit
+is a **non-responder**: it runs with the standard syringe, is reported in its own row and counted
+with its shortfall, never dropped. *Reach the target* is the trial's ``reachable`` (docs/METRICS.md):
+the largest steady ΔMAP at the limit is within the metrics' band of what the scenario asks.
 
-- ``patients``: how many patients the row covers, ``reachable`` (the records' ``reachable``: the
-  pump's maximum rate holds the target at that level to within the metrics' band, by the model's
-  ``max_delta_map_mmhg``) or ``unreachable`` (the target is beyond the pump's limit);
-- ``unstable``: how many of them have the records' ``stable`` flag false, the project's criterion
-  (docs/METRICS.md): non-finite true MAP, or in the final quarter of the run the error swinging
-  from beyond +band to beyond −band (or back) twice or more, i.e. a sustained oscillation;
-- ``MDPE``, ``MDAPE``, ``wobble``: medians over the row's patients of the records' Varvel figures
-  (%, over the whole period after the target step; :mod:`pressor.contracts.metrics`);
-- ``in ±5``: median % of time within ±5 mmHg of the target after first arriving there (a patient
-  that never arrives counts 0 %);
-- ``overshoot``: median and 90th percentile of the step overshoot (% of the step, before the first
-  disturbance).
+**Figures** (:mod:`benchmarks.sweep_figures`, docs/METRICS.md): every metric judges the *true* MAP,
+as ``pressor trial`` does (what the patient experiences; the monitor's noise is not the device's
+harm). Per row: unstable patients; step overshoot (% of the step and mmHg: median / p90 / max); the
+longest stretch above target + 10 mmHg (s) and the patients with one longer than 30 s; time to
+first enter ±5 mmHg (median / p90, never-arrived patients ranked last); time below target − 5 mmHg
+and time within ±5 mmHg after that entry (%); MDPE, MDAPE, wobble (%) and divergence (%/h) over
+the whole period after the step; IAE; patients the hourly dose limit cut; patients the supervisor
+put in HOLD or FAILSAFE (a clean run should have none).
 
-With ``--out DIR`` each (level, controller) writes ``DIR/xF/CONTROLLER/`` (``patients.json``,
-``patients.csv``, ``summary.json``) and a run started again skips those already written for the
-same scenario, cohort, schedule and model (delete a directory to run it again).
+Printed (stdout), as each model finishes: per model a table of who reaches the target per level,
+a headline table of issue 41's figures over every patient brought to the target (the standard
+syringe's and the switched together: the README's results table), and the full table with every
+group apart; the JSON (``--json``, and ``OUT/sweep.json`` with ``--out``) holds every
+figure. Both are deterministic: the same arguments give the same bytes whatever ``--jobs``. The
+throughput (patient-hours per wall minute, and per CPU minute of the workers: per busy core, in
+total and per model and controller) goes to stderr with the progress.
+
+With ``--out DIR`` each (model, level, controller, syringe) cohort writes
+``DIR/MODEL/xF/CONTROLLER/SYRINGE/`` (``patients.json``, ``patients.csv``, ``summary.json``,
+``run.json``) and a run started again reuses those whose ``run.json`` matches (delete a directory
+to run it again).
 """
 
 from __future__ import annotations
@@ -44,150 +61,294 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from pressor.contracts.metrics import percentile_summary
-from pressor.hil_sim.patients.patient_model import DEFAULT_PATIENT_MODEL, PatientModelError
-from pressor.hil_sim.patients.sensitivity import check_factor, with_sensitivity
+import numpy as np
+
+from benchmarks.sweep_figures import (
+    HEADER,
+    HEADLINE_HEADER,
+    REACH_HEADER,
+    format_headline_row,
+    format_reach_row,
+    format_row,
+    row_figures,
+    shortfall_figures,
+)
+from benchmarks.sweep_plan import (
+    DRUG_LPV,
+    MODEL_DRUG,
+    REFERENCE_WEIGHT_KG,
+    Syringe,
+    reach_plan,
+    syringes,
+)
+from pressor.hil_sim.patients.cohort import cohort_seeds
+from pressor.hil_sim.patients.patient_model import PatientModelError
+from pressor.hil_sim.patients.sensitivity import check_factor
 from pressor.hil_sim.scenarios.scenario import Scenario, load_scenario
-from pressor.hil_sim.trials.trial import controller_dir_name, run_cohort, write_outputs
+from pressor.hil_sim.trials.trial import (
+    _simulate_patient,
+    controller_dir_name,
+    summarize,
+    write_outputs,
+)
+from pressor.plumbing.files import write_atomic
+from pressor.plumbing.parallel import run_ordered
+from pressor.runtime.core.dose_guard import DoseLimits
+from pressor.runtime.core.supervisor_config import State
 from pressor.runtime.estimation.sources import SOURCES
+from pressor.runtime.inputs.drug_library import load_library
 
 #: sensitivity levels (× the model's; dimensionless)
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
 CONTROLLERS = ("lpv", "pi", "smith")
-#: summary.json fields that must match for a written (level, controller) to be reused
-IDENTITY = ("scenario", "controller", "patient_model", "cohort_seed", "n_patients", "schedule")
-HEADER = (
-    "| level | controller | patients | unstable | MDPE % | MDAPE % | wobble % | in ±5 mmHg %"
-    " | step overshoot % (median / p90) |\n"
-    "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
-)
+#: the loop period every cohort runs at (s), ``pressor trial``'s
+SAMPLE_PERIOD_S = 0.1
+
+Task = tuple[Scenario, str, int, float, str, str, DoseLimits]
 
 
-def level_dir(out: Path, level: float, controller: str) -> Path:
-    """Where one (level, controller) cohort is written: ``OUT/xF/CONTROLLER``."""
-    return out / f"x{level:g}" / controller_dir_name(controller)
+def _run_one(task: Task) -> tuple[dict[str, Any], float]:
+    """One patient's record, with ``held_s`` (s the supervisor spent in HOLD or FAILSAFE, where
+    the controller does not act), and the CPU time (s) its worker spent on it."""
+    t0 = time.process_time()
+    record, traj = _simulate_patient(*task)
+    held = np.count_nonzero((traj.state == State.HOLD) | (traj.state == State.FAILSAFE))
+    record["held_s"] = float(held * SAMPLE_PERIOD_S)
+    return record, time.process_time() - t0
 
 
-def figures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """One table row's figures over ``records`` (see the module docstring).
+def run_dir(out: Path, model: str, level: float, controller: str, syringe: Syringe) -> Path:
+    """Where one cohort is written: ``OUT/MODEL/xF/CONTROLLER/SYRINGE``."""
+    name = controller_dir_name(model)
+    return out / name / f"x{level:g}" / controller_dir_name(controller) / syringe.dir_name
 
-    Returns
-    -------
-    dict
-        ``patients``, ``unstable`` (counts); ``mdpe_pct``, ``mdape_pct``, ``wobble_pct``,
-        ``time_in_band_pct``, ``overshoot_pct`` (medians over the patients, %, ``None`` without
-        one) and ``overshoot_p90_pct``.
-    """
 
-    def median(key: str, none_as: float | None = None) -> float | None:
-        vals = [none_as if r[key] is None else r[key] for r in records]
-        return percentile_summary(vals)["median"]  # type: ignore[return-value]
-
-    overshoot = percentile_summary(r["step_overshoot_pct"] for r in records)
+def _identity(args: argparse.Namespace, scenario: Scenario, job: dict[str, Any]) -> dict[str, Any]:
+    """What a written cohort must match to be reused (``run.json``)."""
     return {
-        "patients": len(records),
-        "unstable": sum(not r["stable"] for r in records),
-        "mdpe_pct": median("mdpe_pct"),
-        "mdape_pct": median("mdape_pct"),
-        "wobble_pct": median("wobble_pct"),
-        "time_in_band_pct": median("time_in_band_pct", none_as=0.0),
-        "overshoot_pct": overshoot["median"],
-        "overshoot_p90_pct": overshoot["p90"],
+        "scenario": scenario.name,
+        "schedule": args.schedule,
+        "model": job["model"],
+        "level": job["level"],
+        "controller": job["controller"],
+        "patient_model": job["spec"],
+        "dose_limits": asdict(job["syringe"].limits),
+        "patient_seeds": job["seeds"],
     }
 
 
-def _num(value: float | None, digits: int = 1) -> str:
-    return "-" if value is None else f"{value:.{digits}f}"
-
-
-def format_row(level: float, controller: str, group: str, fig: dict[str, Any]) -> str:
-    """The Markdown table row of one level, controller and group of patients (:func:`figures`)."""
-    return (
-        f"| {level:g}× | {controller} | {fig['patients']} {group} | {fig['unstable']}"
-        f" | {_num(fig['mdpe_pct'], 2)} | {_num(fig['mdape_pct'], 2)}"
-        f" | {_num(fig['wobble_pct'], 2)} | {_num(fig['time_in_band_pct'])}"
-        f" | {_num(fig['overshoot_pct'])} / {_num(fig['overshoot_p90_pct'])} |"
-    )
-
-
-def level_rows(level: float, controller: str, records: Sequence[dict[str, Any]]) -> list[str]:
-    """The rows of one level and controller: its reachable patients, then its unreachable ones
-    (no row for a group without a patient)."""
-    rows = []
-    for group, reachable in (("reachable", True), ("unreachable", False)):
-        sub = [r for r in records if r["reachable"] is reachable]
-        if sub:
-            rows.append(format_row(level, controller, group, figures(sub)))
-    return rows
-
-
-def _reuse(path: Path, expected: dict[str, Any]) -> list[dict[str, Any]] | None:
-    """The records written at ``path`` by a run with the same identity, else ``None``."""
+def _reuse(path: Path, identity: dict[str, Any]) -> list[dict[str, Any]] | None:
     try:
-        summary = json.loads((path / "summary.json").read_text())
+        if json.loads((path / "run.json").read_text()) != identity:
+            return None
         records = json.loads((path / "patients.json").read_text())
     except (OSError, ValueError):
         return None
-    same = all(summary.get(k) == expected.get(k) for k in IDENTITY)
-    return records if same and len(records) == expected["n_patients"] else None
+    return records if len(records) == len(identity["patient_seeds"]) else None
+
+
+class Throughput:
+    """Simulated patient-hours against wall and worker CPU time (s), for the stderr report.
+
+    Per core is per CPU minute of the workers: on a shared host the wall time also counts the
+    other processes' use of the cores, the CPU time only this sweep's.
+    """
+
+    def __init__(self) -> None:
+        self.wall_s = 0.0
+        #: (model, controller) -> [patient-hours, worker CPU s]
+        self.by_run: dict[tuple[str, str], list[float]] = {}
+
+    def add(self, wall_s: float, runs: list[tuple[str, str, float, float]]) -> None:
+        """Count one batch: its wall time (s) and per run (model, controller, patient-hours,
+        CPU s)."""
+        self.wall_s += wall_s
+        for model, controller, hours, cpu in runs:
+            acc = self.by_run.setdefault((model, controller), [0.0, 0.0])
+            acc[0] += hours
+            acc[1] += cpu
+
+    def report(self, jobs: int) -> str:
+        """The totals, then patient-hours per CPU minute for each model and controller."""
+        hours = sum(h for h, _ in self.by_run.values())
+        cpu = sum(c for _, c in self.by_run.values())
+        if self.wall_s <= 0.0 or cpu <= 0.0:
+            return "throughput: nothing ran (every cohort reused)"
+        lines = [
+            f"throughput: {hours:.1f} patient-hours in {self.wall_s:.1f} s wall:"
+            f" {hours / (self.wall_s / 60.0):.1f} patient-hours per wall minute with {jobs}"
+            f" job(s), {hours / (cpu / 60.0):.1f} per CPU minute of the workers (per busy core)"
+        ]
+        for (model, controller), (h, c) in self.by_run.items():
+            lines.append(f"  {model} {controller}: {h / (c / 60.0):.1f} per CPU minute")
+        return "\n".join(lines)
 
 
 def run_level(
-    scenario: Scenario,
-    controller: str,
-    level: float,
-    args: argparse.Namespace,
-) -> list[dict[str, Any]]:
-    """The records of one (level, controller) cohort: reused from ``--out`` or run and written."""
-    model = with_sensitivity(args.patient_model, level)
-    out = level_dir(args.out, level, controller) if args.out else None
-    if out is not None:
-        expected = {  # as summary.json names them (schedule, model: absent for the defaults)
-            "scenario": scenario.name,
-            "controller": controller,
-            "patient_model": None if model == DEFAULT_PATIENT_MODEL else model,
-            "cohort_seed": args.seed,
-            "n_patients": args.patients,
-            "schedule": None if args.schedule == "oracle" else args.schedule,
-        }
-        reused = _reuse(out, expected)
-        if reused is not None:
-            print(f"x{level:g} {controller}: reused {out}", file=sys.stderr)
-            return reused
-    label = f"x{level:g} {controller}"
+    args: argparse.Namespace, scenario: Scenario, model: str, level: float, meter: Throughput
+) -> dict[str, Any]:
+    """One model at one level: who reaches the target, then every controller's rows."""
+    drug = MODEL_DRUG[model]
+    standard, stronger = syringes(load_library()[drug], scenario.pump.max_rate_ml_h)
+    seeds = cohort_seeds(args.seed, args.patients)
+    plan = reach_plan(scenario, model, level, seeds, standard, stronger)
+    controllers = [DRUG_LPV[drug] if c == "lpv" else c for c in args.controllers]
+    jobs: list[dict[str, Any]] = []
+    for controller in controllers:
+        for syringe, group_seeds in (
+            (standard, sorted(plan["standard"] + plan["non_responders"])),
+            (stronger, plan["switched"]),
+        ):
+            if syringe is None or not group_seeds:
+                continue
+            spec = syringe.patient_model(model, level)
+            job = {"model": model, "level": level, "controller": controller, "syringe": syringe}
+            job |= {"spec": spec, "seeds": group_seeds}
+            job["identity"] = _identity(args, scenario, job)
+            job["dir"] = run_dir(args.out, model, level, controller, syringe) if args.out else None
+            job["records"] = _reuse(job["dir"], job["identity"]) if job["dir"] else None
+            jobs.append(job)
+    _run_pending(args, scenario, [j for j in jobs if j["records"] is None], meter)
+    rows = []
+    responders: dict[str, list[dict[str, Any]]] = {c: [] for c in controllers}
+    for job in jobs:
+        by_seed = {r["patient_seed"]: r for r in job["records"]}
+        reached = plan["standard"] if job["syringe"] is standard else plan["switched"]
+        responders[job["controller"]] += [by_seed[s] for s in reached]
+        if job["syringe"] is standard:
+            groups = [("standard", plan["standard"]), ("non-responders", plan["non_responders"])]
+        else:
+            groups = [("switched", plan["switched"])]
+        for group, group_seeds in groups:
+            if group_seeds:
+                rows.append(
+                    {
+                        "controller": job["controller"],
+                        "group": group,
+                        "syringe_ug_ml": job["syringe"].concentration_ug_ml,
+                        "figures": row_figures([by_seed[s] for s in group_seeds]),
+                    }
+                )
+    order = {"standard": 0, "switched": 1, "non-responders": 2}
+    rows.sort(key=lambda r: (controllers.index(r["controller"]), order[r["group"]]))
+    reach = {
+        "patients": len(seeds),
+        "standard": len(plan["standard"]),
+        "switched": len(plan["switched"]),
+        "non_responders": len(plan["non_responders"]),
+        "stronger_syringe_ug_ml": None if stronger is None else stronger.concentration_ug_ml,
+        "shortfall_mmhg": shortfall_figures(plan["shortfall_mmhg"]),
+    }
+    headline = [
+        {"controller": c, "figures": row_figures(responders[c])}
+        for c in controllers
+        if responders[c]
+    ]
+    return {"reach": reach, "rows": rows, "responders": headline}
+
+
+def _run_pending(
+    args: argparse.Namespace, scenario: Scenario, jobs: list[dict[str, Any]], meter: Throughput
+) -> None:
+    """Run every pending cohort as one batch (both cores busy to the end) and write each."""
+    if not jobs:
+        return
+    tasks: list[Task] = []
+    for job in jobs:
+        limits = job["syringe"].limits
+        tasks += [
+            (scenario, job["controller"], s, SAMPLE_PERIOD_S, args.schedule, job["spec"], limits)
+            for s in job["seeds"]
+        ]
+    label = f"{jobs[0]['model']} x{jobs[0]['level']:g}"
 
     def progress(done: int, total: int) -> None:
         end = "\n" if done == total else ""
-        print(f"\r{label}: {done}/{total} patients", end=end, file=sys.stderr, flush=True)
+        print(f"\r{label}: {done}/{total} runs", end=end, file=sys.stderr, flush=True)
 
     t0 = time.perf_counter()
-    records, summary, _ = run_cohort(
-        scenario,
-        controller,
-        args.seed,
-        args.patients,
-        jobs=args.jobs,
-        scheduler=args.scheduler,
-        progress=progress,
-        schedule=args.schedule,
-        patient_model=model,
+    results = run_ordered(
+        _run_one, tasks, jobs=args.jobs, scheduler=args.scheduler, progress=progress
     )
-    print(f"{label}: {time.perf_counter() - t0:.1f} s wall", file=sys.stderr, flush=True)
-    if out is not None:
-        write_outputs(out, records, summary)
-    return records
+    wall = time.perf_counter() - t0
+    hours = scenario.duration_s / 3600.0
+    owners = [(job["model"], job["controller"]) for job in jobs for _ in job["seeds"]]
+    meter.add(wall, [(m, c, hours, cpu) for (m, c), (_, cpu) in zip(owners, results, strict=True)])
+    print(f"{label}: {wall:.1f} s wall", file=sys.stderr, flush=True)
+    start = 0
+    for job in jobs:
+        records = [r for r, _ in results[start : start + len(job["seeds"])]]
+        start += len(job["seeds"])
+        job["records"] = records
+        if job["dir"] is not None:
+            summary = summarize(
+                records, scenario, job["controller"], args.seed, args.schedule, job["spec"]
+            )
+            write_outputs(job["dir"], records, summary)
+            write_atomic(job["dir"] / "run.json", json.dumps(job["identity"], indent=1) + "\n")
+
+
+def model_tables(model: str, result: dict[str, Any]) -> str:
+    """The Markdown of one model: its heading, who reaches the target, the figures."""
+    std, strong = result["standard_syringe"], result["stronger_syringe"]
+    lines = [
+        f"### {model} ({result['drug']}; standard syringe {std['concentration_ug_ml']:g} µg/ml,"
+        f" command ≤ {std['hard_max_ml_h']:g} ml/h and ≤ {std['max_ml_per_hour']:g} ml per hour"
+        + (
+            f"; stronger syringe {strong['concentration_ug_ml']:g} µg/ml,"
+            f" ≤ {strong['hard_max_ml_h']:g} ml/h and ≤ {strong['max_ml_per_hour']:g} ml per hour"
+            if strong
+            else "; no stronger syringe in the library"
+        )
+        + ")",
+        "",
+        REACH_HEADER,
+        *(format_reach_row(lv["level"], lv["reach"]) for lv in result["levels"]),
+        "",
+        "Every patient brought to the target (the standard syringe's and the switched together):",
+        "",
+        HEADLINE_HEADER,
+        *(
+            format_headline_row(lv["level"], row["controller"], row["figures"])
+            for lv in result["levels"]
+            for row in lv["responders"]
+        ),
+        "",
+        "Every group apart (the switched and the non-responders marked):",
+        "",
+        HEADER,
+    ]
+    for lv in result["levels"]:
+        for row in lv["rows"]:
+            syringe = f"{row['syringe_ug_ml']:g}"
+            if row["group"] != "standard":
+                syringe += f" ({row['group']})"
+            lines.append(format_row(lv["level"], row["controller"], syringe, row["figures"]))
+    return "\n".join(lines)
 
 
 def _levels(text: str) -> list[float]:
     try:
-        levels = [check_factor(float(v), f"--levels item {v!r}") for v in text.split(",")]
+        return [check_factor(float(v), f"--levels item {v!r}") for v in text.split(",")]
     except (ValueError, PatientModelError) as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-    return levels
+
+
+def _names(known: tuple[str, ...] | None) -> Any:
+    def parse(text: str) -> list[str]:
+        names = [v for v in text.split(",") if v]
+        bad = [v for v in names if known is not None and v not in known]
+        if bad or not names:
+            raise argparse.ArgumentTypeError(
+                f"{text!r}: allowed a comma-separated subset of {known}"
+            )
+        return names
+
+    return parse
 
 
 def parser() -> argparse.ArgumentParser:
@@ -208,47 +369,77 @@ def parser() -> argparse.ArgumentParser:
         " default 0.1,0.2,0.5,1,2,5,10)",
     )
     p.add_argument(
+        "--models",
+        type=_names(tuple(MODEL_DRUG)),
+        default=list(MODEL_DRUG),
+        help=f"patient models, comma-separated (default {','.join(MODEL_DRUG)})",
+    )
+    p.add_argument(
         "--controllers",
-        default=",".join(CONTROLLERS),
-        help="controller specs, comma-separated (default %(default)s)",
+        type=_names(None),
+        default=list(CONTROLLERS),
+        help="controller specs, comma-separated; lpv = the model's drug's design"
+        " (default %(default)s)",
     )
     p.add_argument("--schedule", choices=SOURCES, default="estimated", help="(default %(default)s)")
-    p.add_argument(
-        "--patient-model",
-        default=DEFAULT_PATIENT_MODEL,
-        help="the model whose sensitivity is scaled (default %(default)s)",
-    )
     p.add_argument("--jobs", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None, help="Dask scheduler address (default: local)")
     p.add_argument(
         "--out", type=Path, default=None, help="write and reuse results here (default: none)"
     )
+    p.add_argument("--json", type=Path, default=None, help="write the figures' JSON here")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the sweep and print its table; 0 on completion, 2 on a bad argument."""
+    """Run the sweep and print its tables; 0 on completion, 2 on a bad argument."""
     args = parser().parse_args(argv)
-    controllers = [c for c in args.controllers.split(",") if c]
     try:
         scenario = load_scenario(args.scenario)
-        for level in args.levels:
-            with_sensitivity(args.patient_model, level)
     except ValueError as exc:
         print(f"sensitivity_sweep: {exc}", file=sys.stderr)
         return 2
+    doc: dict[str, Any] = {
+        "scenario": scenario.name,
+        "cohort_seed": args.seed,
+        "patients_per_level": args.patients,
+        "schedule": args.schedule,
+        "levels": args.levels,
+        "reference_weight_kg": REFERENCE_WEIGHT_KG,
+        "map": "true",
+        "models": {},
+    }
     print(
         f"sensitivity sweep: scenario {scenario.name}, cohort seed {args.seed}, {args.patients}"
-        f" patients per level, schedule {args.schedule}, patient model {args.patient_model}"
+        f" patients per level, schedule {args.schedule}, metrics on the true MAP",
+        flush=True,
     )
-    print(HEADER, flush=True)
-    for level in args.levels:
-        rows = [
-            row
-            for c in controllers
-            for row in level_rows(level, c, run_level(scenario, c, level, args))
-        ]
-        print("\n".join(rows), flush=True)
+    meter = Throughput()
+    for model in args.models:
+        drug = MODEL_DRUG[model]
+        standard, stronger = syringes(load_library()[drug], scenario.pump.max_rate_ml_h)
+        result: dict[str, Any] = {
+            "drug": drug,
+            "standard_syringe": standard.describe(),
+            "stronger_syringe": None if stronger is None else stronger.describe(),
+            "levels": [],
+        }
+        for level in args.levels:
+            try:
+                result["levels"].append(
+                    {"level": level, **run_level(args, scenario, model, level, meter)}
+                )
+            except PatientModelError as exc:
+                print(f"sensitivity_sweep: {exc}", file=sys.stderr)
+                return 2
+        doc["models"][model] = result
+        print("\n" + model_tables(model, result), flush=True)
+    print(meter.report(args.jobs), file=sys.stderr, flush=True)
+    text = json.dumps(doc, indent=1) + "\n"
+    for path in (args.json, args.out / "sweep.json" if args.out else None):
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(path, text)
     return 0
 
 

@@ -27,6 +27,7 @@ to the device process. A world without faults behaves exactly as before.
 
 from __future__ import annotations
 
+import functools
 import math
 import struct
 from dataclasses import replace
@@ -52,6 +53,16 @@ _F32 = struct.Struct("<f")
 #: (per tick: the same rounding as six or two calls of :func:`f32`, at a fraction of the calls)
 _F32x6 = struct.Struct("<6f")
 _F32x2 = struct.Struct("<2f")
+
+
+@functools.lru_cache(maxsize=8)
+def disturbance_ticks(parts: tuple, period_s: float, n_ticks: int) -> tuple[float, ...]:
+    """The scenario disturbances' sum (mmHg) at every tick k < ``n_ticks`` of period ``period_s``
+    (s), computed as the world computes it (at ``k * period_s``), so reading the table gives the
+    same bits. Every patient of a cohort meets the same disturbances: a worker process computes
+    them once per scenario instead of once per tick of every patient."""
+    total = DisturbanceSum(parts)
+    return tuple(total(k * period_s) for k in range(n_ticks))
 
 
 def f32(x: float, _pack=_F32.pack, _unpack=_F32.unpack) -> float:
@@ -130,6 +141,10 @@ class World:
         self._pump_faults = bool(self.faults.pump)
         self.sensor = Sensor(sensor_cfg, patient_rng(patient_seed, 1))
         self.disturbance = DisturbanceSum(sc.disturbances)
+        n_ticks = round(sc.duration_s / self.sample_period_s) + 1
+        self._disturbance_ticks = disturbance_ticks(
+            tuple(sc.disturbances), self.sample_period_s, n_ticks
+        )
         self.baseline_mmhg = self.patient.baseline_mmhg
         self.tick = 0
         self.last_command_ml_h = math.nan
@@ -152,7 +167,12 @@ class World:
         """True MAP now (mmHg): baseline + ΔMAP + disturbances."""
         if self._obs is not None and self._obs.tick == self.tick:
             return self._true_map
-        return self.patient.map_mmhg + self.disturbance(self.sim_time_s)
+        return self.patient.map_mmhg + self._disturbance_at(self.tick)
+
+    def _disturbance_at(self, tick: int) -> float:
+        """The disturbances (mmHg) at ``tick``: the cohort's table, past its end computed."""
+        table = self._disturbance_ticks
+        return table[tick] if tick < len(table) else self.disturbance(tick * self.sample_period_s)
 
     def observe(self) -> TickInputs:
         """The observation of the current tick (computed once per tick; repeated calls agree)."""
@@ -162,7 +182,7 @@ class World:
         tick = self.tick
         t = tick * self.sample_period_s  # sim_time_s
         p = self.patient
-        self._true_map = true_map = p.map_mmhg + self.disturbance(t)
+        self._true_map = true_map = p.map_mmhg + self._disturbance_at(tick)
         reading, quality = self.sensor.read(t, true_map)
         K, T_s, tau_s, valid = p.K, p.T_s, p.tau_s, True
         if self._sched_faults:
@@ -242,13 +262,15 @@ class World:
         need = [self.target_at(x) - self.baseline_mmhg - self.disturbance(x) for x in t]
         return float(max(need)) if need else 0.0
 
-    def reachable(self) -> bool:
-        """Whether the pump's maximum rate can bring MAP within the metrics' band of the target at
-        this patient's sensitivity (:func:`pressor.contracts.metrics.reachable_band_mmhg`: the scenario's
-        settling band, or the clinical band without a target step)."""
+    def reachable(self, max_rate_ml_h: float | None = None) -> bool:
+        """Whether the pump's maximum rate (or ``max_rate_ml_h``, ml/h: a lower dose limit) can
+        bring MAP within the metrics' band of the target at this patient's sensitivity
+        (:func:`pressor.contracts.metrics.reachable_band_mmhg`: the scenario's settling band, or the
+        clinical band without a target step)."""
         from pressor.contracts.metrics import reachable_band_mmhg
 
         sc = self.scenario
         band = reachable_band_mmhg(sc.step_mmhg if sc.step_mmhg != 0.0 else None, sc.noisy)
-        achievable = self.patient.max_delta_map_mmhg(sc.pump.max_rate_ml_h)
+        top = sc.pump.max_rate_ml_h if max_rate_ml_h is None else max_rate_ml_h
+        achievable = self.patient.max_delta_map_mmhg(top)
         return self.required_delta_mmhg() - band <= achievable

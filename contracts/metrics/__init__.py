@@ -11,7 +11,8 @@ reports NaN) are ignored by every MAP metric; time-based percentages count only 
 
 The modules: :mod:`~pressor.contracts.metrics.names` (metric names, bands, event kinds),
 :mod:`~pressor.contracts.metrics.step` (one step response), :mod:`~pressor.contracts.metrics.disturbance`
-(disturbance events), :mod:`~pressor.contracts.metrics.run` (every metric of one run),
+(disturbance events), :mod:`~pressor.contracts.metrics.harm` (hypertension, time to the target,
+divergence), :mod:`~pressor.contracts.metrics.run` (every metric of one run),
 :mod:`~pressor.contracts.metrics.aggregate` (cohort summaries).
 
 Definitions (a target step of size Δ mmHg at ``t0``; e = MAP − target):
@@ -50,6 +51,17 @@ Definitions (a target step of size Δ mmHg at ``t0``; e = MAP − target):
     Supplied by the caller (it needs the patient model): the target's required ΔMAP is within what
     the pump's maximum rate can produce at the patient's steady-state sensitivity.
 
+What harms (:mod:`~pressor.contracts.metrics.harm`), from t0 (the first sample without a step):
+
+``step_overshoot_mmhg``
+    ``step_overshoot_pct`` in mmHg: max(0, max sign(Δ)·e) over the step window.
+``longest_above_10_mmhg_s``
+    The longest run of consecutive valid samples with e > 10 mmHg, × Ts (s); 0 if never above.
+``time_to_band_s``
+    First valid sample with |e| ≤ 5 mmHg, minus t0 (s); ``None`` if never.
+``divergence_pct_per_h``
+    Varvel's divergence: least-squares slope of |PE_k| against time (%/h).
+
 The names above keep their meaning whatever the scenario: they judge the whole run after the step,
 so on a scenario with disturbances ``overshoot_pct`` includes any disturbance's excursion above the
 target and ``settling_time_s`` the last excursion out of the band, whatever caused it. Tracking and
@@ -76,15 +88,25 @@ from pressor.contracts.metrics.aggregate import (
     aggregate,
     aggregate_disturbances,
     percentile_summary,
+    percentiles_never_last,
 )
 from pressor.contracts.metrics.disturbance import disturbance_metrics, event_labels, event_windows
+from pressor.contracts.metrics.harm import (
+    divergence_pct_per_h,
+    harm_metrics,
+    longest_above_s,
+    step_overshoot_mmhg,
+    time_to_band_s,
+)
 from pressor.contracts.metrics.names import (
     CLINICAL_BAND_MMHG,
     EVENT_KINDS,
     EVENT_METRICS,
+    HARM_METRICS,
     HIGHER_IS_BETTER,
     NOISE_FREE_BAND_FRACTION,
     NOISY_BAND_MMHG,
+    OVER_TARGET_MARGIN_MMHG,
     RUN_METRICS,
     STEP_METRICS,
     STEP_WINDOW_METRICS,
@@ -102,9 +124,11 @@ __all__ = [
     "CLINICAL_BAND_MMHG",
     "EVENT_KINDS",
     "EVENT_METRICS",
+    "HARM_METRICS",
     "HIGHER_IS_BETTER",
     "NOISE_FREE_BAND_FRACTION",
     "NOISY_BAND_MMHG",
+    "OVER_TARGET_MARGIN_MMHG",
     "RUN_METRICS",
     "STEP_METRICS",
     "STEP_WINDOW_METRICS",
@@ -112,13 +136,19 @@ __all__ = [
     "aggregate",
     "aggregate_disturbances",
     "disturbance_metrics",
+    "divergence_pct_per_h",
     "event_labels",
     "event_windows",
+    "harm_metrics",
+    "longest_above_s",
     "percentile_summary",
+    "percentiles_never_last",
     "run_metrics",
     "stable_flag",
     "reachable_band_mmhg",
     "step_band_mmhg",
     "step_metrics",
+    "step_overshoot_mmhg",
     "step_window_metrics",
+    "time_to_band_s",
 ]

@@ -38,6 +38,52 @@ def percentile_summary(values: Iterable[float | None]) -> dict[str, float | int 
     }
 
 
+def percentiles_never_last(
+    values: Iterable[float | None], qs: Sequence[float] = (50.0, 90.0)
+) -> dict[str, float | int | None]:
+    """Percentiles of a time-to-event in which ``None`` means *never* (not *unknown*).
+
+    :func:`percentile_summary` skips a ``None``, which for ``time_to_band_s`` would drop exactly
+    the patients who never reach the target and make the median look better the more of them
+    there are. Here a ``None`` ranks after every number (a censored, infinite time), and a
+    percentile that falls on or interpolates towards one is ``None`` ("not within the run").
+    Between two numbers the interpolation is numpy's linear one.
+
+    Parameters
+    ----------
+    values
+        Times (any unit), ``None`` for a patient to whom the event never happened.
+    qs
+        Percentiles in [0, 100].
+
+    Returns
+    -------
+    dict
+        ``p{q:g}`` for each q (``p50`` is the median), ``n`` (all values) and ``n_never``.
+    """
+    vals = list(values)
+    finite = sorted(float(v) for v in vals if v is not None)
+    n, n_never = len(vals), len(vals) - len(finite)
+    out: dict[str, float | int | None] = {}
+    for q in qs:
+        if n == 0:
+            out[f"p{q:g}"] = None
+            continue
+        pos = q / 100.0 * (n - 1)
+        lo = int(np.floor(pos))
+        hi = min(lo + 1, n - 1)
+        frac = pos - lo
+        if lo >= len(finite) or (frac > 0.0 and hi >= len(finite)):
+            out[f"p{q:g}"] = None  # the percentile lies among the patients who never got there
+        elif frac == 0.0:
+            out[f"p{q:g}"] = to_float(finite[lo])
+        else:
+            out[f"p{q:g}"] = to_float(finite[lo] + frac * (finite[hi] - finite[lo]))
+    out["n"] = n
+    out["n_never"] = n_never
+    return out
+
+
 def aggregate_disturbances(per_run: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per-event summaries across runs of one scenario, keyed by :func:`event_labels`.
 

@@ -5,6 +5,9 @@ from __future__ import annotations
 NOISY_BAND_MMHG = 5.0
 NOISE_FREE_BAND_FRACTION = 0.02
 CLINICAL_BAND_MMHG = 5.0
+#: MAP more than this above the target (mmHg) is the device's hypertension that
+#: ``longest_above_10_mmhg_s`` times
+OVER_TARGET_MARGIN_MMHG = 10.0
 
 STEP_METRICS = (
     "overshoot_pct",
@@ -20,6 +23,14 @@ STEP_WINDOW_METRICS = (
     "step_iae_mmhg_s",
 )
 """The step metrics over the window before the first disturbance event."""
+HARM_METRICS = (
+    "step_overshoot_mmhg",
+    "longest_above_10_mmhg_s",
+    "time_to_band_s",
+    "divergence_pct_per_h",
+)
+"""What harms the patient (:mod:`pressor.contracts.metrics.harm`): the step overshoot in mmHg, the
+longest stretch above target + 10 mmHg, the time to first reach ±5 mmHg and Varvel's divergence."""
 RUN_METRICS = (
     STEP_METRICS
     + (
@@ -33,6 +44,7 @@ RUN_METRICS = (
         "time_at_limit_pct",
     )
     + STEP_WINDOW_METRICS
+    + HARM_METRICS
 )
 HIGHER_IS_BETTER = frozenset({"time_in_band_pct"})
 """Run metrics where a larger value is better; for every other metric a smaller one is (or, for

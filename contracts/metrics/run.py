@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from pressor.contracts.metrics.disturbance import disturbance_metrics
+from pressor.contracts.metrics.harm import harm_metrics
 from pressor.contracts.metrics.names import (
     CLINICAL_BAND_MMHG,
     NOISY_BAND_MMHG,
@@ -81,9 +82,10 @@ def run_metrics(
     -------
     dict
         Keys :data:`RUN_METRICS` + ``reachable`` + ``stable`` + ``disturbances``. The Varvel
-        figures (``mdpe_pct``, ``mdape_pct``, ``wobble_pct``; %) count the whole controlled period:
-        every valid sample from the target step on (from the first sample without a step), the
-        rise included, not only the time after the target is first reached.
+        figures (``mdpe_pct``, ``mdape_pct``, ``wobble_pct``; %, and ``divergence_pct_per_h``,
+        %/h) count the whole controlled period: every valid sample from the target step on (from
+        the first sample without a step), the rise included, not only the time after the target
+        is first reached. The harm metrics (:mod:`pressor.contracts.metrics.harm`) judge ``map_mmhg``.
     """
     t, y, r, u = as_arrays(t_s, map_mmhg, target_mmhg, rate_ml_h)
     ts = period(t)
@@ -128,13 +130,15 @@ def run_metrics(
     out["time_at_limit_pct"] = percent(u >= max_rate_ml_h * (1.0 - 1e-6))
     out.update(dict.fromkeys(STEP_WINDOW_METRICS))
     disturbances = None
+    first: float | None = None  # the step window's end (s); None when the events are not known
     if events is not None:
         disturbances = disturbance_metrics(t, y, r, events)
+        first = float(disturbances[0]["start_s"]) if disturbances else math.inf  # type: ignore[arg-type]
         if has_step:
-            first = float(disturbances[0]["start_s"]) if disturbances else math.inf  # type: ignore[arg-type]
             out.update(
                 step_window_metrics(t, y, r, float(step_time_s), float(step_mmhg), first, noisy)
             )
+    out.update(harm_metrics(t, y, r, t0, float(step_mmhg) if has_step else None, first))
     band = (
         step_band_mmhg(float(step_mmhg), noisy)
         if has_step

@@ -76,6 +76,10 @@ class DrugPatient:
         self._counter_decay = math.exp(-self.h / counter_tau_s)
         self.time_s = 0.0
         self.counter_mmhg = 0.0
+        #: E (mmHg) at the effect-site level the last step left, ``None`` before the first step:
+        #: the next step starts from it and the world reads MAP and K from it every tick, so it is
+        #: kept instead of evaluated again (the same arithmetic on the same level: the same bits)
+        self._effect_now: float | None = None
 
     def effect_mmhg(self, ce_ng_ml: float) -> float:
         """Direct drug effect E (mmHg) at the effect-site level ``ce_ng_ml`` (ng/ml)."""
@@ -94,6 +98,12 @@ class DrugPatient:
         ramp = 1.0 - self._counter_tau_s * (1.0 - q) / self.h  # weight of the effect's change
         self.counter_mmhg = q * self.counter_mmhg + g * (e0 * (1.0 - q) + (e1 - e0) * ramp)
         self.time_s = self._buffer.n * self.h
+        self._effect_now = e1
+
+    def _effect_before_step(self) -> float:
+        """E (mmHg) at the current effect-site level, before this step moves it."""
+        e = self._effect_now
+        return self.effect_mmhg(self.ce_ng_ml) if e is None else e
 
     @property
     def baseline_mmhg(self) -> float:
@@ -103,7 +113,7 @@ class DrugPatient:
     @property
     def delta_map_mmhg(self) -> float:
         """The drug's MAP change now (mmHg): E − F."""
-        return self.effect_mmhg(self.ce_ng_ml) - self.counter_mmhg
+        return self._effect_before_step() - self.counter_mmhg
 
     @property
     def map_mmhg(self) -> float:

@@ -205,6 +205,11 @@ class Norepinephrine1C(DrugPatient):
         self._bd = tuple(float(v) for v in e[:2, 2])
         self._dc_ng_ml = self.conc_ug_ml / (60.0 * p.clearance_l_min)
         self._t_app_s = 60.0 * p.v_l / p.clearance_l_min + p.effect_tau_s
+        # the Hill curve's constants as plain floats: the curve is evaluated twice a tick, and
+        # the parameters' derived properties (Emax through g) are chains of Python calls
+        self._emax_mmhg, self._ec50_ng_ml, self._hill = p.emax_mmhg, p.ec50_ng_ml, p.hill
+        #: H (mmHg) at the effect-site level the last step left (``None`` before the first), for K
+        self._hill_now: float | None = None
         self._h_endo = self.hill_mmhg(p.endogenous_ng_ml)
         self.plasma_ng_ml = self.ce_ng_ml = p.endogenous_ng_ml
 
@@ -215,11 +220,10 @@ class Norepinephrine1C(DrugPatient):
 
     def hill_mmhg(self, level_ng_ml: float) -> float:
         """The Hill curve H (mmHg) at the level ``level_ng_ml`` (ng/ml)."""
-        p = self.params
         if level_ng_ml <= 0.0:
             return 0.0
-        x = (level_ng_ml / p.ec50_ng_ml) ** p.hill
-        return p.emax_mmhg * x / (1.0 + x)
+        x = (level_ng_ml / self._ec50_ng_ml) ** self._hill
+        return self._emax_mmhg * x / (1.0 + x)
 
     def effect_mmhg(self, ce_ng_ml: float) -> float:
         """Direct drug effect E (mmHg) at the effect-site level ``ce_ng_ml`` (ng/ml)."""
@@ -234,16 +238,18 @@ class Norepinephrine1C(DrugPatient):
         (a00, a01), (a10, a11) = self._ad
         b0, b1 = self._bd
         x0, x1 = self.plasma_ng_ml, self.ce_ng_ml
-        e0 = self.effect_mmhg(x1)
+        e0 = self._effect_before_step()
         self.plasma_ng_ml = a00 * x0 + a01 * x1 + b0 * u_ug_s
         self.ce_ng_ml = a10 * x0 + a11 * x1 + b1 * u_ug_s
-        self._regulate(e0, self.effect_mmhg(self.ce_ng_ml))
+        self._hill_now = h1 = self.hill_mmhg(self.ce_ng_ml)
+        self._regulate(e0, h1 - self._h_endo)  # effect_mmhg(ce), its H kept for K
 
     @property
     def K(self) -> float:
         """Apparent sensitivity now (mmHg/(ml/h)): the settled MAP rise of one more ml/h."""
         ce = self.ce_ng_ml
-        return self.hill_mmhg(ce + self._dc_ng_ml) - self.hill_mmhg(ce)
+        h_now = self.hill_mmhg(ce) if self._hill_now is None else self._hill_now
+        return self.hill_mmhg(ce + self._dc_ng_ml) - h_now
 
     @property
     def T_s(self) -> float:

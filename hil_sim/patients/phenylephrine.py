@@ -191,7 +191,7 @@ class Phenylephrine2C(DrugPatient):
         (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = self._ad
         b0, b1, b2 = self._bd
         x0, x1, x2 = self.a1_ug, self.a2_ug, self.ce_ng_ml
-        e0 = self.effect_mmhg(x2)
+        e0 = self._effect_before_step()
         self.a1_ug = a00 * x0 + a01 * x1 + a02 * x2 + b0 * u_ug_s
         self.a2_ug = a10 * x0 + a11 * x1 + a12 * x2 + b1 * u_ug_s
         self.ce_ng_ml = a20 * x0 + a21 * x1 + a22 * x2 + b2 * u_ug_s
@@ -206,7 +206,7 @@ class Phenylephrine2C(DrugPatient):
     def K(self) -> float:
         """Apparent sensitivity now (mmHg/(ml/h)): the fast MAP rise of one more ml/h."""
         ce = self.ce_ng_ml
-        return self.effect_mmhg(ce + self._fast_dc_ng_ml) - self.effect_mmhg(ce)
+        return self.effect_mmhg(ce + self._fast_dc_ng_ml) - self._effect_before_step()
 
     @property
     def T_s(self) -> float:

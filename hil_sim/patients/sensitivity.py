@@ -25,6 +25,7 @@ unwrapped model's, byte for byte. f must lie in :data:`SENSITIVITY_RANGE`.
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Mapping
 from typing import ClassVar
 
@@ -125,35 +126,31 @@ class SensitivityScaled:
         """The wrapped model's patient of ``patient_seed`` (stepped every ``step_s`` s), scaled."""
         return cls(cls.inner_model.from_seed(patient_seed, step_s), cls.sensitivity_factor)
 
-    @property
-    def baseline_mmhg(self) -> float:
-        """MAP without drug (mmHg), the wrapped patient's."""
-        return self.inner.baseline_mmhg
-
-    @property
-    def map_mmhg(self) -> float:
-        """MAP now (mmHg), the wrapped patient's."""
-        return self.inner.map_mmhg
-
-    @property
-    def delta_map_mmhg(self) -> float:
-        """The drug's MAP change now (mmHg), the wrapped patient's."""
-        return self.inner.delta_map_mmhg
+    # The pass-through members read the wrapped patient through a C-level getter: the world reads
+    # them every tick, and a Python property would add a frame each time.
+    baseline_mmhg = property(
+        operator.attrgetter("inner.baseline_mmhg"), doc="MAP without drug (mmHg), the wrapped's."
+    )
+    map_mmhg = property(
+        operator.attrgetter("inner.map_mmhg"), doc="MAP now (mmHg), the wrapped patient's."
+    )
+    delta_map_mmhg = property(
+        operator.attrgetter("inner.delta_map_mmhg"),
+        doc="The drug's MAP change now (mmHg), the wrapped patient's.",
+    )
 
     @property
     def K(self) -> float:
         """f × the wrapped patient's K (mmHg/(ml/h) of delivered rate)."""
         return self.factor * self.inner.K
 
-    @property
-    def T_s(self) -> float:
-        """The wrapped patient's lag (s), unchanged."""
-        return self.inner.T_s
-
-    @property
-    def tau_s(self) -> float:
-        """The wrapped patient's transport delay (s), unchanged."""
-        return self.inner.tau_s
+    T_s = property(
+        operator.attrgetter("inner.T_s"), doc="The wrapped patient's lag (s), unchanged."
+    )
+    tau_s = property(
+        operator.attrgetter("inner.tau_s"),
+        doc="The wrapped patient's transport delay (s), unchanged.",
+    )
 
     def step(self, rate_ml_h: float) -> None:
         """Advance the wrapped patient one internal step at f × ``rate_ml_h`` (ml/h)."""

@@ -59,6 +59,9 @@ from pressor.hil_sim.world import World
 from pressor.plumbing.files import write_atomic
 from pressor.plumbing.parallel import run_ordered
 from pressor.runtime.core.closed_loop import ControllerError
+from pressor.runtime.core.dose_guard import DOSE_HARD_LIMIT, DOSE_HOUR_LIMIT, DoseLimits
+from pressor.runtime.core.supervisor import Supervisor
+from pressor.runtime.core.supervisor_config import supervisor_config_for
 from pressor.runtime.estimation.sources import make_schedule
 from pressor.runtime.inputs.controller_loader import load_controller
 
@@ -100,17 +103,38 @@ def run_patient(
     sample_period_s: float = 0.1,
     schedule: str = "oracle",
     patient_model: str = DEFAULT_PATIENT_MODEL,
+    dose_limits: DoseLimits | None = None,
 ) -> dict[str, Any]:
     """Simulate one patient and return its JSON-ready record (seed, coefficients, metrics).
 
     ``schedule`` names the scheduling source (:func:`pressor.runtime.estimation.sources.make_schedule`),
     run by the runtime's core exactly as ``pressor run``/``sil`` run it; when it is not the oracle
     the record gains ``estimation`` (:func:`estimation_errors`). ``patient_model`` names the
-    patient model (:mod:`pressor.hil_sim.patients.patient_model`).
+    patient model (:mod:`pressor.hil_sim.patients.patient_model`). ``dose_limits`` (ml/h, from the drug
+    library: :meth:`pressor.runtime.inputs.drug_library.DrugEntry.limits`) makes the supervisor cut every
+    command to them as ``pressor run``'s does; the record's ``reachable`` and ``max_delta_mmhg``
+    are then judged at the smaller of the pump's maximum and the hard dose limit, and the record
+    gains ``dose`` (:func:`dose_record`). Without it the record keeps its bytes.
     """
     return _simulate_patient(
-        scenario, controller_spec, patient_seed, sample_period_s, schedule, patient_model
-    )[0]
+        scenario, controller_spec, patient_seed, sample_period_s, schedule, patient_model,
+        dose_limits,
+    )[0]  # fmt: skip
+
+
+def dose_record(limits: DoseLimits, traj: Trajectory) -> dict[str, float | None]:
+    """The record's ``dose``: the limits (``concentration_ug_ml`` µg/ml, ``weight_kg`` kg or
+    ``None``, ``hard_max_ml_h`` ml/h, ``max_ml_per_hour`` ml) and how long the supervisor cut the
+    command to the hard limit (``hard_limited_s``) and to the hourly one (``hour_limited_s``), s."""
+    ts = float(traj.t_s[1] - traj.t_s[0]) if traj.t_s.size > 1 else 0.0
+    return {
+        "concentration_ug_ml": float(limits.concentration_ug_ml),
+        "weight_kg": None if limits.weight_kg is None else float(limits.weight_kg),
+        "hard_max_ml_h": float(limits.hard_max_ml_h),
+        "max_ml_per_hour": float(limits.max_ml_per_hour),
+        "hard_limited_s": float(np.count_nonzero(traj.faults & DOSE_HARD_LIMIT) * ts),
+        "hour_limited_s": float(np.count_nonzero(traj.faults & DOSE_HOUR_LIMIT) * ts),
+    }
 
 
 def _simulate_patient(
@@ -120,13 +144,21 @@ def _simulate_patient(
     sample_period_s: float,
     schedule: str,
     patient_model: str = DEFAULT_PATIENT_MODEL,
+    dose_limits: DoseLimits | None = None,
 ) -> tuple[dict[str, Any], Trajectory]:
     world = World(scenario, patient_seed, sample_period_s, patient_model=patient_model)
     world.patient = native_patient(world.patient)  # before its first step
     controller = native_twin(load_controller(controller_spec, sample_period_s))
+    supervisor = None  # simulate()'s default, pressor sil's
+    max_rate = scenario.pump.max_rate_ml_h
+    if dose_limits is not None:
+        noise = scenario.sensor.noise_std_mmhg
+        cfg = supervisor_config_for(controller, noise, dose_limits=dose_limits)
+        supervisor = Supervisor(cfg)
+        max_rate = min(max_rate, dose_limits.hard_max_ml_h)
     try:
         source = native_schedule(make_schedule(schedule, sample_period_s))
-        traj = simulate(world, controller, schedule=source)
+        traj = simulate(world, controller, supervisor=supervisor, schedule=source)
     except ControllerError as exc:  # name the patient too (the message crosses processes)
         raise ControllerError(
             f"--controller {controller_spec!r}, patient seed {patient_seed}: {exc}"
@@ -141,7 +173,7 @@ def _simulate_patient(
         step_time_s=scenario.step_time_s if has_step else None,
         step_mmhg=scenario.step_mmhg if has_step else None,
         noisy=scenario.noisy,
-        reachable=world.reachable(),
+        reachable=world.reachable(max_rate),
         map_true_mmhg=traj.map_true_mmhg,
         events=scenario_events(scenario),
     )
@@ -151,9 +183,11 @@ def _simulate_patient(
     record["coefficients"] = world.patient.coefficients()
     record["schedule_range"] = _schedule_range(traj)
     record["required_delta_mmhg"] = world.required_delta_mmhg()
-    record["max_delta_mmhg"] = world.patient.max_delta_map_mmhg(scenario.pump.max_rate_ml_h)
+    record["max_delta_mmhg"] = world.patient.max_delta_map_mmhg(max_rate)
     record.update(metrics)
     record["commands_out_of_range"] = int(world.pump.commands_out_of_range)
+    if dose_limits is not None:  # records without limits keep their bytes
+        record["dose"] = dose_record(dose_limits, traj)
     if schedule != "oracle":  # oracle records keep their bytes
         record["estimation"] = estimation_errors(traj)
     return record, traj

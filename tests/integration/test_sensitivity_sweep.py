@@ -1,90 +1,197 @@
-"""The responsiveness sweep (benchmarks/sensitivity_sweep.py) on a tiny cohort: each level in the
-table, the 10× records scaled, the 1× records ``pressor trial``'s bytes, a second run reusing the
-first's files; its per-row figures against hand-computed values."""
+"""The responsiveness sweep (benchmarks/sensitivity_sweep.py): its per-row figures against values
+worked out by hand, the syringe a clinician switches to, who counts as a non-responder, and the
+sweep on a tiny cohort (every column, every group, the same bytes again, reuse of what it wrote)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from benchmarks.sensitivity_sweep import figures, level_rows, main
-from pressor.hil_sim.cli import main as pressor_main
+from benchmarks.sensitivity_sweep import main
+from benchmarks.sweep_figures import (
+    HEADER,
+    HEADLINE_HEADER,
+    format_headline_row,
+    format_row,
+    row_figures,
+)
+from benchmarks.sweep_plan import reach_plan, syringes
+from pressor.hil_sim.patients.cohort import cohort_seeds
+from pressor.hil_sim.scenarios.scenario import load_scenario
+from pressor.runtime.inputs.drug_library import DrugEntry, load_library
+from tests.support.patient_plugin import FirstOrderPatient
 
 
-def _record(reachable: bool, stable: bool, mdpe: float, in_band: float | None, os_: float) -> dict:
-    return {
-        "reachable": reachable,
-        "stable": stable,
-        "mdpe_pct": mdpe,
-        "mdape_pct": abs(mdpe),
+def _record(**overrides: Any) -> dict[str, Any]:
+    base = {
+        "stable": True,
+        "step_overshoot_pct": 0.0,
+        "step_overshoot_mmhg": 0.0,
+        "longest_above_10_mmhg_s": 0.0,
+        "time_to_band_s": 100.0,
+        "time_below_pct": 0.0,
+        "time_in_band_pct": 100.0,
+        "mdpe_pct": 0.0,
+        "mdape_pct": 1.0,
         "wobble_pct": 1.0,
-        "time_in_band_pct": in_band,
-        "step_overshoot_pct": os_,
+        "divergence_pct_per_h": -1.0,
+        "iae_mmhg_s": 1000.0,
     }
+    return base | overrides
 
 
-def test_a_level_has_a_row_for_its_reachable_and_one_for_its_unreachable_patients():
+def test_row_figures_rank_harm_as_counted_by_hand():
     records = [
-        _record(True, True, -2.0, None, 0.0),
-        _record(True, False, 4.0, 90.0, 10.0),
-        _record(True, True, 10.0, 100.0, 20.0),
-        _record(False, False, -30.0, None, 0.0),
-    ]
-    fig = figures(records[:3])
-    assert (fig["patients"], fig["unstable"]) == (3, 1)
-    assert fig["mdpe_pct"] == 4.0 and fig["mdape_pct"] == 4.0 and fig["wobble_pct"] == 1.0
-    assert fig["time_in_band_pct"] == 90.0  # 0 (never within 5 mmHg), 90, 100
-    assert fig["overshoot_pct"] == 10.0
-    assert fig["overshoot_p90_pct"] == pytest.approx(18.0)  # 10 + 0.8 × 10, linear
-    assert level_rows(0.5, "pi", records) == [
-        "| 0.5× | pi | 3 reachable | 1 | 4.00 | 4.00 | 1.00 | 90.0 | 10.0 / 18.0 |",
-        "| 0.5× | pi | 1 unreachable | 1 | -30.00 | 30.00 | 1.00 | 0.0 | 0.0 / 0.0 |",
-    ]
-    assert level_rows(2.0, "lpv", records[:1]) == [
-        "| 2× | lpv | 1 reachable | 0 | -2.00 | 2.00 | 1.00 | 0.0 | 0.0 / 0.0 |"
-    ]
+        _record(step_overshoot_pct=0.0, step_overshoot_mmhg=0.0, longest_above_10_mmhg_s=0.0,
+                time_to_band_s=300.0, time_below_pct=2.0, time_in_band_pct=98.0),
+        _record(step_overshoot_pct=10.0, step_overshoot_mmhg=2.0, longest_above_10_mmhg_s=12.0,
+                time_to_band_s=200.0, time_below_pct=0.0, time_in_band_pct=100.0, stable=False,
+                held_s=0.1),
+        _record(step_overshoot_pct=50.0, step_overshoot_mmhg=10.0, longest_above_10_mmhg_s=31.0,
+                time_to_band_s=100.0, time_below_pct=4.0, time_in_band_pct=90.0,
+                dose={"hour_limited_s": 12.5}),
+        _record(step_overshoot_pct=200.0, step_overshoot_mmhg=40.0, longest_above_10_mmhg_s=400.0,
+                time_to_band_s=None, time_below_pct=None, time_in_band_pct=None),
+    ]  # fmt: skip
+    fig = row_figures(records)
+    assert (fig["patients"], fig["unstable"], fig["hour_limited"], fig["held"]) == (4, 1, 1, 1)
+    # overshoot 0, 10, 50, 200 %: median (10 + 50)/2; p90 at position 2.7 = 50 + 0.7·150
+    assert fig["step_overshoot_pct"] == {"median": 30.0, "p90": pytest.approx(155.0), "worst": 200}
+    assert fig["step_overshoot_mmhg"] == {"median": 6.0, "p90": pytest.approx(31.0), "worst": 40}
+    # stretches 0, 12, 31, 400 s: two of four last longer than 30 s; p90 = 31 + 0.7·369
+    assert fig["longest_above_10_mmhg_s"] == {
+        "median": 21.5,
+        "p90": pytest.approx(289.3),
+        "worst": 400,
+    }
+    assert (fig["above_10_mmhg_over_30_s"], fig["above_10_mmhg_over_30_s_pct"]) == (2, 50.0)
+    # to the band: 100, 200, 300, never: median (200 + 300)/2; p90 (position 2.7) reaches never
+    assert fig["time_to_band_s"] == {"p50": 250.0, "p90": None, "n_never": 1}
+    # below: the never-arrived patient has no "after entry" and is left out: 0, 2, 4 %
+    assert fig["time_below_pct"] == {"median": 2.0, "p90": pytest.approx(3.6), "worst": 4.0}
+    # in band: the never-arrived patient counts 0 %: 0, 90, 98, 100 -> median 94, p10 at 0.3
+    assert fig["time_in_band_pct"] == {"median": 94.0, "p10": pytest.approx(27.0), "worst": 0.0}
+    assert (fig["mdape_pct"], fig["divergence_pct_per_h"], fig["iae_mmhg_s"]) == (1.0, -1.0, 1000)
+    row = format_row(2.0, "pi", "100", fig)
+    assert row == (
+        "| 2× | pi | 100 | 4 | 1 | 30.0 / 155.0 / 200.0 | 6.0 / 31.0 / 40.0 | 22 / 289 / 400"
+        " | 2 (50.0 %) | 250 / never (1 never) | 2.0 / 3.6 / 4.0 | 94.0 / 27.0 / 0.0 | 0.00"
+        " | 1.00 | 1.00 | -1.00 | 1000 | 1 | 1 |"
+    )
+    assert row.count("|") == HEADER.splitlines()[0].count("|")
+    headline = format_headline_row(2.0, "pi", fig)
+    assert headline == (
+        "| 2× | pi | 4 | 1 | 155.0 / 200.0 | 50.0 | 250 / never (1 never) | 94.0 | 1000 |"
+    )
+    assert headline.count("|") == HEADLINE_HEADER.splitlines()[0].count("|")
 
 
-def test_the_sweep_prints_each_level_scales_k_at_10x_and_reuses_what_it_wrote(
+def test_the_stronger_syringe_is_the_weakest_that_reaches_the_hard_limit():
+    library = load_library()
+    standard, stronger = syringes(library["phenylephrine"], 120.0)
+    assert stronger is None  # one syringe in the library
+    assert (standard.concentration_ug_ml, standard.max_rate_ml_h) == (100.0, 120.0)  # 200 µg/min
+    standard, stronger = syringes(library["norepinephrine"], 120.0)
+    # 70 kg, hard 1 µg/kg/min = 70 µg/min: 16 µg/ml at 120 ml/h gives 32 µg/min, 32 µg/ml 64,
+    # only 64 µg/ml reaches 70 µg/min (at 70·60/64 = 65.625 ml/h)
+    assert (standard.concentration_ug_ml, standard.max_rate_ml_h) == (16.0, 120.0)
+    assert stronger is not None and stronger.concentration_ug_ml == 64.0
+    assert stronger.max_rate_ml_h == pytest.approx(65.625)
+    # with a hard limit of 0.9 µg/kg/min (63 µg/min) 32 µg/ml already reaches it (at 118.1 ml/h)
+    entry = DrugEntry("norepinephrine", (16.0, 32.0, 64.0), "ug/kg/min", 0.9, 0.5, 30.0)
+    assert syringes(entry, 120.0)[1].concentration_ug_ml == 32.0  # type: ignore[union-attr]
+
+
+def test_patients_are_sorted_by_the_syringe_that_brings_them_to_the_target(short_scenario: Path):
+    scenario = load_scenario(short_scenario)
+    standard, stronger = syringes(load_library()["norepinephrine"], 120.0)
+    model = "tests.support.patient_plugin:FirstOrderPatient"
+    seeds = cohort_seeds(3, 12)
+    plan = reach_plan(scenario, model, 0.3, seeds, standard, stronger)
+    # ΔMAP = 0.3·K·rate; the scenario asks 20 + 10 mmHg, reached within its 5 mmHg band at 25:
+    # 120 ml/h needs 0.3·K ≥ 25/120, the 64 µg/ml syringe (65.625 ml/h ≙ 262.5 ml/h of 16 µg/ml)
+    # needs 0.3·K ≥ 25/262.5
+    expected: dict[str, list[Any]] = {"standard": [], "switched": [], "non_responders": []}
+    shortfalls = []
+    for seed in seeds:
+        k = 0.3 * FirstOrderPatient.from_seed(seed, 0.1).K
+        if k >= 25.0 / 120.0:
+            expected["standard"].append(seed)
+        elif k >= 25.0 / 262.5:
+            expected["switched"].append(seed)
+        else:
+            expected["non_responders"].append(seed)
+            shortfalls.append(30.0 - k * 262.5)
+    assert all(expected.values()), "the cohort must hold each group for the test to mean anything"
+    assert {k: plan[k] for k in expected} == expected
+    assert plan["shortfall_mmhg"] == pytest.approx(shortfalls)
+
+
+def _sweep(out: Path, scenario: Path, jobs: int, capsys) -> tuple[str, str]:
+    argv = ["--patients", "6", "--seed", "1", "--levels", "0.2", "--controllers", "pi"]
+    argv += ["--models", "paper,norepinephrine", "--scenario", str(scenario), "--out", str(out)]
+    assert main([*argv, "--jobs", str(jobs)]) == 0
+    captured = capsys.readouterr()
+    return captured.out, captured.err
+
+
+def test_the_sweep_reports_every_column_counts_non_responders_and_repeats_itself(
     tmp_path: Path, short_scenario: Path, capsys
 ):
-    scenario = short_scenario
-    out = tmp_path / "sweep"
-    argv = ["--patients", "2", "--seed", "1", "--levels", "1,10", "--controllers", "pi"]
-    argv += ["--scenario", str(scenario), "--out", str(out)]
-    assert main(argv) == 0
-    first = capsys.readouterr()
-    rows = [line.split(" | ")[:3] for line in first.out.splitlines() if line.startswith("| 1")]
-    # Patient 1000000 (k0 0.288, k1 0.00472) holds at most k0/(k1·e) = 22.4 mmHg at any rate,
-    # short of the 20 + 10 mmHg (step, haemorrhage) asked, at every level; 1000001 (k0 0.978)
-    # holds 76.8 mmHg at 120 ml/h.
-    assert rows == [
-        ["| 1×", "pi", "1 reachable"],
-        ["| 1×", "pi", "1 unreachable"],
-        ["| 10×", "pi", "1 reachable"],
-        ["| 10×", "pi", "1 unreachable"],
-    ]
-    assert "x10 pi: 2/2 patients" in first.err
-
-    for r in json.loads((out / "x10" / "pi" / "patients.json").read_text()):
-        assert r["coefficients"]["sensitivity_factor"] == 10.0
-        k0 = r["coefficients"]["k0"]  # K starts at the model's k0 and only falls
-        assert r["schedule_range"]["K_mmhg_per_ml_h"][1] == pytest.approx(10.0 * k0, rel=1e-6)
-
-    plain = tmp_path / "plain"
-    trial = ["--controller", "pi", "--patients", "2", "--seed", "1", "--scenario", str(scenario)]
-    assert pressor_main("trial", [*trial, "--schedule", "estimated", "--out", str(plain)]) == 0
-    capsys.readouterr()
-    for f in ("patients.json", "patients.csv", "summary.json"):
-        assert (out / "x1" / "pi" / f).read_bytes() == (plain / f).read_bytes(), f
-
-    assert main(argv) == 0
-    again = capsys.readouterr()
-    assert "x1 pi: reused" in again.err and "x10 pi: reused" in again.err
-    assert "/2 patients" not in again.err  # nothing ran again
-    assert again.out == first.out
+    out, err = _sweep(tmp_path / "a", short_scenario, 1, capsys)
+    doc = json.loads((tmp_path / "a" / "sweep.json").read_text())
+    scenario = load_scenario(short_scenario)
+    seeds = cohort_seeds(1, 6)
+    for model in ("paper", "norepinephrine"):
+        standard, stronger = syringes(load_library()[doc["models"][model]["drug"]], 120.0)
+        plan = reach_plan(scenario, model, 0.2, seeds, standard, stronger)
+        (level,) = doc["models"][model]["levels"]
+        reach = level["reach"]
+        assert (reach["standard"], reach["switched"], reach["non_responders"]) == (
+            len(plan["standard"]), len(plan["switched"]), len(plan["non_responders"]),
+        )  # fmt: skip
+        groups = {row["group"]: row["figures"]["patients"] for row in level["rows"]}
+        assert groups == {
+            g: len(plan[k])
+            for g, k in (
+                ("standard", "standard"), ("switched", "switched"),
+                ("non-responders", "non_responders"),
+            )
+            if plan[k]
+        }  # fmt: skip
+        # the headline counts every patient brought to the target, with either syringe
+        reached = len(plan["standard"]) + len(plan["switched"])
+        assert [h["figures"]["patients"] for h in level["responders"]] == (
+            [reached] if reached else []
+        )
+    # norepinephrine at 0.2× on this cohort has all three groups (the test needs them)
+    ne = doc["models"]["norepinephrine"]["levels"][0]
+    assert {r["group"] for r in ne["rows"]} == {"standard", "switched", "non-responders"}
+    assert ne["reach"]["stronger_syringe_ug_ml"] == 64.0
+    switched = next(r for r in ne["rows"] if r["group"] == "switched")
+    assert switched["syringe_ug_ml"] == 64.0
+    # every table row has every column, and names the switched and the non-responders
+    n_cols = HEADER.splitlines()[0].count("|")
+    lines = [line for line in out.splitlines() if line.startswith("| 0.2× | pi |")]
+    rows = [line for line in lines if line.count("|") == n_cols]
+    headlines = [line for line in lines if line not in rows]
+    assert len(rows) == sum(len(m["levels"][0]["rows"]) for m in doc["models"].values())
+    assert len(headlines) == sum(len(m["levels"][0]["responders"]) for m in doc["models"].values())
+    assert all(h.count("|") == HEADLINE_HEADER.splitlines()[0].count("|") for h in headlines)
+    assert any("64 (switched)" in line for line in rows)
+    assert any("(non-responders)" in line for line in rows)
+    assert "throughput:" in err and "per CPU minute" in err
+    # the same arguments give the same bytes with two workers, and a rerun reuses every cohort
+    again, _ = _sweep(tmp_path / "b", short_scenario, 2, capsys)
+    assert again == out
+    assert (tmp_path / "b" / "sweep.json").read_bytes() == (
+        tmp_path / "a" / "sweep.json"
+    ).read_bytes()
+    reused, err = _sweep(tmp_path / "a", short_scenario, 1, capsys)
+    assert reused == out and "runs" not in err and "nothing ran" in err
 
 
 def test_the_sweep_refuses_a_level_outside_the_range(capsys):
@@ -93,3 +200,10 @@ def test_the_sweep_refuses_a_level_outside_the_range(capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "'30'" in err and "[0.05, 20]" in err
+
+
+def test_the_sweep_refuses_an_unknown_model(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--models", "paper,nonesuch"])
+    assert exc.value.code == 2
+    assert "nonesuch" in capsys.readouterr().err

@@ -1,0 +1,176 @@
+"""The sensitivity sweep's figures and tables (:mod:`benchmarks.sensitivity_sweep`).
+
+A *row* is one (model, level, controller, syringe) group of patient records, as ``pressor
+trial`` writes them (every metric judges the true MAP, docs/METRICS.md). :func:`row_figures`
+reduces it to what harms, in the order the issue puts it: hypertension first, then the time a
+hypotensive patient waits, then the time in the band, then the Varvel figures. Patients a figure
+does not apply to are not silently dropped: a patient who never comes within ±5 mmHg ranks after
+every time in ``time_to_band_s`` (:func:`pressor.contracts.metrics.percentiles_never_last`) and counts 0 %
+in the band.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from pressor.contracts.metrics import percentile_summary, percentiles_never_last
+
+#: a hypertensive stretch (MAP > target + 10 mmHg) longer than this (s) counts against the patient
+LONG_ABOVE_S = 30.0
+
+
+def _spread(values: Sequence[float | None], tail: str = "p90") -> dict[str, float | None]:
+    """Median, the bad tail (``p90`` or ``p10``) and the worst value of the non-null values."""
+    summary = percentile_summary(values)
+    used = [float(v) for v in values if v is not None]
+    worst = (max(used) if tail == "p90" else min(used)) if used else None
+    return {"median": summary["median"], tail: summary[tail], "worst": worst}
+
+
+def _median(values: Sequence[float | None]) -> float | None:
+    return percentile_summary(values)["median"]  # type: ignore[return-value]
+
+
+def row_figures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The figures of one row of patients.
+
+    Returns
+    -------
+    dict
+        ``patients``, ``unstable`` (counts); ``step_overshoot_pct`` (% of the step) and
+        ``step_overshoot_mmhg`` (mmHg): ``median``, ``p90``, ``worst`` (the max);
+        ``longest_above_10_mmhg_s`` (s, the same three); ``above_10_mmhg_over_30_s`` (patients
+        with a stretch above target + 10 mmHg longer than :data:`LONG_ABOVE_S`) and its share
+        ``above_10_mmhg_over_30_s_pct`` (%); ``time_to_band_s`` (s): ``p50``, ``p90``, ``n_never``;
+        ``time_below_pct`` (% after arrival, never-arrived patients left out): ``median``, ``p90``,
+        ``worst``; ``time_in_band_pct`` (% after arrival, never-arrived counted 0): ``median``,
+        ``p10``, ``worst``; medians ``mdpe_pct``, ``mdape_pct``, ``wobble_pct`` (%),
+        ``divergence_pct_per_h`` (%/h), ``iae_mmhg_s`` (mmHg·s); ``hour_limited`` (patients whose
+        command the hourly dose limit cut at least once; 0 without dose limits); ``held``
+        (patients the supervisor put in HOLD or FAILSAFE for at least one tick).
+    """
+    n = len(records)
+    longest = [r["longest_above_10_mmhg_s"] for r in records]
+    over = sum(1 for v in longest if v is not None and v > LONG_ABOVE_S)
+    to_band = percentiles_never_last(r["time_to_band_s"] for r in records)
+    in_band = [0.0 if r["time_in_band_pct"] is None else r["time_in_band_pct"] for r in records]
+    return {
+        "patients": n,
+        "unstable": sum(not r["stable"] for r in records),
+        "step_overshoot_pct": _spread([r["step_overshoot_pct"] for r in records]),
+        "step_overshoot_mmhg": _spread([r["step_overshoot_mmhg"] for r in records]),
+        "longest_above_10_mmhg_s": _spread(longest),
+        "above_10_mmhg_over_30_s": over,
+        "above_10_mmhg_over_30_s_pct": 100.0 * over / n if n else None,
+        "time_to_band_s": {
+            "p50": to_band["p50"],
+            "p90": to_band["p90"],
+            "n_never": to_band["n_never"],
+        },  # fmt: skip
+        "time_below_pct": _spread([r["time_below_pct"] for r in records]),
+        "time_in_band_pct": _spread(in_band, tail="p10"),
+        "mdpe_pct": _median([r["mdpe_pct"] for r in records]),
+        "mdape_pct": _median([r["mdape_pct"] for r in records]),
+        "wobble_pct": _median([r["wobble_pct"] for r in records]),
+        "divergence_pct_per_h": _median([r["divergence_pct_per_h"] for r in records]),
+        "iae_mmhg_s": _median([r["iae_mmhg_s"] for r in records]),
+        "hour_limited": sum(1 for r in records if r.get("dose", {}).get("hour_limited_s", 0) > 0),
+        "held": sum(1 for r in records if r.get("held_s", 0) > 0),
+    }
+
+
+def shortfall_figures(shortfalls_mmhg: Sequence[float]) -> dict[str, float | None]:
+    """Median and largest shortfall (mmHg) of the non-responders: the required ΔMAP minus the
+    largest steady ΔMAP the hard dose limit allows."""
+    if not shortfalls_mmhg:
+        return {"median": None, "worst": None}
+    return {
+        "median": float(np.median(shortfalls_mmhg)),
+        "worst": float(max(shortfalls_mmhg)),
+    }
+
+
+def _num(value: float | None, digits: int = 1) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def _triple(d: dict[str, float | None], tail: str, digits: int = 1) -> str:
+    return " / ".join(_num(d[k], digits) for k in ("median", tail, "worst"))
+
+
+def _to_band(d: dict[str, Any]) -> str:
+    """``median / p90`` (s), ``never`` for a percentile among the never-arrived, and their count."""
+    text = " / ".join("never" if d[k] is None else f"{d[k]:.0f}" for k in ("p50", "p90"))
+    return f"{text} ({d['n_never']} never)" if d["n_never"] else text
+
+
+HEADER = (
+    "| level | controller | syringe µg/ml | patients | unstable"
+    " | step overshoot % (median / p90 / max) | step overshoot mmHg (median / p90 / max)"
+    " | longest above target + 10 mmHg, s (median / p90 / max) | > 30 s above target + 10 mmHg"
+    " | to ±5 mmHg, s (median / p90) | below −5 mmHg after entry, % (median / p90 / max)"
+    " | in ±5 mmHg after entry, % (median / p10 / min) | MDPE % | MDAPE % | wobble %"
+    " | divergence %/h | IAE mmHg·s | hour-limited | HOLD/FAILSAFE |\n"
+    "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+    " ---: | ---: | ---: | ---: | ---: | ---: |"
+)
+
+
+def format_row(level: float, controller: str, syringe: str, fig: dict[str, Any]) -> str:
+    """One Markdown row of :data:`HEADER` (``syringe``: the concentration, marked if switched)."""
+    over = f"{fig['above_10_mmhg_over_30_s']} ({_num(fig['above_10_mmhg_over_30_s_pct'])} %)"
+    return (
+        f"| {level:g}× | {controller} | {syringe} | {fig['patients']} | {fig['unstable']}"
+        f" | {_triple(fig['step_overshoot_pct'], 'p90')}"
+        f" | {_triple(fig['step_overshoot_mmhg'], 'p90')}"
+        f" | {_triple(fig['longest_above_10_mmhg_s'], 'p90', 0)} | {over}"
+        f" | {_to_band(fig['time_to_band_s'])} | {_triple(fig['time_below_pct'], 'p90')}"
+        f" | {_triple(fig['time_in_band_pct'], 'p10')} | {_num(fig['mdpe_pct'], 2)}"
+        f" | {_num(fig['mdape_pct'], 2)} | {_num(fig['wobble_pct'], 2)}"
+        f" | {_num(fig['divergence_pct_per_h'], 2)} | {_num(fig['iae_mmhg_s'], 0)}"
+        f" | {fig['hour_limited']} | {fig['held']} |"
+    )
+
+
+REACH_HEADER = (
+    "| level | patients | reach the target, standard syringe | switched to the stronger syringe"
+    " | non-responders | non-responders' shortfall, mmHg (median / max) |\n"
+    "| ---: | ---: | ---: | ---: | ---: | ---: |"
+)
+
+
+def format_reach_row(level: float, reach: dict[str, Any]) -> str:
+    """One Markdown row of :data:`REACH_HEADER` from a level's ``reach`` entry."""
+    short = reach["shortfall_mmhg"]
+    switched = reach["switched"]
+    if reach["stronger_syringe_ug_ml"] is None:
+        switched_text = "- (none in the library)"
+    else:
+        switched_text = f"{switched} (to {reach['stronger_syringe_ug_ml']:g} µg/ml)"
+    return (
+        f"| {level:g}× | {reach['patients']} | {reach['standard']} | {switched_text}"
+        f" | {reach['non_responders']} | {_num(short['median'])} / {_num(short['worst'])} |"
+    )
+
+
+HEADLINE_HEADER = (
+    "| level | controller | responders | unstable | step overshoot %, p90 / max"
+    " | > 30 s above target + 10 mmHg, % of patients | to ±5 mmHg, s (median / p90)"
+    " | in ±5 mmHg after entry, % (median) | IAE mmHg·s (median) |\n"
+    "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+)
+
+
+def format_headline_row(level: float, controller: str, fig: dict[str, Any]) -> str:
+    """One Markdown row of :data:`HEADLINE_HEADER`: issue 41's figures over every patient brought
+    to the target (the standard syringe's and the switched ones together)."""
+    os_ = fig["step_overshoot_pct"]
+    return (
+        f"| {level:g}× | {controller} | {fig['patients']} | {fig['unstable']}"
+        f" | {_num(os_['p90'])} / {_num(os_['worst'])}"
+        f" | {_num(fig['above_10_mmhg_over_30_s_pct'])} | {_to_band(fig['time_to_band_s'])}"
+        f" | {_num(fig['time_in_band_pct']['median'])} | {_num(fig['iae_mmhg_s'], 0)} |"
+    )
