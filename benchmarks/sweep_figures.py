@@ -1,4 +1,5 @@
-"""The sensitivity sweep's figures and tables (:mod:`benchmarks.sensitivity_sweep`).
+"""The sensitivity sweep's figures, its tables and its throughput meter
+(:mod:`benchmarks.sensitivity_sweep`).
 
 A *row* is one (model, level, controller, syringe) group of patient records, as ``pressor
 trial`` writes them (every metric judges the true MAP, docs/METRICS.md). :func:`row_figures`
@@ -174,3 +175,79 @@ def format_headline_row(level: float, controller: str, fig: dict[str, Any]) -> s
         f" | {_num(fig['above_10_mmhg_over_30_s_pct'])} | {_to_band(fig['time_to_band_s'])}"
         f" | {_num(fig['time_in_band_pct']['median'])} | {_num(fig['iae_mmhg_s'], 0)} |"
     )
+
+
+def model_tables(model: str, result: dict[str, Any]) -> str:
+    """The Markdown of one model: its heading, who reaches the target, the figures."""
+    std, strong = result["standard_syringe"], result["stronger_syringe"]
+    lines = [
+        f"### {model} ({result['drug']}; standard syringe {std['concentration_ug_ml']:g} µg/ml,"
+        f" command ≤ {std['hard_max_ml_h']:g} ml/h and ≤ {std['max_ml_per_hour']:g} ml per hour"
+        + (
+            f"; stronger syringe {strong['concentration_ug_ml']:g} µg/ml,"
+            f" ≤ {strong['hard_max_ml_h']:g} ml/h and ≤ {strong['max_ml_per_hour']:g} ml per hour"
+            if strong
+            else "; no stronger syringe in the library"
+        )
+        + ")",
+        "",
+        REACH_HEADER,
+        *(format_reach_row(lv["level"], lv["reach"]) for lv in result["levels"]),
+        "",
+        "Every patient brought to the target (the standard syringe's and the switched together):",
+        "",
+        HEADLINE_HEADER,
+        *(
+            format_headline_row(lv["level"], row["controller"], row["figures"])
+            for lv in result["levels"]
+            for row in lv["responders"]
+        ),
+        "",
+        "Every group apart (the switched and the non-responders marked):",
+        "",
+        HEADER,
+    ]
+    for lv in result["levels"]:
+        for row in lv["rows"]:
+            syringe = f"{row['syringe_ug_ml']:g}"
+            if row["group"] != "standard":
+                syringe += f" ({row['group']})"
+            lines.append(format_row(lv["level"], row["controller"], syringe, row["figures"]))
+    return "\n".join(lines)
+
+
+class Throughput:
+    """Simulated patient-hours against wall and worker CPU time (s), for the stderr report.
+
+    Per core is per CPU minute of the workers: on a shared host the wall time also counts the
+    other processes' use of the cores, the CPU time only this sweep's.
+    """
+
+    def __init__(self) -> None:
+        self.wall_s = 0.0
+        #: (model, controller) -> [patient-hours, worker CPU s]
+        self.by_run: dict[tuple[str, str], list[float]] = {}
+
+    def add(self, wall_s: float, runs: list[tuple[str, str, float, float]]) -> None:
+        """Count one batch: its wall time (s) and per run (model, controller, patient-hours,
+        CPU s)."""
+        self.wall_s += wall_s
+        for model, controller, hours, cpu in runs:
+            acc = self.by_run.setdefault((model, controller), [0.0, 0.0])
+            acc[0] += hours
+            acc[1] += cpu
+
+    def report(self, jobs: int) -> str:
+        """The totals, then patient-hours per CPU minute for each model and controller."""
+        hours = sum(h for h, _ in self.by_run.values())
+        cpu = sum(c for _, c in self.by_run.values())
+        if self.wall_s <= 0.0 or cpu <= 0.0:
+            return "throughput: nothing ran (every cohort reused)"
+        lines = [
+            f"throughput: {hours:.1f} patient-hours in {self.wall_s:.1f} s wall:"
+            f" {hours / (self.wall_s / 60.0):.1f} patient-hours per wall minute with {jobs}"
+            f" job(s), {hours / (cpu / 60.0):.1f} per CPU minute of the workers (per busy core)"
+        ]
+        for (model, controller), (h, c) in self.by_run.items():
+            lines.append(f"  {model} {controller}: {h / (c / 60.0):.1f} per CPU minute")
+        return "\n".join(lines)
