@@ -51,6 +51,23 @@ def _text(value: bytes | str) -> str:
     return text.rstrip("\0")
 
 
+def hello_of(msg: Any) -> Hello:
+    """A received PRESSOR_HELLO message object as a :class:`Hello`."""
+    return Hello(
+        _text(msg.name),
+        msg.patient_seed,
+        msg.sample_period_s,
+        msg.sensor_noise_mmhg,
+        msg.n_ticks,
+        msg.link_mode,
+        msg.role,
+        msg.protocol_version,
+        _text(msg.drug),
+        msg.concentration_ug_ml,
+        msg.pump_max_ml_h,
+    )
+
+
 class ManualClock:
     """Run clock set by its owner (virtual time, s). Calling it returns the current time."""
 
@@ -109,6 +126,9 @@ class Session:
         self.codec = FrameCodec(
             system_id or self.ROLE, component_id, signing, self.clock, self.counters
         )
+        # only the peer's frames count (its system id is its role): this end's own frames
+        # echoed back by the line are dropped (``wrong_system``), never taken for its liveness
+        self.codec.peer_system = self.PEER_ROLE
         #: the port's one-syscall read (``ttyport.FdPort`` / ``FastPort``), if it has one
         self._read_some: Callable[[float], bytes] | None = getattr(port, "read_some", None)
         self._tx = bytearray()
@@ -213,16 +233,18 @@ class Session:
         )
         self.send_fields(_ID_HEARTBEAT, tick, self.ROLE, state, flush=flush)
 
-    def refuse(self, refusal: HelloRefused) -> None:
+    def refuse(self, refusal: HelloRefused, *, fault: bool = True) -> None:
         """Tell the peer why its hello is refused: PRESSOR_REFUSAL (reason, this end's protocol
         version, the text cut to 200 ASCII characters), then a heartbeat FAULT, written at once.
-        The caller then closes the link (docs/PROTOCOL.md, "Refusals")."""
+        The caller then closes the link (docs/PROTOCOL.md, "Refusals"). ``fault=False``: the
+        refusal alone (a hello in the middle of a run, refused while the run goes on)."""
         text = refusal.text.encode("ascii", "replace")[:REFUSAL_TEXT_CHARS]
         self.send(
             self.codec.mav.pressor_refusal_encode(refusal.reason, PROTOCOL_VERSION, text),
-            flush=False,
+            flush=not fault,
         )
-        self.send_heartbeat(0, STATE_FAULT)
+        if fault:
+            self.send_heartbeat(0, STATE_FAULT)
 
     # ---------------------------------------------------------------- receiving
     def poll(self, timeout_s: float = 0.0) -> int:
@@ -304,19 +326,7 @@ class Session:
 
     def _on_hello(self, msg: Any) -> None:
         self.peer_system_id = msg.get_srcSystem()
-        self.peer_hello = Hello(
-            _text(msg.name),
-            msg.patient_seed,
-            msg.sample_period_s,
-            msg.sensor_noise_mmhg,
-            msg.n_ticks,
-            msg.link_mode,
-            msg.role,
-            msg.protocol_version,
-            _text(msg.drug),
-            msg.concentration_ug_ml,
-            msg.pump_max_ml_h,
-        )
+        self.peer_hello = hello_of(msg)
 
     # ---------------------------------------------------------------- handshake
     def wait_for_hello(self, timeout_s: float) -> Hello | None:

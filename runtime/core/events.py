@@ -95,6 +95,11 @@ class EventLog:
                 warn=False,
             )
 
+    def note(self, tick: int, sim_time_s: float, text: str) -> None:
+        """An event of the loop itself (not of a tick's record): to the recording's event log."""
+        if self.recorder is not None:
+            self.recorder.event(tick, sim_time_s, text, warn=True)
+
     def _controller_fault(self, rec: TickRecord) -> None:
         inp, out = rec.inputs, rec.supervisor
         kind = "CONTROLLER_FAULT" if out.faults & Fault.CONTROLLER_FAULT else "COMMAND_INVALID"

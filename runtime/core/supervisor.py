@@ -65,7 +65,6 @@ from __future__ import annotations
 
 import math
 
-from contracts.faults import PUMP_ALARM_WATCHDOG
 from runtime.core.dose_guard import DoseGuard
 from runtime.core.flatline import FlatlineRules
 from runtime.core.supervisor_config import (
@@ -167,8 +166,11 @@ class Supervisor:
         self._out_of_box_since_s: float | None = None
         self._ack_requested = False
         self.last_ack: AckOutcome | None = None
-        self._latched = 0  # controller faults kept until acknowledged (controller_faults="latch")
+        self._latched = 0  # faults kept until acknowledged (controller faults, DEVICE_CHANGED)
         self._latch = cfg.controller_faults == "latch"
+        # the largest delivered rate a pump status may report (ml/h; float32 on the wire)
+        pump_max = cfg.max_rate_ml_h if cfg.pump_max_ml_h is None else cfg.pump_max_ml_h
+        self._pump_max_ml_h = pump_max * (1.0 + 1e-6)
         limits = cfg.dose_limits
         #: the drug library's limits on the final command (None: no library)
         self.dose_guard = None if limits is None else DoseGuard(limits, cfg.sample_period_s)
@@ -177,6 +179,11 @@ class Supervisor:
     def alarm(self) -> bool:
         """True while the supervisor is not in normal automatic control or a fault is present."""
         return self.state in (State.HOLD, State.FAILSAFE) or bool(self.faults & ALARM_FAULTS)
+
+    def latch(self, faults: int) -> None:
+        """Hold on ``faults`` (``DEVICE_CHANGED``) from the next tick until the clinician's
+        acknowledgement clears them, as a latched controller fault (the shell's boundary check)."""
+        self._latched |= int(faults)
 
     def acknowledge(self) -> None:
         """The clinician acknowledges the alarm and asks to resume; judged at the next
@@ -256,12 +263,14 @@ class Supervisor:
         cfg = self.config
         if delivered != delivered:  # no fresh status: neither fault nor evidence of health
             return 0
+        if not 0.0 <= delivered <= self._pump_max_ml_h:  # no pump delivers that: inf, < 0, > max
+            self._mismatch_since_s = now_s
+            return _PUMP_MISMATCH | (_PUMP_ALARM if alarms & cfg.pump_alarm_mask else 0)
         faults = 0
         if alarms & cfg.pump_alarm_mask:
+            # the held command stays the runtime's own: a status (the watchdog bit's included)
+            # never sets what the runtime commands (docs/PROTOCOL.md, "Quality and alarm bits")
             faults |= _PUMP_ALARM
-            if alarms & PUMP_ALARM_WATCHDOG:
-                # the pump fell back to its own safe rate: hold *that*, re-enter from it
-                self.command_ml_h = _clamp(delivered, cfg.max_rate_ml_h)
         sent = self.command_ml_h
         if alarms & cfg.pump_alarm_mask or abs(delivered - sent) <= max(
             cfg.pump_mismatch_abs_ml_h, cfg.pump_mismatch_rel * abs(sent)
@@ -296,7 +305,7 @@ class Supervisor:
         faults |= self._check_pump(now_s, inp.pump_delivered_ml_h, inp.pump_alarms)
         if inp.estimated:
             faults |= self._check_estimate(now_s, inp)
-        faults |= self._latched
+        faults |= inp.boundary_faults | self._latched
         self.faults = faults
         state = self.state
         if faults & self._holding_faults:

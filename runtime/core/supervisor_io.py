@@ -57,6 +57,9 @@ class SupervisorInput(NamedTuple):
         Whether the online estimator runs (``--schedule estimated`` or ``validated``).
     estimate_healthy
         False when the estimator rejected its estimate and reports the prior instead.
+    boundary_faults
+        Fault bits the shell found at the boundary before the core (``SAMPLE_TIME``,
+        ``RECORD_ERROR``; :data:`runtime.core.supervisor_config.BOUNDARY_FAULTS`); 0 in process.
     """
 
     now_s: float
@@ -74,6 +77,7 @@ class SupervisorInput(NamedTuple):
     pump_alarms: int
     estimated: bool
     estimate_healthy: bool
+    boundary_faults: int
 
 
 class SupervisorOutput(NamedTuple):

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -107,14 +109,56 @@ def parse_target(text: str) -> float:
     return number_in(text, TARGET_MIN_MMHG, TARGET_MAX_MMHG, "mmHg")
 
 
-def read_target_file(path: Path) -> float:
-    """The target (mmHg) ``path`` holds (an ``ack`` line in it is not a target); ``ValueError`` if
-    it cannot be read or is out of range."""
+#: the largest clinician's input file read (bytes): a target and a few command lines
+MAX_INPUT_FILE_BYTES = 4096
+_FILE_KINDS = (
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISDIR, "a directory"),
+)
+
+
+def read_input_file(path: Path) -> str:
+    """The text of the clinician's input file ``path``, read without ever blocking.
+
+    A FIFO no one writes would block an ``open()`` (and with it the loop's tick, and the stop
+    signals it polls), a device file would never end: the file is opened non-blocking and only a
+    regular file of at most :data:`MAX_INPUT_FILE_BYTES` bytes is read.
+
+    Raises
+    ------
+    ValueError
+        ``cannot read: CAUSE``, ``not a regular file (a FIFO)`` (or another kind), or a file
+        longer than :data:`MAX_INPUT_FILE_BYTES` bytes.
+    """
     try:
-        text = path.read_text(encoding="ascii", errors="replace")
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
     except OSError as exc:
         raise ValueError(f"cannot read: {exc.strerror}") from None
-    return parse_target(split_ack(text)[0])
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = next((name for test, name in _FILE_KINDS if test(st.st_mode)), "another kind")
+            raise ValueError(f"not a regular file ({kind})")
+        if st.st_size > MAX_INPUT_FILE_BYTES:
+            raise ValueError(
+                f"{st.st_size} bytes: a target file holds a number and command lines, at most"
+                f" {MAX_INPUT_FILE_BYTES} bytes"
+            )
+        data = os.read(fd, MAX_INPUT_FILE_BYTES)
+    except OSError as exc:
+        raise ValueError(f"cannot read: {exc.strerror}") from None
+    finally:
+        os.close(fd)
+    return data.decode("ascii", "replace")
+
+
+def read_target_file(path: Path) -> float:
+    """The target (mmHg) ``path`` holds (an ``ack`` line in it is not a target); ``ValueError`` if
+    it cannot be read (:func:`read_input_file`) or is out of range."""
+    return parse_target(split_ack(read_input_file(path))[0])
 
 
 def argtype(name: str, parse: Any) -> Any:

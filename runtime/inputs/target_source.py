@@ -34,7 +34,7 @@ from typing import Any, TextIO
 
 from link import TickInputs
 from runtime.core.supervisor import AckOutcome
-from runtime.inputs.clinician import ClinicianInput, parse_target, split_ack
+from runtime.inputs.clinician import ClinicianInput, parse_target, read_input_file, split_ack
 
 
 class TargetSource:
@@ -94,10 +94,10 @@ class TargetSource:
             state = _file_state(path)
             if state != self._file_state:
                 self._file_state = state
-                try:
-                    text = path.read_text(encoding="ascii", errors="replace")
-                except OSError as exc:
-                    self._refuse(f"file {path}", f"cannot read: {exc.strerror}")
+                try:  # never blocks: a FIFO or a device in its place is refused (a ValueError)
+                    text = read_input_file(path)
+                except ValueError as exc:
+                    self._refuse(f"file {path}", str(exc))
                 else:  # the file as read at start acknowledges nothing
                     first, self._first_read = self._first_read, False
                     self._offer(text, f"file {path}", ack=not first)

@@ -189,7 +189,7 @@ LIMITS = DoseLimits(
 
 def _good(now_s: float) -> SupervisorInput:
     return SupervisorInput(
-        now_s, 70.0, 0, 0.5, 150.0, 30.0, True, 0.0, 0.0, 80.0, 0, math.nan, 0, False, True
+        now_s, 70.0, 0, 0.5, 150.0, 30.0, True, 0.0, 0.0, 80.0, 0, math.nan, 0, False, True, 0
     )
 
 
