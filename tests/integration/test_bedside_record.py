@@ -120,3 +120,34 @@ def test_a_run_that_is_refused_keeps_its_tlog_and_writes_its_summary(tmp_path):
     assert "PRESSOR_REFUSAL" in kinds
     s = (tmp_path / "s.json").read_text()
     assert '"ticks": 0' in s and "norepinephrine" in s
+
+
+def test_a_killed_sil_run_leaves_no_signing_key_in_its_temporary_folder(tmp_path):
+    import os
+    import re
+    import subprocess
+    import sys
+
+    from tests.support.sil_helpers import ROOT
+
+    tmpdir = tmp_path / "tmp"
+    tmpdir.mkdir()
+    env = dict(os.environ, CI="1", PYTHONPATH=str(ROOT), TMPDIR=str(tmpdir))
+    cmd = [sys.executable, "-m", "pressor", "sil", "--controller", "pi", "--realtime"]
+    cmd += ["--duration", "60", "--rrd", str(tmp_path / "r.rrd")]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        while not any(p.name.startswith(".r.rrd") for p in tmp_path.iterdir()):
+            assert proc.poll() is None and time.monotonic() < deadline, "the run did not start"
+            time.sleep(0.1)
+        time.sleep(1.0)  # the device runs, its key read
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+    finally:
+        proc.kill()
+    folders = [p for p in tmpdir.iterdir() if p.name.startswith("pressor-sil-")]
+    assert folders, "pressor sil made no temporary folder"  # the check below would be vacuous
+    hexkey = re.compile(rb"^[0-9a-f]{64}\s*$", re.M)
+    for f in (f for d in folders for f in d.rglob("*") if f.is_file()):
+        assert f.name != "signing.key" and not hexkey.search(f.read_bytes()), f
