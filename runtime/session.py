@@ -399,7 +399,11 @@ def _summarize(
             from runtime.inputs.dosing import dose_summary
 
             summary["dose"] = dose_summary(
-                result.trajectory["command_ml_h"], config.period_s, clinician, sup.detections
+                result.trajectory["command_ml_h"],
+                config.period_s,
+                clinician,
+                sup.detections,
+                result.trajectory["sim_time_s"],  # elapsed time: a skipped stretch is charged
             )
     return summary
 

@@ -160,6 +160,7 @@ class Supervisor:
         self._fault_since_s: float | None = None
         self._good_since_s: float | None = None
         self._now_s = 0.0
+        self._short_mmhg = math.nan
         self._run_controller = False
         self._entry_state = State.STARTUP
         self._mismatch_since_s: float | None = None
@@ -289,6 +290,7 @@ class Supervisor:
         now_s = inp.now_s
         cfg = self.config
         self._now_s = now_s
+        self._short_mmhg = inp.target_mmhg - inp.map_mmhg  # how far below the target (dose guard)
         self._entry_state = self.state
         faults = 0
         if inp.link_silence_s >= cfg.link_loss_after_s - _EPS_S:
@@ -389,7 +391,7 @@ class Supervisor:
             command = previous
         command = _clamp(command, high)
         if self.dose_guard is not None:  # the last word: the drug library's dose limits
-            command, dose_faults = self.dose_guard.limit(command)
+            command, dose_faults = self.dose_guard.limit(command, self._now_s, self._short_mmhg)
             self.faults |= dose_faults
         self.command_ml_h = command
         self.state = state

@@ -68,8 +68,12 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
   the run keeps the first hello's terms, the device is sent a PRESSOR_REFUSAL, and the loop
   holds until the clinician acknowledges (latched like a controller fault);
 - ``DOSE_HARD_LIMIT``, ``DOSE_SOFT_LIMIT``, ``DOSE_HOUR_LIMIT`` (``pressor run``, with
-  ``dose_limits`` from the drug library) the final command is cut to the hard or the hourly dose
-  maximum, or lies above the soft one (:mod:`runtime.core.dose_guard`); advisory, alarm raised.
+  ``dose_limits`` from the drug library) the final command is cut to the hard dose maximum, to
+  the soft one (unless the clinician confirmed doses above it, then only flagged), or to what the
+  sliding hour allows, tapered over 10 min and charged on elapsed time
+  (:mod:`runtime.core.dose_guard`); ``DOSE_SHORTFALL`` a cut held 10 min with MAP more than 5 mmHg
+  below the target: the patient cannot be brought to target within the limits; advisory, alarm
+  raised (the guard's ``reason`` names the limit and the shortfall).
 
 The pump checks need a pump status of this tick (``pump_delivered_ml_h`` not NaN); a missing one is
 not a fault (the link watchdogs cover silence).
@@ -89,7 +93,13 @@ from contracts.faults import (
     PUMP_ALARM_WATCHDOG,
     QUALITY_HELD,
 )
-from runtime.core.dose_guard import DOSE_HARD_LIMIT, DOSE_HOUR_LIMIT, DOSE_SOFT_LIMIT, DoseLimits
+from runtime.core.dose_guard import (
+    DOSE_HARD_LIMIT,
+    DOSE_HOUR_LIMIT,
+    DOSE_SHORTFALL,
+    DOSE_SOFT_LIMIT,
+    DoseLimits,
+)
 
 
 class State(IntEnum):
@@ -131,10 +141,13 @@ class Fault(IntFlag):
     SAMPLE_TIME = 1 << 22
     RECORD_ERROR = 1 << 23
     DEVICE_CHANGED = 1 << 24
+    DOSE_SHORTFALL = DOSE_SHORTFALL
 
 
 #: the drug library's faults (advisory: the command is cut, the state unchanged)
-DOSE_FAULTS = Fault.DOSE_HARD_LIMIT | Fault.DOSE_SOFT_LIMIT | Fault.DOSE_HOUR_LIMIT
+DOSE_FAULTS = (
+    Fault.DOSE_HARD_LIMIT | Fault.DOSE_SOFT_LIMIT | Fault.DOSE_HOUR_LIMIT | Fault.DOSE_SHORTFALL
+)
 
 
 #: the controller's own faults: what ``controller_faults="latch"`` keeps until acknowledged

@@ -280,7 +280,13 @@ def run_config(
             design = binding_of(controller)
         except ValueError as exc:
             raise UsageError(f"--controller {args.controller}: {exc}") from None
-        clinician = bind_syringe(clinician, design, args.controller, args.drug_library)
+        clinician = bind_syringe(
+            clinician,
+            design,
+            args.controller,
+            args.drug_library,
+            getattr(args, "confirm_above_soft_limit", False),
+        )
     try:
         specs = tuple(parse_faults(args.fault))
     except FaultSpecError as exc:

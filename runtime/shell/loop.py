@@ -54,7 +54,7 @@ from runtime.core.closed_loop import ClosedLoopCore, LinkHealth
 from runtime.core.events import EventLog
 from runtime.core.scheduling import ScheduleSource
 from runtime.core.supervisor import AckOutcome, Supervisor
-from runtime.core.supervisor_config import State
+from runtime.core.supervisor_config import DOSE_FAULTS, State
 from runtime.record.recorder import Recorder
 from runtime.shell.boundary import Boundary
 from runtime.shell.clock import MonotonicClock, PeriodicSchedule, VirtualClock, perf_counter_s
@@ -63,6 +63,7 @@ from runtime.shell.timing import TimingStats
 from runtime.shell.trajectory import LoopResult, Trajectory
 
 _NAN = math.nan
+_DOSE_FAULTS = int(DOSE_FAULTS)
 
 
 class DeviceStalled(RuntimeError):
@@ -225,6 +226,9 @@ class Loop:
         map_rec = inp.map_mmhg if send else _NAN
         self.trajectory.append(rec, map_rec)
         self.events.log(rec)
+        guard = self.sup.dose_guard
+        if guard is not None and out.new_faults & _DOSE_FAULTS and guard.reason:
+            self.events.dose(rec, guard.reason)  # the limit and, past 10 min, the shortfall
         if self.recorder is not None:
             c = ep.counters
             bad = c.bad_crc + c.refused_unsigned + c.refused_bad_signature + c.resyncs

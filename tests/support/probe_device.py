@@ -49,6 +49,7 @@ class Probe:
     """A lockstep device end, handshake done; ``commands`` maps each tick to its command."""
 
     ep: DeviceSession
+    ts: float = TS
     commands: dict[int, Command] = field(default_factory=dict)
     refusals: list[tuple[int, str]] = field(default_factory=list)
 
@@ -65,8 +66,8 @@ class Probe:
         last command's rate, none at tick 0), scheduling parameters, target and MAP sample (time
         ``sim_time_s``, default ``k`` periods)."""
         ep = self.ep
-        t = k * TS if sim_time_s is None else sim_time_s
-        ep.clock.t = k * TS
+        t = k * self.ts if sim_time_s is None else sim_time_s
+        ep.clock.t = k * self.ts
         if k > 0:
             last = self.commands.get(k - 1)
             rate, alarms = (last.rate_ml_h if last else 0.0, 0) if status is None else status
@@ -146,11 +147,13 @@ def probe_run(
     n_ticks: int = 0,
     hello: dict[str, Any] | None = None,
     realtime: bool = False,
+    period_s: float = TS,
 ) -> Iterator[ProbeRun]:
     """Start ``pressor run --controller pi RUN_ARGS`` (summary ``s.json``, tlog ``run.tlog`` in
     ``tmp_path``) on one end of bridged ttys and a :class:`Probe` on the other, handshake done
     with a hello announcing ``n_ticks`` (``hello`` overrides the syringe fields) and lockstep, or
-    real time with ``realtime`` (then pass ``--realtime`` in ``run_args``)."""
+    real time with ``realtime`` (then pass ``--realtime`` in ``run_args``), at ``period_s`` (then
+    pass the ``--rate`` that matches)."""
     key = new_key(tmp_path)
     with bridged_ttys() as (device_port, runtime_port):
         args = ["--summary", str(tmp_path / "s.json"), "--tlog", str(tmp_path / "run.tlog")]
@@ -163,7 +166,7 @@ def probe_run(
                 Hello(
                     "probe",
                     0,
-                    TS,
+                    period_s,
                     0.0,
                     n_ticks,
                     LINK_REALTIME if realtime else LINK_LOCKSTEP,
@@ -171,7 +174,7 @@ def probe_run(
                 ),
                 timeout_s=60.0,
             )
-            yield ProbeRun(proc, Probe(ep), tmp_path)
+            yield ProbeRun(proc, Probe(ep, period_s), tmp_path)
         finally:
             proc.kill()
             proc.wait()
