@@ -315,7 +315,12 @@ def _run_loop(
         "ack_input": clinician.target_stdin or clinician.target_file is not None,
     }
     # the runtime's own target, in place of the device's (runtime.inputs.target_source)
-    target = None if clinician.target_mmhg is None else TargetSource(clinician)
+    target = (
+        None
+        if clinician.target_mmhg is None
+        else TargetSource(clinician, max_rate_ml_h=controller.max_rate_ml_h)
+    )
+    loop_kw["on_stop"] = config.on_stop
     loop_kw["boundary"] = Boundary(
         config.period_s,
         sup.config.pump_max_ml_h or controller.max_rate_ml_h,

@@ -215,7 +215,11 @@ class DoseGuard:
         return cap * _HOUR_S
 
     def limit(
-        self, command_ml_h: float, now_s: float | None = None, short_mmhg: float = math.nan
+        self,
+        command_ml_h: float,
+        now_s: float | None = None,
+        short_mmhg: float = math.nan,
+        chosen: bool = False,
     ) -> tuple[float, int]:
         """The command (ml/h) cut to the limits, and the fault bits raised; charges the time since
         the previous call.
@@ -228,6 +232,9 @@ class DoseGuard:
             The run clock (s); ``None``: one period after the previous call.
         short_mmhg
             How far MAP is below the target now (mmHg; NaN when unknown).
+        chosen
+            The clinician chose this rate (MANUAL): above the soft maximum it is only flagged, as
+            with ``confirm_above_soft``; the hard and hourly maxima cut it as any command.
         """
         if now_s is None:
             now_s = 0.0 if self._last_s is None else self._last_s + self.period_s
@@ -255,7 +262,7 @@ class DoseGuard:
             limit = f"the hard maximum {lim.hard_max_ml_h:g} ml/h"
         if command > lim.soft_max_ml_h:
             faults |= DOSE_SOFT_LIMIT
-            if not lim.confirm_above_soft:
+            if not (lim.confirm_above_soft or chosen):
                 command = lim.soft_max_ml_h
                 limit = f"the soft maximum {lim.soft_max_ml_h:g} ml/h (not confirmed above)"
         self._last_s, self._last_ml_h = now_s, command

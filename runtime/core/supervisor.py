@@ -27,6 +27,11 @@ HOLD
 FAILSAFE
     Link loss (immediately) or a long fault: the command ramps at ``failsafe_ramp_ml_h_per_s`` to
     ``safe_rate_ml_h`` (``None``: keep the held rate). Alarm raised.
+STOPPED, MANUAL
+    The clinician's (:meth:`Supervisor.command`): ``stop`` commands 0 ml/h at once and holds it,
+    ``manual`` a rate of the clinician's, from any state, whatever the faults (still detected and
+    alarmed); only the clinician's ``resume`` leaves them (RECOVERING, or HOLD while a fault
+    persists). The controller is not stepped meanwhile.
 RECOVERING
     From HOLD or FAILSAFE once every input has been good for ``recover_after_s``, or at once on a
     clinician's acknowledgement (:meth:`Supervisor.acknowledge`) at a tick without a holding fault:
@@ -76,7 +81,13 @@ from runtime.core.supervisor_config import (
     SupervisorConfig,
     fault_names,
 )
-from runtime.core.supervisor_io import AckOutcome, SupervisorInput, SupervisorOutput, judge_ack
+from runtime.core.supervisor_io import (
+    AckOutcome,
+    SupervisorInput,
+    SupervisorOutput,
+    judge_ack,
+    judge_command,
+)
 
 __all__ = ["AckOutcome", "Supervisor", "SupervisorInput", "SupervisorOutput"]
 
@@ -167,6 +178,9 @@ class Supervisor:
         self._out_of_box_since_s: float | None = None
         self._ack_requested = False
         self.last_ack: AckOutcome | None = None
+        self._clinician: tuple[str, float] | None = None
+        self.last_command: AckOutcome | None = None
+        self._manual_ml_h = 0.0
         self._latched = 0  # faults kept until acknowledged (controller faults, DEVICE_CHANGED)
         self._latch = cfg.controller_faults == "latch"
         # the largest delivered rate a pump status may report (ml/h; float32 on the wire)
@@ -185,6 +199,12 @@ class Supervisor:
         """Hold on ``faults`` (``DEVICE_CHANGED``) from the next tick until the clinician's
         acknowledgement clears them, as a latched controller fault (the shell's boundary check)."""
         self._latched |= int(faults)
+
+    def command(self, kind: str, rate_ml_h: float = 0.0) -> None:
+        """The clinician's ``stop`` (0 ml/h now, held), ``manual`` (``rate_ml_h``, held) or
+        ``resume`` (back to automatic control); judged at the next :meth:`assess`
+        (:func:`runtime.core.supervisor_io.judge_command`), its outcome in ``last_command``."""
+        self._clinician = (kind, float(rate_ml_h))
 
     def acknowledge(self) -> None:
         """The clinician acknowledges the alarm and asks to resume; judged at the next
@@ -340,6 +360,14 @@ class Supervisor:
                 state = State.RECOVERING
                 self._latched = 0
                 self.faults = faults & ~latched
+        self.last_command = None
+        if self._clinician is not None:  # the clinician's stop, manual rate or resume
+            kind, rate = self._clinician
+            self._clinician = None
+            self.last_command = judge_command(kind, state, faults & self._holding_faults, rate)
+            state = self.last_command.state
+            if state == State.MANUAL:
+                self._manual_ml_h = rate
         self.state = state
         self._run_controller = state in (State.AUTO, State.RECOVERING)
         return self._run_controller
@@ -385,13 +413,17 @@ class Supervisor:
             step = cfg.failsafe_ramp_ml_h_per_s * cfg.sample_period_s
             delta = goal - previous
             command = goal if abs(delta) <= step else previous + (step if delta > 0.0 else -step)
-        elif state == State.STARTUP:
+        elif state == State.STARTUP or state == State.STOPPED:
             command = 0.0
+        elif state == State.MANUAL:
+            command = self._manual_ml_h
         else:  # HOLD
             command = previous
         command = _clamp(command, high)
         if self.dose_guard is not None:  # the last word: the drug library's dose limits
-            command, dose_faults = self.dose_guard.limit(command, self._now_s, self._short_mmhg)
+            command, dose_faults = self.dose_guard.limit(
+                command, self._now_s, self._short_mmhg, chosen=state == State.MANUAL
+            )
             self.faults |= dose_faults
         self.command_ml_h = command
         self.state = state

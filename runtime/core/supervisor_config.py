@@ -110,6 +110,8 @@ class State(IntEnum):
     HOLD = 2
     FAILSAFE = 3
     RECOVERING = 4
+    STOPPED = 5
+    MANUAL = 6
 
 
 class Fault(IntFlag):

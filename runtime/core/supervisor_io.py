@@ -150,3 +150,35 @@ def judge_ack(state: State, holding_faults: int, latched: int = 0) -> AckOutcome
     if latched:
         text += f" ({', '.join(fault_names(latched))} acknowledged)"
     return AckOutcome(True, state, 0, text)
+
+
+#: the clinician's commands (``pressor run``: lines on stdin or in the target file)
+CLINICIAN_COMMANDS = ("stop", "manual", "resume")
+
+
+def judge_command(kind: str, state: State, holding_faults: int, rate_ml_h: float) -> AckOutcome:
+    """Judge the clinician's ``stop``, ``manual`` (at ``rate_ml_h``, ml/h) or ``resume`` taken at a
+    tick whose state is ``state`` and whose holding fault bits are ``holding_faults``.
+
+    ``stop`` and ``manual`` are always accepted (the clinician's hand is on the pump: the state
+    becomes STOPPED, 0 ml/h, or MANUAL at the rate); ``resume`` from STOPPED or MANUAL goes to
+    RECOVERING (the controller again, its command reached by the bumpless slew), or to HOLD at the
+    current command while a fault persists (which ends as any HOLD does); elsewhere it is ignored.
+    The outcome's ``state`` is the state after the command.
+    """
+    if kind == "stop":
+        return AckOutcome(True, State.STOPPED, 0, f"{state.name} -> STOPPED: 0 ml/h until resume")
+    if kind == "manual":
+        return AckOutcome(
+            True, State.MANUAL, 0, f"{state.name} -> MANUAL: {rate_ml_h:g} ml/h until resume"
+        )
+    if state not in (State.STOPPED, State.MANUAL):
+        return AckOutcome(False, state, 0, f"resume ignored: {state.name}, not stopped or manual")
+    if holding_faults:
+        persists = ", ".join(fault_names(holding_faults))
+        return AckOutcome(
+            True, State.HOLD, holding_faults, f"{state.name} -> HOLD: fault persists: {persists}"
+        )
+    return AckOutcome(
+        True, State.RECOVERING, 0, f"{state.name} -> RECOVERING, resuming automatic control"
+    )

@@ -19,6 +19,13 @@ acknowledges nothing). It is taken at the next tick: the supervisor judges it
 only if no fault holds the loop at that tick) and the outcome is printed on stderr, logged to the
 event log with the tick and the time, and listed in :meth:`~TargetSource.summary` (``acks``).
 
+They carry the clinician's hand on the pump as well: the lines ``stop`` (0 ml/h now, held),
+``manual RATE`` (RATE ml/h, held) and ``resume`` (back to automatic control) are taken at the next
+tick (:meth:`TargetSource.take_commands`), judged by the supervisor
+(:func:`runtime.core.supervisor_io.judge_command`) and their outcome printed, logged and listed
+in :meth:`~TargetSource.summary` (``commands``). A ``manual`` line without a rate in [0, the
+controller's maximum] is refused with one line. The file as read at start commands nothing.
+
 Which tick a change lands on depends on when it was written in wall-clock time, so a lockstep run
 with live changes is not reproducible byte for byte; a run with a fixed ``--target-mmhg`` is.
 """
@@ -34,7 +41,13 @@ from typing import Any, TextIO
 
 from link import TickInputs
 from runtime.core.supervisor import AckOutcome
-from runtime.inputs.clinician import ClinicianInput, parse_target, read_input_file, split_ack
+from runtime.inputs.clinician import (
+    ClinicianInput,
+    parse_target,
+    read_input_file,
+    split_ack,
+    split_commands,
+)
 
 
 class TargetSource:
@@ -50,6 +63,8 @@ class TargetSource:
         Where refusals are reported (default ``sys.stderr``).
     prog
         Program name in front of each reported line.
+    max_rate_ml_h
+        The largest rate (ml/h) a ``manual`` command may set: the controller's maximum.
     """
 
     def __init__(
@@ -59,6 +74,7 @@ class TargetSource:
         stdin_fd: int = 0,
         err: TextIO | None = None,
         prog: str = "pressor run",
+        max_rate_ml_h: float = 120.0,
     ) -> None:
         if clinician.target_mmhg is None:
             raise ValueError("TargetSource needs a starting target")
@@ -72,6 +88,11 @@ class TargetSource:
         #: acknowledgements taken: tick, sim_time_s, from, state, accepted, outcome
         self.acks: list[dict[str, Any]] = []
         self._pending_acks: list[str] = []
+        #: the clinician's commands taken: tick, sim_time_s, from, command, rate_ml_h, state,
+        #: outcome
+        self.commands: list[dict[str, Any]] = []
+        self._pending_commands: list[tuple[str, float, str]] = []
+        self.max_rate_ml_h = float(max_rate_ml_h)
         self._path = clinician.target_file
         # never a real state: the first poll reads the file again (it may have changed since
         # the command line read the starting target)
@@ -126,6 +147,11 @@ class TargetSource:
         text, acked = split_ack(text)
         if acked and ack:
             self._pending_acks.append(source)
+        text, commands, refused = split_commands(text, self.max_rate_ml_h)
+        if ack:  # as for ack: the file as read at start commands nothing
+            self._pending_commands += [(kind, rate, source) for kind, rate in commands]
+            for why in refused:
+                self._refuse_command(source, why)
         if not text.strip():
             return  # an empty file (being rewritten) or a blank line
         try:
@@ -174,6 +200,42 @@ class TargetSource:
         self._pending.clear()
         return replace(inp, target_mmhg=self.target_mmhg, target_tick=tick)
 
+    def _refuse_command(self, source: str, why: str) -> None:
+        line = f"command from {source} refused: {why}"
+        print(f"{self._prog}: {line}", file=self._err or sys.stderr)
+        self._pending_refusals.append(line)
+        self.refused += 1
+
+    def take_commands(self) -> list[tuple[str, float, str]]:
+        """The clinician's commands read since the last call: ``(kind, ml/h, source)``."""
+        commands, self._pending_commands = self._pending_commands, []
+        return commands
+
+    def log_command(
+        self, outcome: AckOutcome, command: tuple[str, float, str], tick: int, t: float,
+        recorder: Any = None,
+    ) -> None:  # fmt: skip
+        """Keep, print and log what became of the clinician's ``command`` at ``tick`` (time
+        ``t``, s): the summary's ``commands`` (``tick``, ``sim_time_s``, ``from``, ``command``,
+        ``rate_ml_h``, ``state``, ``outcome``)."""
+        kind, rate, source = command
+        said = f"{kind} {rate:g}" if kind == "manual" else kind
+        self.commands.append(
+            {
+                "tick": tick,
+                "sim_time_s": t,
+                "from": source,
+                "command": kind,
+                "rate_ml_h": rate if kind == "manual" else None,
+                "state": outcome.state.name,
+                "outcome": outcome.text,
+            }
+        )
+        line = f"{said} ({source}) at {t:g} s, tick {tick}: {outcome.text}"
+        print(f"{self._prog}: {line}", file=self._err or sys.stderr)
+        if recorder is not None:
+            recorder.event(tick, t, line, warn=kind != "resume")
+
     def take_acks(self) -> list[str]:
         """The sources of the acknowledgements read since the last call (taken by the tick)."""
         acks, self._pending_acks = self._pending_acks, []
@@ -209,6 +271,7 @@ class TargetSource:
             "changes": list(self.changes),
             "refused": self.refused,
             "acks": list(self.acks),
+            **({"commands": list(self.commands)} if self.commands else {}),
         }
 
 

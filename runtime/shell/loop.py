@@ -41,7 +41,9 @@ from typing import Any, Protocol
 from contracts.controller import Controller
 from link import (
     MODE_AUTO,
+    MODE_MANUAL,
     MODE_SAFE,
+    MODE_STOP,
     STATE_FAULT,
     STATE_FINISHED,
     STATE_RUNNING,
@@ -64,6 +66,8 @@ from runtime.shell.trajectory import LoopResult, Trajectory
 
 _NAN = math.nan
 _DOSE_FAULTS = int(DOSE_FAULTS)
+#: the INFUSION_COMMAND mode of each state (the others: SAFE, the supervisor's fallback)
+_MODES = {State.AUTO: MODE_AUTO, State.STOPPED: MODE_STOP, State.MANUAL: MODE_MANUAL}
 
 
 class DeviceStalled(RuntimeError):
@@ -76,9 +80,14 @@ class TickTarget(Protocol):
 
     def apply(self, inp: TickInputs, recorder: Any = None) -> TickInputs: ...
     def take_acks(self) -> list[str]: ...
+    def take_commands(self) -> list[tuple[str, float, str]]: ...
     def log_ack(
         self, outcome: AckOutcome, sources: list[str], tick: int, t: float, recorder: Any = None
     ) -> None: ...
+    def log_command(
+        self, outcome: AckOutcome, command: tuple[str, float, str], tick: int, t: float,
+        recorder: Any = None,
+    ) -> None: ...  # fmt: skip
 
 
 class Loop:
@@ -118,6 +127,9 @@ class Loop:
     boundary
         The checks of each tick's inputs and of the record writers before the core
         (:class:`runtime.shell.boundary.Boundary`); default: the sample time, the ``.tlog``.
+    on_stop
+        The last command a stop signal sends (``--on-stop``): ``held`` (the safe command:
+        :meth:`safe_rate_ml_h`, mode SAFE) or ``zero`` (0 ml/h, mode STOP).
     """
 
     def __init__(
@@ -134,8 +146,10 @@ class Loop:
         ack_input: bool = False,
         target: TickTarget | None = None,
         boundary: Boundary | None = None,
+        on_stop: str = "held",
     ) -> None:
         self.core = ClosedLoopCore(controller, supervisor, schedule)
+        self.on_stop = on_stop
         self.sup = supervisor
         self.ep = endpoint
         self.recorder = recorder
@@ -188,12 +202,17 @@ class Loop:
         """
         target = self.target
         acks: list[str] = []
+        said: tuple[str, float, str] | None = None
         bound = self.boundary
         if target is not None:
             inp = target.apply(inp, self.recorder)
             acks = target.take_acks()
             if acks:
                 self.sup.acknowledge()
+            commands = target.take_commands()
+            if commands:  # several within one tick: the last one counts
+                said = commands[-1]
+                self.sup.command(said[0], said[1])
         else:
             boundary_faults |= bound.device_target(inp)
         ep = self.ep
@@ -214,7 +233,7 @@ class Loop:
         if send:
             if self._count % self.heartbeat_every == 0:
                 ep.send_heartbeat(inp.tick, STATE_RUNNING, flush=False)
-            ep.send_command(inp.tick, command, MODE_AUTO if state == State.AUTO else MODE_SAFE)
+            ep.send_command(inp.tick, command, _MODES.get(state, MODE_SAFE))
         exec_s = perf_counter_s() - release_wall_s
         self._last_command = command
         self._last_tick = inp.tick
@@ -237,6 +256,8 @@ class Loop:
             self.on_tick(inp.tick, int(state), int(out.faults), command)
         if acks and target is not None and self.sup.last_ack is not None:
             target.log_ack(self.sup.last_ack, acks, inp.tick, inp.sim_time_s, self.recorder)
+        if said is not None and target is not None and self.sup.last_command is not None:
+            target.log_command(self.sup.last_command, said, inp.tick, inp.sim_time_s, self.recorder)
         return command
 
     def _link_errors(self) -> int:
@@ -454,11 +475,15 @@ class Loop:
         return self._last_command if safe is None else safe
 
     def _stop_safe(self, last: TickInputs | None, signum: int) -> str:
-        """Stop on a signal: command the safe rate (:meth:`safe_rate_ml_h`) for the tick after
-        ``last``; return the ``ended`` text."""
+        """Stop on a signal: command the safe rate (:meth:`safe_rate_ml_h`, mode SAFE), or with
+        ``on_stop="zero"`` 0 ml/h (mode STOP), for the tick after ``last``; return the ``ended``
+        text."""
+        zero = self.on_stop == "zero"
         with suppress(LinkError, OSError):
             self.ep.send_command(
-                0 if last is None else last.tick + 1, self.safe_rate_ml_h(), MODE_SAFE
+                0 if last is None else last.tick + 1,
+                0.0 if zero else self.safe_rate_ml_h(),
+                MODE_STOP if zero else MODE_SAFE,
             )
         self._stop_signal = signum
         return f"interrupted by {signal_name(signum)}"
@@ -489,7 +514,11 @@ class Loop:
             timing=self.timing.summary(),
             link=self.ep.counters.as_dict(),
             detections=dict(self.sup.detections),
-            ticks_in_state={s.name: self.ticks_in_state[s] for s in State},
+            ticks_in_state={  # the clinician's states only when they occurred
+                s.name: self.ticks_in_state[s]
+                for s in State
+                if self.ticks_in_state[s] or s not in (State.STOPPED, State.MANUAL)
+            },
             transitions=list(self.events.transitions),
             controller_faults=list(self.events.controller_faults),
             commands_out_of_range=self.out_of_range,
