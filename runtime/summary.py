@@ -296,14 +296,13 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
         failed) or the record is incomplete (a writer failed during the run, ``record``, or an
         output file cannot be written: one line), else 0.
     """
-    print_summary(summary, result.timing)
-    if result.host:
-        print(f"host: cpu wake-up latency {result.host['cpu_latency']}")
-    # the run is over and the pump has its last command: a file that cannot be written (a full
-    # disk) is one line and exit 1, never a traceback
+    # the run is over and the pump has its last command: the files first (a closed stdout, a
+    # reader gone from a pipe, must not cost the record), then the terminal; a file that cannot
+    # be written (a full disk) is one line and exit 1, never a traceback
     lost = [f"the {name} stopped: {why}" for name, why in summary.get("record", {}).items()]
+    written = []
     if config.summary is not None:
-        lost += _write_output("summary", config.summary, summary)
+        lost += _write_output("summary", config.summary, summary, written)
     if config.timing is not None:
         status = {
             "loop": result.timing,
@@ -312,7 +311,12 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
             "link": result.link,
             "host": result.host,
         }
-        lost += _write_output("timing", config.timing, status)
+        lost += _write_output("timing", config.timing, status, written)
+    print_summary(summary, result.timing)
+    if result.host:
+        print(f"host: cpu wake-up latency {result.host['cpu_latency']}")
+    for line in written:
+        print(line)
     if config.rrd is not None:
         print(f"recording: {config.rrd}\nreplay:    rerun {config.rrd}")
     if result.stop_signal is not None:
@@ -336,11 +340,12 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
     return 1 if summary["metrics"].get("commands_out_of_range") or failed or lost else 0
 
 
-def _write_output(name: str, path: Path, data: dict[str, Any]) -> list[str]:
-    """Write ``data`` to the ``name`` file ``path`` and say so; ``[why]`` if it failed."""
+def _write_output(name: str, path: Path, data: dict[str, Any], written: list[str]) -> list[str]:
+    """Write ``data`` to the ``name`` file ``path`` (its line for the terminal added to
+    ``written``); ``[why]`` if it failed."""
     try:
         write_json(path, data)
     except OSError as exc:
         return [f"the {name} {path} cannot be written: {exc.strerror or exc}"]
-    print(f"{name}: {path}")
+    written.append(f"{name}: {path}")
     return []
