@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from contextlib import suppress
 from dataclasses import replace
 from typing import Any
 
@@ -362,15 +363,22 @@ class Session:
         ------
         LinkError
             No hello within ``timeout_s`` (s, wall clock); :class:`SigningMismatch` at once when
-            the peer signs differently; :class:`PeerRefused` when the peer refused this end's
+            the peer signs differently (after one hello sent back, so that the peer names it too); :class:`PeerRefused` when the peer refused this end's
             hello.
         HelloRefused
             The peer's hello announces the wrong role, comes from a system id other than its role
             or carries another protocol version (:func:`link.handshake.check_peer_hello`); the
             peer has been sent the refusal (:meth:`refuse`).
         """
-        peer = self._exchange_hellos(hello, timeout_s, resend_s)
-        self.check_signing()
+        try:
+            peer = self._exchange_hellos(hello, timeout_s, resend_s)
+            self.check_signing()
+        except SigningMismatch:
+            # one hello back, signed as this end signs: the peer's own check names the mismatch
+            # at once (within its next read) instead of waiting out its handshake for a hello
+            with suppress(LinkError):
+                self.send_hello(hello)
+            raise
         if peer is None:
             raise LinkError(f"no hello from the {self.PEER_NAME} within {timeout_s} s")
         try:
