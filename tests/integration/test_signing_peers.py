@@ -152,3 +152,39 @@ def test_both_real_ends_name_a_signing_mismatch_within_3_s(tmp_path, device_key,
     assert "signing mismatch" in device_err and device.returncode == 1, device_err
     assert run_s < 3.0 + 2.0  # the runtime's start (imports) is part of its 3 s
     assert device_s - run_s < 3.0 and device_s < 6.0, (run_s, device_s)
+
+
+def test_a_run_refused_at_its_command_line_tells_the_waiting_device(tmp_path):
+    """``pressor run --controller lpv:norepinephrine`` without ``--weight-kg`` cannot start: it
+    exits 2 with one line, and ``pressor device``, waiting in its handshake, is told the same line
+    on the wire (PRESSOR_REFUSAL RUNTIME_CONFIG) and exits 2 with it within 3 s."""
+    import os
+    import subprocess
+    import sys
+
+    from tests.support.sil_helpers import ROOT, bridged_ttys
+
+    key = _key(tmp_path, "a", 1)
+    env = dict(os.environ, CI="1", PYTHONPATH=str(ROOT))
+    base = [sys.executable, "-m", "pressor"]
+    with bridged_ttys() as (device_port, runtime_port):
+        device = subprocess.Popen(
+            [*base, "device", "--port", device_port, "--duration", "5", "--signing-key", str(key)],
+            cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        time.sleep(2.0)
+        t0 = time.monotonic()
+        run = subprocess.run(
+            [*base, "run", "--port", runtime_port, "--controller", "lpv:norepinephrine",
+             "--signing-key", str(key)],
+            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        try:
+            device_err = device.communicate(timeout=30)[1]
+            device_s = time.monotonic() - t0
+        finally:
+            device.kill()
+    assert run.returncode == 2 and "--weight-kg: required" in run.stderr, run.stderr
+    assert device.returncode == 2, device_err
+    assert "refused by the runtime: --weight-kg: required" in device_err
+    assert device_s < 3.0 + 5.0  # the runtime's own start (imports, the design) comes first
