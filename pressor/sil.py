@@ -146,6 +146,13 @@ def sil_parser() -> UsageParser:
         " device on another; N both on CPU N; N,M the loop on N and the device on M; none let"
         " the scheduler place them. Ignored with --realtime",
     )
+    p.add_argument(
+        "--clinician-stdin",
+        action="store_true",
+        help="the clinician's lines on stdin while running: 'stop' (0 ml/h now, held), 'manual"
+        " RATE' (ml/h, held), 'resume' (back to automatic control), 'ack' (acknowledge an"
+        " alarm); the target stays the scenario's (default: off)",
+    )
     add_patient_model_option(p)
     return p
 
@@ -165,7 +172,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
             f"pressor_sil_{_file_label(args.controller)}_{Path(args.scenario).stem}"
             f"_seed{args.patient_seed}.rrd"
         )
-    run = run_config(args)
+    run = replace(run_config(args), clinician_stdin=args.clinician_stdin)
     try:
         drug = binding_of(load_controller(args.controller, 1.0 / args.rate))
     except ValueError as exc:
@@ -296,6 +303,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 # run (safe rate, outputs kept) and closes the link; the device then ends by itself
                 proc = subprocess.Popen(
                     cmd,
+                    stdin=subprocess.DEVNULL,  # stdin is the clinician's (--clinician-stdin)
                     stdout=log,
                     stderr=subprocess.STDOUT,
                     start_new_session=True,

@@ -320,6 +320,14 @@ def _run_loop(
         if clinician.target_mmhg is None
         else TargetSource(clinician, max_rate_ml_h=controller.max_rate_ml_h)
     )
+    if target is None and config.clinician_stdin:  # pressor sil: the clinician's commands only
+        target = TargetSource(
+            ClinicianInput(target_stdin=True),
+            prog=loop_kw["prog"],
+            max_rate_ml_h=controller.max_rate_ml_h,
+            own_target=False,
+        )
+        loop_kw["ack_input"] = True
     loop_kw["on_stop"] = config.on_stop
     loop_kw["boundary"] = Boundary(
         config.period_s,
@@ -393,6 +401,9 @@ def _summarize(
         faults=report,
         events=events,
     )
+    if target is not None and not target.own_target:  # pressor sil --clinician-stdin
+        record = target.summary()
+        summary["clinician"] = {"acks": record["acks"], "commands": record.get("commands", [])}
     if config.clinician is not None:  # pressor run: where the target came from, the syringe
         summary["target"] = {"source": "device"} if target is None else target.summary()
         summary["syringe"] = {

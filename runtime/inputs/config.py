@@ -91,6 +91,10 @@ class RunConfig:
     on_stop
         The last command a stop signal sends (``--on-stop``): ``held`` (the safe rate, else the
         last rate held, mode SAFE) or ``zero`` (0 ml/h, mode STOP).
+    clinician_stdin
+        ``pressor sil --clinician-stdin``: the clinician's ``ack``, ``stop``, ``manual RATE`` and
+        ``resume`` on stdin, the target staying the device's (``pressor run`` has them on its
+        target inputs).
     """
 
     controller: str
@@ -112,6 +116,7 @@ class RunConfig:
     clinician: ClinicianInput | None = None
     sample_age_limit_s: float = DEFAULT_SAMPLE_AGE_LIMIT_S
     on_stop: str = "held"
+    clinician_stdin: bool = False
 
     @property
     def period_s(self) -> float:

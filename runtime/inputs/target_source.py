@@ -32,6 +32,7 @@ with live changes is not reproducible byte for byte; a run with a fixed ``--targ
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import sys
@@ -65,6 +66,9 @@ class TargetSource:
         Program name in front of each reported line.
     max_rate_ml_h
         The largest rate (ml/h) a ``manual`` command may set: the controller's maximum.
+    own_target
+        ``False`` (``pressor sil --clinician-stdin``): the device's target stays, stdin carries
+        only ``ack``, ``stop``, ``manual RATE`` and ``resume``; a number is refused.
     """
 
     def __init__(
@@ -75,10 +79,13 @@ class TargetSource:
         err: TextIO | None = None,
         prog: str = "pressor run",
         max_rate_ml_h: float = 120.0,
+        own_target: bool = True,
     ) -> None:
-        if clinician.target_mmhg is None:
+        if clinician.target_mmhg is None and own_target:
             raise ValueError("TargetSource needs a starting target")
-        self.initial_mmhg = float(clinician.target_mmhg)
+        #: whether the runtime sets the target (else the device's stays: commands only)
+        self.own_target = own_target
+        self.initial_mmhg = math.nan if clinician.target_mmhg is None else clinician.target_mmhg
         #: the current target (mmHg)
         self.target_mmhg = self.initial_mmhg
         #: applied changes: tick, sim_time_s, old_mmhg, new_mmhg, source
@@ -154,6 +161,9 @@ class TargetSource:
                 self._refuse_command(source, why)
         if not text.strip():
             return  # an empty file (being rewritten) or a blank line
+        if not self.own_target:
+            self._refuse_command(source, f"{text.strip()!r}: the target is the device's here")
+            return
         try:
             self._pending.append((parse_target(text), source))
         except ValueError as exc:
@@ -173,6 +183,12 @@ class TargetSource:
         logged to ``recorder`` (a :class:`runtime.record.recorder.Recorder`) when given."""
         self.poll()
         tick, t = inp.tick, inp.sim_time_s
+        if not self.own_target:  # commands only: the device's target and the tick as they came
+            for line in self._pending_refusals:
+                if recorder is not None:
+                    recorder.event(tick, t, line, warn=True)
+            self._pending_refusals.clear()
+            return inp
         if not self._announced:
             self._announced = True
             if recorder is not None:

@@ -112,3 +112,50 @@ def test_sigterm_ends_on_the_command_on_stop_chooses(tmp_path, on_stop, mode):
     assert last.tick == 30 and last.mode == mode
     expected = 0.0 if on_stop == "zero" else p.commands[29].rate_ml_h
     assert last.rate_ml_h == pytest.approx(expected)
+
+
+def test_pressor_sil_takes_stop_and_resume_from_stdin(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    from link import read_tlog
+    from link.dialect import pressor as mavlink
+    from tests.support.sil_helpers import ROOT
+
+    env = dict(os.environ, CI="1", PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "pressor", "sil", "--controller", "pi", "--realtime"]
+    cmd += ["--duration", "12", "--clinician-stdin", "--tlog", "run.tlog", "--summary", "s.json"]
+    cmd += ["--rrd", "r.rrd"]
+    proc = subprocess.Popen(
+        cmd, cwd=tmp_path, env=env, stdin=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        deadline = time.monotonic() + 60.0
+        while not (tmp_path / "run.tlog").exists() or (tmp_path / "run.tlog").stat().st_size < 2000:
+            assert proc.poll() is None and time.monotonic() < deadline, "the run did not start"
+            time.sleep(0.1)
+        time.sleep(2.0)
+        proc.stdin.write("stop\n")
+        proc.stdin.flush()
+        time.sleep(2.0)
+        proc.stdin.write("resume\n")
+        proc.stdin.flush()
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    said = json.loads((tmp_path / "s.json").read_text())["clinician"]["commands"]
+    assert [(x["command"], x["state"]) for x in said] == [
+        ("stop", "STOPPED"),
+        ("resume", "RECOVERING"),
+    ]
+    mav = mavlink.MAVLink(None)
+    modes = [
+        m.mode
+        for m in (mav.decode(bytearray(f)) for _, f in read_tlog(tmp_path / "run.tlog"))
+        if m.get_type() == "INFUSION_COMMAND"
+    ]
+    stopped = [k for k, mode in enumerate(modes) if mode == MODE_STOP]
+    assert 10 <= len(stopped) <= 30  # about 2 s at 10 Hz, then resumed
+    assert modes[-1] in (MODE_AUTO, MODE_SAFE)
