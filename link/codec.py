@@ -91,6 +91,7 @@ def _fast_codecs() -> dict[int, tuple[Any, struct.Struct, bytes, _Perm, _Perm]]:
 
 _FAST = _fast_codecs()
 #: longest payload (bytes) of each message id: a candidate frame claiming more is junk
+_ID_HELLO = mavlink.MAVLINK_MSG_ID_PRESSOR_HELLO
 _MAXLEN = {mid: cls.unpacker.size for mid, cls in mavlink.mavlink_map.items()}
 
 
@@ -149,6 +150,8 @@ class FrameCodec:
         self.refusal: str | None = None
         #: an unsigned end accepted a signed frame (the peer has a key this end lacks)
         self.peer_signed = False
+        #: the MAVLink system id the peer's frames must come from (its role); ``None``: any
+        self.peer_system: int | None = None
 
     # ------------------------------------------------------------------ packing
     def _stamp(self) -> None:
@@ -232,6 +235,7 @@ class FrameCodec:
         i = 0
         maxlen = _MAXLEN
         fast = _FAST
+        peer = self.peer_system
         while True:
             j = rx.find(_MARKER, i)
             if j < 0:
@@ -279,6 +283,11 @@ class FrameCodec:
                     i += 1
                 continue
             i += flen
+            if peer is not None and frame[5] != peer and mid != _ID_HELLO:
+                # this end's own frames echoed back, or a third node: never the peer's liveness
+                # (a hello passes, so that a wrong role or system id is refused by name)
+                c.wrong_system += 1
+                continue
             c.frames_received += 1
             if incompat & 1 and not self.signed:
                 self.peer_signed = True

@@ -104,6 +104,10 @@ class LinkCounters:
         numbers the status of tick k's command k instead of k+1). The runtime cannot use them,
         so its pump checks (alarms, delivered versus commanded) do not run; counted and raised
         as the advisory ``LINK_ERRORS`` instead of passing silently.
+    wrong_system
+        Frames (hellos excepted) from another MAVLink system id than the peer's role: this end's
+        own frames echoed back by the line (a tty in cooked mode), or a third node. Dropped
+        before they count as received, so they never pass for the peer's liveness.
     """
 
     frames_sent: int = 0
@@ -126,6 +130,7 @@ class LinkCounters:
     incomplete_target: int = 0
     incomplete_status: int = 0
     misnumbered_status: int = 0
+    wrong_system: int = 0
 
     def as_dict(self) -> dict[str, int]:
         """The counters as a plain dict (JSON-ready)."""
@@ -138,7 +143,8 @@ class LinkCounters:
     def discarded(self) -> int:
         """What the link layer discarded or could not use, all causes that raise the runtime's
         advisory ``LINK_ERRORS``: bad frames, junk, abandoned partial frames, sequence gaps,
-        incomplete ticks, misnumbered pump statuses, refused signatures."""
+        incomplete ticks, misnumbered pump statuses, frames of another system id, refused
+        signatures."""
         return (
             self.bad_crc
             + self.junk_bytes
@@ -146,6 +152,7 @@ class LinkCounters:
             + self.seq_gaps
             + self.incomplete()
             + self.misnumbered_status
+            + self.wrong_system
             + self.refused_unsigned
             + self.refused_bad_signature
         )
@@ -165,4 +172,5 @@ DROP_CAUSES: tuple[str, ...] = (
     "incomplete_target",
     "incomplete_status",
     "misnumbered_status",
+    "wrong_system",
 )

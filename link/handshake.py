@@ -13,8 +13,14 @@ from __future__ import annotations
 from pressor.link.counters import HelloRefused
 from pressor.link.messages import (
     PROTOCOL_VERSION,
+    REFUSAL_CONCENTRATION,
+    REFUSAL_DRUG,
+    REFUSAL_LINK_MODE,
     REFUSAL_PROTOCOL_VERSION,
+    REFUSAL_PUMP_MAXIMUM,
     REFUSAL_ROLE,
+    REFUSAL_SAMPLE_PERIOD,
+    REFUSAL_SENSOR_NOISE,
     REFUSAL_SYSTEM_ID,
     ROLE_DEVICE,
     ROLE_RUNTIME,
@@ -90,3 +96,63 @@ def check_peer_hello(peer: Hello, system_id: int | None, name: str, role: int) -
             f"{name} hello: peer protocol_version {peer.protocol_version}, expected"
             f" {PROTOCOL_VERSION}",
         )
+
+
+#: the fields of a hello that set the terms of a run, each with its refusal reason: a hello in the
+#: middle of the run must announce the same (docs/PROTOCOL.md, "A hello in the middle of a run")
+RUN_TERMS: tuple[tuple[str, str, int, str], ...] = (
+    ("role", "role", REFUSAL_ROLE, ""),
+    ("protocol_version", "protocol version", REFUSAL_PROTOCOL_VERSION, ""),
+    ("sample_period_s", "sample period", REFUSAL_SAMPLE_PERIOD, " s"),
+    ("sensor_noise_mmhg", "noise", REFUSAL_SENSOR_NOISE, " mmHg"),
+    ("link_mode", "link mode", REFUSAL_LINK_MODE, ""),
+    ("drug", "drug", REFUSAL_DRUG, ""),
+    ("concentration_ug_ml", "concentration", REFUSAL_CONCENTRATION, " ug/ml"),
+    ("pump_max_ml_h", "pump maximum", REFUSAL_PUMP_MAXIMUM, " ml/h"),
+)
+
+
+def hello_change(first: Hello, later: Hello, name: str) -> HelloRefused | None:
+    """The refusal of a hello received in the middle of a run that changes its terms, else
+    ``None`` (the same terms again: a device repeating itself or reconnecting).
+
+    Parameters
+    ----------
+    first
+        The hello the run was started on (checked at the handshake).
+    later
+        A hello received after the handshake.
+    name
+        The peer's name (``device``) for the text.
+
+    Returns
+    -------
+    HelloRefused or None
+        With the reason of the first field that differs, in the handshake's order
+        (:data:`RUN_TERMS`: role, version, sample period, noise, link mode, drug, concentration,
+        pump maximum; a NaN differs from everything), the text naming every changed field with
+        both values.
+    """
+    changes = []
+    reason = 0
+    for field, label, code, unit in RUN_TERMS:
+        old, new = getattr(first, field), getattr(later, field)
+        if isinstance(old, str):
+            same = old.strip().lower() == new.strip().lower()
+        else:
+            same = old == new  # False for NaN: an announcement of nothing is a change
+        if not same:
+            reason = reason or code
+            changes.append(f"{label} {_value(old)} -> {_value(new)}{unit}")
+    if not changes:
+        return None
+    return HelloRefused(
+        reason,
+        f"{name} hello in the middle of the run changes {', '.join(changes)}: refused, the run"
+        " keeps its first hello",
+    )
+
+
+def _value(v: object) -> str:
+    """A hello field's value for a refusal text (numbers short: ``200``, ``0.1``)."""
+    return f"{v:g}" if isinstance(v, float) else str(v or "(none)")

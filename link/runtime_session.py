@@ -18,7 +18,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from pressor.link.counters import HelloRefused
 from pressor.link.dialect import pressor as mavlink
+from pressor.link.handshake import hello_change
 from pressor.link.messages import (
     LINK_LOCKSTEP,
     MODE_AUTO,
@@ -28,13 +30,15 @@ from pressor.link.messages import (
     PumpStatus,
     TickInputs,
 )
-from pressor.link.session import Session
+from pressor.link.session import Session, hello_of
 
 _ID_SCHED = mavlink.MAVLINK_MSG_ID_SCHEDULING_PARAMS
 _ID_TARGET = mavlink.MAVLINK_MSG_ID_MAP_TARGET
 _ID_SAMPLE = mavlink.MAVLINK_MSG_ID_MAP_SAMPLE
 _ID_COMMAND = mavlink.MAVLINK_MSG_ID_INFUSION_COMMAND
 _ID_STATUS = mavlink.MAVLINK_MSG_ID_PUMP_STATUS
+#: the latest sample time (s) the run clock follows: 2^32 ticks of the longest period (10 s)
+_MAX_RUN_S = 4.3e10
 
 
 class RuntimeSession(Session):
@@ -91,6 +95,10 @@ class RuntimeSession(Session):
         #: the device's latest pump status (or None)
         self.pump_status: PumpStatus | None = None
         self._hello_reply_due = False
+        #: the device's hello the run started on (:meth:`lock_terms`), else None
+        self._terms: Hello | None = None
+        #: refusals of hellos that tried to change the run, not yet taken by the loop
+        self.hello_changes: list[HelloRefused] = []
         # received tick data, as field tuples in XML order (see the handlers): samples ready for
         # the loop, each with the scheduling and target frames of its own tick taken when the
         # lockstep tick was complete (None: real time, the latest ones at hand-over)
@@ -133,7 +141,28 @@ class RuntimeSession(Session):
             assert self._hello is not None
             self.send_hello(self._hello)
 
+    def lock_terms(self) -> None:
+        """The device's hello was checked and the run starts on it: from now on a hello may not
+        change it (:meth:`_on_hello`, :func:`pressor.link.handshake.hello_change`)."""
+        self._terms = self.peer_hello
+
+    def take_hello_changes(self) -> list[HelloRefused]:
+        """The refusals of the hellos that tried to change the run since the last call (each
+        already sent to the device)."""
+        changes, self.hello_changes = self.hello_changes, []
+        return changes
+
     def _on_hello(self, msg: Any) -> None:
+        first = self._terms
+        if first is not None:  # the run's terms are set: a later hello may not change them
+            if msg.get_srcSystem() != self.PEER_ROLE:
+                self.counters.wrong_system += 1  # an echo of this end's hello, a third node
+                return
+            refusal = hello_change(first, hello_of(msg), self.PEER_NAME)
+            if refusal is not None:  # told at once; the run keeps the first hello's terms
+                self.hello_changes.append(refusal)
+                self.refuse(refusal, fault=False)
+            return
         super()._on_hello(msg)
         # the runtime answers device hellos once it has announced itself (a device that missed the
         # first answer - its port flushed on open - keeps asking), at most once per read so that
@@ -267,7 +296,9 @@ class RuntimeSession(Session):
         fields, own = self._samples.pop(0)
         sim_time_s, tick, map_mmhg, quality = fields
         self._last_sample_tick = tick
-        if self._follow_samples:
+        if self._follow_samples and self.clock.t <= sim_time_s <= _MAX_RUN_S:  # False for NaN
+            # the run clock (tlog stamps, seed-key signing) never runs backwards or off the
+            # scale; the loop judges the sample's time itself (SAMPLE_TIME)
             self.clock.t = sim_time_s
         s, t = own if own is not None else (self._sched, self._target)
         nan = math.nan

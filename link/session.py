@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from contextlib import suppress
 from dataclasses import replace
 from typing import Any
 
@@ -55,6 +56,23 @@ def _text(value: bytes | str) -> str:
     """A ``char[N]`` field as text (pymavlink hands out bytes or str, NUL padding removed)."""
     text = value.decode("ascii", "replace") if isinstance(value, bytes) else value
     return text.rstrip("\0")
+
+
+def hello_of(msg: Any) -> Hello:
+    """A received PRESSOR_HELLO message object as a :class:`Hello`."""
+    return Hello(
+        _text(msg.name),
+        msg.patient_seed,
+        msg.sample_period_s,
+        msg.sensor_noise_mmhg,
+        msg.n_ticks,
+        msg.link_mode,
+        msg.role,
+        msg.protocol_version,
+        _text(msg.drug),
+        msg.concentration_ug_ml,
+        msg.pump_max_ml_h,
+    )
 
 
 class ManualClock:
@@ -115,6 +133,9 @@ class Session:
         self.codec = FrameCodec(
             system_id or self.ROLE, component_id, signing, self.clock, self.counters
         )
+        # only the peer's frames count (its system id is its role): this end's own frames
+        # echoed back by the line are dropped (``wrong_system``), never taken for its liveness
+        self.codec.peer_system = self.PEER_ROLE
         #: the port's one-syscall read (``ttyport.FdPort`` / ``FastPort``), if it has one
         self._read_some: Callable[[float], bytes] | None = getattr(port, "read_some", None)
         self._tx = bytearray()
@@ -219,16 +240,18 @@ class Session:
         )
         self.send_fields(_ID_HEARTBEAT, tick, self.ROLE, state, flush=flush)
 
-    def refuse(self, refusal: HelloRefused) -> None:
+    def refuse(self, refusal: HelloRefused, *, fault: bool = True) -> None:
         """Tell the peer why its hello is refused: PRESSOR_REFUSAL (reason, this end's protocol
         version, the text cut to 200 ASCII characters), then a heartbeat FAULT, written at once.
-        The caller then closes the link (docs/PROTOCOL.md, "Refusals")."""
+        The caller then closes the link (docs/PROTOCOL.md, "Refusals"). ``fault=False``: the
+        refusal alone (a hello in the middle of a run, refused while the run goes on)."""
         text = refusal.text.encode("ascii", "replace")[:REFUSAL_TEXT_CHARS]
         self.send(
             self.codec.mav.pressor_refusal_encode(refusal.reason, PROTOCOL_VERSION, text),
-            flush=False,
+            flush=not fault,
         )
-        self.send_heartbeat(0, STATE_FAULT)
+        if fault:
+            self.send_heartbeat(0, STATE_FAULT)
 
     # ---------------------------------------------------------------- receiving
     def poll(self, timeout_s: float = 0.0) -> int:
@@ -310,19 +333,7 @@ class Session:
 
     def _on_hello(self, msg: Any) -> None:
         self.peer_system_id = msg.get_srcSystem()
-        self.peer_hello = Hello(
-            _text(msg.name),
-            msg.patient_seed,
-            msg.sample_period_s,
-            msg.sensor_noise_mmhg,
-            msg.n_ticks,
-            msg.link_mode,
-            msg.role,
-            msg.protocol_version,
-            _text(msg.drug),
-            msg.concentration_ug_ml,
-            msg.pump_max_ml_h,
-        )
+        self.peer_hello = hello_of(msg)
 
     # ---------------------------------------------------------------- handshake
     def wait_for_hello(self, timeout_s: float) -> Hello | None:
@@ -358,15 +369,22 @@ class Session:
         ------
         LinkError
             No hello within ``timeout_s`` (s, wall clock); :class:`SigningMismatch` at once when
-            the peer signs differently; :class:`PeerRefused` when the peer refused this end's
+            the peer signs differently (after one hello sent back, so that the peer names it too); :class:`PeerRefused` when the peer refused this end's
             hello.
         HelloRefused
             The peer's hello announces the wrong role, comes from a system id other than its role
             or carries another protocol version (:func:`pressor.link.handshake.check_peer_hello`); the
             peer has been sent the refusal (:meth:`refuse`).
         """
-        peer = self._exchange_hellos(hello, timeout_s, resend_s)
-        self.check_signing()
+        try:
+            peer = self._exchange_hellos(hello, timeout_s, resend_s)
+            self.check_signing()
+        except SigningMismatch:
+            # one hello back, signed as this end signs: the peer's own check names the mismatch
+            # at once (within its next read) instead of waiting out its handshake for a hello
+            with suppress(LinkError):
+                self.send_hello(hello)
+            raise
         if peer is None:
             raise LinkError(f"no hello from the {self.PEER_NAME} within {timeout_s} s")
         try:

@@ -1,7 +1,8 @@
 """Atomic file output: write a hidden temporary sibling, then move it over the target.
 
-Every file pressor writes (recordings, telemetry logs, summaries, trial tables, artifacts,
-generated code) goes through :class:`AtomicFile`: the data goes to ``.NAME.PID.RANDOM.tmp`` in the
+Every file pressor writes whole (recordings, summaries, trial tables, artifacts, generated code)
+goes through :class:`AtomicFile` (the ``.tlog``, a log streamed while the patient is on the line,
+is written in place instead: :class:`pressor.link.tlog.TlogWriter`): the data goes to ``.NAME.PID.RANDOM.tmp`` in the
 target's directory and :func:`os.replace` moves it over ``NAME`` only when the writer succeeds
 (atomic on POSIX: a reader sees the old file or the new one, never half of one). A writer that
 fails removes its temporary file and leaves an earlier ``NAME`` untouched.
@@ -12,8 +13,8 @@ Two forms. A block that writes everything at once::
         fh.write(data)              # committed when the block ends without an exception
 
 or :func:`write_atomic` for a whole ``str``/``bytes``; a streaming writer that lives across many
-calls (the ``.rrd`` recorder, the ``.tlog`` writer) keeps the :class:`AtomicFile` and calls
-:meth:`AtomicFile.commit` or :meth:`AtomicFile.discard` when it closes.
+calls (the ``.rrd`` recorder) keeps the :class:`AtomicFile` and calls :meth:`AtomicFile.commit`
+when it closes.
 """
 
 from __future__ import annotations

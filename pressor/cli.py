@@ -14,6 +14,7 @@ Exit codes: 0 success, 1 the run completed but a check failed, 2 bad usage or ba
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 from importlib.metadata import version
 
@@ -94,7 +95,13 @@ def main(argv: list[str] | None = None) -> int:
 
         single_blas_thread()
     module = importlib.import_module(COMMANDS[command][0])
-    return int(module.main(command, rest))
+    try:
+        return int(module.main(command, rest))
+    except BrokenPipeError:
+        # the reader went away (`pressor faults | head`): what it wanted it has; say nothing, and
+        # keep the interpreter's own flush of stdout at exit from raising again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

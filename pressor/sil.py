@@ -22,8 +22,10 @@ Faults the scenario declares (``[[faults]]``) are injected by the device too; bo
 after the run (summary ``faults`` list, docs/METRICS.md). The scenario's hemorrhages and boluses
 are the disturbance events the metrics split the run at.
 
-Files. The ``.rrd``, ``.tlog``, ``--summary`` and ``--timing`` files are written to a hidden
-temporary name and renamed when the run succeeds; a failed run leaves earlier files untouched.
+Files. The ``.tlog`` is written in place, the ``.rrd``, ``--summary`` and ``--timing`` files to a
+hidden temporary name renamed when written; a run that fails keeps its ``.tlog``, ``.rrd`` and
+summary (:mod:`pressor.runtime.session`). The signing key reaches the device process through a pipe it
+inherits (``--signing-key /dev/fd/N``), never through a file.
 
 Exit codes: 0 success, 1 the run completed but a check failed (or the device stalled, or the link
 failed), 2 bad usage or input (one line on stderr naming the option or file, value and range).
@@ -32,6 +34,7 @@ failed), 2 bad usage or input (one line on stderr naming the option or file, val
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import tempfile
@@ -143,6 +146,13 @@ def sil_parser() -> UsageParser:
         " device on another; N both on CPU N; N,M the loop on N and the device on M; none let"
         " the scheduler place them. Ignored with --realtime",
     )
+    p.add_argument(
+        "--clinician-stdin",
+        action="store_true",
+        help="the clinician's lines on stdin while running: 'stop' (0 ml/h now, held), 'manual"
+        " RATE' (ml/h, held), 'resume' (back to automatic control), 'ack' (acknowledge an"
+        " alarm); the target stays the scenario's (default: off)",
+    )
     add_patient_model_option(p)
     return p
 
@@ -162,7 +172,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
             f"pressor_sil_{_file_label(args.controller)}_{Path(args.scenario).stem}"
             f"_seed{args.patient_seed}.rrd"
         )
-    run = run_config(args)
+    run = replace(run_config(args), clinician_stdin=args.clinician_stdin)
     try:
         drug = binding_of(load_controller(args.controller, 1.0 / args.rate))
     except ValueError as exc:
@@ -278,18 +288,30 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     cpus = lockstep_cpus(config.cpu, run.realtime)
     pair = PtyPair.open()
     with tempfile.TemporaryDirectory(prefix="pressor-sil-") as tmp:
-        key_file = signing.write(Path(tmp) / "signing.key") if signing is not None else None
+        # the key goes to the device through a pipe it inherits (read as /dev/fd/N), never
+        # through a file: a killed run leaves no key behind in the temporary folder
+        key_fd = _key_pipe(signing) if signing is not None else None
+        key_file = None if key_fd is None else Path(f"/dev/fd/{key_fd}")
         truth_file = Path(tmp) / "truth.npz" if run.rrd is not None else None
         cmd = device_command(
             config, pair.follower_path, None if cpus is None else cpus[1], key_file, truth_file
         )
         device_log = Path(tmp) / "device.log"
-        with open(device_log, "wb") as log:
-            # its own session: a terminal's Ctrl-C reaches the runtime only, which stops the run
-            # (safe rate, outputs kept) and closes the link; the device then ends by itself
-            proc = subprocess.Popen(
-                cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
-            )
+        try:
+            with open(device_log, "wb") as log:
+                # its own session: a terminal's Ctrl-C reaches the runtime only, which stops the
+                # run (safe rate, outputs kept) and closes the link; the device then ends by itself
+                proc = subprocess.Popen(
+                    cmd,
+                    stdin=subprocess.DEVNULL,  # stdin is the clinician's (--clinician-stdin)
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                    pass_fds=() if key_fd is None else (key_fd,),
+                )
+        finally:
+            if key_fd is not None:
+                os.close(key_fd)
         port = pair.leader_port()
         progress = TerminalProgress(run.period_s, round(config.duration_s / run.period_s))
         try:
@@ -331,6 +353,17 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
             text = device_log.read_text(errors="replace").strip()
             print(f"device exited with {code}:\n{text}", file=sys.stderr)
     return summary, result
+
+
+def _key_pipe(signing: Any) -> int:
+    """The read end of a pipe holding ``signing``'s key as 64 hex characters (a key file's
+    format), its write end closed: the device process inherits it and reads it once."""
+    read_fd, write_fd = os.pipe()
+    try:
+        os.write(write_fd, (signing.key.hex() + "\n").encode("ascii"))  # < a pipe's buffer
+    finally:
+        os.close(write_fd)
+    return read_fd
 
 
 def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:

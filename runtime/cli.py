@@ -32,6 +32,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from pressor.plumbing.usage import UsageError, UsageParser, usage_exit
 from pressor.runtime.inputs.clinician import add_clinician_options, clinician_input
@@ -69,12 +70,16 @@ def _main_run(argv: Sequence[str]) -> int:
     from pressor.runtime.summary import finish
 
     args = _run_parser().parse_args(argv)
-    config = run_config(args, ticks=args.ticks, clinician=clinician_input(args))
+    try:
+        config = run_config(args, ticks=args.ticks, clinician=clinician_input(args))
+    except UsageError as exc:  # the device waiting in its handshake is told too
+        _refuse_on_the_wire(args, str(exc))
+        raise
+    signing = load_signing(config, generate=False)  # a bad key: refused before the port opens
     try:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises several types for a bad path/URL
         raise UsageError(f"--port {args.port}: cannot open: {exc}") from None
-    signing = load_signing(config, generate=False)
     if signing is None:
         print(
             "pressor run: warning: the link is unsigned (--no-signing): anything on the line"
@@ -90,6 +95,42 @@ def _main_run(argv: Sequence[str]) -> int:
     }
     summary, result = run_runtime(port, config, identity, signing)
     return finish(summary, result, config, "pressor run")
+
+
+def _refuse_on_the_wire(args: Any, text: str, wait_s: float = 3.0) -> None:
+    """Tell the device that this run cannot start (docs/PROTOCOL.md, "A refusal before the
+    handshake"): open ``--port``, sign as asked, send PRESSOR_REFUSAL ``RUNTIME_CONFIG`` with
+    ``text`` and a heartbeat FAULT at once and in answer to each device hello for ``wait_s``
+    (s). Best effort: a port or key that cannot be used leaves it unsaid (the one line on stderr
+    stands)."""
+    import time
+
+    from pressor.link import (
+        REFUSAL_RUNTIME_CONFIG,
+        HelloRefused,
+        LinkError,
+        RuntimeSession,
+        open_port,
+    )
+    from pressor.link.signing import Signing, default_key_path
+
+    try:
+        key = None if args.no_signing else Signing.from_file(args.signing_key or default_key_path())
+        ep = RuntimeSession(open_port(args.port), signing=key)
+    except Exception:  # pyserial's and the key file's many errors: nothing can be sent
+        return
+    refusal = HelloRefused(REFUSAL_RUNTIME_CONFIG, text)
+    try:
+        ep.refuse(refusal)
+        end = time.monotonic() + wait_s
+        while (left := end - time.monotonic()) > 0:
+            ep.peer_hello = None
+            if ep.wait_for_hello(left) is not None:  # a device (re)started: tell it too
+                ep.refuse(refusal)
+    except (LinkError, OSError):
+        pass
+    finally:
+        ep.close()
 
 
 def _main_keygen(argv: Sequence[str]) -> int:

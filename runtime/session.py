@@ -1,10 +1,12 @@
 """One runtime run on an open port: handshake, controller, supervisor, recorder, loop, summary.
 
 :func:`run_runtime` is the runtime end of ``pressor run`` (a port it opened) and of ``pressor sil``
-(the leader of the pty whose follower the device process opened). Its outputs (``.rrd``,
-``.tlog``) are written to hidden temporary names and moved into place only when the run succeeds
-(:mod:`pressor.plumbing.files`): a failed run leaves earlier files untouched. :func:`run_guarded` gives
-both commands their exit codes.
+(the leader of the pty whose follower the device process opened). The record of every run is
+kept, the one of a run that went wrong first of all: the ``.tlog`` is written in place and made
+durable every 0.5 s (:class:`pressor.link.tlog.TlogWriter`), the ``.rrd`` is moved into place however the
+run ended, and a run that fails after its first tick (the loop sent the safe command first) or is
+refused before it writes its ``--summary`` (``ended``, ``error``) before the error is raised.
+:func:`run_guarded` gives both commands their exit codes.
 """
 
 from __future__ import annotations
@@ -14,9 +16,16 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from pressor.plumbing.usage import USAGE_EXIT, run_command
-from pressor.runtime.inputs.clinician import ClinicianInput, check_device_hello, check_link_hello
+from pressor.runtime.inputs.clinician import (
+    TARGET_MAX_MMHG,
+    TARGET_MIN_MMHG,
+    ClinicianInput,
+    check_device_hello,
+    check_link_hello,
+)
 from pressor.runtime.inputs.config import RunConfig, load_controller
 from pressor.runtime.inputs.controller_loader import controller_name
+from pressor.runtime.shell.boundary import Unwritten
 from pressor.runtime.shell.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
 from pressor.runtime.shell.placement import Pinned
 from pressor.runtime.summary import build_summary
@@ -108,28 +117,44 @@ def run_runtime(
     )
     recorder = None
     try:
-        peer = _handshake(ep, config, controller, clinician, peer_alive, handshake_timeout_s,
-                          on_connected)  # fmt: skip
+        try:
+            peer = _handshake(ep, config, controller, clinician, peer_alive, handshake_timeout_s,
+                              on_connected)  # fmt: skip
+        except Exception as exc:  # refused, a link error: the record says so, then the error
+            _write_failed_summary(config, identity, exc)
+            raise
         identity = _run_identity(identity, config, peer)
         sup = _build_supervisor(config, controller, clinician, peer)
         recorder = _open_recorder(config, identity, clinician, peer)
+        unstarted = recorder if isinstance(recorder, Unwritten) else None
+        if unstarted is not None:
+            recorder = None
         if recorder is not None:
             recorder.plan_markers(_markers(config, events))
         result, target = _run_loop(config, controller, clinician, sup, ep, peer, recorder, cpus,
-                                   on_tick)  # fmt: skip
+                                   on_tick, tlog, unstarted)  # fmt: skip
+        ep.close()  # the device sees the end at once; the record is written after
+        if tlog is not None:
+            tlog.close()  # its last write may fail too: the summary says so
+            _late_record_error(result, "tlog", tlog.error)
         if recorder is not None:
             _close_recording(recorder, result, clinician, before_close)
+            _late_record_error(result, "recording", recorder.error)
             recorder = None
         summary = _summarize(result, identity, config, controller, clinician, sup, peer, target,
                              events, noisy_band)  # fmt: skip
+        if result.error is not None:  # the loop failed after the safe command: keep the record
+            if config.summary is not None:
+                _write_summary(config.summary, summary)
+            raise result.error
         ok = True
         return summary, result
     finally:
         if recorder is not None:
-            recorder.abort()
+            recorder.abort()  # kept: the record of a run that went wrong
         ep.close()
         if tlog is not None:
-            tlog.close(commit=ok)
+            tlog.close(commit=ok)  # in place and durable on every exit path
 
 
 def _clinician_for(config: RunConfig, controller: Controller) -> ClinicianInput:
@@ -199,6 +224,7 @@ def _handshake(
     except HelloRefused as exc:  # the device is told why before the link closes
         ep.refuse(exc)
         raise
+    ep.lock_terms()  # a later hello may not change what was checked here
     return peer
 
 
@@ -229,6 +255,7 @@ def _build_supervisor(
             sched_action=config.sched_faults,
             stale_after_s=config.sample_age_limit_s,
             dose_limits=clinician.dose_limits,  # pressor run: the drug library's
+            pump_max_ml_h=max(float(peer.pump_max_ml_h), controller.max_rate_ml_h),
             # pressor run (a patient on the line) holds on a controller fault until the
             # clinician acknowledges; pressor sil stops with exit 1 (pressor.runtime.core.supervisor)
             controller_faults="latch" if config.clinician is not None else "stop",
@@ -238,9 +265,10 @@ def _build_supervisor(
 
 def _open_recorder(
     config: RunConfig, identity: dict[str, Any], clinician: ClinicianInput, peer: Hello
-) -> Recorder | None:
+) -> Recorder | Unwritten | None:
     """The rerun recorder of ``config.rrd`` (labelled with controller, scenario, seed, rate and
-    mode), or ``None`` without one."""
+    mode), or ``None`` without one, or an :class:`pressor.runtime.shell.boundary.Unwritten` naming why
+    it could not start (the loop raises ``RECORD_ERROR`` on it and goes on)."""
     if config.rrd is None:
         return None
     from pressor.runtime.record.recorder import Recorder
@@ -249,7 +277,10 @@ def _open_recorder(
         f"{identity['controller']}|{peer.name}|seed{peer.patient_seed}|{config.rate_hz}Hz"
         f"|{config.mode}"
     )
-    return Recorder(config.rrd, run_label=label, dose_view=clinician.dose_limits is not None)
+    try:
+        return Recorder(config.rrd, run_label=label, dose_view=clinician.dose_limits is not None)
+    except OSError as exc:  # no room to start it: the run goes on unrecorded (RECORD_ERROR)
+        return Unwritten(f"{config.rrd}: not started: {exc.strerror or exc}")
 
 
 def _markers(
@@ -271,11 +302,14 @@ def _run_loop(
     recorder: Recorder | None,
     cpus: tuple[int, int] | None,
     on_tick: Callable[[int, int, int, float], object] | None,
+    tlog: Any = None,
+    unstarted: Unwritten | None = None,
 ) -> tuple[LoopResult, TargetSource | None]:
     """Run the fixed-rate loop (real time, or lockstep pinned to ``cpus[0]``) under the CPU
     wake-up latency request; return (the loop's result, the runtime's own target or ``None``)."""
     from pressor.runtime.estimation.sources import make_schedule
     from pressor.runtime.inputs.target_source import TargetSource
+    from pressor.runtime.shell.boundary import Boundary
     from pressor.runtime.shell.cpu_latency import CpuLatencyRequest
     from pressor.runtime.shell.loop import Loop
 
@@ -288,7 +322,29 @@ def _run_loop(
         "ack_input": clinician.target_stdin or clinician.target_file is not None,
     }
     # the runtime's own target, in place of the device's (pressor.runtime.inputs.target_source)
-    target = None if clinician.target_mmhg is None else TargetSource(clinician)
+    target = (
+        None
+        if clinician.target_mmhg is None
+        else TargetSource(clinician, max_rate_ml_h=controller.max_rate_ml_h)
+    )
+    if target is None and config.clinician_stdin:  # pressor sil: the clinician's commands only
+        target = TargetSource(
+            ClinicianInput(target_stdin=True),
+            prog=loop_kw["prog"],
+            max_rate_ml_h=controller.max_rate_ml_h,
+            own_target=False,
+        )
+        loop_kw["ack_input"] = True
+    loop_kw["on_stop"] = config.on_stop
+    loop_kw["boundary"] = Boundary(
+        config.period_s,
+        sup.config.pump_max_ml_h or controller.max_rate_ml_h,
+        [("tlog", tlog), ("recording", recorder or unstarted)],
+        loop_kw["prog"],
+        # pressor run: the device's target is bound as the clinician's (pressor sil's device is
+        # the simulator, whose targets the in-process trial takes unbounded too)
+        target_limits=None if config.clinician is None else (TARGET_MIN_MMHG, TARGET_MAX_MMHG),
+    )
     loop = Loop(controller, sup, ep, target=target, **loop_kw)
     with CpuLatencyRequest(config.cpu_latency_us) as wake:
         if config.realtime:
@@ -352,6 +408,9 @@ def _summarize(
         faults=report,
         events=events,
     )
+    if target is not None and not target.own_target:  # pressor sil --clinician-stdin
+        record = target.summary()
+        summary["clinician"] = {"acks": record["acks"], "commands": record.get("commands", [])}
     if config.clinician is not None:  # pressor run: where the target came from, the syringe
         summary["target"] = {"source": "device"} if target is None else target.summary()
         summary["syringe"] = {
@@ -363,9 +422,39 @@ def _summarize(
             from pressor.runtime.inputs.dosing import dose_summary
 
             summary["dose"] = dose_summary(
-                result.trajectory["command_ml_h"], config.period_s, clinician, sup.detections
+                result.trajectory["command_ml_h"],
+                config.period_s,
+                clinician,
+                sup.detections,
+                result.trajectory["sim_time_s"],  # elapsed time: a skipped stretch is charged
             )
     return summary
+
+
+def _late_record_error(result: LoopResult, name: str, error: str | None) -> None:
+    """File a writer failure found only when the writer closed (its last write) in the run's
+    record errors, as the loop files the ones it sees (:mod:`pressor.runtime.shell.boundary`)."""
+    if error is not None:
+        result.boundary.setdefault("record", {}).setdefault(name, error)
+
+
+def _write_summary(path: Any, summary: dict[str, Any]) -> None:
+    """Write ``summary`` to ``path`` (JSON); a disk that fails is one line on stderr, not a second
+    error on top of the run's own."""
+    from pressor.runtime.summary import write_json
+
+    try:
+        write_json(path, summary)
+    except OSError as exc:
+        print(f"pressor: summary {path}: cannot be written: {exc.strerror or exc}", file=sys.stderr)
+
+
+def _write_failed_summary(config: RunConfig, identity: dict[str, Any], exc: Exception) -> None:
+    """The summary of a run that ended before its first tick (refused, the link failed): its
+    identity, no ticks, and why (``ended``, ``error``)."""
+    if config.summary is not None:
+        why = f"{type(exc).__name__}: {exc}"
+        _write_summary(config.summary, {**identity, "ticks": 0, "ended": why, "error": why})
 
 
 def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequence[str]) -> int:

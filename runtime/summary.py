@@ -103,6 +103,9 @@ def build_summary(
     """
     tr = result.trajectory
     t, y, r, u = tr["sim_time_s"], tr["map_mmhg"], tr["target_mmhg"], tr["command_ml_h"]
+    # a sample no monitor gives (inf; NaN is "no value") is no measurement: the supervisor held
+    # on it, and the metrics must not average it in (an overshoot of inf %)
+    y = np.where(np.isfinite(y), y, np.nan)
     if t.size < 2:
         metrics: dict[str, Any] = {"error": "fewer than 2 ticks: no metrics"}
     else:
@@ -126,6 +129,10 @@ def build_summary(
         extra["faults"] = faults
     if result.stop_signal is not None:
         extra["interrupted"] = True
+    error = getattr(result, "error", None)
+    if error is not None:  # the run failed (after the safe command): why
+        extra["error"] = f"{type(error).__name__}: {error}"
+    extra.update(getattr(result, "boundary", None) or {})  # record errors, sample times, hellos
     # controller failures the supervisor held on (pressor run), only when there were some: the
     # summaries of other runs keep their bytes
     held = {"controller_faults": result.controller_faults} if result.controller_faults else {}
@@ -258,9 +265,23 @@ def print_fault_table(faults: list[dict[str, Any]], out_of_range: int, out: Any 
     print(f"commands out of [0, max]: {out_of_range}", file=out)
 
 
+def json_ready(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by ``None`` (JSON null: a value that does
+    not exist, as for a metric that does not apply), in nested dicts, lists and tuples."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(v) for v in value]
+    return value
+
+
 def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write ``data`` to ``path`` as sorted, indented JSON, atomically (NaN refused)."""
-    write_atomic(path, json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n")
+    """Write ``data`` to ``path`` as sorted, indented JSON, atomically (a non-finite float is
+    written as null, never as the non-JSON ``NaN`` / ``Infinity``)."""
+    text = json.dumps(json_ready(data), indent=2, sort_keys=True, allow_nan=False)
+    write_atomic(path, text + "\n")
 
 
 def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = "pressor") -> int:
@@ -272,14 +293,16 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
         128 + the signal number when a signal stopped the run (one line on stderr,
         :mod:`pressor.runtime.shell.interrupt`); else 1 if a command left [0, max] or the controller failed
         (``pressor run``: the supervisor held on it, ``supervisor.controller_faults``; a check
-        failed), else 0.
+        failed) or the record is incomplete (a writer failed during the run, ``record``, or an
+        output file cannot be written: one line), else 0.
     """
-    print_summary(summary, result.timing)
-    if result.host:
-        print(f"host: cpu wake-up latency {result.host['cpu_latency']}")
+    # the run is over and the pump has its last command: the files first (a closed stdout, a
+    # reader gone from a pipe, must not cost the record), then the terminal; a file that cannot
+    # be written (a full disk) is one line and exit 1, never a traceback
+    lost = [f"the {name} stopped: {why}" for name, why in summary.get("record", {}).items()]
+    written = []
     if config.summary is not None:
-        write_json(config.summary, summary)
-        print(f"summary: {config.summary}")
+        lost += _write_output("summary", config.summary, summary, written)
     if config.timing is not None:
         status = {
             "loop": result.timing,
@@ -288,8 +311,12 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
             "link": result.link,
             "host": result.host,
         }
-        write_json(config.timing, status)
-        print(f"timing: {config.timing}")
+        lost += _write_output("timing", config.timing, status, written)
+    print_summary(summary, result.timing)
+    if result.host:
+        print(f"host: cpu wake-up latency {result.host['cpu_latency']}")
+    for line in written:
+        print(line)
     if config.rrd is not None:
         print(f"recording: {config.rrd}\nreplay:    rerun {config.rrd}")
     if result.stop_signal is not None:
@@ -308,4 +335,17 @@ def finish(summary: dict[str, Any], result: Any, config: RunConfig, prog: str = 
             f" {failed[0]['tick']}: {failed[0]['error']}",
             file=sys.stderr,
         )
-    return 1 if summary["metrics"].get("commands_out_of_range") or failed else 0
+    if lost:
+        print(f"{prog}: the record is incomplete: {'; '.join(lost)}", file=sys.stderr)
+    return 1 if summary["metrics"].get("commands_out_of_range") or failed or lost else 0
+
+
+def _write_output(name: str, path: Path, data: dict[str, Any], written: list[str]) -> list[str]:
+    """Write ``data`` to the ``name`` file ``path`` (its line for the terminal added to
+    ``written``); ``[why]`` if it failed."""
+    try:
+        write_json(path, data)
+    except OSError as exc:
+        return [f"the {name} {path} cannot be written: {exc.strerror or exc}"]
+    written.append(f"{name}: {path}")
+    return []

@@ -455,8 +455,10 @@ PRESSOR_REFUSAL_REASON_CONCENTRATION = 8
 enums["PRESSOR_REFUSAL_REASON"][8] = EnumEntry("PRESSOR_REFUSAL_REASON_CONCENTRATION", """The syringe's concentration is not the one the controller's gain assumes.""")
 PRESSOR_REFUSAL_REASON_PUMP_MAXIMUM = 9
 enums["PRESSOR_REFUSAL_REASON"][9] = EnumEntry("PRESSOR_REFUSAL_REASON_PUMP_MAXIMUM", """The pump's maximum rate is below the controller's maximum command.""")
-PRESSOR_REFUSAL_REASON_ENUM_END = 10
-enums["PRESSOR_REFUSAL_REASON"][10] = EnumEntry("PRESSOR_REFUSAL_REASON_ENUM_END", """""")
+PRESSOR_REFUSAL_REASON_RUNTIME_CONFIG = 10
+enums["PRESSOR_REFUSAL_REASON"][10] = EnumEntry("PRESSOR_REFUSAL_REASON_RUNTIME_CONFIG", """The runtime cannot run as it was started (its options, its drug library or its design were refused before the handshake).""")
+PRESSOR_REFUSAL_REASON_ENUM_END = 11
+enums["PRESSOR_REFUSAL_REASON"][11] = EnumEntry("PRESSOR_REFUSAL_REASON_ENUM_END", """""")
 
 # MAV_AUTOPILOT
 enums["MAV_AUTOPILOT"] = Enum()

@@ -67,11 +67,17 @@ class LinkHealth(NamedTuple):
         Time (s) since any frame was received from the device.
     link_errors
         Frames the link layer discarded since the previous tick.
+    boundary_faults
+        Fault bits the shell found in the tick's inputs before the core
+        (:data:`pressor.runtime.core.supervisor_config.BOUNDARY_FAULTS`: a sample time that is not
+        finite, runs backwards or disagrees with its tick; a record writer that failed); 0 in
+        process.
     """
 
     sample_age_s: float
     link_silence_s: float
     link_errors: int
+    boundary_faults: int = 0
 
 
 class ControllerError(RuntimeError):
@@ -237,6 +243,7 @@ class ClosedLoopCore:
                 alarms,
                 self._estimated,
                 sched.healthy,
+                link.boundary_faults,
             )
         )
         raw = None

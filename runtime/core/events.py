@@ -15,7 +15,7 @@ import sys
 from typing import Any, TextIO
 
 from pressor.runtime.core.closed_loop import TickRecord
-from pressor.runtime.core.supervisor_config import Fault, State, fault_names
+from pressor.runtime.core.supervisor_config import DOSE_FAULTS, Fault, State, fault_names
 
 
 class EventLog:
@@ -94,6 +94,21 @@ class EventLog:
                 f"{out.state.name}: advisory {', '.join(fault_names(out.new_faults))}",
                 warn=False,
             )
+
+    def dose(self, rec: TickRecord, reason: str) -> None:
+        """A dose limit started cutting the command, or its shortfall alarm rose: one line on
+        stderr and in the recording naming the limit (the dose guard's ``reason``)."""
+        inp, out = rec.inputs, rec.supervisor
+        names = ", ".join(fault_names(out.new_faults & DOSE_FAULTS))
+        line = f"{names} at {inp.sim_time_s:g} s, tick {inp.tick}: {reason}"
+        print(f"{self.prog}: {line}", file=self.err or sys.stderr, flush=True)
+        if self.recorder is not None:
+            self.recorder.event(inp.tick, inp.sim_time_s, line, warn=True)
+
+    def note(self, tick: int, sim_time_s: float, text: str) -> None:
+        """An event of the loop itself (not of a tick's record): to the recording's event log."""
+        if self.recorder is not None:
+            self.recorder.event(tick, sim_time_s, text, warn=True)
 
     def _controller_fault(self, rec: TickRecord) -> None:
         inp, out = rec.inputs, rec.supervisor

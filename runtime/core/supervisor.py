@@ -27,6 +27,11 @@ HOLD
 FAILSAFE
     Link loss (immediately) or a long fault: the command ramps at ``failsafe_ramp_ml_h_per_s`` to
     ``safe_rate_ml_h`` (``None``: keep the held rate). Alarm raised.
+STOPPED, MANUAL
+    The clinician's (:meth:`Supervisor.command`): ``stop`` commands 0 ml/h at once and holds it,
+    ``manual`` a rate of the clinician's, from any state, whatever the faults (still detected and
+    alarmed); only the clinician's ``resume`` leaves them (RECOVERING, or HOLD while a fault
+    persists). The controller is not stepped meanwhile.
 RECOVERING
     From HOLD or FAILSAFE once every input has been good for ``recover_after_s``, or at once on a
     clinician's acknowledgement (:meth:`Supervisor.acknowledge`) at a tick without a holding fault:
@@ -65,7 +70,6 @@ from __future__ import annotations
 
 import math
 
-from pressor.contracts.faults import PUMP_ALARM_WATCHDOG
 from pressor.runtime.core.dose_guard import DoseGuard
 from pressor.runtime.core.flatline import FlatlineRules
 from pressor.runtime.core.supervisor_config import (
@@ -82,6 +86,7 @@ from pressor.runtime.core.supervisor_io import (
     SupervisorInput,
     SupervisorOutput,
     judge_ack,
+    judge_command,
 )
 
 __all__ = ["AckOutcome", "Supervisor", "SupervisorInput", "SupervisorOutput"]
@@ -166,14 +171,21 @@ class Supervisor:
         self._fault_since_s: float | None = None
         self._good_since_s: float | None = None
         self._now_s = 0.0
+        self._short_mmhg = math.nan
         self._run_controller = False
         self._entry_state = State.STARTUP
         self._mismatch_since_s: float | None = None
         self._out_of_box_since_s: float | None = None
         self._ack_requested = False
         self.last_ack: AckOutcome | None = None
-        self._latched = 0  # controller faults kept until acknowledged (controller_faults="latch")
+        self._clinician: tuple[str, float] | None = None
+        self.last_command: AckOutcome | None = None
+        self._manual_ml_h = 0.0
+        self._latched = 0  # faults kept until acknowledged (controller faults, DEVICE_CHANGED)
         self._latch = cfg.controller_faults == "latch"
+        # the largest delivered rate a pump status may report (ml/h; float32 on the wire)
+        pump_max = cfg.max_rate_ml_h if cfg.pump_max_ml_h is None else cfg.pump_max_ml_h
+        self._pump_max_ml_h = pump_max * (1.0 + 1e-6)
         limits = cfg.dose_limits
         #: the drug library's limits on the final command (None: no library)
         self.dose_guard = None if limits is None else DoseGuard(limits, cfg.sample_period_s)
@@ -182,6 +194,17 @@ class Supervisor:
     def alarm(self) -> bool:
         """True while the supervisor is not in normal automatic control or a fault is present."""
         return self.state in (State.HOLD, State.FAILSAFE) or bool(self.faults & ALARM_FAULTS)
+
+    def latch(self, faults: int) -> None:
+        """Hold on ``faults`` (``DEVICE_CHANGED``) from the next tick until the clinician's
+        acknowledgement clears them, as a latched controller fault (the shell's boundary check)."""
+        self._latched |= int(faults)
+
+    def command(self, kind: str, rate_ml_h: float = 0.0) -> None:
+        """The clinician's ``stop`` (0 ml/h now, held), ``manual`` (``rate_ml_h``, held) or
+        ``resume`` (back to automatic control); judged at the next :meth:`assess`
+        (:func:`pressor.runtime.core.supervisor_io.judge_command`), its outcome in ``last_command``."""
+        self._clinician = (kind, float(rate_ml_h))
 
     def acknowledge(self) -> None:
         """The clinician acknowledges the alarm and asks to resume; judged at the next
@@ -261,12 +284,14 @@ class Supervisor:
         cfg = self.config
         if delivered != delivered:  # no fresh status: neither fault nor evidence of health
             return 0
+        if not 0.0 <= delivered <= self._pump_max_ml_h:  # no pump delivers that: inf, < 0, > max
+            self._mismatch_since_s = now_s
+            return _PUMP_MISMATCH | (_PUMP_ALARM if alarms & cfg.pump_alarm_mask else 0)
         faults = 0
         if alarms & cfg.pump_alarm_mask:
+            # the held command stays the runtime's own: a status (the watchdog bit's included)
+            # never sets what the runtime commands (docs/PROTOCOL.md, "Quality and alarm bits")
             faults |= _PUMP_ALARM
-            if alarms & PUMP_ALARM_WATCHDOG:
-                # the pump fell back to its own safe rate: hold *that*, re-enter from it
-                self.command_ml_h = _clamp(delivered, cfg.max_rate_ml_h)
         sent = self.command_ml_h
         if alarms & cfg.pump_alarm_mask or abs(delivered - sent) <= max(
             cfg.pump_mismatch_abs_ml_h, cfg.pump_mismatch_rel * abs(sent)
@@ -285,6 +310,7 @@ class Supervisor:
         now_s = inp.now_s
         cfg = self.config
         self._now_s = now_s
+        self._short_mmhg = inp.target_mmhg - inp.map_mmhg  # how far below the target (dose guard)
         self._entry_state = self.state
         faults = 0
         if inp.link_silence_s >= cfg.link_loss_after_s - _EPS_S:
@@ -301,7 +327,7 @@ class Supervisor:
         faults |= self._check_pump(now_s, inp.pump_delivered_ml_h, inp.pump_alarms)
         if inp.estimated:
             faults |= self._check_estimate(now_s, inp)
-        faults |= self._latched
+        faults |= inp.boundary_faults | self._latched
         self.faults = faults
         state = self.state
         if faults & self._holding_faults:
@@ -334,6 +360,14 @@ class Supervisor:
                 state = State.RECOVERING
                 self._latched = 0
                 self.faults = faults & ~latched
+        self.last_command = None
+        if self._clinician is not None:  # the clinician's stop, manual rate or resume
+            kind, rate = self._clinician
+            self._clinician = None
+            self.last_command = judge_command(kind, state, faults & self._holding_faults, rate)
+            state = self.last_command.state
+            if state == State.MANUAL:
+                self._manual_ml_h = rate
         self.state = state
         self._run_controller = state in (State.AUTO, State.RECOVERING)
         return self._run_controller
@@ -379,13 +413,17 @@ class Supervisor:
             step = cfg.failsafe_ramp_ml_h_per_s * cfg.sample_period_s
             delta = goal - previous
             command = goal if abs(delta) <= step else previous + (step if delta > 0.0 else -step)
-        elif state == State.STARTUP:
+        elif state == State.STARTUP or state == State.STOPPED:
             command = 0.0
+        elif state == State.MANUAL:
+            command = self._manual_ml_h
         else:  # HOLD
             command = previous
         command = _clamp(command, high)
         if self.dose_guard is not None:  # the last word: the drug library's dose limits
-            command, dose_faults = self.dose_guard.limit(command)
+            command, dose_faults = self.dose_guard.limit(
+                command, self._now_s, self._short_mmhg, chosen=state == State.MANUAL
+            )
             self.faults |= dose_faults
         self.command_ml_h = command
         self.state = state

@@ -74,12 +74,29 @@ def detection_bounds(cfg: SupervisorConfig) -> list[tuple[str, str]]:
         (
             "PUMP_ALARM",
             "pump status reports occlusion, empty reservoir or pump watchdog; the tick the status"
-            " arrives (1 tick after the cause)",
+            " arrives (1 tick after the cause); the held command stays the runtime's own",
         ),
         (
             "PUMP_MISMATCH",
             f"|delivered - command| > max({cfg.pump_mismatch_abs_ml_h} ml/h,"
-            f" {cfg.pump_mismatch_rel:g} x command) for {cfg.pump_mismatch_s} s",
+            f" {cfg.pump_mismatch_rel:g} x command) for {cfg.pump_mismatch_s} s; at once for a"
+            " delivered rate no pump gives (infinite, negative, above the pump's maximum)",
+        ),
+        (
+            "SAMPLE_TIME",
+            "the sample's sim_time_s not finite, earlier than the previous one, or not tick x"
+            f" {ts} s within half a period; same tick, the sample not used",
+        ),
+        (
+            "RECORD_ERROR",
+            "a writer of the record (.tlog, .rrd) failed (full disk, I/O error); the record"
+            " stops, control goes on; advisory alarm for the rest of the run",
+        ),
+        (
+            "DEVICE_CHANGED",
+            "a device hello in the middle of the run changes drug, concentration, pump maximum,"
+            " noise, sample period or link mode: refused on the wire (the run keeps the first"
+            " hello), held until the clinician's ack",
         ),
         (
             "ESTIMATOR_FALLBACK",

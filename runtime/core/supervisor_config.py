@@ -45,7 +45,9 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
   advance to k, one tick after the cause). After a pump watchdog trip the held command is re-based
   on the pump's delivered (safe) rate, so re-entry slews from what the pump actually does;
 - ``PUMP_MISMATCH`` the delivered rate differs from the command sent one tick earlier by more than
-  max(``pump_mismatch_abs_ml_h``, ``pump_mismatch_rel`` × command) for ``pump_mismatch_s``;
+  max(``pump_mismatch_abs_ml_h``, ``pump_mismatch_rel`` × command) for ``pump_mismatch_s``; at
+  once when the status reports a rate no pump delivers (infinite, negative, or above
+  ``pump_max_ml_h``, the device's announced pump maximum; default ``max_rate_ml_h``);
 - ``ESTIMATOR_FALLBACK`` (``--schedule estimated`` only) the online estimator's health check
   rejected its estimate (diverged, non-finite, K or T implausible): the scheduling source reports
   the prior (the nominal patient) instead, so the safe action is already taken - the controller is
@@ -54,9 +56,24 @@ Fault kinds (bit flags, :class:`Fault`) and detection bounds (at 10 Hz, defaults
 - ``ESTIMATE_OUT_OF_BOX`` (``--schedule estimated`` only) the estimate the controller is scheduled
   on has been outside ``sched_box`` for ``estimate_box_s`` (default 60 s) without a break;
   advisory alarm (the controller clamps ρ to its box, as it does with any scheduling value);
+- ``SAMPLE_TIME`` (the shell's boundary check, :mod:`pressor.runtime.shell.boundary`) the MAP sample's
+  ``sim_time_s`` is not finite, runs backwards, or is not its tick times the period (within half a
+  period; a tick number that jumped while the time did not): the sample is not used, the loop runs
+  on the tick's own time (tick × period) and holds; the next sample with a consistent time clears
+  it;
+- ``RECORD_ERROR`` a record writer (the ``.tlog``, the ``.rrd``) failed (disk full, I/O error): the
+  record stops there, control goes on; advisory, alarm raised for the rest of the run;
+- ``DEVICE_CHANGED`` a hello in the middle of the run announces another drug, concentration, pump
+  maximum, monitor noise, sample period or link mode than the first one (:mod:`pressor.runtime.shell.boundary`):
+  the run keeps the first hello's terms, the device is sent a PRESSOR_REFUSAL, and the loop
+  holds until the clinician acknowledges (latched like a controller fault);
 - ``DOSE_HARD_LIMIT``, ``DOSE_SOFT_LIMIT``, ``DOSE_HOUR_LIMIT`` (``pressor run``, with
-  ``dose_limits`` from the drug library) the final command is cut to the hard or the hourly dose
-  maximum, or lies above the soft one (:mod:`pressor.runtime.core.dose_guard`); advisory, alarm raised.
+  ``dose_limits`` from the drug library) the final command is cut to the hard dose maximum, to
+  the soft one (unless the clinician confirmed doses above it, then only flagged), or to what the
+  sliding hour allows, tapered over 10 min and charged on elapsed time
+  (:mod:`pressor.runtime.core.dose_guard`); ``DOSE_SHORTFALL`` a cut held 10 min with MAP more than 5 mmHg
+  below the target: the patient cannot be brought to target within the limits; advisory, alarm
+  raised (the guard's ``reason`` names the limit and the shortfall).
 
 The pump checks need a pump status of this tick (``pump_delivered_ml_h`` not NaN); a missing one is
 not a fault (the link watchdogs cover silence).
@@ -79,6 +96,7 @@ from pressor.contracts.faults import (
 from pressor.runtime.core.dose_guard import (
     DOSE_HARD_LIMIT,
     DOSE_HOUR_LIMIT,
+    DOSE_SHORTFALL,
     DOSE_SOFT_LIMIT,
     DoseLimits,
 )
@@ -92,6 +110,8 @@ class State(IntEnum):
     HOLD = 2
     FAILSAFE = 3
     RECOVERING = 4
+    STOPPED = 5
+    MANUAL = 6
 
 
 class Fault(IntFlag):
@@ -120,10 +140,16 @@ class Fault(IntFlag):
     DOSE_SOFT_LIMIT = DOSE_SOFT_LIMIT
     DOSE_HOUR_LIMIT = DOSE_HOUR_LIMIT
     CONTROLLER_FAULT = 1 << 21
+    SAMPLE_TIME = 1 << 22
+    RECORD_ERROR = 1 << 23
+    DEVICE_CHANGED = 1 << 24
+    DOSE_SHORTFALL = DOSE_SHORTFALL
 
 
 #: the drug library's faults (advisory: the command is cut, the state unchanged)
-DOSE_FAULTS = Fault.DOSE_HARD_LIMIT | Fault.DOSE_SOFT_LIMIT | Fault.DOSE_HOUR_LIMIT
+DOSE_FAULTS = (
+    Fault.DOSE_HARD_LIMIT | Fault.DOSE_SOFT_LIMIT | Fault.DOSE_HOUR_LIMIT | Fault.DOSE_SHORTFALL
+)
 
 
 #: the controller's own faults: what ``controller_faults="latch"`` keeps until acknowledged
@@ -133,10 +159,15 @@ CONTROLLER_FAULTS = Fault.CONTROLLER_FAULT | Fault.COMMAND_INVALID
 #: (``pressor run``: both hold until the clinician acknowledges)
 CONTROLLER_FAULT_ACTIONS = ("stop", "latch")
 
+#: faults the shell finds at the boundary, before the core (:mod:`pressor.runtime.shell.boundary`): handed
+#: to the supervisor in ``SupervisorInput.boundary_faults``
+BOUNDARY_FAULTS = Fault.SAMPLE_TIME | Fault.RECORD_ERROR | Fault.DEVICE_CHANGED
+
 #: faults that never change the state (the command is clamped and the event logged)
 ADVISORY = (
     Fault.COMMAND_CLAMPED
     | Fault.LINK_ERRORS
+    | Fault.RECORD_ERROR
     | Fault.ESTIMATOR_FALLBACK
     | Fault.ESTIMATE_OUT_OF_BOX
     | DOSE_FAULTS
@@ -196,6 +227,7 @@ class SupervisorConfig:
     recover_after_s: float = 5.0
     reentry_step_ml_h: float = 0.5
     pump_alarm_mask: int = PUMP_ALARM_MASK
+    pump_max_ml_h: float | None = None
     pump_mismatch_s: float = 1.0
     pump_mismatch_abs_ml_h: float = 1.0
     pump_mismatch_rel: float = 0.05
@@ -237,6 +269,11 @@ class SupervisorConfig:
         need("failsafe_ramp_ml_h_per_s", self.failsafe_ramp_ml_h_per_s > 0.0, "> 0 ml/h/s")
         need("recover_after_s", self.recover_after_s >= 0.0, ">= 0 s")
         need("reentry_step_ml_h", self.reentry_step_ml_h > 0.0, "> 0 ml/h per tick")
+        need(
+            "pump_max_ml_h",
+            self.pump_max_ml_h is None or self.max_rate_ml_h <= self.pump_max_ml_h <= 10000.0,
+            "None or [max_rate_ml_h, 10000] ml/h",
+        )
         need("pump_mismatch_s", self.pump_mismatch_s >= 0.0, ">= 0 s")
         need("pump_mismatch_abs_ml_h", self.pump_mismatch_abs_ml_h > 0.0, "> 0 ml/h")
         need("pump_mismatch_rel", 0.0 <= self.pump_mismatch_rel <= 1.0, "[0, 1]")

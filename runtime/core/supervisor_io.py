@@ -57,6 +57,9 @@ class SupervisorInput(NamedTuple):
         Whether the online estimator runs (``--schedule estimated`` or ``validated``).
     estimate_healthy
         False when the estimator rejected its estimate and reports the prior instead.
+    boundary_faults
+        Fault bits the shell found at the boundary before the core (``SAMPLE_TIME``,
+        ``RECORD_ERROR``; :data:`pressor.runtime.core.supervisor_config.BOUNDARY_FAULTS`); 0 in process.
     """
 
     now_s: float
@@ -74,6 +77,7 @@ class SupervisorInput(NamedTuple):
     pump_alarms: int
     estimated: bool
     estimate_healthy: bool
+    boundary_faults: int
 
 
 class SupervisorOutput(NamedTuple):
@@ -146,3 +150,35 @@ def judge_ack(state: State, holding_faults: int, latched: int = 0) -> AckOutcome
     if latched:
         text += f" ({', '.join(fault_names(latched))} acknowledged)"
     return AckOutcome(True, state, 0, text)
+
+
+#: the clinician's commands (``pressor run``: lines on stdin or in the target file)
+CLINICIAN_COMMANDS = ("stop", "manual", "resume")
+
+
+def judge_command(kind: str, state: State, holding_faults: int, rate_ml_h: float) -> AckOutcome:
+    """Judge the clinician's ``stop``, ``manual`` (at ``rate_ml_h``, ml/h) or ``resume`` taken at a
+    tick whose state is ``state`` and whose holding fault bits are ``holding_faults``.
+
+    ``stop`` and ``manual`` are always accepted (the clinician's hand is on the pump: the state
+    becomes STOPPED, 0 ml/h, or MANUAL at the rate); ``resume`` from STOPPED or MANUAL goes to
+    RECOVERING (the controller again, its command reached by the bumpless slew), or to HOLD at the
+    current command while a fault persists (which ends as any HOLD does); elsewhere it is ignored.
+    The outcome's ``state`` is the state after the command.
+    """
+    if kind == "stop":
+        return AckOutcome(True, State.STOPPED, 0, f"{state.name} -> STOPPED: 0 ml/h until resume")
+    if kind == "manual":
+        return AckOutcome(
+            True, State.MANUAL, 0, f"{state.name} -> MANUAL: {rate_ml_h:g} ml/h until resume"
+        )
+    if state not in (State.STOPPED, State.MANUAL):
+        return AckOutcome(False, state, 0, f"resume ignored: {state.name}, not stopped or manual")
+    if holding_faults:
+        persists = ", ".join(fault_names(holding_faults))
+        return AckOutcome(
+            True, State.HOLD, holding_faults, f"{state.name} -> HOLD: fault persists: {persists}"
+        )
+    return AckOutcome(
+        True, State.RECOVERING, 0, f"{state.name} -> RECOVERING, resuming automatic control"
+    )

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -102,19 +104,93 @@ def split_ack(text: str) -> tuple[str, bool]:
     return "\n".join(rest), len(rest) < len(lines)
 
 
+def split_commands(
+    text: str, max_rate_ml_h: float
+) -> tuple[str, list[tuple[str, float]], list[str]]:
+    """The clinician's command lines in ``text`` (case and surrounding blanks ignored): ``stop``
+    (0 ml/h now, held), ``manual RATE`` (RATE ml/h in [0, ``max_rate_ml_h``], held), ``resume``
+    (back to automatic control).
+
+    Returns
+    -------
+    tuple
+        The text without them (the target and ``ack`` lines), the commands as ``(kind, ml/h)``
+        in order, and one refusal line per malformed one (``manual`` without a rate in range).
+    """
+    rest, commands, refused = [], [], []
+    for line in text.splitlines():
+        words = line.strip().lower().split()
+        if words in (["stop"], ["resume"]):
+            commands.append((words[0], 0.0))
+        elif words and words[0] == "manual":
+            try:
+                if len(words) != 2:
+                    raise ValueError(f"{line.strip()!r}: give one rate, e.g. 'manual 20'")
+                rate = number_in(words[1], 0.0, max_rate_ml_h, "ml/h")
+            except ValueError as exc:
+                refused.append(f"manual {exc}")
+            else:
+                commands.append(("manual", rate))
+        else:
+            rest.append(line)
+    return "\n".join(rest), commands, refused
+
+
 def parse_target(text: str) -> float:
     """A MAP target (mmHg) from ``text``; ``ValueError`` naming the allowed range otherwise."""
     return number_in(text, TARGET_MIN_MMHG, TARGET_MAX_MMHG, "mmHg")
 
 
-def read_target_file(path: Path) -> float:
-    """The target (mmHg) ``path`` holds (an ``ack`` line in it is not a target); ``ValueError`` if
-    it cannot be read or is out of range."""
+#: the largest clinician's input file read (bytes): a target and a few command lines
+MAX_INPUT_FILE_BYTES = 4096
+_FILE_KINDS = (
+    (stat.S_ISFIFO, "a FIFO"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+    (stat.S_ISDIR, "a directory"),
+)
+
+
+def read_input_file(path: Path) -> str:
+    """The text of the clinician's input file ``path``, read without ever blocking.
+
+    A FIFO no one writes would block an ``open()`` (and with it the loop's tick, and the stop
+    signals it polls), a device file would never end: the file is opened non-blocking and only a
+    regular file of at most :data:`MAX_INPUT_FILE_BYTES` bytes is read.
+
+    Raises
+    ------
+    ValueError
+        ``cannot read: CAUSE``, ``not a regular file (a FIFO)`` (or another kind), or a file
+        longer than :data:`MAX_INPUT_FILE_BYTES` bytes.
+    """
     try:
-        text = path.read_text(encoding="ascii", errors="replace")
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
     except OSError as exc:
         raise ValueError(f"cannot read: {exc.strerror}") from None
-    return parse_target(split_ack(text)[0])
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = next((name for test, name in _FILE_KINDS if test(st.st_mode)), "another kind")
+            raise ValueError(f"not a regular file ({kind})")
+        if st.st_size > MAX_INPUT_FILE_BYTES:
+            raise ValueError(
+                f"{st.st_size} bytes: a target file holds a number and command lines, at most"
+                f" {MAX_INPUT_FILE_BYTES} bytes"
+            )
+        data = os.read(fd, MAX_INPUT_FILE_BYTES)
+    except OSError as exc:
+        raise ValueError(f"cannot read: {exc.strerror}") from None
+    finally:
+        os.close(fd)
+    return data.decode("ascii", "replace")
+
+
+def read_target_file(path: Path) -> float:
+    """The target (mmHg) ``path`` holds (an ``ack`` line in it is not a target); ``ValueError`` if
+    it cannot be read (:func:`read_input_file`) or is out of range."""
+    return parse_target(split_commands(split_ack(read_input_file(path))[0], math.inf)[0])
 
 
 def argtype(name: str, parse: Any) -> Any:
@@ -169,8 +245,10 @@ def add_clinician_options(p: argparse.ArgumentParser) -> None:
         "--target-stdin",
         action="store_true",
         help=f"read a new MAP target (mmHg, {rng}) from each line on stdin while running, or"
-        " 'ack' to acknowledge an alarm and resume automatic control once the fault cleared;"
-        " needs --target-mmhg or --target-file for the starting target (default: off)",
+        " 'ack' to acknowledge an alarm and resume automatic control once the fault cleared, or"
+        " 'stop' (0 ml/h now, held), 'manual RATE' (ml/h, held), 'resume' (back to automatic"
+        " control; the same lines work in --target-file); needs --target-mmhg or --target-file"
+        " for the starting target (default: off)",
     )
     p.add_argument(
         "--drug",

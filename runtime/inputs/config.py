@@ -44,6 +44,10 @@ DEFAULT_RATE_HZ = 10.0
 MAX_RATE_HZ = 1000.0
 
 
+#: what ``--on-stop`` may choose: the last command of a run a signal stopped
+STOP_COMMANDS = ("held", "zero")
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """One runtime run, as the command line asked for it (checked by :func:`run_config`).
@@ -84,6 +88,13 @@ class RunConfig:
         (``pressor sil``): the device's target, the shipped designs' drug and concentration.
     sample_age_limit_s
         Age (s) past which the held MAP sample is stale (the supervisor's ``STALE_SAMPLE``).
+    on_stop
+        The last command a stop signal sends (``--on-stop``): ``held`` (the safe rate, else the
+        last rate held, mode SAFE) or ``zero`` (0 ml/h, mode STOP).
+    clinician_stdin
+        ``pressor sil --clinician-stdin``: the clinician's ``ack``, ``stop``, ``manual RATE`` and
+        ``resume`` on stdin, the target staying the device's (``pressor run`` has them on its
+        target inputs).
     """
 
     controller: str
@@ -104,6 +115,8 @@ class RunConfig:
     signed: bool = True
     clinician: ClinicianInput | None = None
     sample_age_limit_s: float = DEFAULT_SAMPLE_AGE_LIMIT_S
+    on_stop: str = "held"
+    clinician_stdin: bool = False
 
     @property
     def period_s(self) -> float:
@@ -217,6 +230,14 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
         help="lockstep: give up after this many wall-clock seconds without a sample (s)",
     )
     p.add_argument(
+        "--on-stop",
+        choices=STOP_COMMANDS,
+        default="held",
+        help="the last command SIGINT / SIGTERM sends before the run ends: held (default: the"
+        " safe rate, which is the last rate held, mode SAFE: the pump keeps the patient's"
+        " infusion) or zero (0 ml/h, mode STOP: the infusion stops)",
+    )
+    p.add_argument(
         "--sample-age-limit-s",
         type=positive("--sample-age-limit-s", 60.0),
         default=DEFAULT_SAMPLE_AGE_LIMIT_S,
@@ -280,7 +301,13 @@ def run_config(
             design = binding_of(controller)
         except ValueError as exc:
             raise UsageError(f"--controller {args.controller}: {exc}") from None
-        clinician = bind_syringe(clinician, design, args.controller, args.drug_library)
+        clinician = bind_syringe(
+            clinician,
+            design,
+            args.controller,
+            args.drug_library,
+            getattr(args, "confirm_above_soft_limit", False),
+        )
     try:
         specs = tuple(parse_faults(args.fault))
     except FaultSpecError as exc:
@@ -304,6 +331,7 @@ def run_config(
         signed=not args.no_signing,
         clinician=clinician,
         sample_age_limit_s=args.sample_age_limit_s,
+        on_stop=args.on_stop,
     )
 
 

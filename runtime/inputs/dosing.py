@@ -42,7 +42,8 @@ def parse_weight(text: str) -> float:
 
 
 def add_dosing_options(p: argparse.ArgumentParser) -> None:
-    """Add ``--weight-kg`` and ``--drug-library`` to ``p`` (``pressor run``)."""
+    """Add ``--weight-kg``, ``--confirm-above-soft-limit`` and ``--drug-library`` to ``p``
+    (``pressor run``)."""
     p.add_argument(
         "--weight-kg",
         type=argtype("--weight-kg", parse_weight),
@@ -51,6 +52,13 @@ def add_dosing_options(p: argparse.ArgumentParser) -> None:
         help=f"the patient's weight (kg, allowed [{WEIGHT_MIN_KG:g}, {WEIGHT_MAX_KG:g}]): required"
         " when the drug library doses the drug per kg (norepinephrine), optional otherwise"
         " (phenylephrine, dosed in ug/min; with it the summary also gives ug/kg/min)",
+    )
+    p.add_argument(
+        "--confirm-above-soft-limit",
+        action="store_true",
+        help="the clinician confirms doses above the drug library's soft maximum: it then only"
+        " raises the advisory DOSE_SOFT_LIMIT (default: off, the command is cut to the soft"
+        " maximum; the hard maximum always cuts)",
     )
     p.add_argument(
         "--drug-library",
@@ -64,7 +72,11 @@ def add_dosing_options(p: argparse.ArgumentParser) -> None:
 
 
 def bind_syringe(
-    clinician: ClinicianInput, design: DrugBinding, controller: str, library: Path | None
+    clinician: ClinicianInput,
+    design: DrugBinding,
+    controller: str,
+    library: Path | None,
+    confirm_above_soft: bool = False,
 ) -> ClinicianInput:
     """Check the syringe and the patient against the design and the library (module docstring).
 
@@ -78,6 +90,9 @@ def bind_syringe(
         The ``--controller`` spec (for the messages).
     library
         ``--drug-library`` (``None``: the shipped library).
+    confirm_above_soft
+        ``--confirm-above-soft-limit``: commands above the soft maximum are only flagged, not
+        cut (:class:`pressor.runtime.core.dose_guard.DoseLimits`).
 
     Returns
     -------
@@ -123,17 +138,22 @@ def bind_syringe(
             f"--weight-kg: required: the drug library doses {design.name} in ug/kg/min (a weight"
             f" {allowed_range(WEIGHT_MIN_KG, WEIGHT_MAX_KG, unit='kg')})"
         )
+    limits = dataclasses.replace(entry.limits(c, weight), confirm_above_soft=confirm_above_soft)
     return dataclasses.replace(
         clinician,
         drug=design.name,
         concentration_ug_ml=c,
-        dose_limits=entry.limits(c, weight),
+        dose_limits=limits,
         dose_unit=entry.unit,
     )
 
 
 def dose_summary(
-    commands_ml_h: Any, period_s: float, clinician: ClinicianInput, detections: dict[str, int]
+    commands_ml_h: Any,
+    period_s: float,
+    clinician: ClinicianInput,
+    detections: dict[str, int],
+    times_s: Any = None,
 ) -> dict[str, Any]:
     """The summary's ``dose`` record of a ``pressor run``.
 
@@ -147,6 +167,10 @@ def dose_summary(
         The bound clinician input (:func:`bind_syringe`).
     detections
         The supervisor's detection counts (the ``DOSE_*`` ones are copied).
+    times_s
+        The run time (s) of each tick: each command is charged until the next tick (the pump runs
+        it that long, a stall or a skipped stretch included), the last one period; ``None``: one
+        period each.
 
     Returns
     -------
@@ -157,7 +181,13 @@ def dose_summary(
     """
     c, w, lim = clinician.concentration_ug_ml, clinician.weight_kg, clinician.dose_limits
     peak = max((float(u) for u in commands_ml_h if u == u), default=0.0)
-    total_ml = math.fsum(float(u) for u in commands_ml_h if u == u) * period_s / 3600.0
+    u = [float(x) for x in commands_ml_h]
+    if times_s is None:
+        spans = [period_s] * len(u)
+    else:
+        t = [float(x) for x in times_s]
+        spans = [max(b - a, 0.0) for a, b in zip(t, t[1:], strict=False)] + [period_s] * bool(t)
+    total_ml = math.fsum(x * dt for x, dt in zip(u, spans, strict=True) if x == x) / 3600.0
 
     def in_unit(rate_ml_h: float) -> float:
         if clinician.dose_unit == "ug/kg/min":

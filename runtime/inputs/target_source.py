@@ -19,12 +19,20 @@ acknowledges nothing). It is taken at the next tick: the supervisor judges it
 only if no fault holds the loop at that tick) and the outcome is printed on stderr, logged to the
 event log with the tick and the time, and listed in :meth:`~TargetSource.summary` (``acks``).
 
+They carry the clinician's hand on the pump as well: the lines ``stop`` (0 ml/h now, held),
+``manual RATE`` (RATE ml/h, held) and ``resume`` (back to automatic control) are taken at the next
+tick (:meth:`TargetSource.take_commands`), judged by the supervisor
+(:func:`pressor.runtime.core.supervisor_io.judge_command`) and their outcome printed, logged and listed
+in :meth:`~TargetSource.summary` (``commands``). A ``manual`` line without a rate in [0, the
+controller's maximum] is refused with one line. The file as read at start commands nothing.
+
 Which tick a change lands on depends on when it was written in wall-clock time, so a lockstep run
 with live changes is not reproducible byte for byte; a run with a fixed ``--target-mmhg`` is.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import sys
@@ -34,7 +42,13 @@ from typing import Any, TextIO
 
 from pressor.link import TickInputs
 from pressor.runtime.core.supervisor import AckOutcome
-from pressor.runtime.inputs.clinician import ClinicianInput, parse_target, split_ack
+from pressor.runtime.inputs.clinician import (
+    ClinicianInput,
+    parse_target,
+    read_input_file,
+    split_ack,
+    split_commands,
+)
 
 
 class TargetSource:
@@ -50,6 +64,11 @@ class TargetSource:
         Where refusals are reported (default ``sys.stderr``).
     prog
         Program name in front of each reported line.
+    max_rate_ml_h
+        The largest rate (ml/h) a ``manual`` command may set: the controller's maximum.
+    own_target
+        ``False`` (``pressor sil --clinician-stdin``): the device's target stays, stdin carries
+        only ``ack``, ``stop``, ``manual RATE`` and ``resume``; a number is refused.
     """
 
     def __init__(
@@ -59,10 +78,14 @@ class TargetSource:
         stdin_fd: int = 0,
         err: TextIO | None = None,
         prog: str = "pressor run",
+        max_rate_ml_h: float = 120.0,
+        own_target: bool = True,
     ) -> None:
-        if clinician.target_mmhg is None:
+        if clinician.target_mmhg is None and own_target:
             raise ValueError("TargetSource needs a starting target")
-        self.initial_mmhg = float(clinician.target_mmhg)
+        #: whether the runtime sets the target (else the device's stays: commands only)
+        self.own_target = own_target
+        self.initial_mmhg = math.nan if clinician.target_mmhg is None else clinician.target_mmhg
         #: the current target (mmHg)
         self.target_mmhg = self.initial_mmhg
         #: applied changes: tick, sim_time_s, old_mmhg, new_mmhg, source
@@ -72,6 +95,11 @@ class TargetSource:
         #: acknowledgements taken: tick, sim_time_s, from, state, accepted, outcome
         self.acks: list[dict[str, Any]] = []
         self._pending_acks: list[str] = []
+        #: the clinician's commands taken: tick, sim_time_s, from, command, rate_ml_h, state,
+        #: outcome
+        self.commands: list[dict[str, Any]] = []
+        self._pending_commands: list[tuple[str, float, str]] = []
+        self.max_rate_ml_h = float(max_rate_ml_h)
         self._path = clinician.target_file
         # never a real state: the first poll reads the file again (it may have changed since
         # the command line read the starting target)
@@ -94,10 +122,10 @@ class TargetSource:
             state = _file_state(path)
             if state != self._file_state:
                 self._file_state = state
-                try:
-                    text = path.read_text(encoding="ascii", errors="replace")
-                except OSError as exc:
-                    self._refuse(f"file {path}", f"cannot read: {exc.strerror}")
+                try:  # never blocks: a FIFO or a device in its place is refused (a ValueError)
+                    text = read_input_file(path)
+                except ValueError as exc:
+                    self._refuse(f"file {path}", str(exc))
                 else:  # the file as read at start acknowledges nothing
                     first, self._first_read = self._first_read, False
                     self._offer(text, f"file {path}", ack=not first)
@@ -126,8 +154,16 @@ class TargetSource:
         text, acked = split_ack(text)
         if acked and ack:
             self._pending_acks.append(source)
+        text, commands, refused = split_commands(text, self.max_rate_ml_h)
+        if ack:  # as for ack: the file as read at start commands nothing
+            self._pending_commands += [(kind, rate, source) for kind, rate in commands]
+            for why in refused:
+                self._refuse_command(source, why)
         if not text.strip():
             return  # an empty file (being rewritten) or a blank line
+        if not self.own_target:
+            self._refuse_command(source, f"{text.strip()!r}: the target is the device's here")
+            return
         try:
             self._pending.append((parse_target(text), source))
         except ValueError as exc:
@@ -147,6 +183,12 @@ class TargetSource:
         logged to ``recorder`` (a :class:`pressor.runtime.record.recorder.Recorder`) when given."""
         self.poll()
         tick, t = inp.tick, inp.sim_time_s
+        if not self.own_target:  # commands only: the device's target and the tick as they came
+            for line in self._pending_refusals:
+                if recorder is not None:
+                    recorder.event(tick, t, line, warn=True)
+            self._pending_refusals.clear()
+            return inp
         if not self._announced:
             self._announced = True
             if recorder is not None:
@@ -173,6 +215,42 @@ class TargetSource:
                 recorder.event(tick, t, f"target {old:g} -> {value:g} mmHg ({source})", warn=False)
         self._pending.clear()
         return replace(inp, target_mmhg=self.target_mmhg, target_tick=tick)
+
+    def _refuse_command(self, source: str, why: str) -> None:
+        line = f"command from {source} refused: {why}"
+        print(f"{self._prog}: {line}", file=self._err or sys.stderr)
+        self._pending_refusals.append(line)
+        self.refused += 1
+
+    def take_commands(self) -> list[tuple[str, float, str]]:
+        """The clinician's commands read since the last call: ``(kind, ml/h, source)``."""
+        commands, self._pending_commands = self._pending_commands, []
+        return commands
+
+    def log_command(
+        self, outcome: AckOutcome, command: tuple[str, float, str], tick: int, t: float,
+        recorder: Any = None,
+    ) -> None:  # fmt: skip
+        """Keep, print and log what became of the clinician's ``command`` at ``tick`` (time
+        ``t``, s): the summary's ``commands`` (``tick``, ``sim_time_s``, ``from``, ``command``,
+        ``rate_ml_h``, ``state``, ``outcome``)."""
+        kind, rate, source = command
+        said = f"{kind} {rate:g}" if kind == "manual" else kind
+        self.commands.append(
+            {
+                "tick": tick,
+                "sim_time_s": t,
+                "from": source,
+                "command": kind,
+                "rate_ml_h": rate if kind == "manual" else None,
+                "state": outcome.state.name,
+                "outcome": outcome.text,
+            }
+        )
+        line = f"{said} ({source}) at {t:g} s, tick {tick}: {outcome.text}"
+        print(f"{self._prog}: {line}", file=self._err or sys.stderr)
+        if recorder is not None:
+            recorder.event(tick, t, line, warn=kind != "resume")
 
     def take_acks(self) -> list[str]:
         """The sources of the acknowledgements read since the last call (taken by the tick)."""
@@ -209,6 +287,7 @@ class TargetSource:
             "changes": list(self.changes),
             "refused": self.refused,
             "acks": list(self.acks),
+            **({"commands": list(self.commands)} if self.commands else {}),
         }
 
 

@@ -13,8 +13,11 @@ Reproducibility: the wall-clock ``log_time`` and ``log_tick`` timelines are disa
 properties (which carry the wall-clock start time) are not sent, and the recording id is derived from
 the run's label, so two runs with the same seed log the same values on the same timelines.
 
-The file is written to a hidden temporary name next to the target and renamed on :meth:`close`; a
-run that fails (:meth:`abort`) never leaves a half-written or clobbered ``FILE.rrd``.
+The file is written to a hidden temporary name next to the target and renamed on :meth:`close`,
+whether the run succeeded or failed (:meth:`abort` keeps it too): the record of a run that went
+wrong is kept. Buffered rows go to rerun at least once a second of wall time. A writer failure
+(rerun's file sink on a full disk) never reaches the loop: the recording stops there and
+:attr:`Recorder.error` says why (the loop's advisory ``RECORD_ERROR``).
 
 Entities (units in the names): see :data:`CHANNELS`; besides them, the design box of a scheduled
 controller (:meth:`Recorder.use_controller`, two points per bound: first and last tick), markers on
@@ -25,7 +28,11 @@ plot at each supervisor transition. The viewer's layout is
 
 from __future__ import annotations
 
+import errno
 import math
+import os
+import threading
+import time
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
@@ -81,6 +88,8 @@ CHANNELS: tuple[tuple[str, str], ...] = (
     ("/schedule/estimated/tau_lo_s", "tau 90 % interval low (s)"),
     ("/schedule/estimated/tau_hi_s", "tau 90 % interval high (s)"),
 )
+#: free space (bytes) the recording needs on its disk to start
+MIN_FREE_BYTES = 1 << 20
 #: standard normal quantile of a two-sided 90 % band (K and T bands from their standard deviations)
 _Z90 = 1.6449
 CHANNEL_INDEX: dict[str, int] = {path: i for i, (path, _) in enumerate(CHANNELS)}
@@ -115,6 +124,14 @@ class Recorder:
         self.path = Path(path)
         if not self.path.parent.is_dir():
             raise FileNotFoundError(f"{self.path}: directory {self.path.parent} does not exist")
+        st = os.statvfs(self.path.parent)
+        if st.f_bavail * st.f_frsize < MIN_FREE_BYTES:
+            # rerun's save() can block for good on a disk that fills while it writes its header
+            raise OSError(
+                errno.ENOSPC,
+                f"{st.f_bavail * st.f_frsize >> 10} KiB free on its disk, the recording needs"
+                f" {MIN_FREE_BYTES >> 10} KiB to start",
+            )
         self._target = AtomicFile(self.path)
         rid = uuid.uuid5(uuid.NAMESPACE_URL, f"pressor:{run_label}")
         self._rec = rr.RecordingStream("pressor", recording_id=rid, send_properties=False)
@@ -145,6 +162,13 @@ class Recorder:
         self._row = [math.nan] * len(CHANNELS)
         self.rows_written = 0
         self._closed = False
+        #: why the recording stopped (a full disk, an I/O error: the file and the cause), else
+        #: None; the loop raises its advisory RECORD_ERROR on it while control goes on
+        self.error: str | None = None
+        self._sent_at = time.monotonic()
+        self._stop = threading.Event()
+        self._watch = threading.Thread(target=self._watch_sink, name="rrd sink", daemon=True)
+        self._watch.start()
 
     def use_controller(self, controller: Controller) -> None:
         """Record what ``controller`` declares: its design box (``/schedule/box/*``) and the K, T, τ
@@ -181,16 +205,17 @@ class Recorder:
         """Buffer one tick: ``values`` in :data:`CHANNELS` order (NaN for "not available")."""
         if self._first_tick is None:
             self._first_tick = (tick, sim_time_s)
-            self._log_box(tick, sim_time_s)
+            self._guarded(self._log_box, tick, sim_time_s)
         self._last_tick = (tick, sim_time_s)
         if self._markers and self._markers[-1][0] <= sim_time_s:
-            self._log_markers(tick, sim_time_s, values)
+            self._guarded(self._log_markers, tick, sim_time_s, values)
         n = self._n
         self._ticks[n] = tick
         self._times[n] = sim_time_s
         self._values[n] = values
         self._n = n + 1
-        if self._n == self._ticks.shape[0]:
+        # at least once a second of wall time, so that a run that ends badly loses at most that
+        if self._n == self._ticks.shape[0] or time.monotonic() - self._sent_at >= 1.0:
             self.flush()
 
     def record_tick(
@@ -268,12 +293,17 @@ class Recorder:
         self, tick: int, sim_time_s: float, text: str, warn: bool = True, state: int | None = None
     ) -> None:
         """Log a supervisor transition or alarm to ``/safety/events`` (rare; not batched); a
-        transition (``state``: the new state) is also marked on the safety plot."""
-        self._at(tick, sim_time_s)
-        level = rr.TextLogLevel.WARN if warn else rr.TextLogLevel.INFO
-        self._rec.log(EVENTS_ENTITY, rr.TextLog(text, level=level))
-        if state is not None:
-            self._rec.log(TRANSITION_MARKERS, rr.Scalars(float(state)))
+        transition (``state``: the new state) is also marked on the safety plot. Never raises."""
+        if self.error is not None:
+            return
+        try:
+            self._at(tick, sim_time_s)
+            level = rr.TextLogLevel.WARN if warn else rr.TextLogLevel.INFO
+            self._rec.log(EVENTS_ENTITY, rr.TextLog(text, level=level))
+            if state is not None:
+                self._rec.log(TRANSITION_MARKERS, rr.Scalars(float(state)))
+        except (RuntimeError, OSError) as exc:
+            self._fail(exc)
 
     def _log_markers(self, tick: int, sim_time_s: float, values: Sequence[float]) -> None:
         """Log every planned marker due by ``sim_time_s`` on this tick's MAP (else target)."""
@@ -301,11 +331,47 @@ class Recorder:
             self._rec.log(lo_entity, rr.Scalars(lo))
             self._rec.log(hi_entity, rr.Scalars(hi))
 
+    def _watch_sink(self) -> None:
+        """Once a second, off the loop's thread, wait for rerun to write what it was given: its
+        file sink reports a write failure (a full disk) only to a flush, as a ``RuntimeError``
+        other than a timeout (a slow disk)."""
+        while not self._stop.wait(1.0) and self.error is None:
+            try:
+                self._rec.flush(timeout_sec=5.0)
+            except RuntimeError as exc:
+                if "timed out" not in str(exc):
+                    self._fail(exc)
+
+    def _guarded(self, log: Any, *args: Any) -> None:
+        """Call ``log(*args)`` unless the recording failed; a failure stops it (:meth:`_fail`)."""
+        if self.error is None:
+            try:
+                log(*args)
+            except (RuntimeError, OSError) as exc:
+                self._fail(exc)
+
+    def _fail(self, exc: BaseException) -> None:
+        """Stop recording on a writer failure (rerun's file sink reports a full disk as a
+        ``RuntimeError``), keeping what was written; never raises."""
+        if self.error is None:
+            self.error = f"{self.path}: {exc}"
+
     def flush(self) -> None:
-        """Send the buffered rows as one column per channel."""
+        """Send the buffered rows as one column per channel (never raises: a failure stops the
+        recording, :attr:`error`)."""
         n = self._n
+        self._sent_at = time.monotonic()
         if n == 0:
             return
+        self._n = 0
+        if self.error is not None:
+            return
+        try:
+            self._send_rows(n)
+        except (RuntimeError, OSError) as exc:
+            self._fail(exc)
+
+    def _send_rows(self, n: int) -> None:
         indexes = [
             rr.TimeColumn("tick", sequence=self._ticks[:n].copy()),
             rr.TimeColumn("sim_time", duration=self._times[:n].copy()),
@@ -317,7 +383,6 @@ class Recorder:
                 columns=rr.Scalars.columns(scalars=self._values[:n, j].copy()),
             )
         self.rows_written += n
-        self._n = 0
 
     def log_series(
         self,
@@ -329,6 +394,9 @@ class Recorder:
     ) -> None:
         """Add a whole series named ``label`` that did not come through the loop (the simulated
         device's true MAP) on the same two timelines; call before :meth:`close`."""
+        self._guarded(self._log_series, entity, label, ticks, times_s, values)
+
+    def _log_series(self, entity: str, label: str, ticks: Any, times_s: Any, values: Any) -> None:
         style = rr.SeriesLines(names=label, colors=SERIES_COLORS.get(entity))
         self._rec.log(entity, style, static=True)
         self._rec.send_columns(
@@ -341,27 +409,28 @@ class Recorder:
         )
 
     def close(self) -> Path:
-        """Flush, finish the file and move it to ``path``; return ``path``."""
+        """Flush, finish the file and move it to ``path``; return ``path``. A recording that
+        failed (:attr:`error`) is moved into place too, holding what was written before."""
         if self._closed:
             return self.path
+        self._closed = True
+        self._stop.set()
+        self._watch.join()
         self.flush()
         if self._last_tick is not None and self._last_tick != self._first_tick:
-            self._log_box(*self._last_tick)
-        self._rec.flush()
+            self._guarded(self._log_box, *self._last_tick)
+        try:
+            self._rec.flush()
+        except (RuntimeError, OSError) as exc:
+            self._fail(exc)
         self._rec.disconnect()
         self._target.commit()
-        self._closed = True
         return self.path
 
     def abort(self) -> None:
-        """Drop the recording: the temporary file is removed, ``path`` is left untouched."""
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._rec.disconnect()
-        finally:
-            self._target.discard()
+        """End the recording of a run that failed: kept, like a finished one (:meth:`close`), since
+        the record of a run that went wrong is the one an investigator needs most."""
+        self.close()
 
     def __enter__(self) -> Recorder:
         return self

@@ -124,3 +124,8 @@ class LoopResult:
     stop_signal: int | None = None
     #: controller failures the supervisor held on (``pressor run``; :mod:`pressor.runtime.core.events`)
     controller_faults: list[dict[str, Any]] = field(default_factory=list)
+    #: what ended the run when it failed (the device stalled, an internal error): the loop sent
+    #: the safe command first; the caller keeps the outputs, then raises it
+    error: BaseException | None = None
+    #: what the loop's boundary checks found (:meth:`pressor.runtime.shell.boundary.Boundary.summary`)
+    boundary: dict[str, Any] = field(default_factory=dict)

@@ -115,7 +115,7 @@ def test_sigint_stops_pressor_run_with_safe_command_and_summary(tmp_path):
     key = Signing.generate().write(tmp_path / "key")
     proc = _start(
         "run", "--port", pair.follower_path, "--controller", "pi", "--realtime",
-        "--signing-key", str(key),
+        "--signing-key", str(key), "--confirm-above-soft-limit",  # no dose line beside the stop's
         "--rrd", str(rrd), "--summary", str(summary), cwd=tmp_path,
     )  # fmt: skip
     done = threading.Event()

@@ -114,3 +114,85 @@ def test_key_files_sign_with_the_wall_clock_and_seeded_keys_with_the_run_clock(t
     assert abs(stamp / 100_000.0 - signing.wall_clock_s()) < 5.0
     seeded = int.from_bytes(_run_frames(Signing.generate(seed=3))[0][-12:-6], "little")
     assert seeded < 10  # run clock at 0 s
+
+
+@pytest.mark.parametrize(
+    ("device_key", "runtime_key"), [("b", "a"), (None, "a"), ("a", None)], ids=str
+)
+def test_both_real_ends_name_a_signing_mismatch_within_3_s(tmp_path, device_key, runtime_key):
+    """``pressor device`` and ``pressor run`` on bridged ttys, keyed differently: each exits with
+    one line naming the signing mismatch within 3 s of the other starting, neither waits out its
+    30 s handshake for a hello."""
+    import os
+    import subprocess
+    import sys
+
+    from tests.support.sil_helpers import ROOT, bridged_ttys
+
+    keys = {n: _key(tmp_path, n, seed) for n, seed in (("a", 1), ("b", 2))}
+
+    def key_args(name):
+        return ["--signing-key", str(keys[name])] if name else ["--no-signing"]
+
+    env = dict(os.environ, CI="1", PYTHONPATH=str(ROOT))
+    with bridged_ttys() as (device_port, runtime_port):
+        base = [sys.executable, "-m", "pressor"]
+        device = subprocess.Popen(
+            [*base, "device", "--port", device_port, "--duration", "5", *key_args(device_key)],
+            cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        time.sleep(2.0)  # the device is up and repeating its hello
+        t0 = time.monotonic()
+        run = subprocess.Popen(
+            [*base, "run", "--port", runtime_port, "--controller", "pi",
+             *key_args(runtime_key)],
+            cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        try:
+            run_err = run.communicate(timeout=30)[1]
+            run_s = time.monotonic() - t0
+            device_err = device.communicate(timeout=30)[1]
+            device_s = time.monotonic() - t0
+        finally:
+            run.kill()
+            device.kill()
+    assert "signing mismatch" in run_err and run.returncode == 1, run_err
+    assert "signing mismatch" in device_err and device.returncode == 1, device_err
+    assert run_s < 3.0 + 2.0  # the runtime's start (imports) is part of its 3 s
+    assert device_s - run_s < 3.0 and device_s < 6.0, (run_s, device_s)
+
+
+def test_a_run_refused_at_its_command_line_tells_the_waiting_device(tmp_path):
+    """``pressor run --controller lpv:norepinephrine`` without ``--weight-kg`` cannot start: it
+    exits 2 with one line, and ``pressor device``, waiting in its handshake, is told the same line
+    on the wire (PRESSOR_REFUSAL RUNTIME_CONFIG) and exits 2 with it within 3 s."""
+    import os
+    import subprocess
+    import sys
+
+    from tests.support.sil_helpers import ROOT, bridged_ttys
+
+    key = _key(tmp_path, "a", 1)
+    env = dict(os.environ, CI="1", PYTHONPATH=str(ROOT))
+    base = [sys.executable, "-m", "pressor"]
+    with bridged_ttys() as (device_port, runtime_port):
+        device = subprocess.Popen(
+            [*base, "device", "--port", device_port, "--duration", "5", "--signing-key", str(key)],
+            cwd=tmp_path, env=env, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        time.sleep(2.0)
+        t0 = time.monotonic()
+        run = subprocess.run(
+            [*base, "run", "--port", runtime_port, "--controller", "lpv:norepinephrine",
+             "--signing-key", str(key)],
+            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        try:
+            device_err = device.communicate(timeout=30)[1]
+            device_s = time.monotonic() - t0
+        finally:
+            device.kill()
+    assert run.returncode == 2 and "--weight-kg: required" in run.stderr, run.stderr
+    assert device.returncode == 2, device_err
+    assert "refused by the runtime: --weight-kg: required" in device_err
+    assert device_s < 3.0 + 5.0  # the runtime's own start (imports, the design) comes first

@@ -11,7 +11,15 @@ from typing import Any
 
 import pytest
 
-from pressor.link import DeviceSession, RuntimeSession, Signing, generate, open_port
+from pressor.link import (
+    ROLE_DEVICE,
+    ROLE_RUNTIME,
+    DeviceSession,
+    RuntimeSession,
+    Signing,
+    generate,
+    open_port,
+)
 from pressor.link.dialect import pressor as mavlink
 from tests.support.link_doubles import tick_inputs
 
@@ -109,7 +117,9 @@ def test_every_message_round_trips_through_a_real_frame(msg_id, signed, variant)
     cls = mavlink.mavlink_map[msg_id]
     port = open_port("loop://")
     sign = Signing.generate(seed=7) if signed else None
-    ep = RuntimeSession(port, signing=sign)
+    # loop:// reads back what it writes: the frames come from the peer's system id, or the
+    # session drops them as its own echo (wrong_system)
+    ep = RuntimeSession(port, signing=sign, system_id=ROLE_DEVICE)
     got = []
     ep.on_message = got.append
     args = _sample_args(cls, variant)
@@ -130,7 +140,7 @@ def test_every_message_round_trips_through_a_real_frame(msg_id, signed, variant)
 
 def test_nan_map_sample_survives_the_wire():
     port = open_port("loop://")
-    ep = DeviceSession(port)
+    ep = DeviceSession(port, system_id=ROLE_RUNTIME)  # read back as the runtime's frames
     got = []
     ep.on_message = got.append
     ep.send_tick(tick_inputs(5, 0.5, math.nan, 3, 90.0, 0.5, 150.0, 30.0, False))

@@ -77,3 +77,23 @@ def test_synthesis_and_trial_commands_pin_openblas_to_one_thread_before_numpy_lo
     )
     # the value OpenBLAS reads when numpy loads it (a later setting has no effect)
     assert proc.stdout.strip().splitlines()[-1] == "['1']"
+
+
+@pytest.mark.parametrize("command", ["faults", "scenarios"])
+def test_a_reader_that_went_away_is_not_a_traceback(command):
+    """``pressor faults | head``: the pipe's reader is gone before anything is written (closed
+    here at once, so that every write meets it), and the command ends quietly with 0."""
+    read_fd, write_fd = os.pipe()
+    os.close(read_fd)
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "pressor", command],
+            stdout=write_fd,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=dict(os.environ, CI="1"),
+            timeout=60,
+        )
+    finally:
+        os.close(write_fd)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr

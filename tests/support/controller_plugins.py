@@ -106,3 +106,22 @@ class FailsAt(PlainPI):
         if self.how == "raise":
             raise ZeroDivisionError("plugin bug")
         return float("nan") if self.how == "nan" else None  # type: ignore[return-value]
+
+
+class InternalError(BaseException):
+    """Not an ``Exception``: what no handler of the controller's faults catches (a bug of the
+    runtime itself, as far as the loop can tell)."""
+
+
+class Crashes(PlainPI):
+    """Raises :class:`InternalError` at its ``at``-th step: the runtime's loop dies from within."""
+
+    def __init__(self, sample_period_s: float = 0.1, at: int = 20) -> None:
+        super().__init__(sample_period_s)
+        self.at, self.n = at, 0
+
+    def step(self, map_mmhg: float, target_mmhg: float, K: float, T: float, tau: float) -> float:
+        self.n += 1
+        if self.n >= self.at:
+            raise InternalError("the loop died")
+        return super().step(map_mmhg, target_mmhg, K, T, tau)

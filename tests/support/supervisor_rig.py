@@ -31,6 +31,7 @@ def good_inputs(now_s: float) -> dict:
         pump_alarms=0,
         estimated=False,
         estimate_healthy=True,
+        boundary_faults=0,
     )
 
 

@@ -146,6 +146,7 @@ def test_an_unknown_quality_bit_still_counts_as_bad():
         now_s=0.0, map_mmhg=80.0, quality=8, K=0.5, T_s=150.0, tau_s=30.0, sched_valid=True,
         sample_age_s=0.0, link_silence_s=0.0, target_mmhg=80.0, link_errors=0,
         pump_delivered_ml_h=math.nan, pump_alarms=0, estimated=False, estimate_healthy=True,
+        boundary_faults=0,
     )  # fmt: skip
     sup.assess(SupervisorInput(**args))
     assert sup.faults & Fault.SENSOR_QUALITY

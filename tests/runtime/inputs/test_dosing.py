@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from dataclasses import replace
 
 import pytest
 from hypothesis import given, settings
@@ -25,6 +26,7 @@ from pressor.plumbing.usage import UsageError
 from pressor.runtime.core.dose_guard import (
     DOSE_HARD_LIMIT,
     DOSE_HOUR_LIMIT,
+    DOSE_SHORTFALL,
     DOSE_SOFT_LIMIT,
     DoseGuard,
 )
@@ -200,7 +202,7 @@ LIMITS = DoseLimits(
 
 def _good(now_s: float) -> SupervisorInput:
     return SupervisorInput(
-        now_s, 70.0, 0, 0.5, 150.0, 30.0, True, 0.0, 0.0, 80.0, 0, math.nan, 0, False, True
+        now_s, 70.0, 0, 0.5, 150.0, 30.0, True, 0.0, 0.0, 80.0, 0, math.nan, 0, False, True, 0
     )
 
 
@@ -232,7 +234,8 @@ def test_hard_limit_is_never_exceeded_under_any_controller_output(raws):
 
 
 def test_hard_cut_and_soft_alarm_are_advisory_alarms_counted_once_per_episode():
-    sup = _supervisor(DoseLimits(60.0, 30.0, 1e6, 100.0))
+    # doses above the soft maximum confirmed by the clinician: the soft maximum only alarms
+    sup = _supervisor(DoseLimits(60.0, 30.0, 1e6, 100.0, confirm_above_soft=True))
     outs = []
     for k, raw in enumerate([10.0, 45.0, 45.0, 90.0, 90.0, 10.0]):
         sup.assess(_good(k * TS))
@@ -245,19 +248,46 @@ def test_hard_cut_and_soft_alarm_are_advisory_alarms_counted_once_per_episode():
     assert sup.detections == {"DOSE_SOFT_LIMIT": 1, "DOSE_HARD_LIMIT": 1}
 
 
-def test_hourly_maximum_over_a_sliding_hour():
-    # 40 ml per hour at most; commanding 60 ml/h uses it up in 40 min, then the command is cut to
-    # what leaves the window; the hour's volume never exceeds 40 ml
-    guard = DoseGuard(LIMITS, 1.0)
-    volumes, faults = [], 0
+def test_hourly_maximum_over_a_sliding_hour_tapers_instead_of_a_cliff():
+    # 40 ml per hour at most; commanding 60 ml/h approaches it over the taper (10 min), then the
+    # command settles on what the room sustains until the old doses leave; the hour's volume never
+    # exceeds 40 ml, and the command never falls from full rate to 0 from one tick to the next
+    guard = DoseGuard(replace(LIMITS, confirm_above_soft=True), 1.0)
+    volumes, cmds, faults = [], [], 0
     for _ in range(3 * 3600):
         cmd, f = guard.limit(60.0)
         faults |= f
         volumes.append(cmd / 3600.0)
+        cmds.append(cmd)
         assert math.fsum(volumes[-3600:]) <= 40.0 * (1 + 1e-9)
     assert faults & DOSE_HOUR_LIMIT and faults & DOSE_HARD_LIMIT == 0
-    assert math.fsum(volumes[-3600:]) == pytest.approx(40.0, rel=1e-6)
-    assert max(v * 3600 for v in volumes) == 60.0
+    assert 39.0 <= math.fsum(volumes[-3600:]) <= 40.0 * (1 + 1e-9)
+    assert max(cmds) == 60.0
+    # no cliff: no fall of more than 1 ml/h in a second (it rises as soon as the hour allows)
+    assert max(a - b for a, b in zip(cmds, cmds[1:], strict=False)) < 1.0
+
+
+def test_the_hourly_maximum_charges_elapsed_time_not_ticks():
+    # a loop that stalls 10 min between two calls still pays for the 10 min the pump ran
+    guard = DoseGuard(replace(LIMITS, confirm_above_soft=True), 0.1)
+    guard.limit(30.0, now_s=0.0)
+    guard.limit(30.0, now_s=600.0)
+    assert guard.hour_volume_ml == pytest.approx(30.0 * 600.0 / 3600.0)
+
+
+def test_the_soft_maximum_caps_the_command_until_the_clinician_confirms():
+    sup = _supervisor(DoseLimits(60.0, 30.0, 1e6, 100.0))
+    sup.assess(_good(0.0))
+    out = sup.finalize(55.0)
+    assert out.command_ml_h == 30.0 and out.faults & DOSE_SOFT_LIMIT and out.alarm
+    assert "soft maximum 30 ml/h" in sup.dose_guard.reason
+
+
+def test_a_cut_that_keeps_the_patient_below_target_for_10_min_is_a_named_shortfall():
+    guard = DoseGuard(DoseLimits(60.0, 60.0, 1e6, 100.0), 0.1)
+    faults = [guard.limit(90.0, now_s=k * 0.1, short_mmhg=12.0)[1] for k in range(6001)]
+    assert not faults[5999] & DOSE_SHORTFALL and faults[6000] & DOSE_SHORTFALL
+    assert "hard maximum 60 ml/h" in guard.reason and "12.0 mmHg below the target" in guard.reason
 
 
 def test_dose_summary_reports_the_unit_limits_and_peak():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from rerun.chunk import RrdReader  # noqa: E402
 
 from pressor.runtime.record.blueprint import EVENTS_ENTITY  # noqa: E402
 from pressor.runtime.record.recorder import CHANNEL_INDEX, CHANNELS, Recorder  # noqa: E402
+from tests.support.full_disk import fill, small_tmpfs  # noqa: E402
 
 
 def read_columns(path) -> dict[str, dict[int, float]]:
@@ -79,12 +81,42 @@ def test_sim_time_timeline_is_a_duration_in_seconds(tmp_path):
         pytest.fail("no sim_time column on /patient/map_mmhg")
 
 
-def test_failed_run_leaves_existing_recording_untouched(tmp_path):
+def test_a_failed_run_keeps_its_recording_up_to_the_failure(tmp_path):
     path = tmp_path / "keep.rrd"
-    path.write_bytes(b"previous good recording")
+    path.write_bytes(b"previous recording")
     with pytest.raises(RuntimeError):
         with Recorder(path, run_label="x") as rec:
-            rec.record(0, 0.0, make_row(0))
+            for k in range(3):
+                rec.record(k, 0.1 * k, make_row(k))
             raise RuntimeError("device died")
-    assert path.read_bytes() == b"previous good recording"
-    assert [p.name for p in tmp_path.iterdir()] == ["keep.rrd"]
+    assert sorted(read_columns(path)["/patient/map_mmhg"]) == [0, 1, 2]
+    assert [p.name for p in tmp_path.iterdir()] == ["keep.rrd"]  # no temporary file left
+
+
+def test_a_full_disk_stops_the_recording_without_raising(tmp_path):
+    """rerun's file sink on a disk that fills under it (a 2 MiB tmpfs filled once the recording
+    started; skipped where none can be mounted): the recorder keeps taking rows and events,
+    names the failure within a second or two, and still closes."""
+    with small_tmpfs(tmp_path / "disk", 2048) as (disk, kind):
+        if kind != "tmpfs":
+            pytest.skip("no tmpfs can be mounted here")
+        rec = Recorder(disk / "x.rrd", run_label="full", chunk_ticks=16)
+        fill(disk, 0)
+        k = 0
+        deadline = time.monotonic() + 30.0
+        while rec.error is None and time.monotonic() < deadline:
+            for _ in range(500):
+                rec.record(k, 0.1 * k, make_row(k))
+                k += 1
+            rec.event(k, 0.1 * k, "tick")
+            time.sleep(0.05)
+        rec.close()
+        assert rec.error is not None and "x.rrd" in rec.error, k
+
+
+def test_a_disk_without_room_to_start_a_recording_is_refused_naming_it(tmp_path):
+    with small_tmpfs(tmp_path / "disk", 256) as (disk, kind):
+        if kind != "tmpfs":
+            pytest.skip("no tmpfs can be mounted here")
+        with pytest.raises(OSError, match="256 KiB free on its disk"):
+            Recorder(disk / "x.rrd", run_label="none")
