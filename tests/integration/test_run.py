@@ -63,7 +63,16 @@ def test_run_against_a_hand_started_device_scores_its_faults_without_scenario_ev
 
 
 def test_run_with_an_unopenable_port_exits_2_with_one_line(tmp_path: Path):
-    proc = pressor("run", "--controller", "pi", "--port", str(tmp_path / "no-tty"), cwd=tmp_path)
+    # without signing: the key is read (and refused when missing) before the port is opened
+    proc = pressor(
+        "run",
+        "--controller",
+        "pi",
+        "--no-signing",
+        "--port",
+        str(tmp_path / "no-tty"),
+        cwd=tmp_path,
+    )
     assert proc.returncode == 2
     [line] = proc.stderr.strip().splitlines()
     assert line.startswith(f"pressor run: --port {tmp_path / 'no-tty'}: cannot open")
