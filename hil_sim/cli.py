@@ -25,18 +25,18 @@ from pressor.plumbing.usage import UsageError, UsageParser, run_command, usage_e
 
 
 def _scenarios(argv: Sequence[str]) -> int:
-    from pressor.hil_sim.scenarios.scenario import (
+    UsageParser(
+        prog="pressor scenarios",
+        description="list the named scenarios: name, file, description (any other .toml file"
+        " with the same fields can be passed by path: --scenario path/to/file.toml)",
+    ).parse_args(argv)
+    from pressor.hil_sim.scenarios.scenario import (  # numpy, scipy: after the arguments parse
         SCENARIO_DIR,
         ScenarioError,
         load_scenario,
         scenario_names,
     )
 
-    UsageParser(
-        prog="pressor scenarios",
-        description="list the named scenarios: name, file, description (any other .toml file"
-        " with the same fields can be passed by path: --scenario path/to/file.toml)",
-    ).parse_args(argv)
     names = scenario_names()
     width = max(len(n) for n in names)
     files = {name: str(SCENARIO_DIR / f"{name}.toml") for name in names}
