@@ -15,7 +15,7 @@ from pressor.plumbing.usage import UsageError, UsageParser, run_command
 
 
 def _parser() -> UsageParser:
-    from pressor.codegen.pipeline import DEFAULT_ARTIFACT
+    from pressor.synthesis.artifact_path import default_artifact_path  # not the pipeline: numpy
 
     p = UsageParser(
         prog="pressor codegen",
@@ -24,7 +24,7 @@ def _parser() -> UsageParser:
     p.add_argument(
         "artifact",
         nargs="?",
-        default=str(DEFAULT_ARTIFACT),
+        default=str(default_artifact_path()),
         help="artifact .npz (default: shipped)",
     )
     p.add_argument(

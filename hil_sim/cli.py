@@ -25,18 +25,18 @@ from pressor.plumbing.usage import UsageError, UsageParser, run_command, usage_e
 
 
 def _scenarios(argv: Sequence[str]) -> int:
-    from pressor.hil_sim.scenarios.scenario import (
+    UsageParser(
+        prog="pressor scenarios",
+        description="list the named scenarios: name, file, description (any other .toml file"
+        " with the same fields can be passed by path: --scenario path/to/file.toml)",
+    ).parse_args(argv)
+    from pressor.hil_sim.scenarios.scenario import (  # numpy, scipy: after the arguments parse
         SCENARIO_DIR,
         ScenarioError,
         load_scenario,
         scenario_names,
     )
 
-    UsageParser(
-        prog="pressor scenarios",
-        description="list the named scenarios: name, file, description (any other .toml file"
-        " with the same fields can be passed by path: --scenario path/to/file.toml)",
-    ).parse_args(argv)
     names = scenario_names()
     width = max(len(n) for n in names)
     files = {name: str(SCENARIO_DIR / f"{name}.toml") for name in names}
@@ -160,7 +160,13 @@ def _trial(argv: Sequence[str]) -> int:
         " the model's, T and tau unchanged (hil_sim/patients/sensitivity.py); 1 runs the model as drawn"
         " (default: %(default)g)",
     )
-    p.add_argument("--out", required=True, type=Path, help="output directory")
+    p.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="output directory (a reused one first loses an earlier run's comparison.json and"
+        " report.html)",
+    )
     args = p.parse_args(argv)
     try:
         check_int_range("--patients", args.patients, 1, 100000)
@@ -200,6 +206,7 @@ def _trial(argv: Sequence[str]) -> int:
             load_controller(spec, period)
         except ControllerSpecError as exc:
             raise UsageError(str(exc)) from None
+    _remove_stale_outputs(args.out)
     records: dict[str, list[dict[str, Any]]] = {}
     trajectories: dict[str, dict[str, Any]] = {}
     for spec in specs:
@@ -238,6 +245,26 @@ def _trial(argv: Sequence[str]) -> int:
         path = write_report(args.out, title, records, trajectories, comparison)
         print(f"report: {path}")
     return 0
+
+
+#: files in ``--out`` that describe a whole run (all its controllers): an earlier run's would sit
+#: beside this run's results as if they were its own
+RUN_WIDE_OUTPUTS = ("comparison.json", "report.html")
+
+
+def _remove_stale_outputs(out: Path) -> None:
+    """Remove an earlier run's :data:`RUN_WIDE_OUTPUTS` from ``out`` before this run writes (the
+    per-controller files are overwritten; these might not be), saying so on stderr."""
+    for name in RUN_WIDE_OUTPUTS:
+        path = out / name
+        if path.is_file():
+            try:
+                path.unlink()
+            except OSError as exc:
+                raise UsageError(
+                    f"--out {out}: cannot remove an earlier run's {name}: {exc}"
+                ) from None
+            print(f"pressor trial: removed {path} (an earlier run's)", file=sys.stderr)
 
 
 def main(command: str, argv: list[str]) -> int:

@@ -107,3 +107,35 @@ def run_command(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequen
         return usage_exit(prog, exc)
     except SystemExit as exc:  # argparse --help
         return int(exc.code or 0)
+
+
+def parse_first(prog: str, parser: argparse.ArgumentParser, argv: Sequence[str]) -> int | None:
+    """Parse ``argv`` before a command imports what its run needs: ``--help`` and bad options
+    answer at once, without numpy, the link or the recorder loaded.
+
+    The command parses ``argv`` again when it runs (the parse is cheap and has no side effects);
+    this call only decides whether it runs at all.
+
+    Parameters
+    ----------
+    prog
+        The command name printed in front of a usage error.
+    parser
+        The command's parser (a :class:`UsageParser`, or any parser that raises
+        :class:`UsageError` or :class:`SystemExit`).
+    argv
+        The command's arguments.
+
+    Returns
+    -------
+    int or None
+        The exit code when the command ends here (``--help``: 0; a usage error: one line on
+        stderr and :data:`USAGE_EXIT`); ``None`` when ``argv`` parses and the command should run.
+    """
+    try:
+        parser.parse_args(argv)
+    except UsageError as exc:
+        return usage_exit(prog, exc)
+    except SystemExit as exc:  # argparse --help
+        return int(exc.code or 0)
+    return None

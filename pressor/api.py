@@ -1,6 +1,6 @@
 """The Python API: run what ``pressor trial`` runs (and one patient of it) from Python.
 
-Two functions, two typed results::
+Three functions, three typed results::
 
     from pressor import api
 
@@ -11,7 +11,11 @@ Two functions, two typed results::
     result.summary["metrics"], result.to_pandas()      # one row per patient (patients.csv)
     result.write("out/")                               # patients.json, patients.csv, summary.json
 
-Both run the code the command runs: :func:`trial` calls :func:`pressor.hil_sim.trials.trial.run_cohort`, as
+    both = api.compare(["lpv", "pi"], "paper-disturbance", n_patients=20, seed=1)
+    both.comparison["lpv vs pi"]["iae_mmhg_s"]         # paired statistics (comparison.json)
+    both.trials["pi"].summary, both.write("out/")      # one folder per controller + comparison.json
+
+All run the code the command runs: :func:`trial` calls :func:`pressor.hil_sim.trials.trial.run_cohort`, as
 ``pressor trial`` does (same seed, same records, same bytes, whatever ``jobs``), and
 :func:`simulate` runs one patient exactly as a trial does (:func:`pressor.hil_sim.trials.trial.run_patient`'s
 path: the world, the controller, the runtime's closed-loop core and supervisor, the metrics), which
@@ -20,8 +24,10 @@ is tick for tick what a lockstep ``pressor sil`` of that seed gives. ``controlle
 ``MODULE:CLASS[:ARGS]`` - :mod:`pressor.runtime.inputs.controller_plugin`) or a controller class itself (see
 :func:`controller_spec`). ``to_pandas`` needs pandas (``pip install -e ".[pandas]"``).
 
-Errors: a bad argument raises :class:`ValueError` (a subclass naming the argument, the value and
-the allowed range: :class:`pressor.runtime.inputs.controller_loader.ControllerSpecError`,
+:func:`compare` runs several controllers on the same patients, as ``pressor trial --controller
+lpv,pi`` does. Errors: a bad argument raises :class:`ValueError` naming the argument as this API
+spells it (``controller``, ``patient_model``, not a command-line option), the value and the allowed
+range (or a subclass: :class:`pressor.runtime.inputs.controller_loader.ControllerSpecError`,
 :class:`pressor.hil_sim.scenarios.scenario.ScenarioError`,
 :class:`pressor.hil_sim.patients.patient_model.PatientModelError`); a controller that raises mid-run raises :class:`pressor.runtime.core.closed_loop.ControllerError` naming it,
 the patient and the tick.
@@ -31,8 +37,11 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import json
+import re
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -44,15 +53,32 @@ from pressor.hil_sim.episode import Trajectory
 from pressor.hil_sim.patients.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
 from pressor.hil_sim.patients.sensitivity import with_sensitivity
 from pressor.hil_sim.scenarios.scenario import Scenario, load_scenario
-from pressor.hil_sim.trials.trial import _csv_text, _simulate_patient, run_cohort, write_outputs
+from pressor.hil_sim.trials.paired import compare_controllers
+from pressor.hil_sim.trials.trial import (
+    _csv_text,
+    _simulate_patient,
+    controller_dir_name,
+    run_cohort,
+    write_outputs,
+)
+from pressor.plumbing.files import write_atomic
 from pressor.runtime.core.supervisor_config import ALARM_FAULTS, State
 from pressor.runtime.estimation.sources import SOURCES
 from pressor.runtime.inputs.controller_loader import load_controller
+from pressor.runtime.inputs.controller_plugin import split_controller_list
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas
 
-__all__ = ["SimulationResult", "TrialResult", "controller_spec", "simulate", "trial"]
+__all__ = [
+    "ComparisonResult",
+    "SimulationResult",
+    "TrialResult",
+    "compare",
+    "controller_spec",
+    "simulate",
+    "trial",
+]
 
 #: the per-tick columns of :meth:`SimulationResult.to_pandas` (name -> Trajectory field)
 TICK_COLUMNS = {
@@ -192,6 +218,43 @@ class TrialResult:
         return out
 
 
+@dataclass(frozen=True)
+class ComparisonResult:
+    """Several controllers on the same patients (:func:`compare`): what ``pressor trial
+    --controller A,B,...`` prints and writes.
+
+    Attributes
+    ----------
+    controllers
+        The controller specs, in the order given; the first is compared with each other one.
+    scenario, cohort_seed, n_patients
+        The cohort every controller ran on.
+    trials
+        Spec -> that controller's :class:`TrialResult` (the same patients, in cohort order).
+    comparison
+        The paired comparison, ``"A vs B" -> metric -> statistics`` (``n``, ``win_rate_pct``,
+        ``median_ratio``, ``median_difference``, ``wilcoxon_p``): the ``comparison.json``
+        document (:func:`pressor.hil_sim.trials.paired.compare_controllers`).
+    """
+
+    controllers: tuple[str, ...]
+    scenario: str
+    cohort_seed: int
+    n_patients: int
+    trials: dict[str, TrialResult]
+    comparison: dict[str, dict[str, dict[str, Any]]]
+
+    def write(self, out_dir: str | Path) -> Path:
+        """Write what ``pressor trial`` writes for several controllers: one folder per
+        controller (``patients.json``, ``patients.csv``, ``summary.json``) and
+        ``comparison.json``, the same bytes; returns ``out_dir``."""
+        out = Path(out_dir)
+        for spec, result in self.trials.items():
+            result.write(out / controller_dir_name(spec))
+        write_atomic(out / "comparison.json", json.dumps(self.comparison, indent=1) + "\n")
+        return out
+
+
 def controller_spec(controller: str | type, args: Mapping[str, Any] | None = None) -> str:
     """The ``--controller`` spec of ``controller``.
 
@@ -234,6 +297,30 @@ def _scenario(scenario: str | Path | Scenario, duration_s: float | None) -> Scen
     return sc
 
 
+#: command-line option -> the API's argument, for errors raised by the loaders both share
+_API_NAMES = {
+    "--controller": "controller",
+    "--scenario": "scenario",
+    "--patient-model": "patient_model",
+}
+_OPTION = re.compile(r"^(field ')?(--controller|--scenario|--patient-model)\b")
+
+
+@contextmanager
+def _in_api_terms() -> Iterator[None]:
+    """Re-raise a loader's :class:`ValueError` that names a command-line option (``--controller
+    'x': ...``) with the API's argument in its place (``controller 'x': ...``), same type."""
+    try:
+        yield
+    except ValueError as exc:
+        text = str(exc)
+        match = _OPTION.match(text)
+        if match is None:
+            raise
+        renamed = (match.group(1) or "") + _API_NAMES[match.group(2)] + text[match.end() :]
+        raise type(exc)(renamed) from None
+
+
 def _checked(
     controller: str | type,
     controller_args: Mapping[str, Any] | None,
@@ -243,15 +330,22 @@ def _checked(
     schedule: str,
     patient_model: str,
 ) -> tuple[str, Scenario, float]:
-    """(spec, scenario, period s) after the checks ``pressor trial`` makes before it runs."""
+    """(spec, scenario, period s) after the checks ``pressor trial`` makes before it runs; errors
+    name the API's arguments (``controller``), not the command line's (``--controller``)."""
     check_range("rate_hz", rate_hz, 0.1, 1000.0, unit="Hz")
     if schedule not in SOURCES:
         raise ValueError(f"schedule = {schedule!r}: allowed {', '.join(SOURCES)}")
     spec = controller_spec(controller, controller_args)
-    sc = _scenario(scenario, duration_s)
-    check_model_for_scenario(patient_model, sc.name, sc.frozen is not None)
-    period_s = 1.0 / rate_hz
-    load_controller(spec, period_s)  # fail fast, naming the spec
+    if isinstance(controller, str) and len(split_controller_list(controller)) > 1:
+        raise ValueError(
+            f"controller = {controller!r} names several controllers: compare([...]) runs several"
+            " on the same patients"
+        )
+    with _in_api_terms():
+        sc = _scenario(scenario, duration_s)
+        check_model_for_scenario(patient_model, sc.name, sc.frozen is not None)
+        period_s = 1.0 / rate_hz
+        load_controller(spec, period_s)  # fail fast, naming the spec
     return spec, sc, period_s
 
 
@@ -377,3 +471,85 @@ def trial(
         patient_model=patient_model,
     )
     return TrialResult(spec, sc.name, int(seed), n_patients, records, summary, traj)
+
+
+def compare(
+    controllers: Sequence[str | type] | str,
+    scenario: str | Path | Scenario = "paper-disturbance",
+    n_patients: int = 20,
+    seed: int = 1,
+    *,
+    jobs: int = 1,
+    scheduler: str | None = None,
+    duration_s: float | None = None,
+    rate_hz: float = 10.0,
+    schedule: str = "oracle",
+    patient_model: str = DEFAULT_PATIENT_MODEL,
+    sensitivity: float = 1.0,
+    trajectories: bool = False,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> ComparisonResult:
+    """Run several controllers on the same patients and compare them in pairs, as ``pressor trial
+    --controller A,B,...`` does (the same records and the same ``comparison.json``).
+
+    Parameters
+    ----------
+    controllers
+        Two or more controllers, each a spec or a controller class (:func:`controller_spec`), or
+        one comma-separated string of specs (``"lpv,pi"``); each named once. The first is compared
+        with each of the others.
+    scenario, n_patients, seed, jobs, scheduler, duration_s, rate_hz, schedule, patient_model, \
+sensitivity, trajectories
+        As :func:`trial`, the same for every controller.
+    progress
+        Called with ``(spec, done, total)`` after each patient of each controller.
+
+    Returns
+    -------
+    ComparisonResult
+
+    Raises
+    ------
+    ValueError
+        Fewer than two controllers, one named twice, or any argument :func:`trial` refuses; every
+        controller is checked before any runs.
+    """
+    given = split_controller_list(controllers) if isinstance(controllers, str) else controllers
+    specs = [controller_spec(c) for c in given]
+    if len(specs) < 2 or "" in specs or len(set(specs)) != len(specs):
+        raise ValueError(
+            f"controllers = {specs!r}: name two or more controllers, each once (one controller:"
+            " trial())"
+        )
+    for spec in specs:  # every controller checked before any runs
+        _checked(
+            spec,
+            None,
+            scenario,
+            duration_s,
+            rate_hz,
+            schedule,
+            with_sensitivity(patient_model, sensitivity),
+        )
+    trials: dict[str, TrialResult] = {}
+    for spec in specs:
+        trials[spec] = trial(
+            spec,
+            scenario,
+            n_patients,
+            seed,
+            jobs=jobs,
+            scheduler=scheduler,
+            duration_s=duration_s,
+            rate_hz=rate_hz,
+            schedule=schedule,
+            patient_model=patient_model,
+            sensitivity=sensitivity,
+            trajectories=trajectories,
+            progress=None if progress is None else (lambda d, t, s=spec: progress(s, d, t)),
+        )
+    comparison = compare_controllers({spec: r.records for spec, r in trials.items()})
+    first = trials[specs[0]]
+    return ComparisonResult(
+        tuple(specs), first.scenario, first.cohort_seed, n_patients, trials, comparison
+    )

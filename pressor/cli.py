@@ -16,7 +16,6 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-from importlib.metadata import version
 
 from pressor.plumbing.usage import USAGE_EXIT, usage_exit
 
@@ -85,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
         print(_usage())
         return 0 if args else USAGE_EXIT
     if args[0] in ("--version", "-V"):
+        from importlib.metadata import version  # ~20 ms: only for --version
+
         print(f"pressor {version('pressor')}")
         return 0
     command, rest = args[0], args[1:]

@@ -46,7 +46,7 @@ from typing import Any
 from pressor.contracts.checks import check_int_range
 from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
 from pressor.hil_sim.patients.patient_model import add_patient_model_option
-from pressor.plumbing.usage import USAGE_EXIT, UsageError, UsageParser
+from pressor.plumbing.usage import USAGE_EXIT, UsageError, UsageParser, parse_first
 from pressor.runtime.inputs.config import (
     ORACLE_DEFAULT_WHY,
     RunConfig,
@@ -403,6 +403,10 @@ def _main(argv: Sequence[str]) -> int:
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point for ``pressor sil`` (see the module docstring for exit codes)."""
+    # --help and a bad option answer before the link, the recorder and numpy load
+    early = parse_first(f"pressor {command}", sil_parser(), argv)
+    if early is not None:
+        return early
     from pressor.runtime.session import run_guarded
 
     return run_guarded(f"pressor {command}", _main, argv)

@@ -34,7 +34,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from pressor.plumbing.usage import UsageError, UsageParser, usage_exit
+from pressor.plumbing.usage import UsageError, UsageParser, parse_first, run_command, usage_exit
 from pressor.runtime.inputs.clinician import add_clinician_options, clinician_input
 from pressor.runtime.inputs.config import (
     DEFAULT_RATE_HZ,
@@ -134,18 +134,23 @@ def _refuse_on_the_wire(args: Any, text: str, wait_s: float = 3.0) -> None:
 
 
 def _main_keygen(argv: Sequence[str]) -> int:
-    from pressor.link.signing import Signing, default_key_path
-
     p = UsageParser(
         prog="pressor keygen",
         description="write a fresh 32-byte link signing key (hex, mode 0600) for pressor run and"
         " pressor device; copy the same file to the other end",
     )
+    # the default is spelled out rather than computed: pressor.link (pyserial, the dialect) loads
+    # only after the arguments parse, so that --help answers at once
     p.add_argument(
-        "--out", type=Path, default=None, help=f"key file (default: {default_key_path()})"
+        "--out",
+        type=Path,
+        default=None,
+        help="key file (default: $XDG_CONFIG_HOME/pressor/signing.key, ~/.config when unset)",
     )
     p.add_argument("--force", action="store_true", help="replace an existing key file")
     args = p.parse_args(argv)
+    from pressor.link.signing import Signing, default_key_path
+
     path = args.out or default_key_path()
     if path.exists() and not args.force:
         raise UsageError(f"--out {path}: a key exists already (--force replaces it)")
@@ -197,9 +202,15 @@ def _main_faults(argv: Sequence[str]) -> int:
 
 def main(command: str, argv: list[str]) -> int:
     """Entry point for ``pressor run | faults`` (see the module docstring for exit codes)."""
-    from pressor.runtime.session import run_guarded
-
     handlers = {"run": _main_run, "faults": _main_faults, "keygen": _main_keygen}
     if command not in handlers:
         return usage_exit("pressor.runtime.cli", f"unknown command {command!r}")
+    if command != "run":  # they open no link and start no loop: nothing for run_guarded to guard
+        return run_command(f"pressor {command}", handlers[command], argv)
+    # --help and a bad option answer before the link, the recorder and numpy load
+    early = parse_first(f"pressor {command}", _run_parser(), argv)
+    if early is not None:
+        return early
+    from pressor.runtime.session import run_guarded
+
     return run_guarded(f"pressor {command}", handlers[command], argv)

@@ -43,6 +43,7 @@ import numpy as np
 
 from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
 from pressor.plumbing.files import AtomicFile
+from pressor.synthesis.artifact_path import default_artifact_path  # noqa: F401 (re-exported)
 from pressor.synthesis.families.registry import ControllerFamily
 from pressor.synthesis.problem.config import ModelConfig
 from pressor.synthesis.problem.model import dims
@@ -365,11 +366,3 @@ def load_artifact(path: str | Path) -> ControllerArtifact:
             p, "sha256", f"content hash {actual[:16]}… does not match stored {stored_sha[:16]}…"
         )
     return ControllerArtifact(meta, coefs, nodes, actual)
-
-
-def default_artifact_path() -> Path:
-    """Absolute path of the shipped default design artifact (``synthesis/data/default_design.npz``):
-    the one place that names it."""
-    from importlib import resources
-
-    return Path(str(resources.files("pressor.synthesis") / "data" / "default_design.npz")).resolve()

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from pressor.plumbing.usage import UsageError, UsageParser, run_command
-from pressor.synthesis.artifact import default_artifact_path
+from pressor.synthesis.artifact_path import default_artifact_path
 from pressor.synthesis.solver.kkt import DEFAULT_KKT_CHAIN, KKT_METHODS, kkt_chain, parse_kkt_chain
 
 DEFAULT_ARTIFACT = default_artifact_path()

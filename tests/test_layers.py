@@ -54,8 +54,10 @@ SYNTHESIS_ALLOWED: dict[str, frozenset[str]] = {
     "solver": frozenset(),
     "families": frozenset(),
     "families.registry": frozenset(),
+    # where the shipped artifact lives (standard library only): the CLIs' --help names it
+    "artifact_path": frozenset(),
     "problem": frozenset({"families.registry"}),
-    "artifact": frozenset({"problem", "families.registry"}),
+    "artifact": frozenset({"problem", "families.registry", "artifact_path"}),
     "certificates": frozenset({"problem"}),
     "certificates.wirtinger": frozenset({"certificates", "problem", "solver"}),
     "certificates.jensen": frozenset({"certificates", "problem", "solver"}),
@@ -74,7 +76,7 @@ SYNTHESIS_ALLOWED: dict[str, frozenset[str]] = {
     ),
     "verification": frozenset({"certificates", "problem"}),
     "cli": frozenset({"artifact", "families.registry", "problem", "solver", "verification"}),
-    "verify_cli": frozenset({"artifact", "solver", "verification"}),
+    "verify_cli": frozenset({"artifact", "artifact_path", "solver", "verification"}),
 }
 
 #: part of runtime -> the parts of runtime it may import (besides itself): the per-tick core at

@@ -19,6 +19,8 @@ bounds), :mod:`~pressor.contracts.faults.spec` (parsing ``--fault`` and ``[[faul
 :mod:`~pressor.contracts.faults.scoring` (scoring detections from the supervisor's log).
 """
 
+from typing import TYPE_CHECKING, Any
+
 from pressor.contracts.faults.catalogue import (
     CATALOGUE,
     DEFAULT_START_S,
@@ -26,10 +28,6 @@ from pressor.contracts.faults.catalogue import (
     FaultKind,
     Param,
     catalogue_rows,
-)
-from pressor.contracts.faults.scoring import (
-    FaultScorer,
-    fault_report,
 )
 from pressor.contracts.faults.spec import (
     FaultSpec,
@@ -49,6 +47,22 @@ from pressor.contracts.faults.wire_bits import (
     QUALITY_INVALID,
     QUALITY_WAVEFORM,
 )
+
+if TYPE_CHECKING:
+    from pressor.contracts.faults.scoring import FaultScorer, fault_report
+
+#: names served by :mod:`~pressor.contracts.faults.scoring`, which imports numpy: loaded on first use,
+#: so that parsing ``--fault`` (every command's argument check) stays free of numpy
+_SCORING = frozenset({"FaultScorer", "fault_report"})
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SCORING:
+        from pressor.contracts.faults import scoring
+
+        return getattr(scoring, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "CATALOGUE",

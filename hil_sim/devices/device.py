@@ -48,7 +48,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pressor.contracts.checks import check_range
 from pressor.contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
@@ -59,10 +59,12 @@ from pressor.hil_sim.devices.device_options import (
     device_parser,
     make_world,
 )
-from pressor.hil_sim.patients.truth import TruthLog
 from pressor.plumbing.usage import UsageError, run_command
 from pressor.runtime.shell.interrupt import exit_code, signal_name, stop_requested
 from pressor.runtime.shell.placement import pin_thread
+
+if TYPE_CHECKING:  # numpy: imported when a run keeps the true MAP, not for --help
+    from pressor.hil_sim.patients.truth import TruthLog
 
 
 @dataclass(frozen=True)
@@ -124,6 +126,8 @@ def _main(command: str, argv: Sequence[str]) -> int:
     tlog = TlogWriter(args.tlog) if args.tlog else None
     clock = ManualClock()
     ep = DeviceSession(port, signing=signing, clock=clock, tlog=tlog)
+    from pressor.hil_sim.patients.truth import TruthLog
+
     truth = TruthLog() if args.truth_out else None
     ok = False
     try:

@@ -21,6 +21,7 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from pressor.runtime.core.estimate import Estimate
 from pressor.runtime.core.scheduling import (
@@ -30,7 +31,9 @@ from pressor.runtime.core.scheduling import (
     ScheduleInput,
     ScheduleSource,
 )
-from pressor.runtime.estimation.estimator import DelayBankEstimator
+
+if TYPE_CHECKING:  # the estimator's settings load the shipped design (~0.7 MB): not for --help
+    from pressor.runtime.estimation.estimator import DelayBankEstimator
 
 SOURCES = ("oracle", "estimated", "nominal", "validated")
 #: the cautious rule's full shift (standard deviations) and the relative standard deviation from
@@ -73,7 +76,11 @@ class EstimatedSchedule:
                 raise ValueError(f"{name}={value!r} must be finite and >= 0")
         if caution_rel_std == 0.0 and caution_sigma > 0.0:
             raise ValueError("caution_rel_std must be > 0 when caution_sigma > 0")
-        self.estimator = estimator if estimator is not None else DelayBankEstimator(sample_period_s)
+        if estimator is None:
+            from pressor.runtime.estimation.estimator import DelayBankEstimator
+
+            estimator = DelayBankEstimator(sample_period_s)
+        self.estimator = estimator
         self._z = float(caution_sigma)
         self._z_per_rel = self._z / caution_rel_std if caution_sigma > 0.0 else 0.0
         (_, self._K_hi), (self._T_lo, _), _ = self.estimator.box

@@ -27,9 +27,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
-import numpy as np
+if TYPE_CHECKING:  # numpy only annotates here: the CLIs import this module before parsing
+    import numpy as np
 
-if TYPE_CHECKING:
     from pressor.synthesis.artifact import ControllerArtifact
     from pressor.synthesis.certificates.interface import AnalysisResult
     from pressor.synthesis.problem.closed_loop import DelaySystem

@@ -63,7 +63,12 @@ print(seen)
 
 @pytest.mark.parametrize(
     "argv",
-    [["synth", "--help"], ["verify", "--controller", "x:Y"], ["trial", "--help"]],
+    # each fails only after its arguments parse, once numpy has loaded (--help loads no numpy)
+    [
+        ["synth", "--config", "no-such-design.toml"],
+        ["verify", "--controller", "x:Y"],
+        ["trial", "--out", "out", "--scenario", "no-such-scenario"],
+    ],
 )
 def test_synthesis_and_trial_commands_pin_openblas_to_one_thread_before_numpy_loads(argv, tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
@@ -97,3 +102,48 @@ def test_a_reader_that_went_away_is_not_a_traceback(command):
     finally:
         os.close(write_fd)
     assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+#: modules whose import costs a command's --help tenths of a second or more: the numeric stack, the
+#: solver, the recorder, the serial link and its dialect, plotting, and the shipped design's
+#: generated controller (~0.7 MB of source)
+HEAVY_MODULES = (
+    "numpy",
+    "scipy",
+    "cvxpy",
+    "rerun",
+    "pandas",
+    "serial",
+    "pymavlink",
+    "matplotlib",
+    "pressor.runtime.generated.lpv_map_controller",
+)
+
+IMPORTS_AFTER = f"""
+import sys
+from pressor import cli
+code = cli.main(sys.argv[1:])
+print(code, [m for m in {HEAVY_MODULES!r} if m in sys.modules])
+"""
+
+
+@pytest.mark.parametrize("command", sorted(cli.COMMANDS))
+@pytest.mark.parametrize(("extra", "exit_code"), [("--help", 0), ("--no-such-flag", 2)])
+def test_help_and_argument_errors_of_every_command_import_no_heavy_module(
+    command, extra, exit_code, tmp_path
+):
+    proc = subprocess.run(
+        [sys.executable, "-c", IMPORTS_AFTER, command, extra],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().splitlines()[-1] == f"{exit_code} []", proc.stdout + proc.stderr
+    if exit_code:
+        # one line naming the command (argparse names a missing required option first)
+        (line,) = proc.stderr.strip().splitlines()
+        assert line.startswith(f"pressor {command}: "), line
+    else:
+        assert proc.stdout.startswith(f"usage: pressor {command}"), proc.stdout[:200]

@@ -132,3 +132,18 @@ def test_a_controller_named_twice_is_refused_with_exit_2(tmp_path, short_scenari
     argv = ["--controller", "pi,pi", "--patients", "2", "--scenario", str(short_scenario)]
     assert main("trial", argv + ["--out", str(tmp_path / "o")]) == 2
     assert "name each controller once" in capsys.readouterr().err
+
+
+def test_a_reused_out_loses_the_earlier_runs_comparison_and_report(
+    tmp_path: Path, short_scenario: Path, capsys
+):
+    out = tmp_path / "o"
+    base = ["--patients", "1", "--seed", "1", "--scenario", str(short_scenario), "--out", str(out)]
+    assert main("trial", ["--controller", "pi,smith", "--report", *base]) == 0
+    assert (out / "comparison.json").is_file() and (out / "report.html").is_file()
+    capsys.readouterr()
+    assert main("trial", ["--controller", "pi", *base]) == 0  # one controller, no report
+    assert not (out / "comparison.json").exists() and not (out / "report.html").exists()
+    assert (out / "patients.json").is_file()
+    err = capsys.readouterr().err
+    assert "removed" in err and "comparison.json" in err and "report.html" in err
