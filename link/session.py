@@ -31,6 +31,7 @@ from pressor.link.dialect import pressor as mavlink
 from pressor.link.handshake import check_peer_hello, signing_mismatch
 from pressor.link.messages import (
     PROTOCOL_VERSION,
+    REFUSAL_SIGNING,
     REFUSAL_TEXT_CHARS,
     STATE_FAULT,
     Heartbeat,
@@ -369,7 +370,8 @@ class Session:
         ------
         LinkError
             No hello within ``timeout_s`` (s, wall clock); :class:`SigningMismatch` at once when
-            the peer signs differently (after one hello sent back, so that the peer names it too); :class:`PeerRefused` when the peer refused this end's
+            the peer signs differently (after a PRESSOR_REFUSAL ``SIGNING`` sent back, so that the
+            peer names it too); :class:`PeerRefused` when the peer refused this end's
             hello.
         HelloRefused
             The peer's hello announces the wrong role, comes from a system id other than its role
@@ -379,11 +381,12 @@ class Session:
         try:
             peer = self._exchange_hellos(hello, timeout_s, resend_s)
             self.check_signing()
-        except SigningMismatch:
-            # one hello back, signed as this end signs: the peer's own check names the mismatch
-            # at once (within its next read) instead of waiting out its handshake for a hello
+        except SigningMismatch as exc:
+            # told, signed as this end signs: a peer that checks signatures names the mismatch
+            # on this very frame, one that does not reads the reason; neither waits out its
+            # handshake for a hello (a hello would tell the second one the link is up)
             with suppress(LinkError):
-                self.send_hello(hello)
+                self.refuse(HelloRefused(REFUSAL_SIGNING, str(exc)))
             raise
         if peer is None:
             raise LinkError(f"no hello from the {self.PEER_NAME} within {timeout_s} s")

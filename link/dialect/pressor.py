@@ -457,8 +457,10 @@ PRESSOR_REFUSAL_REASON_PUMP_MAXIMUM = 9
 enums["PRESSOR_REFUSAL_REASON"][9] = EnumEntry("PRESSOR_REFUSAL_REASON_PUMP_MAXIMUM", """The pump's maximum rate is below the controller's maximum command.""")
 PRESSOR_REFUSAL_REASON_RUNTIME_CONFIG = 10
 enums["PRESSOR_REFUSAL_REASON"][10] = EnumEntry("PRESSOR_REFUSAL_REASON_RUNTIME_CONFIG", """The runtime cannot run as it was started (its options, its drug library or its design were refused before the handshake).""")
-PRESSOR_REFUSAL_REASON_ENUM_END = 11
-enums["PRESSOR_REFUSAL_REASON"][11] = EnumEntry("PRESSOR_REFUSAL_REASON_ENUM_END", """""")
+PRESSOR_REFUSAL_REASON_SIGNING = 11
+enums["PRESSOR_REFUSAL_REASON"][11] = EnumEntry("PRESSOR_REFUSAL_REASON_SIGNING", """The peer's frames show it signs differently (unsigned, another key, stale timestamps, or signed while this end has no key); the text names which.""")
+PRESSOR_REFUSAL_REASON_ENUM_END = 12
+enums["PRESSOR_REFUSAL_REASON"][12] = EnumEntry("PRESSOR_REFUSAL_REASON_ENUM_END", """""")
 
 # MAV_AUTOPILOT
 enums["MAV_AUTOPILOT"] = Enum()

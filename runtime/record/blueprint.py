@@ -137,7 +137,7 @@ def default_blueprint(dose: bool = False) -> rrb.Blueprint:
             rrb.Horizontal(
                 _plot("Loop timing (us)", ["/loop/exec_us", "/loop/lateness_us"]),
                 _plot(
-                    "Safety state (0 STARTUP 1 AUTO 2 HOLD 3 FAILSAFE 4 RECOVERING)",
+                    "Safety state (0 STARTUP 1 AUTO 2 HOLD 3 FAILSAFE 4 RECOVERING 5 STOPPED 6 MANUAL)",
                     ["/safety/state", "/safety/alarm", TRANSITION_MARKERS],
                 ),
                 rrb.TextLogView(

@@ -74,7 +74,10 @@ CHANNELS: tuple[tuple[str, str], ...] = (
     ("/controller/rho/tau_s", "tau as the controller used it (s)"),
     ("/loop/exec_us", "execution time (us)"),
     ("/loop/lateness_us", "release lateness (us)"),
-    ("/safety/state", "supervisor state (0 STARTUP 1 AUTO 2 HOLD 3 FAILSAFE 4 RECOVERING)"),
+    (
+        "/safety/state",
+        "supervisor state (0 STARTUP 1 AUTO 2 HOLD 3 FAILSAFE 4 RECOVERING 5 STOPPED 6 MANUAL)",
+    ),
     ("/safety/faults", "fault bits"),
     ("/safety/alarm", "alarm (0/1)"),
     ("/link/bad_frames", "bad frames (count)"),

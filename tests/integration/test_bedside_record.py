@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import signal
 import time
+from dataclasses import replace
 
 import pytest
 
@@ -107,13 +108,26 @@ def test_a_killed_run_leaves_its_tlog_readable_to_the_last_second(tmp_path):
 
 
 def test_a_run_that_is_refused_keeps_its_tlog_and_writes_its_summary(tmp_path):
-    from pressor.link import HelloRefused, PeerRefused
+    from pressor.link import LINK_LOCKSTEP, DeviceSession, Hello, PeerRefused, Signing, open_port
+    from tests.support.scripted_run import SYRINGE, new_key, start_run
+    from tests.support.sil_helpers import bridged_ttys
 
-    try:
-        with probe_run(tmp_path, hello={"drug": "norepinephrine"}) as r:
-            r.wait()
-    except (HelloRefused, PeerRefused):
-        pass
+    key = new_key(tmp_path)
+    with bridged_ttys() as (device_port, runtime_port):
+        args = ["--summary", str(tmp_path / "s.json"), "--tlog", str(tmp_path / "run.tlog")]
+        proc = start_run(runtime_port, key, tmp_path, *args)
+        try:
+            ep = DeviceSession(open_port(device_port), signing=Signing.from_file(key))
+            hello = Hello("probe", 0, 0.1, 0.0, 0, LINK_LOCKSTEP, **SYRINGE)
+            try:  # the runtime answers with its hello, then refuses the drug: the refusal can be
+                # read in the handshake, or come right after it; the tlog below says which came
+                ep.handshake(replace(hello, drug="norepinephrine"), timeout_s=60.0)
+            except PeerRefused:
+                pass
+            proc.communicate(timeout=30)  # it ends by itself: no kill before its record is out
+        finally:
+            proc.kill()
+    assert proc.returncode == 2
     frames = list(read_tlog(tmp_path / "run.tlog"))
     mav = mavlink.MAVLink(None)
     kinds = [mav.decode(bytearray(f)).get_type() for _, f in frames]

@@ -265,9 +265,7 @@ def test_signing_mismatch_is_refused_with_one_line_within_2_s(
     run = drive(dialect, tmp_path, cfg, key)
     assert run.rc == 1
     assert run.after_port_open_s < 2.0
-    # no command ever; the one hello the runtime sends back is signed as it signs, so that the
-    # device's own check names the mismatch too (docs/PROTOCOL.md, "Signing and key provisioning")
-    assert not run.log.commands
+    assert run.log.runtime_hello is None and not run.log.commands
     lines = (run.stdout + run.stderr).strip().splitlines()
     assert len(lines) == 1 and "signing mismatch" in lines[0] and cause in lines[0], lines
 

@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from pressor.link import Signing
 from tests.support.sil_helpers import ROOT, pressor
 
 SEED = 4
@@ -63,16 +64,11 @@ def test_run_against_a_hand_started_device_scores_its_faults_without_scenario_ev
 
 
 def test_run_with_an_unopenable_port_exits_2_with_one_line(tmp_path: Path):
-    # without signing: the key is read (and refused when missing) before the port is opened
+    key = Signing.generate().write(tmp_path / "key")  # the key is read first: give a good one
     proc = pressor(
-        "run",
-        "--controller",
-        "pi",
-        "--no-signing",
-        "--port",
-        str(tmp_path / "no-tty"),
-        cwd=tmp_path,
-    )
+        "run", "--controller", "pi", "--port", str(tmp_path / "no-tty"),
+        "--signing-key", str(key), cwd=tmp_path,
+    )  # fmt: skip
     assert proc.returncode == 2
     [line] = proc.stderr.strip().splitlines()
     assert line.startswith(f"pressor run: --port {tmp_path / 'no-tty'}: cannot open")
