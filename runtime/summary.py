@@ -173,6 +173,11 @@ _UNITS: tuple[tuple[str, str, int], ...] = (
     ("_ml", "ml", 2),
     ("_s", "s", 1),
 )
+#: names whose suffix reads as another unit: a time above a level named in mmHg, a rate per hour
+_NAMED_UNITS: dict[str, tuple[str, int]] = {
+    "longest_above_10_mmhg_s": ("s", 1),
+    "divergence_pct_per_h": ("%/h", 2),
+}
 
 
 def _fmt(v: Any, key: str = "") -> str:
@@ -181,6 +186,9 @@ def _fmt(v: Any, key: str = "") -> str:
     if v is None:
         return "null"
     if isinstance(v, (int, float)) and not isinstance(v, bool):
+        if key in _NAMED_UNITS:
+            unit, decimals = _NAMED_UNITS[key]
+            return f"{v:.{decimals}f} {unit}"
         for suffix, unit, decimals in _UNITS:
             if key.endswith(suffix):
                 return f"{v:.{decimals}f} {unit}"

@@ -35,6 +35,8 @@ def summary() -> dict:
             "iae_mmhg_s": 857.61,
             "drug_total_ml": 6.4651,
             "max_rate_ml_h": 108,
+            "longest_above_10_mmhg_s": 12.25,
+            "divergence_pct_per_h": -2.2271,
             "rise_time_s": None,
             "reachable": True,
             "disturbances": [
@@ -63,6 +65,9 @@ def test_terminal_summary_rounds_each_metric_to_its_unit():
     assert lines["iae_mmhg_s"] == "857.6 mmHg·s"
     assert lines["drug_total_ml"] == "6.47 ml"
     assert lines["max_rate_ml_h"] == "108.0 ml/h"
+    # a time above a level named in mmHg is a time, and divergence is a rate per hour
+    assert lines["longest_above_10_mmhg_s"] == "12.2 s"
+    assert lines["divergence_pct_per_h"] == "-2.23 %/h"
     assert lines["rise_time_s"] == "null" and lines["reachable"] == "True"
     assert "hemorrhage at 1200 s: peak deviation 3.14 mmHg, recovery 85.0 s, IAE 100.3" in (
         out.getvalue()
