@@ -279,8 +279,8 @@ def _validate(
     if meta.get("reference") is not None:
         ref = meta["reference"]
         keys = {"enabled", "lambda_s", "pump_fraction", "k_min"}
-        if not isinstance(ref, dict) or set(ref) != keys:
-            raise _err(path, "metadata.reference", f"must have exactly the keys {sorted(keys)}")
+        if not isinstance(ref, dict) or not keys <= set(ref) <= keys | {"lag_s"}:
+            raise _err(path, "metadata.reference", f"must have the keys {sorted(keys)} (and lag_s)")
         try:
             ReferenceConfig.from_dict(ref)
         except (TypeError, ValueError) as exc:

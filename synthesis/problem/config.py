@@ -121,12 +121,24 @@ class ModelConfig:
     box
         (3, 2) array, rows K [mmHg/(ml/h)], T [s], tau [s]; columns lower, upper.
     rate_bounds
-        (3,) array: |dK/dt| [mmHg/(ml/h)/s], |dT/dt| [s/s], |dtau/dt| [s/s].
+        (3,) array: |dK/dt| [mmHg/(ml/h)/s], |dT/dt| [s/s], |dtau/dt| [s/s]; with
+        ``k_rate_relative`` the first is |d(ln K)/dt| [1/s] instead.
     max_rate_ml_h
         Pump limit (ml/h).
     shaping
         ``None``: the paper's performance output z = [φ x_e; ξ u_a]; otherwise the frequency
         weights of ``weights.performance = "shaped"``.
+    k_rate_relative
+        False: ``rate_bounds[0]`` bounds |dK/dt| (the box's K moves at most that much per s).
+        True: it bounds the *relative* rate |d(ln K)/dt| (1/s), the same at every K: the design
+        is certified on a log-K scale, so the K box may span any factor (``[rates]
+        K_relative_per_s``; only for the "smith" family, whose controller then also absorbs a
+        change of K in its integral, :mod:`pressor.synthesis.families.smith.law`).
+    k_rate_up_per_s
+        With ``k_rate_relative``: the bound on the *rise* of ln K (1/s), ``rate_bounds[0]`` then
+        bounding its fall (``-rate_bounds[0] <= d(ln K)/dt <= k_rate_up_per_s``); None: the same
+        bound both ways. A falling K is the benign direction of the certificate's rate terms
+        (:mod:`pressor.synthesis.certificates.wirtinger.k_scaling`).
     """
 
     omega: float
@@ -138,9 +150,12 @@ class ModelConfig:
     rate_bounds: np.ndarray
     max_rate_ml_h: float
     shaping: PerformanceShaping | None = None
+    k_rate_relative: bool = False
+    k_rate_up_per_s: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (the artifact's ``model`` metadata entry; ``shaping`` only if set)."""
+        """JSON-ready dict (the artifact's ``model`` metadata entry; ``shaping`` and
+        ``k_rate_relative`` only if set, so older artifacts keep their bytes)."""
         out = {
             "omega": self.omega,
             "lambda": self.lambda_,
@@ -153,6 +168,10 @@ class ModelConfig:
         }
         if self.shaping is not None:
             out["shaping"] = self.shaping.to_dict()
+        if self.k_rate_relative:
+            out["k_rate_relative"] = True
+        if self.k_rate_up_per_s is not None:
+            out["k_rate_up_per_s"] = float(self.k_rate_up_per_s)
         return out
 
     @classmethod
@@ -172,6 +191,10 @@ class ModelConfig:
                 if d.get("shaping") is not None
                 else None
             ),
+            k_rate_relative=bool(d.get("k_rate_relative", False)),
+            k_rate_up_per_s=None
+            if d.get("k_rate_up_per_s") is None
+            else float(d["k_rate_up_per_s"]),
         )
 
 

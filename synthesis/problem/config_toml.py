@@ -3,7 +3,10 @@
 A design is described by a TOML file with the sections below (all physical units, time in s)::
 
     [box]        K = [lo, hi]  (mmHg/(ml/h)),  T_s = [lo, hi] (s),  tau_s = [lo, hi] (s)
-    [rates]      K_per_s (mmHg/(ml/h)/s),  T_s_per_s (s/s),  tau_s_per_s (s/s, < 1)
+    [rates]      K_per_s (mmHg/(ml/h)/s),  T_s_per_s (s/s),  tau_s_per_s (s/s, < 1); or, instead
+                 of K_per_s, K_relative_per_s (1/s, in (0, 0.2]): a bound on |d(ln K)/dt|, the design
+                 certified on a log-K scale (``ModelConfig.k_rate_relative``; "smith" family only),
+                 and optionally K_relative_up_per_s (1/s, in (0, 0.2]): a separate bound on its rise
     [filter]     omega (1/s), lambda (1/s)            u = omega/(s + lambda) u_a
     [weights]    phi (1/(mmHg·s)) on x_e,  xi on u_a,  eta_xe (mmHg·s) x_e measurement-noise weight,
                  performance ("integral" | "shaped") and, for "shaped", the frequency weights
@@ -33,7 +36,8 @@ A design is described by a TOML file with the sections below (all physical units
                  (``design.drug``) and the generated module (``DRUG``,
                  ``DRUG_CONCENTRATION_UG_ML``); ``pressor run`` refuses any other (docs/DRUGS.md)
     [reference]  enabled (bool), lambda_s (s, in [1, 1000]), pump_fraction (in [0.1, 1]),
-                 k_min (mmHg/(ml/h), in [0.001, box K upper])
+                 k_min (mmHg/(ml/h), in [0.0001, box K upper]), optional lag_s (s, in [1, 2000]:
+                 the model's fixed lag; absent: the scheduled T)
                  the two-degree-of-freedom prefilter of :mod:`pressor.synthesis.problem.reference` (outside
                  the certified loop: it changes the reference and adds a feedforward, not the LMIs)
 
@@ -71,6 +75,7 @@ from pressor.synthesis.problem.config import (
 )
 from pressor.synthesis.problem.reference import (
     K_MIN_RANGE,
+    LAG_RANGE_S,
     LAMBDA_RANGE_S,
     PUMP_FRACTION_RANGE,
     ReferenceConfig,
@@ -88,8 +93,15 @@ PARAM_NAMES = ("K", "T_s", "tau_s")
 RATE_NAMES = ("K_per_s", "T_s_per_s", "tau_s_per_s")
 
 #: Allowed ranges: (lo, hi) for box edges, rates, filter, weights.
-_BOX_RANGE = {"K": (1e-3, 10.0), "T_s": (1.0, 2000.0), "tau_s": (0.0, 600.0)}
+_BOX_RANGE = {"K": (1e-4, 1e4), "T_s": (1.0, 2000.0), "tau_s": (0.0, 600.0)}
 _RATE_RANGE = {"K_per_s": (0.0, 1.0), "T_s_per_s": (0.0, 10.0), "tau_s_per_s": (0.0, 0.999)}
+#: the relative K rate's range (1/s), the alternative to ``K_per_s``
+K_RELATIVE_RANGE = (0.0, 0.2)
+#: keys a design may give that the shipped default TOML does not (no default: absent = off)
+OPTIONAL_KEYS = {
+    "rates": ("K_relative_per_s", "K_relative_up_per_s"),
+    "reference": ("lag_s",),
+}
 
 
 #: Optional [weights] keys (not in the shipped TOML, whose design uses performance = "integral").
@@ -130,7 +142,7 @@ def _merge_check_keys(source: str, table: dict[str, Any], default: dict[str, Any
         if not isinstance(body, dict):
             raise field_error(source, section, body, "a TOML table")
         for key in body:
-            if key not in default[section]:
+            if key not in default[section] and key not in OPTIONAL_KEYS.get(section, ()):
                 raise field_error(
                     source, f"{section}.{key}", body[key], f"one of {sorted(default[section])}"
                 )
@@ -175,6 +187,21 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
     for i, name in enumerate(RATE_NAMES):
         lo, hi = _RATE_RANGE[name]
         rates[i] = check(f"rates.{name}", _get(table, "rates", name, default), lo, hi)
+    relative = "K_relative_per_s" in table.get("rates", {})
+    if relative:
+        if "K_per_s" in table["rates"]:
+            raise field_error(
+                source, "rates.K_per_s", table["rates"]["K_per_s"], "absent with K_relative_per_s"
+            )
+        rel = table["rates"]["K_relative_per_s"]
+        rates[0] = check("rates.K_relative_per_s", rel, *K_RELATIVE_RANGE, lo_open=True)
+    up = table.get("rates", {}).get("K_relative_up_per_s")
+    if up is not None:
+        if not relative:
+            raise field_error(
+                source, "rates.K_relative_up_per_s", up, "absent without K_relative_per_s"
+            )
+        up = check("rates.K_relative_up_per_s", up, *K_RELATIVE_RANGE, lo_open=True)
 
     omega = check("filter.omega", _get(table, "filter", "omega", default), 0.0, 100.0, lo_open=True)
     lam = check("filter.lambda", _get(table, "filter", "lambda", default), 0.0, 100.0, lo_open=True)
@@ -235,6 +262,9 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
             K_MIN_RANGE[0],
             min(K_MIN_RANGE[1], float(box[0, 1])),
         ),
+        lag_s=None
+        if (lag := table.get("reference", {}).get("lag_s")) is None
+        else check("reference.lag_s", lag, *LAG_RANGE_S),
     )
 
     model = ModelConfig(
@@ -247,6 +277,8 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         rate_bounds=rates,
         max_rate_ml_h=pump,
         shaping=shaping,
+        k_rate_relative=relative,
+        k_rate_up_per_s=up,
     )
     solver = SolverConfig(
         lambda2=l2,
@@ -258,12 +290,20 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         rate_terms=rt,
         mean_gamma_weight=mgw,
     )
+    controller = _parse_controller(table, source)
+    if relative and (controller.structure != "smith" or shaping is not None):
+        raise field_error(
+            source,
+            "rates.K_relative_per_s",
+            rates[0],
+            "used with [controller] structure 'smith' and weights.performance 'integral'",
+        )
     return DesignConfig(
         model=model,
         grid_points=grid,
         solver=solver,
         reference=reference,
-        controller=_parse_controller(table, source),
+        controller=controller,
         lambda2_candidates=cands[0],
         lambda3_candidates=cands[1],
         drug=_parse_drug(table, source, default),

@@ -147,6 +147,9 @@ def plant_batch(rho: np.ndarray, cfg: ModelConfig) -> dict[str, np.ndarray]:
     D11 = np.zeros((g, nz, nw))
     D12 = np.zeros((g, nz, 1))
     D12[:, nz - 1, 0] = cfg.xi
+    if getattr(cfg, "k_rate_relative", False):
+        # a design on a log-K scale weighs K u_a (mmHg of effect per s): every K looks alike
+        D12[:, nz - 1, 0] *= K
     if cfg.shaping is None:
         C1[:, 0, I_XE] = cfg.phi
     else:

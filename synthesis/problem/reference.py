@@ -68,7 +68,8 @@ __all__ = ["ReferenceConfig", "frozen_step_reference"]
 #: Allowed ranges of the [reference] fields.
 LAMBDA_RANGE_S = (1.0, 1000.0)
 PUMP_FRACTION_RANGE = (0.1, 1.0)
-K_MIN_RANGE = (1e-3, 10.0)
+K_MIN_RANGE = (1e-4, 10.0)
+LAG_RANGE_S = (1.0, 2000.0)
 
 
 @dataclass(frozen=True)
@@ -84,25 +85,34 @@ class ReferenceConfig:
     pump_fraction
         α in (0, 1]: the feedforward stays at or below α·max_rate during the transient.
     k_min
-        Floor (mmHg/(ml/h)) of the model gain K. The model takes the reported K clamped to
-        [k_min, the box's upper K], not to the design box: the prefilter is outside the certified
-        loop, and a desensitised patient whose K falls below the box (the cohort reaches ≈ 0.18)
-        is better served by a faithful model than by one the slow feedback has to correct.
+        Floor (mmHg/(ml/h)) of the model gain K. The model runs on the feedback's own K (clamped
+        to the design box and rate limited), never below this floor.
+    lag_s
+        None (default): the model's lag is the feedback's scheduled T (clamped, rate limited).
+        A number (s): the model's lag, fixed. The feedforward's opening push is T/λ times the
+        steady infusion; a fixed lag at the box's low T keeps that push to what the fastest
+        patient of the box follows without overshoot, whatever T the feedback is scheduled on
+        (the cautious start, docs/notes/cautious-start.md).
     """
 
     enabled: bool = False
     lambda_s: float = 10.0
     pump_fraction: float = 0.9
     k_min: float = 0.05
+    lag_s: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (the artifact's ``reference`` metadata entry)."""
-        return {
+        """JSON-ready dict (the artifact's ``reference`` metadata entry; ``lag_s`` only when
+        set, so older artifacts keep their bytes)."""
+        out: dict[str, Any] = {
             "enabled": bool(self.enabled),
             "lambda_s": float(self.lambda_s),
             "pump_fraction": float(self.pump_fraction),
             "k_min": float(self.k_min),
         }
+        if self.lag_s is not None:
+            out["lag_s"] = float(self.lag_s)
+        return out
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ReferenceConfig:
@@ -121,7 +131,12 @@ class ReferenceConfig:
         k_min = float(d["k_min"])
         if not (math.isfinite(k_min) and K_MIN_RANGE[0] <= k_min <= K_MIN_RANGE[1]):
             raise ValueError(f"reference.k_min = {k_min!r}: must be in {list(K_MIN_RANGE)}")
-        return cls(enabled, lam, frac, k_min)
+        lag = d.get("lag_s")
+        if lag is not None:
+            lag = float(lag)
+            if not (math.isfinite(lag) and LAG_RANGE_S[0] <= lag <= LAG_RANGE_S[1]):
+                raise ValueError(f"reference.lag_s = {lag!r}: must be in {list(LAG_RANGE_S)} s")
+        return cls(enabled, lam, frac, k_min, lag)
 
 
 def _cap(step_mmhg: float, K: float, pump_fraction: float, max_rate_ml_h: float) -> float:

@@ -178,8 +178,12 @@ def prepare(
     h = taus / ts
     k_moves = k_scaling is not None and k_scaling.k_rate_per_s > 0
     if k_moves:
-        ad, u_kappa, u_r, s_tx = k_terms(k_scaling, ad, tx, txi, ts, tau_max)
+        ad, (u_kappa, phi_kappa), (u_r, phi_r), ga_c = k_terms(
+            k_scaling, ad, tx, txi, ts, tau_max, nw
+        )
     ga = np.concatenate([a, ad, np.zeros((m, n, n)), b], axis=2)
+    if k_moves and np.any(ga_c != 0.0):
+        ga = ga + ga_c
     gz = np.concatenate([c, cd, np.zeros((m, c.shape[1], n)), d], axis=2)
     g1 = np.zeros((m, 2 * n, 3 * n + nw))
     g1[:, :n, :n] = np.eye(n)
@@ -208,10 +212,13 @@ def prepare(
             axis=2,
         )
         c_tau = np.append(rate[real] * dtau[real], 0.0)
-        scale = np.linalg.norm(s_tx, 2)  # Phi of unit norm, the size in U
-        phi = np.zeros((2, s_tx.shape[0], 3 * n + nw))  # kappa acts on x, r on x(t - tau)
-        phi[0, :, :n], phi[1, :, n : 2 * n] = s_tx / scale, s_tx / scale
-        young = (scale * np.stack([u_kappa, u_r], axis=1), phi, moving.index(ik))
+        # kappa and r factors padded to a common number of selector rows (zero rows add nothing)
+        q = max(phi_kappa.shape[0], phi_r.shape[0])
+        phi = np.zeros((2, q, 3 * n + nw))
+        u_both = np.zeros((m, 2, n, q))
+        phi[0, : phi_kappa.shape[0]], u_both[:, 0, :, : phi_kappa.shape[0]] = phi_kappa, u_kappa
+        phi[1, : phi_r.shape[0]], u_both[:, 1, :, : phi_r.shape[0]] = phi_r, u_r
+        young = (u_both, phi, moving.index(ik))
         dga = np.zeros((m, len(moving), n, 3 * n + nw))
         dga[:, [young[2], -1]] = np.einsum("mjns,jsb->mjnb", young[0], phi)
     return WirtingerData(

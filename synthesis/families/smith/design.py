@@ -42,7 +42,7 @@ from pressor.synthesis.families.smith.law import SmithLPV
 from pressor.synthesis.families.smith.packaging import package_artifact
 from pressor.synthesis.problem.closed_loop import DelaySystem, close_loop
 from pressor.synthesis.problem.config import NOMINAL_RHO, DesignConfig, ModelConfig
-from pressor.synthesis.problem.model import I_U, dims, plant_at
+from pressor.synthesis.problem.model import I_U, I_XE, dims, plant_at
 from pressor.synthesis.problem.reconstruct import scaling_of
 from pressor.synthesis.problem.scaling import Scaling
 
@@ -154,6 +154,7 @@ def certify_smith(
     progress: Progress | None = None,
     p_dependence: str = P_DEPENDENCE,
     epsilon: float = 1e-6,
+    law: SmithLPV | None = None,
 ) -> AnalysisResult:
     """The Wirtinger analysis (rate-bound form) of the frozen Smith loops ``systems`` at ``points``.
 
@@ -178,6 +179,9 @@ def certify_smith(
         P(ρ) basis: "quadratic" (default, 7 terms), "affine" or "constant".
     epsilon
         Strictness of the solve (scaled units; :data:`DESIGN_EPSILON` for the design).
+    law
+        The law of ``systems``; needed (and only used) with a relative K rate, whose certificate
+        covers the law's bumpless integral (:func:`bumpless_rows`).
     """
     return certify_in_form(
         SHIPPED_FORM,
@@ -190,6 +194,7 @@ def certify_smith(
         progress,
         p_dependence,
         epsilon,
+        law,
     )
 
 
@@ -204,6 +209,7 @@ def certify_in_form(
     progress: Progress | None = None,
     p_dependence: str = P_DEPENDENCE,
     epsilon: float = 1e-6,
+    law: SmithLPV | None = None,
 ) -> AnalysisResult:
     """:func:`certify_smith` written in ``form`` (the builder :mod:`research.synthesis_forms` calls).
 
@@ -216,8 +222,9 @@ def certify_in_form(
     c_sys, c_rho = centre
     k_scaling = None
     if form.coordinates == "k_scaled":
-        k_scaling = _k_scaling(pts, model)
+        k_scaling = _k_scaling(pts, model, law)
         c_sys = k_scaled_system(c_sys, float(c_rho[0]), k_scaling.states)
+
     zero = np.zeros(3)
     c0 = analyse_wirtinger(
         [c_sys], scaling.to_hat(c_rho)[None], zero, zero, float(c_rho[2]), "constant"
@@ -232,6 +239,10 @@ def certify_in_form(
         progress(
             f"Wirtinger analysis: conditioning transform from rho {c_rho.tolist()} ({tx is not None})"
         )
+    rate_form = form.rate_form
+    if model.k_rate_relative:
+        # the bumpless integral's kappa term is far from the Young bound's reach: exact vertices
+        rate_form = "vertex"
     return analyse_wirtinger(
         systems,
         *_analysis_inputs(pts, model, scaling),
@@ -243,27 +254,70 @@ def certify_in_form(
         solver_options=None if gamma_cap is None else FEASIBILITY_SOLVER_OPTIONS,
         working_set=form.working_set,
         progress=progress,
-        rate_form=form.rate_form,
+        rate_form=rate_form,
         coupling=form.coupling,
         p_params=form.p_params,
         k_scaling=k_scaling,
     )
 
 
-def _k_scaling(points: np.ndarray, model: ModelConfig) -> KScaling:
+def _k_scaling(points: np.ndarray, model: ModelConfig, law: SmithLPV | None = None) -> KScaling:
     """The K-scaling of the Smith loops at ``points``: the ml/h states (the plant's infusion u and
-    the controller's model input û, its first state) times K, K's rate bound from the model."""
+    the controller's model input û, its first state) times K, K's rate bound from the model.
+
+    With a relative K rate (``model.k_rate_relative``) the bound is on d(ln K)/dt and the law is
+    the one that absorbs a change of K in its integral (:func:`bumpless_rows`, needs ``law``)."""
     scaled = (I_U, plant_at(points[0], model).A.shape[0])
-    return KScaling(points[:, 0], float(model.rate_bounds[0]), scaled)
+    if not model.k_rate_relative:
+        return KScaling(points[:, 0], float(model.rate_bounds[0]), scaled)
+    if law is None:
+        raise ValueError("a relative K rate needs the law (its bumpless integral's kappa rows)")
+    rows = np.stack([bumpless_rows(law, model, p, scaled) for p in points])
+    up = model.k_rate_up_per_s
+    return KScaling(points[:, 0], float(model.rate_bounds[0]), scaled, 0, True, rows, up)
+
+
+def bumpless_rows(
+    law: SmithLPV, model: ModelConfig, rho: np.ndarray, scaled: tuple[int, ...]
+) -> np.ndarray:
+    """The kappa rows of the bumpless Smith law at ``rho``, in K-scaled coordinates.
+
+    The law keeps its command's rate u_a continuous when K changes: the integral x_e absorbs it,
+    ``x_e <- (K'/K) x_e + (1 - K'/K)(τ(ŷ + ŷ(t - τ))/2 - T e_p)`` (the generated module does this
+    at every tick its K moves; :mod:`pressor.synthesis.families.smith.law`). With κ = d(ln K)/dt that is
+    ``dx_e/dt += κ (T e_p + x_e - τ(ŷ + ŷ(t - τ))/2) = κ (K T / g) u_a``, u_a the law's output.
+    Returns the (n, 2n + nw) rows ``[E, E_d, E_w]`` of that term over the closed loop's
+    ``[x, x(t - τ), w]`` (only the x_e row is non-zero), with the scaled states divided by K.
+    """
+    pm, ctrl = plant_at(rho, model), law.at(rho)
+    k, t_s = float(rho[0]), float(rho[1])
+    row_x = np.concatenate([ctrl.Dk @ pm.C2, ctrl.Ck], axis=1)
+    row_d = np.concatenate([ctrl.Dk @ pm.C2d, ctrl.Cdk], axis=1)
+    row_w = ctrl.Dk @ pm.D21
+    n = row_x.shape[1]
+    d_inv = np.ones(n)
+    d_inv[list(scaled)] = 1.0 / k
+    factor = k * t_s / law.loop_gain
+    rows = np.zeros((n, 2 * n + row_w.shape[1]))
+    rows[I_XE, :n] = factor * row_x[0] * d_inv
+    rows[I_XE, n : 2 * n] = factor * row_d[0] * d_inv
+    rows[I_XE, 2 * n :] = factor * row_w[0]
+    return rows
 
 
 def _analysis_inputs(
     points: np.ndarray, model: ModelConfig, scaling: Scaling
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """(ρ̂, rate bounds of ρ̂ per s, dτ/dρ̂ in s, τ_max in s) of the analysis at ``points``."""
+    """(ρ̂, rate bounds of ρ̂ per s, dτ/dρ̂ in s, τ_max in s) of the analysis at ``points``.
+
+    With a relative K rate ν the K coordinate of ρ̂ moves at most ν·K_max (the box's top) per s."""
+    rates = np.asarray(model.rate_bounds, dtype=float).copy()
+    if model.k_rate_relative:
+        up = rates[0] if model.k_rate_up_per_s is None else model.k_rate_up_per_s
+        rates[0] = max(rates[0], up) * float(np.asarray(model.box, dtype=float)[0, 1])
     return (
         scaling.to_hat(points),
-        np.asarray(model.rate_bounds, dtype=float) / scaling.rho_half,
+        rates / scaling.rho_half,
         np.array([0.0, 0.0, scaling.rho_half[2]]),
         float(np.asarray(model.box, dtype=float)[2, 1]),
     )
@@ -303,7 +357,7 @@ def recheck_smith_artifact(artifact: ControllerArtifact) -> tuple[bool, np.ndarr
         cert,
         artifact.gamma,
         P_DEPENDENCE,
-        _k_scaling(flat, model),
+        _k_scaling(flat, model, law),
     )
 
 
@@ -347,6 +401,7 @@ def design_in_form(
         scaling,
         progress=progress,
         epsilon=DESIGN_EPSILON,
+        law=law,
     )
     if not res.certified or res.gamma is None or res.certificate is None:
         margin = float(np.nanmin(res.margins)) if np.isfinite(res.margins).any() else None

@@ -149,6 +149,7 @@ def capped_analysis(
     :data:`SMITH_GAMMA_CAP_FACTOR` × the artifact's (the family's analysis with the shipped form;
     :mod:`research.synthesis_forms` with its ablations). ``label`` names it in the progress line."""
     from pressor.synthesis.families.smith.design import certify_in_form
+    from pressor.synthesis.families.smith.law import SmithLPV
     from pressor.synthesis.problem.reconstruct import scaling_of
 
     cap = SMITH_GAMMA_CAP_FACTOR * float(artifact.gamma)
@@ -163,6 +164,7 @@ def capped_analysis(
         cap,
         progress,
         p_dependence,
+        law=SmithLPV(artifact.family.loop_gain, artifact.omega, artifact.lambda_),
     )
 
 

@@ -32,6 +32,17 @@ Tuning: ``Kc = T/(K λ)``, ``Ti = T`` (``Ki = Kc/Ti = 1/(K λ)``), the rule of
 ``λ = T / loop_gain``: ``loop_gain = K·Kc`` is then the same at every ρ, which is what the
 closed-loop dynamics depend on (a fixed λ makes the loop faster, relative to the plant, where T is
 large). At τ = 0 the law reduces to the PI ``u_a = Kc e + Ki x_e``.
+
+The bumpless integral (designs with a relative K rate, ``[rates] K_relative_per_s``). The gains
+are ``Kc = g/K``, ``Ki = g/(K T)``: when the scheduled K moves, u_a = (g/K)(e_p + (x_e − Q)/T)
+(``Q = τ(ŷ + ŷ(t − τ))/2``) would move with it, a falling K pushing harder on the error and the
+integral already accumulated at the old gain. The generated module keeps u_a continuous instead:
+at every tick its K moves from K to K' the integral becomes
+``x_e' = ρ x_e + (1 − ρ)(Q − T e_p)``, ``ρ = K'/K``, so the command changes only through the
+error that follows (velocity form). In continuous time that is ``dx_e/dt = e + κ (K T / g) u_a``,
+κ = d(ln K)/dt: the term the certificate carries
+(:func:`pressor.synthesis.families.smith.design.bumpless_rows`). A frozen ρ is unchanged: the frozen
+loops, roots and nominal step are this module's.
 """
 
 from __future__ import annotations

@@ -132,13 +132,54 @@ def test_k_terms_span_the_r_interval_of_each_point() -> None:
         [k_scaled_system(q, k, SMITH_STATES).Ad for q, k in zip(loops, rhos[:, 0], strict=True)]
     )
     eye = np.eye(5)
-    center, u_kappa, u_r, s_tx = k_terms(ks, ad, eye, eye, 45.0, 45.0)
-    d_kappa, d_r = u_kappa @ s_tx, u_r @ s_tx
+    center, (u_kappa, phi_kappa), (u_r, phi_r), _ = k_terms(ks, ad, eye, eye, 45.0, 45.0, 3)
+    d_kappa, d_r = u_kappa @ phi_kappa[:, :5], u_r @ phi_r[:, 5:10]
     pi = np.diag([0.0, 1.0, 0.0, 1.0, 0.0])
     for j, k in enumerate(rhos[:, 0]):
         for r, sign in ((k / (k - RATES[0] * 45.0), 1.0), (k / (k + RATES[0] * 45.0), -1.0)):
             assert np.allclose(center[j] + sign * d_r[j], ad[j] @ (eye + (r - 1.0) * pi))
         assert np.allclose(d_kappa[j], 45.0 * RATES[0] / k * pi)
+
+
+def test_relative_k_terms_are_the_same_at_every_k() -> None:
+    # |d ln K/dt| <= nu: kappa = +/- nu and r in [e^(-nu tau_max), e^(nu tau_max)] at every K
+    loops, _, rhos = _smith_corners(3.0)
+    nu = 0.01
+    ks = KScaling(rhos[:, 0], nu, SMITH_STATES, relative=True)
+    ad = np.stack(
+        [k_scaled_system(q, k, SMITH_STATES).Ad for q, k in zip(loops, rhos[:, 0], strict=True)]
+    )
+    eye = np.eye(5)
+    center, (u_kappa, phi_kappa), (u_r, phi_r), _ = k_terms(ks, ad, eye, eye, 45.0, 45.0, 3)
+    d_kappa, d_r = u_kappa @ phi_kappa[:, :5], u_r @ phi_r[:, 5:10]
+    pi = np.diag([0.0, 1.0, 0.0, 1.0, 0.0])
+    for j in range(len(rhos)):
+        for r, sign in ((np.exp(nu * 45.0), 1.0), (np.exp(-nu * 45.0), -1.0)):
+            assert np.allclose(center[j] + sign * d_r[j], ad[j] @ (eye + (r - 1.0) * pi))
+        assert np.allclose(d_kappa[j], 45.0 * nu * pi)
+
+
+def test_kappa_rows_add_their_direction_on_x_x_delayed_and_w() -> None:
+    loops, _, rhos = _smith_corners(3.0)
+    m = len(rhos)
+    rows = np.zeros((m, 5, 13))
+    rows[:, 2, 0] = 1.5  # x_e row reads x[0], x_d[4] and w[1]
+    rows[:, 2, 5 + 4] = -0.5
+    rows[:, 2, 10 + 1] = 2.0
+    ks = KScaling(rhos[:, 0], 0.01, SMITH_STATES, relative=True, kappa_rows=rows)
+    ad = np.stack(
+        [k_scaled_system(q, k, SMITH_STATES).Ad for q, k in zip(loops, rhos[:, 0], strict=True)]
+    )
+    eye = np.eye(5)
+    _, (u_kappa, phi_kappa), _, _ = k_terms(ks, ad, eye, eye, 45.0, 45.0, 3)
+    full = np.einsum("mnq,qb->mnb", u_kappa, phi_kappa)  # over [x, x_d, int x, w]
+    pi = np.diag([0.0, 1.0, 0.0, 1.0, 0.0])
+    want = np.zeros((m, 5, 18))
+    want[:, :, :5] = pi
+    want[:, 2, 0] += 1.5
+    want[:, 2, 9] = -0.5
+    want[:, 2, 16] = 2.0
+    assert np.allclose(full, 45.0 * 0.01 * want)
 
 
 def test_k_scaling_rejects_a_delayed_output_on_a_scaled_state_and_k_reaching_zero() -> None:
