@@ -15,13 +15,15 @@
 :func:`make_schedule`
     The source named by ``--schedule``: oracle and nominal from :mod:`runtime.core.scheduling`
     (the protocol, :class:`~runtime.core.scheduling.Schedule`), estimated from here, validated
-    from :mod:`runtime.estimation.validated`.
+    from :mod:`runtime.estimation.validated`, cautious (the population's most sensitive patient
+    first, lowered on evidence) from :mod:`runtime.estimation.cautious`.
 """
 
 from __future__ import annotations
 
 import math
 
+from contracts.drug import DoseScale
 from runtime.core.estimate import Estimate
 from runtime.core.scheduling import (
     NominalSchedule,
@@ -32,7 +34,7 @@ from runtime.core.scheduling import (
 )
 from runtime.estimation.estimator import DelayBankEstimator
 
-SOURCES = ("oracle", "estimated", "nominal", "validated")
+SOURCES = ("oracle", "estimated", "nominal", "validated", "cautious")
 #: the cautious rule's full shift (standard deviations) and the relative standard deviation from
 #: which it applies in full (below, the shift shrinks in proportion): tuned on cohort seed 11
 CAUTION_SIGMA = 0.75
@@ -121,8 +123,19 @@ class EstimatedSchedule:
         return self._schedule
 
 
-def make_schedule(source: str, sample_period_s: float = 0.1) -> ScheduleSource:
-    """The scheduling source named ``source`` (one of :data:`SOURCES`) at ``sample_period_s`` (s)."""
+def make_schedule(
+    source: str,
+    sample_period_s: float = 0.1,
+    controller: object | None = None,
+    dose: DoseScale | None = None,
+) -> ScheduleSource:
+    """The scheduling source named ``source`` (one of :data:`SOURCES`) at ``sample_period_s`` (s).
+
+    ``controller`` is the controller the source schedules: ``cautious`` reads its design (box,
+    certified ln K rates, patient population: :func:`runtime.estimation.cautious.envelope_of`;
+    required); ``dose`` the syringe and patient to convert the population's doses with (default:
+    the design's syringe and the reference adult).
+    """
     if source == "oracle":
         return OracleSchedule()
     if source == "nominal":
@@ -134,4 +147,10 @@ def make_schedule(source: str, sample_period_s: float = 0.1) -> ScheduleSource:
         from runtime.estimation.validated import ValidatedSchedule
 
         return ValidatedSchedule(sample_period_s=sample_period_s)
+    if source == "cautious":
+        from runtime.estimation.cautious import CautiousSchedule, envelope_of
+
+        if controller is None:
+            raise ValueError("--schedule cautious needs the controller it schedules (its design)")
+        return CautiousSchedule(envelope_of(controller), sample_period_s, dose)
     raise ValueError(f"schedule source {source!r} not one of {SOURCES}")

@@ -125,7 +125,7 @@ def _simulate_patient(
     world.patient = native_patient(world.patient)  # before its first step
     controller = native_twin(load_controller(controller_spec, sample_period_s))
     try:
-        source = native_schedule(make_schedule(schedule, sample_period_s))
+        source = native_schedule(make_schedule(schedule, sample_period_s, controller))
         traj = simulate(world, controller, schedule=source)
     except ControllerError as exc:  # name the patient too (the message crosses processes)
         raise ControllerError(

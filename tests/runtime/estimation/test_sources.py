@@ -198,10 +198,17 @@ def test_estimated_schedules_on_the_estimate_once_learned():
 
 
 def test_make_schedule_builds_each_named_source():
-    assert SOURCES == ("oracle", "estimated", "nominal", "validated")
-    assert [make_schedule(name).source for name in SOURCES] == list(SOURCES)
+    from runtime.inputs.config import load_controller
+
+    assert SOURCES == ("oracle", "estimated", "nominal", "validated", "cautious")
+    cautious = load_controller("lpv:cautious", 0.1)
+    assert [make_schedule(name, 0.1, cautious).source for name in SOURCES] == list(SOURCES)
     with pytest.raises(ValueError, match="not one of"):
         make_schedule("truth")
+    with pytest.raises(ValueError, match="needs the controller"):
+        make_schedule("cautious")
+    with pytest.raises(ValueError, match="log-K"):
+        make_schedule("cautious", 0.1, load_controller("lpv", 0.1))
 
 
 def test_estimation_imports_no_numpy_solver_or_simulator():
