@@ -36,6 +36,7 @@ from typing import Any
 
 __all__ = [
     "DEFAULT_BINDING",
+    "drug_agnostic",
     "REFERENCE_WEIGHT_KG",
     "DoseScale",
     "DrugBinding",
@@ -129,6 +130,16 @@ def binding_of(controller: Any) -> DrugBinding:
                 str(src.DRUG), float(getattr(src, "DRUG_CONCENTRATION_UG_ML", math.nan))
             )
     return DEFAULT_BINDING
+
+
+def drug_agnostic(controller: Any) -> bool:
+    """Whether a controller declares ``DRUG_AGNOSTIC = True`` (on the instance, its class or its
+    module): it is bound to no drug and runs on whichever the clinician names (the PI and Smith
+    baselines: fixed or scheduled gains in ml/h that every shipped drug's nominal patient shares,
+    K ≈ 0.55 mmHg/(ml/h) of its usual syringe; docs/DRUGS.md). ``pressor run`` then checks the
+    clinician's drug and syringe against the library and the device, not against a design."""
+    module = sys.modules.get(type(controller).__module__)
+    return any(getattr(src, "DRUG_AGNOSTIC", False) is True for src in (controller, module) if src)
 
 
 def dose_ug_min(rate_ml_h: float, concentration_ug_ml: float) -> float:

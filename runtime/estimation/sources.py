@@ -22,6 +22,8 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from typing import Any
 
 from contracts.drug import DoseScale
 from runtime.core.estimate import Estimate
@@ -33,6 +35,12 @@ from runtime.core.scheduling import (
     ScheduleSource,
 )
 from runtime.estimation.estimator import DelayBankEstimator
+from runtime.estimation.settings import (
+    DEFAULT_SETTINGS,
+    DESIGN_BOX,
+    DESIGN_RATES,
+    EstimatorSettings,
+)
 
 SOURCES = ("oracle", "estimated", "nominal", "validated", "cautious")
 #: the cautious rule's full shift (standard deviations) and the relative standard deviation from
@@ -123,6 +131,45 @@ class EstimatedSchedule:
         return self._schedule
 
 
+def _design_of(controller: object | None) -> tuple[Any, Any] | None:
+    """The box and rates ``controller`` declares when they are not the shipped phenylephrine
+    design's (whose sources keep their tuned defaults), else None."""
+    if controller is None:
+        return None
+    from runtime.core.supervisor_config import sched_limits_of
+
+    box, rates = sched_limits_of(controller)  # type: ignore[arg-type]
+    if box is None or rates is None:
+        return None
+    if tuple(box) == tuple(DESIGN_BOX) and tuple(rates) == tuple(DESIGN_RATES):
+        return None
+    return box, rates
+
+
+def settings_for_box(box: Any) -> EstimatorSettings:
+    """The estimator's settings for a design whose box is ``box`` (((K lo, hi) mmHg/(ml/h), (T lo,
+    hi) s, (τ lo, hi) s)): the prior at the box's geometric-mean K and T and its delay range's
+    lower end + 5 s (the shipped prior's place in its box, τ 15 s in 10-45 s), the plausible K
+    within 5x of the box, the delay bank and the caution's edges on the box, no T drift (the
+    paper model's law is phenylephrine's). The shipped phenylephrine design keeps
+    :data:`runtime.estimation.settings.DEFAULT_SETTINGS`."""
+    (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = ((float(a), float(b)) for a, b in box)
+    base = DEFAULT_SETTINGS
+    return replace(
+        base,
+        prior=(math.sqrt(k_lo * k_hi), math.sqrt(t_lo * t_hi), d_lo + 5.0),
+        tau_range_s=(d_lo, d_hi + 1.0),
+        tau_prior_s=(d_lo + 5.0, base.tau_prior_s[1]),
+        K_plausible=(k_lo / 5.0, k_hi * 5.0),
+        T_plausible_s=(
+            min(base.T_plausible_s[0], t_lo / 5.0),
+            max(base.T_plausible_s[1], 2.5 * t_hi),
+        ),
+        box=((k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi)),
+        T_drift_per_ml_h=0.0,
+    )
+
+
 def make_schedule(
     source: str,
     sample_period_s: float = 0.1,
@@ -133,20 +180,32 @@ def make_schedule(
 
     ``controller`` is the controller the source schedules: ``cautious`` reads its design (box,
     certified ln K rates, patient population: :func:`runtime.estimation.cautious.envelope_of`;
-    required); ``dose`` the syringe and patient to convert the population's doses with (default:
-    the design's syringe and the reference adult).
+    required); ``estimated`` and ``validated`` take its box and rates when they are not the
+    shipped phenylephrine design's (:func:`settings_for_box`: another drug's design schedules
+    inside its own box, not phenylephrine's); ``dose`` the syringe and patient to convert the
+    population's doses with (default: the design's syringe and the reference adult).
     """
     if source == "oracle":
         return OracleSchedule()
     if source == "nominal":
         return NominalSchedule()
+    design = _design_of(controller)
     if source == "estimated":
-        return EstimatedSchedule(sample_period_s=sample_period_s)
+        if design is None:
+            return EstimatedSchedule(sample_period_s=sample_period_s)
+        settings = settings_for_box(design[0])
+        est = DelayBankEstimator(sample_period_s, settings)
+        return EstimatedSchedule(est, sample_period_s)
     if source == "validated":
         # imported here: only this opt-in source needs the model bank and the generated module
         from runtime.estimation.validated import ValidatedSchedule
 
-        return ValidatedSchedule(sample_period_s=sample_period_s)
+        if design is None:
+            return ValidatedSchedule(sample_period_s=sample_period_s)
+        box, rates = design
+        est = DelayBankEstimator(sample_period_s, settings_for_box(box))
+        start = settings_for_box(box).prior
+        return ValidatedSchedule(est, sample_period_s, start=start, box=box, rate_bounds=rates)
     if source == "cautious":
         from runtime.estimation.cautious import CautiousSchedule, envelope_of
 

@@ -273,11 +273,14 @@ def run_config(
         )
     controller = load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device
     if clinician is not None:  # pressor run: the syringe and patient against design and library
-        from contracts.drug import binding_of
+        from contracts.drug import DrugBinding, binding_of, drug_agnostic
         from runtime.inputs.dosing import bind_syringe
 
         try:
-            design = binding_of(controller)
+            if drug_agnostic(controller):  # a baseline: the clinician's drug and syringe
+                design = DrugBinding(clinician.drug, clinician.concentration_ug_ml)
+            else:
+                design = binding_of(controller)
         except ValueError as exc:
             raise UsageError(f"--controller {args.controller}: {exc}") from None
         clinician = bind_syringe(clinician, design, args.controller, args.drug_library)

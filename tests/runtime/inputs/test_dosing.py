@@ -295,3 +295,40 @@ def test_artifact_metadata_drug_is_checked_and_absent_reads_as_the_default():
     meta = {**art.metadata, "design": {**art.metadata["design"], "drug": {"name": ""}}}
     with pytest.raises(ArtifactError, match="metadata.design.drug"):
         make_artifact(meta, art.coefficients, art.nodes)
+
+
+@pytest.mark.parametrize("controller", ["pi", "smith"])
+@pytest.mark.parametrize(
+    ("drug", "conc", "weight"),
+    [
+        ("phenylephrine", 100.0, None),
+        ("norepinephrine", 16.0, "70"),
+        ("norepinephrine", 64.0, "30"),
+    ],
+)
+def test_every_baseline_runs_on_every_library_drug(controller, drug, conc, weight):
+    # pressor run --controller pi|smith --drug D --concentration-ug-ml C: bound to the clinician's
+    # syringe (checked against the library), and a device announcing it is accepted
+    from types import SimpleNamespace
+
+    from plumbing.usage import UsageParser
+    from runtime.inputs.clinician import add_clinician_options, check_device_hello, clinician_input
+    from runtime.inputs.config import add_run_options, run_config
+    from runtime.inputs.dosing import add_dosing_options
+
+    p = UsageParser(prog="pressor run")
+    add_run_options(p, "estimated", "")
+    add_clinician_options(p)
+    add_dosing_options(p)
+    argv = ["--controller", controller, "--drug", drug, "--concentration-ug-ml", f"{conc:g}"]
+    argv += [] if weight is None else ["--weight-kg", weight]
+    args = p.parse_args(argv)
+    cfg = run_config(args, clinician=clinician_input(args))
+    assert (cfg.clinician.drug, cfg.clinician.concentration_ug_ml) == (drug, conc)
+    peer = SimpleNamespace(drug=drug, concentration_ug_ml=conc, pump_max_ml_h=120.0)
+    check_device_hello(peer, 120.0, cfg.clinician)
+    # a drug-bound design is still refused another drug
+    if drug != "phenylephrine":
+        lpv = p.parse_args(["--controller", "lpv", *argv[2:]])
+        with pytest.raises(UsageError, match="loaded design"):
+            run_config(lpv, clinician=clinician_input(lpv))
