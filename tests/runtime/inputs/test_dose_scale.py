@@ -47,7 +47,7 @@ def test_a_bad_syringe_or_weight_is_refused(conc, weight):
         DoseScale(conc, weight)
 
 
-@pytest.mark.parametrize("spec", ["lpv:cautious"])
+@pytest.mark.parametrize("spec", ["lpv:cautious", "lpv:norepinephrine-cautious"])
 def test_the_population_fits_the_module_box_at_every_library_syringe_and_weight(spec):
     mod = type(load_controller(spec, 0.1)).__module__
     import sys
