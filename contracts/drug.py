@@ -36,6 +36,7 @@ from typing import Any
 
 __all__ = [
     "DEFAULT_BINDING",
+    "dose_scaled",
     "drug_agnostic",
     "REFERENCE_WEIGHT_KG",
     "DoseScale",
@@ -140,6 +141,18 @@ def drug_agnostic(controller: Any) -> bool:
     clinician's drug and syringe against the library and the device, not against a design."""
     module = sys.modules.get(type(controller).__module__)
     return any(getattr(src, "DRUG_AGNOSTIC", False) is True for src in (controller, module) if src)
+
+
+def dose_scaled(controller: Any) -> bool:
+    """Whether a controller's design is sized in doses (its module declares
+    ``POPULATION_K_UG_KG_MIN``): it is bound to its drug but serves every syringe of it, the
+    schedule converting the population to ml/h of the syringe in the pump (:class:`DoseScale`)."""
+    module = sys.modules.get(type(controller).__module__)
+    return any(
+        getattr(src, "POPULATION_K_UG_KG_MIN", None) is not None
+        for src in (controller, module)
+        if src
+    )
 
 
 def dose_ug_min(rate_ml_h: float, concentration_ug_ml: float) -> float:

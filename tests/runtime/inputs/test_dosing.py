@@ -332,3 +332,31 @@ def test_every_baseline_runs_on_every_library_drug(controller, drug, conc, weigh
         lpv = p.parse_args(["--controller", "lpv", *argv[2:]])
         with pytest.raises(UsageError, match="loaded design"):
             run_config(lpv, clinician=clinician_input(lpv))
+
+
+def test_a_dose_design_takes_every_syringe_of_its_drug_the_library_allows():
+    from plumbing.usage import UsageParser
+    from runtime.inputs.clinician import add_clinician_options, clinician_input
+    from runtime.inputs.config import add_run_options, run_config
+    from runtime.inputs.dosing import add_dosing_options
+
+    p = UsageParser(prog="pressor run")
+    add_run_options(p, "cautious", "")
+    add_clinician_options(p)
+    add_dosing_options(p)
+    base = ["--controller", "lpv:norepinephrine-cautious", "--weight-kg", "70"]
+    for conc in (16.0, 32.0, 64.0):
+        args = p.parse_args([*base, "--concentration-ug-ml", f"{conc:g}"])
+        cfg = run_config(args, clinician=clinician_input(args))
+        assert (cfg.clinician.drug, cfg.clinician.concentration_ug_ml) == ("norepinephrine", conc)
+    args = p.parse_args(base)  # no syringe given: the design's
+    assert run_config(args, clinician=clinician_input(args)).clinician.concentration_ug_ml == 16.0
+    args = p.parse_args([*base, "--concentration-ug-ml", "20"])
+    with pytest.raises(UsageError, match="allowed 16, 32, 64"):
+        run_config(args, clinician=clinician_input(args))
+    # a design in ml/h of one syringe still refuses another
+    args = p.parse_args(
+        ["--controller", "lpv:norepinephrine", *base[2:], "--concentration-ug-ml", "32"]
+    )
+    with pytest.raises(UsageError, match="count ml/h of that syringe"):
+        run_config(args, clinician=clinician_input(args))
