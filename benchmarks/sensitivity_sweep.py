@@ -13,7 +13,8 @@ each controller, for each patient model (default ``paper``, ``pkpd``, ``phenylep
 ``norepinephrine``; docs/PATIENTS.md). A level is the model ``MODEL@sensitivity=f``
 (:mod:`pressor.hil_sim.patients.sensitivity`: each delivered ml/h acts as f ml/h). Each model is played with
 its drug (:data:`MODEL_DRUG`); ``lpv`` in ``--controllers`` is that drug's shipped design
-(:data:`DRUG_LPV`: ``lpv`` for phenylephrine, ``lpv:norepinephrine``), the others run as named
+(:data:`DRUG_LPV`: ``lpv`` for phenylephrine, ``lpv:norepinephrine``; under ``--schedule
+cautious`` its design on a log-K scale, :data:`DRUG_LPV_CAUTIOUS`), the others run as named
 (the PI and the Smith predictor have no drug: their gains are in ml/h of phenylephrine's 100 µg/ml
 syringe, and ``pressor run`` refuses a norepinephrine device for them, docs/DRUGS.md; here, in
 process, they run unretuned). All controllers use one scheduling source (``--schedule``, default
@@ -24,10 +25,11 @@ every level uses the drug library's (``runtime/inputs/drug_library.toml``) stand
 first concentration), the scenario's pump and the library's limits, which the supervisor enforces
 as under ``pressor run`` (hard, soft and hourly; :mod:`pressor.runtime.core.dose_guard`), per-kg limits at
 :data:`REFERENCE_WEIGHT_KG`. A patient the standard syringe cannot bring to the target within the
-smaller of the pump's maximum and the hard dose limit runs with the library's stronger syringe
-(:func:`stronger_syringe`) when that one can, as a clinician would switch to it; the controllers
-are not told (today's designs count ml/h of their own syringe, and ``pressor run`` refuses
-another). A patient no syringe of the library can bring to the target within the hard dose limit
+rate it can hold for the hour (the smallest of the pump's maximum, the hard and soft dose limits
+and the hourly maximum spread over the hour: :attr:`Syringe.max_rate_ml_h`) runs with the
+library's stronger syringe (:func:`syringes`) when that one can, as a clinician would switch to
+it; the controllers are not told (the simulated patient counts ml/h of the standard syringe). A
+patient no syringe of the library can bring to the target within those limits
 is a **non-responder**: it runs with the standard syringe, is reported in its own row and counted
 with its shortfall, never dropped. *Reach the target* is the trial's ``reachable`` (docs/METRICS.md):
 the largest steady ΔMAP at the limit is within the metrics' band of what the scenario asks.
@@ -70,6 +72,7 @@ import numpy as np
 from benchmarks.sweep_figures import Throughput, model_tables, row_figures, shortfall_figures
 from benchmarks.sweep_plan import (
     DRUG_LPV,
+    DRUG_LPV_CAUTIOUS,
     MODEL_DRUG,
     REFERENCE_WEIGHT_KG,
     Syringe,
@@ -150,7 +153,8 @@ def run_level(
     standard, stronger = syringes(load_library()[drug], scenario.pump.max_rate_ml_h)
     seeds = cohort_seeds(args.seed, args.patients)
     plan = reach_plan(scenario, model, level, seeds, standard, stronger)
-    controllers = [DRUG_LPV[drug] if c == "lpv" else c for c in args.controllers]
+    lpv = (DRUG_LPV_CAUTIOUS if args.schedule == "cautious" else DRUG_LPV)[drug]
+    controllers = [lpv if c == "lpv" else c for c in args.controllers]
     jobs: list[dict[str, Any]] = []
     for controller in controllers:
         for syringe, group_seeds in (

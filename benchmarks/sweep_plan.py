@@ -5,7 +5,7 @@ library: the standard syringe (the library's first concentration), the stronger 
 switches to when the standard cannot reach the target (:func:`syringes`), and the limits the
 supervisor enforces at each. :func:`reach_plan` sorts a level's patients before anything runs:
 those the standard syringe brings to the target, those only the stronger one does, and the
-non-responders no syringe of the library brings there within the hard dose limit.
+non-responders no syringe of the library brings there within the dose limits it can hold for an hour.
 
 A patient model counts ml/h of one syringe (:data:`MODEL_CONCENTRATION_UG_ML`); a syringe c times
 stronger is the same patient at c times the sensitivity
@@ -42,6 +42,12 @@ MODEL_CONCENTRATION_UG_ML = {
 }
 #: each drug's shipped LPV design, what ``lpv`` in ``--controllers`` runs on its models
 DRUG_LPV = {"phenylephrine": "lpv", "norepinephrine": "lpv:norepinephrine"}
+#: each drug's design on a log-K scale, what ``lpv`` runs under ``--schedule cautious`` (the
+#: cautious start needs a design with a patient population: docs/SCHEDULING.md)
+DRUG_LPV_CAUTIOUS = {
+    "phenylephrine": "lpv:cautious",
+    "norepinephrine": "lpv:norepinephrine-cautious",
+}
 #: the weight (kg) per-kg dose limits are converted at: the models draw no weight, and 70 kg is
 #: the reference adult of the dosing literature (docs/DRUGS.md)
 REFERENCE_WEIGHT_KG = 70.0
@@ -62,8 +68,10 @@ class Syringe:
     limits
         The library's limits in ml/h at this syringe (:class:`DoseLimits`).
     max_rate_ml_h
-        The largest rate the loop can give (ml/h): the smaller of the pump's maximum and the hard
-        dose limit.
+        The largest rate the loop can hold through the scenario's hour (ml/h): the smallest of the
+        pump's maximum, the hard dose limit, the soft one (the supervisor cuts to it: nobody
+        confirms doses above it here) and the hourly maximum spread over the hour. A patient who
+        needs more cannot be held at the target by any controller within the library's limits.
     """
 
     concentration_ug_ml: float
@@ -105,12 +113,13 @@ class Syringe:
 def _syringe(entry: DrugEntry, concentration_ug_ml: float, pump_max_ml_h: float) -> Syringe:
     weight = REFERENCE_WEIGHT_KG if entry.per_kg else None
     limits = entry.limits(concentration_ug_ml, weight)
-    return Syringe(
-        concentration_ug_ml,
-        MODEL_CONCENTRATION_UG_ML[entry.name],
-        limits,
-        min(pump_max_ml_h, limits.hard_max_ml_h),
+    sustained = min(
+        pump_max_ml_h,
+        limits.hard_max_ml_h,
+        limits.soft_max_ml_h if not limits.confirm_above_soft else math.inf,
+        limits.max_ml_per_hour / 1.0,  # ml per hour, spread over one hour: ml/h
     )
+    return Syringe(concentration_ug_ml, MODEL_CONCENTRATION_UG_ML[entry.name], limits, sustained)
 
 
 def syringes(entry: DrugEntry, pump_max_ml_h: float) -> tuple[Syringe, Syringe | None]:
@@ -118,8 +127,8 @@ def syringes(entry: DrugEntry, pump_max_ml_h: float) -> tuple[Syringe, Syringe |
 
     The standard syringe is the library's first concentration. The stronger one is the weakest
     concentration that gives the largest dose the library allows within the pump's maximum
-    (``pump_max_ml_h``, ml/h) and the hard dose limit: a dilute syringe the pump cannot push to
-    the hard limit is no use, and a stronger one than needed only coarsens the dosing.
+    (``pump_max_ml_h``, ml/h) and the dose limits (:attr:`Syringe.max_rate_ml_h`): a dilute
+    syringe the pump cannot push to the limit is no use, and a stronger one than needed only coarsens the dosing.
     ``None`` when no concentration gives more than the standard (phenylephrine's one syringe).
     """
     standard = _syringe(entry, entry.concentrations_ug_ml[0], pump_max_ml_h)

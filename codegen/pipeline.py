@@ -208,8 +208,8 @@ def load_design(path: str | Path) -> LoadedDesign:
         k_rate_relative=(model := art.model_config).k_rate_relative,
         k_rate_up_per_s=model.k_rate_up_per_s,
         reference_lag_s=ref.lag_s if ref.enabled else None,
-        # the Smith law absorbs a change of K in its integral on a log-K scale
-        bumpless=model.k_rate_relative and art.family.structure == "smith",
+        # a family's law may absorb a change of K in its integral on a log-K scale
+        bumpless=model.k_rate_relative and art.family.impl.bumpless_log_k,
         population=art.population,
     )
 

@@ -24,7 +24,7 @@ source makes them safe by construction and lets the MAP's response buy speed:
   rises toward it (a higher K̂ is the cautious direction).
 * **At the certified rates.** K̂ falls at most at the design's certified fall of ln K and rises at
   most at its certified rise (``RATE_BOUNDS[0]`` / ``K_RATE_UP_PER_S`` of a log-K design, times
-  ``rate_fraction``), inside its box; T and τ are fixed at the box's geometric-mean T and mean τ.
+  ``rate_fraction``), inside its box; T and τ are fixed at the box's geometric-mean T and longest τ.
   The design's certificate covers these rates (falls fast, rises slowly: a falling K is the
   benign direction, :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`), and its module's
   bumpless integral keeps the command continuous while K̂ moves

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/cautious_design.npz --target python --fixed-point q31
 Artifact sha256:  ffdad7e8e41e42a120268d2cfd15b60cf1aa349fb424a4a4ab6ec7a8f32c4aff
-Content hash:     974f76e48a3b554bb7c8a242c332a7acd6c5238bb0df1d99caf987f7663c80f8
+Content hash:     3418b176a5c8e57230d153f1d590bea53146d881a39f0d8a95d1e38916fd7f5b
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -60,9 +60,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '8c01370ad3ab67e79392ed82abdb39e078a6ff2cf4d0b66aeb45f8634ce2120f'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'bc84634ae81d3e630477698dd62ebd24c60b3bd4d869cdfc22bc57962f1a5733'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'ffdad7e8e41e42a120268d2cfd15b60cf1aa349fb424a4a4ab6ec7a8f32c4aff'
-CONTENT_HASH = '974f76e48a3b554bb7c8a242c332a7acd6c5238bb0df1d99caf987f7663c80f8'
+CONTENT_HASH = '3418b176a5c8e57230d153f1d590bea53146d881a39f0d8a95d1e38916fd7f5b'
 TABLES_SHA256 = 'aebeb36d49ddb20e4d4e434212c86083c797c54743f297d57d670a366155edce'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/cautious_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/norepinephrine_cautious_design.npz --target python --fixed-point q31
 Artifact sha256:  c8d1e9059e08a434d8dab1f38ed1da22d8e72b74ae784fc774a4b8c26b69048c
-Content hash:     757cbb15403c5a792b24942d81fb148c547fdfe286332e02e5f57d8d475ca3e1
+Content hash:     c0abf652ce009c7e56c08929c79ca0a6654517342d9507633549eeb186b2bcd9
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -60,9 +60,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'e7aa154987dc6ff67ee79e9df038ce77312045908d7f3231959f5663618ef88c'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '880c1ee23b14298aea01c5e977d3a21c01bc9b229f1d9025ef4a9b5c47e57104'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'c8d1e9059e08a434d8dab1f38ed1da22d8e72b74ae784fc774a4b8c26b69048c'
-CONTENT_HASH = '757cbb15403c5a792b24942d81fb148c547fdfe286332e02e5f57d8d475ca3e1'
+CONTENT_HASH = 'c0abf652ce009c7e56c08929c79ca0a6654517342d9507633549eeb186b2bcd9'
 TABLES_SHA256 = '3d1a1331356203255044f650010b743670f8d41aebcc801ce535d517d700d1bf'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/norepinephrine_cautious_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -31,7 +31,10 @@ SCHEDULE_HELP = (
     " patient until it has learned or when its health check rejects an estimate), nominal ="
     " the nominal patient's constants (a fixed-gain controller), validated = opt-in: the nominal"
     " patient's K with T and tau slewed, inside the design box at 0.9x the certified rates,"
-    " toward a model that predicts the MAP better than the nominal one (docs/SCHEDULING.md)"
+    " toward a model that predicts the MAP better than the nominal one, cautious = for a design"
+    " on a log-K scale (lpv:cautious, lpv:norepinephrine-cautious): K starts at the most"
+    " sensitive patient of the design's population and falls only on the MAP's evidence, at"
+    " the certified rate (docs/SCHEDULING.md)"
 )
 #: why ``pressor sil`` and ``pressor trial`` still default to the oracle
 ORACLE_DEFAULT_WHY = (

@@ -115,6 +115,9 @@ class Family(Protocol):
     takes_loop_gain: bool
     #: the ``pressor synth`` options only this family uses (a usage error for the others)
     synth_options: frozenset[str]
+    #: whether the generated law absorbs a change of K in its integral on a log-K scale (the
+    #: bumpless integral, whose rate term the family's certificate carries)
+    bumpless_log_k: bool
 
     def controller_order(self, n_plant: int) -> int:
         """States of the controller for a generalised plant of ``n_plant`` states."""

@@ -89,25 +89,41 @@ def test_row_figures_rank_harm_as_counted_by_hand():
     assert headline.count("|") == HEADLINE_HEADER.splitlines()[0].count("|")
 
 
-def test_the_stronger_syringe_is_the_weakest_that_reaches_the_hard_limit():
+#: the library's norepinephrine with the soft and hourly limits at the hard one (1 µg/kg/min):
+#: the rate a syringe holds for the hour is then the pump's or the hard limit's
+NE_HARD_ONLY = DrugEntry("norepinephrine", (16.0, 32.0, 64.0), "ug/kg/min", 1.0, 1.0, 60.0)
+
+
+def test_a_syringe_holds_the_smallest_of_the_pump_and_the_dose_limits_for_the_hour():
     library = load_library()
     standard, stronger = syringes(library["phenylephrine"], 120.0)
     assert stronger is None  # one syringe in the library
-    assert (standard.concentration_ug_ml, standard.max_rate_ml_h) == (100.0, 120.0)  # 200 µg/min
+    # hard 200 µg/min = 120 ml/h, but the soft 100 µg/min (nobody confirms above it) and the
+    # hourly 6000 µg spread over the hour both hold 60 ml/h
+    assert (standard.concentration_ug_ml, standard.max_rate_ml_h) == (100.0, 60.0)
     standard, stronger = syringes(library["norepinephrine"], 120.0)
+    # 70 kg: soft 0.5 µg/kg/min = 35 µg/min, hourly 30 µg/kg = 35 µg/min over the hour; 16 µg/ml
+    # at 120 ml/h gives 32 µg/min, 32 µg/ml reaches 35 µg/min at 35·60/32 = 65.625 ml/h
+    assert (standard.concentration_ug_ml, standard.max_rate_ml_h) == (16.0, 120.0)
+    assert stronger is not None and stronger.concentration_ug_ml == 32.0
+    assert stronger.max_rate_ml_h == pytest.approx(65.625)
+
+
+def test_the_stronger_syringe_is_the_weakest_that_reaches_the_limit():
+    standard, stronger = syringes(NE_HARD_ONLY, 120.0)
     # 70 kg, hard 1 µg/kg/min = 70 µg/min: 16 µg/ml at 120 ml/h gives 32 µg/min, 32 µg/ml 64,
     # only 64 µg/ml reaches 70 µg/min (at 70·60/64 = 65.625 ml/h)
     assert (standard.concentration_ug_ml, standard.max_rate_ml_h) == (16.0, 120.0)
     assert stronger is not None and stronger.concentration_ug_ml == 64.0
     assert stronger.max_rate_ml_h == pytest.approx(65.625)
     # with a hard limit of 0.9 µg/kg/min (63 µg/min) 32 µg/ml already reaches it (at 118.1 ml/h)
-    entry = DrugEntry("norepinephrine", (16.0, 32.0, 64.0), "ug/kg/min", 0.9, 0.5, 30.0)
+    entry = DrugEntry("norepinephrine", (16.0, 32.0, 64.0), "ug/kg/min", 0.9, 0.9, 54.0)
     assert syringes(entry, 120.0)[1].concentration_ug_ml == 32.0  # type: ignore[union-attr]
 
 
 def test_patients_are_sorted_by_the_syringe_that_brings_them_to_the_target(short_scenario: Path):
     scenario = load_scenario(short_scenario)
-    standard, stronger = syringes(load_library()["norepinephrine"], 120.0)
+    standard, stronger = syringes(NE_HARD_ONLY, 120.0)
     model = "tests.support.patient_plugin:FirstOrderPatient"
     seeds = cohort_seeds(3, 12)
     plan = reach_plan(scenario, model, 0.3, seeds, standard, stronger)
@@ -170,9 +186,9 @@ def test_the_sweep_reports_every_column_counts_non_responders_and_repeats_itself
     # norepinephrine at 0.2× on this cohort has all three groups (the test needs them)
     ne = doc["models"]["norepinephrine"]["levels"][0]
     assert {r["group"] for r in ne["rows"]} == {"standard", "switched", "non-responders"}
-    assert ne["reach"]["stronger_syringe_ug_ml"] == 64.0
+    assert ne["reach"]["stronger_syringe_ug_ml"] == 32.0
     switched = next(r for r in ne["rows"] if r["group"] == "switched")
-    assert switched["syringe_ug_ml"] == 64.0
+    assert switched["syringe_ug_ml"] == 32.0
     # every table row has every column, and names the switched and the non-responders
     n_cols = HEADER.splitlines()[0].count("|")
     lines = [line for line in out.splitlines() if line.startswith("| 0.2× | pi |")]
@@ -181,7 +197,7 @@ def test_the_sweep_reports_every_column_counts_non_responders_and_repeats_itself
     assert len(rows) == sum(len(m["levels"][0]["rows"]) for m in doc["models"].values())
     assert len(headlines) == sum(len(m["levels"][0]["responders"]) for m in doc["models"].values())
     assert all(h.count("|") == HEADLINE_HEADER.splitlines()[0].count("|") for h in headlines)
-    assert any("64 (switched)" in line for line in rows)
+    assert any("32 (switched)" in line for line in rows)
     assert any("(non-responders)" in line for line in rows)
     assert "throughput:" in err and "per CPU minute" in err
     # the same arguments give the same bytes with two workers, and a rerun reuses every cohort

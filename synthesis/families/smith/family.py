@@ -69,6 +69,7 @@ class SmithFamily:
     name = NAME
     takes_loop_gain = True
     synth_options: frozenset[str] = frozenset()
+    bumpless_log_k = True  # synthesis.families.smith.design.bumpless_rows
 
     def controller_order(self, n_plant: int) -> int:
         """Always :data:`SMITH_ORDER`, whatever the plant."""

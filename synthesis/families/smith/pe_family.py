@@ -39,6 +39,7 @@ class SmithPEFamily(SmithFamily):
 
     name = NAME
     analysis_name = "prediction-error analysis"
+    bumpless_log_k = False  # its certificate carries no bumpless rows
 
     def coefficient_shapes(self, n_plant: int, ny: int) -> dict[str, tuple[tuple[int, ...], ...]]:
         """The prediction-error certificate: P (3, 8, 8), S, R and transform (4, 4)."""

@@ -84,6 +84,7 @@ class Theorem3Family:
     name = NAME
     takes_loop_gain = False
     synth_options = frozenset({"--lambda-search", "--lambda2", "--lambda3", "--backoff"})
+    bumpless_log_k = False
 
     def controller_order(self, n_plant: int) -> int:
         """Full order: the generalised plant's."""
