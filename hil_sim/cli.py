@@ -115,17 +115,22 @@ def _progress_bar(done: int, total: int) -> None:
 
 def _trial(argv: Sequence[str]) -> int:
     from pressor.runtime.estimation.sources import SOURCES
-    from pressor.runtime.inputs.config import ORACLE_DEFAULT_WHY, SCHEDULE_HELP
+    from pressor.runtime.inputs.config import (
+        CONTROLLER_DEFAULT_HELP,
+        SCHEDULE_DEFAULT_HELP,
+        SCHEDULE_HELP,
+    )
+    from pressor.runtime.inputs.defaults import DEFAULT_SCENARIO
 
     p = UsageParser(prog="pressor trial", description="in-silico cohort trial of a controller")
     p.add_argument(
         "--controller",
-        default="pi",
-        help="pi | smith[:LAMBDA_S] (Smith predictor, lambda 30 s) | lpv | PATH to a generated "
+        default=None,
+        help=f"{CONTROLLER_DEFAULT_HELP}; pi | smith[:LAMBDA_S] (Smith predictor, lambda 30 s) | lpv | PATH to a generated "
         "module | a plugin class MODULE:CLASS[:ARGS] or FILE.py:CLASS[:ARGS] or an installed "
         "'pressor.controllers' entry point NAME[:ARGS] (ARGS: key=value,...); several, "
         "comma-separated (lpv,pi,smith), run the same cohort under each and compare them per "
-        "patient (default: %(default)s)",
+        "patient",
     )
     p.add_argument(
         "--report",
@@ -134,7 +139,11 @@ def _trial(argv: Sequence[str]) -> int:
     )
     p.add_argument("--patients", type=int, default=20, help="cohort size N (1..100000)")
     p.add_argument("--seed", type=int, default=1, help="cohort seed S (>= 0)")
-    p.add_argument("--scenario", default="paper-disturbance", help="scenario name or .toml path")
+    p.add_argument(
+        "--scenario",
+        default=DEFAULT_SCENARIO,
+        help="scenario name or .toml path (default %(default)s)",
+    )
     p.add_argument(
         "--jobs", type=int, default=1, help="local worker processes, 1..64 (default: %(default)s)"
     )
@@ -146,7 +155,7 @@ def _trial(argv: Sequence[str]) -> int:
         "(default: local processes, see --jobs); same records either way",
     )
     p.add_argument(
-        "--schedule", choices=SOURCES, default="oracle", help=f"{SCHEDULE_HELP}{ORACLE_DEFAULT_WHY}"
+        "--schedule", choices=SOURCES, default=None, help=f"{SCHEDULE_HELP}{SCHEDULE_DEFAULT_HELP}"
     )
     p.add_argument("--rate", type=float, default=10.0, help="loop rate in Hz (default 10)")
     add_patient_model_option(p)
@@ -188,6 +197,7 @@ def _trial(argv: Sequence[str]) -> int:
     from pressor.runtime.core.closed_loop import ControllerError
     from pressor.runtime.inputs.controller_loader import ControllerSpecError, load_controller
     from pressor.runtime.inputs.controller_plugin import split_controller_list
+    from pressor.runtime.inputs.defaults import default_schedule
 
     period = 1.0 / args.rate
     try:
@@ -196,16 +206,23 @@ def _trial(argv: Sequence[str]) -> int:
         check_model_for_scenario(patient_model, scenario.name, scenario.frozen is not None)
     except (ScenarioError, PatientModelError) as exc:
         raise UsageError(str(exc)) from None
+    if args.controller is None:
+        from pressor.hil_sim.patients.patient_model import model_drug
+        from pressor.runtime.inputs.defaults import default_controller
+
+        args.controller = default_controller(model_drug(args.patient_model))
     specs = split_controller_list(args.controller)
     if "" in specs or len(set(specs)) != len(specs):
         raise UsageError(
             f"field '--controller' = {args.controller!r}: name each controller once, comma-separated"
         )
+    schedules: dict[str, str] = {}
     for spec in specs:
         try:
-            load_controller(spec, period)
+            controller = load_controller(spec, period)
         except ControllerSpecError as exc:
             raise UsageError(str(exc)) from None
+        schedules[spec] = args.schedule or default_schedule(controller)
     _remove_stale_outputs(args.out)
     records: dict[str, list[dict[str, Any]]] = {}
     trajectories: dict[str, dict[str, Any]] = {}
@@ -222,7 +239,7 @@ def _trial(argv: Sequence[str]) -> int:
                 sample_period_s=period,
                 progress=_progress_bar,
                 scheduler=args.scheduler,
-                schedule=args.schedule,
+                schedule=schedules[spec],
                 patient_model=patient_model,
             )
         except ControllerError as exc:  # a plugin that raised: one line, exit 1

@@ -50,7 +50,11 @@ import numpy as np
 
 from pressor.contracts.checks import check_int_range, check_range
 from pressor.hil_sim.episode import Trajectory
-from pressor.hil_sim.patients.patient_model import DEFAULT_PATIENT_MODEL, check_model_for_scenario
+from pressor.hil_sim.patients.patient_model import (
+    DEFAULT_PATIENT_MODEL,
+    check_model_for_scenario,
+    model_drug,
+)
 from pressor.hil_sim.patients.sensitivity import with_sensitivity
 from pressor.hil_sim.scenarios.scenario import Scenario, load_scenario
 from pressor.hil_sim.trials.paired import compare_controllers
@@ -66,6 +70,7 @@ from pressor.runtime.core.supervisor_config import ALARM_FAULTS, State
 from pressor.runtime.estimation.sources import SOURCES
 from pressor.runtime.inputs.controller_loader import load_controller
 from pressor.runtime.inputs.controller_plugin import split_controller_list
+from pressor.runtime.inputs.defaults import DEFAULT_SCENARIO, default_controller, default_schedule
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas
@@ -322,19 +327,23 @@ def _in_api_terms() -> Iterator[None]:
 
 
 def _checked(
-    controller: str | type,
+    controller: str | type | None,
     controller_args: Mapping[str, Any] | None,
     scenario: str | Path | Scenario,
     duration_s: float | None,
     rate_hz: float,
-    schedule: str,
+    schedule: str | None,
     patient_model: str,
-) -> tuple[str, Scenario, float]:
-    """(spec, scenario, period s) after the checks ``pressor trial`` makes before it runs; errors
-    name the API's arguments (``controller``), not the command line's (``--controller``)."""
+) -> tuple[str, Scenario, float, str]:
+    """(spec, scenario, period s, schedule) after the checks ``pressor trial`` makes before it
+    runs, the defaults resolved as ``pressor trial`` resolves them (the patient model's drug's
+    design, its default schedule: :mod:`pressor.runtime.inputs.defaults`); errors name the API's
+    arguments (``controller``), not the command line's (``--controller``)."""
     check_range("rate_hz", rate_hz, 0.1, 1000.0, unit="Hz")
-    if schedule not in SOURCES:
+    if schedule is not None and schedule not in SOURCES:
         raise ValueError(f"schedule = {schedule!r}: allowed {', '.join(SOURCES)}")
+    if controller is None:
+        controller = default_controller(model_drug(patient_model))
     spec = controller_spec(controller, controller_args)
     if isinstance(controller, str) and len(split_controller_list(controller)) > 1:
         raise ValueError(
@@ -345,19 +354,19 @@ def _checked(
         sc = _scenario(scenario, duration_s)
         check_model_for_scenario(patient_model, sc.name, sc.frozen is not None)
         period_s = 1.0 / rate_hz
-        load_controller(spec, period_s)  # fail fast, naming the spec
-    return spec, sc, period_s
+        loaded = load_controller(spec, period_s)  # fail fast, naming the spec
+    return spec, sc, period_s, schedule or default_schedule(loaded)
 
 
 def simulate(
-    controller: str | type = "lpv",
-    scenario: str | Path | Scenario = "paper-tracking",
+    controller: str | type | None = None,
+    scenario: str | Path | Scenario = DEFAULT_SCENARIO,
     patient_seed: int = 1,
     *,
     controller_args: Mapping[str, Any] | None = None,
     duration_s: float | None = None,
     rate_hz: float = 10.0,
-    schedule: str = "oracle",
+    schedule: str | None = None,
     patient_model: str = DEFAULT_PATIENT_MODEL,
     sensitivity: float = 1.0,
 ) -> SimulationResult:
@@ -366,7 +375,9 @@ def simulate(
     Parameters
     ----------
     controller
-        A ``--controller`` spec or a controller class (:func:`controller_spec`).
+        A ``--controller`` spec or a controller class (:func:`controller_spec`); default the
+        patient model's drug's design on a log-K scale (``lpv:cautious`` for phenylephrine,
+        :mod:`pressor.runtime.inputs.defaults`).
     scenario
         A scenario name (``pressor scenarios``), a ``.toml`` path or a :class:`Scenario`.
     patient_seed
@@ -378,7 +389,9 @@ def simulate(
     rate_hz
         Loop rate (Hz), [0.1, 1000].
     schedule
-        Where K, T, τ come from: ``oracle``, ``estimated``, ``nominal`` or ``validated``.
+        Where K, T, τ come from: ``oracle``, ``estimated``, ``nominal``, ``validated`` or
+        ``cautious``; default ``cautious`` for a design on a log-K scale, ``estimated`` for any
+        other.
     patient_model
         A patient model name or ``MODULE:CLASS`` (:mod:`pressor.hil_sim.patients.patient_model`).
     sensitivity
@@ -392,7 +405,7 @@ def simulate(
     if not 0 <= patient_seed < 2**63:
         raise ValueError(f"patient_seed = {patient_seed!r}: allowed [0, 2**63)")
     patient_model = with_sensitivity(patient_model, sensitivity)
-    spec, sc, period_s = _checked(
+    spec, sc, period_s, schedule = _checked(
         controller, controller_args, scenario, duration_s, rate_hz, schedule, patient_model
     )
     record, traj = _simulate_patient(sc, spec, patient_seed, period_s, schedule, patient_model)
@@ -400,8 +413,8 @@ def simulate(
 
 
 def trial(
-    controller: str | type = "pi",
-    scenario: str | Path | Scenario = "paper-disturbance",
+    controller: str | type | None = None,
+    scenario: str | Path | Scenario = DEFAULT_SCENARIO,
     n_patients: int = 20,
     seed: int = 1,
     *,
@@ -410,7 +423,7 @@ def trial(
     scheduler: str | None = None,
     duration_s: float | None = None,
     rate_hz: float = 10.0,
-    schedule: str = "oracle",
+    schedule: str | None = None,
     patient_model: str = DEFAULT_PATIENT_MODEL,
     sensitivity: float = 1.0,
     trajectories: bool = False,
@@ -421,7 +434,8 @@ def trial(
     Parameters
     ----------
     controller
-        A ``--controller`` spec or a controller class (:func:`controller_spec`).
+        A ``--controller`` spec or a controller class (:func:`controller_spec`); default as
+        :func:`simulate`'s.
     scenario
         A scenario name, a ``.toml`` path or a :class:`Scenario`.
     n_patients
@@ -454,7 +468,7 @@ def trial(
     ):
         check_int_range(name, value, lo, hi)
     patient_model = with_sensitivity(patient_model, sensitivity)
-    spec, sc, period_s = _checked(
+    spec, sc, period_s, schedule = _checked(
         controller, controller_args, scenario, duration_s, rate_hz, schedule, patient_model
     )
     records, summary, traj = run_cohort(
@@ -475,7 +489,7 @@ def trial(
 
 def compare(
     controllers: Sequence[str | type] | str,
-    scenario: str | Path | Scenario = "paper-disturbance",
+    scenario: str | Path | Scenario = DEFAULT_SCENARIO,
     n_patients: int = 20,
     seed: int = 1,
     *,
@@ -483,7 +497,7 @@ def compare(
     scheduler: str | None = None,
     duration_s: float | None = None,
     rate_hz: float = 10.0,
-    schedule: str = "oracle",
+    schedule: str | None = None,
     patient_model: str = DEFAULT_PATIENT_MODEL,
     sensitivity: float = 1.0,
     trajectories: bool = False,
@@ -500,7 +514,8 @@ def compare(
         with each of the others.
     scenario, n_patients, seed, jobs, scheduler, duration_s, rate_hz, schedule, patient_model, \
 sensitivity, trajectories
-        As :func:`trial`, the same for every controller.
+        As :func:`trial`, the same for every controller (``schedule`` None: each controller's
+        default).
     progress
         Called with ``(spec, done, total)`` after each patient of each controller.
 

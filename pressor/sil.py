@@ -11,9 +11,9 @@ it. The run lasts the scenario's ``duration_s`` unless ``--duration`` is given; 
 status line shows simulated time and the real-time factor (:mod:`pressor.runtime.shell.progress`). The
 runtime itself never imports the simulator: the control path learns of the patient, and of any
 fault, only through what arrives on the link. ``--schedule`` picks where the controller's K, T, τ
-come from (:func:`pressor.runtime.estimation.sources.make_schedule`); the default here is still the oracle
-(the device's truth), because the online estimator's figures do not all hold yet
-(docs/notes/cohort-evidence.md). ``--patient-model`` picks the device's patient model
+come from (:func:`pressor.runtime.estimation.sources.make_schedule`); the controller, the schedule and
+the scenario default to what ``pressor run`` and ``pressor trial`` default to
+(:mod:`pressor.runtime.inputs.defaults`). ``--patient-model`` picks the device's patient model
 (:mod:`pressor.hil_sim.patients.patient_model`); a model other than ``paper`` is named in the summary as
 ``patient_model``.
 
@@ -48,15 +48,15 @@ from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
 from pressor.hil_sim.patients.patient_model import add_patient_model_option
 from pressor.plumbing.usage import USAGE_EXIT, UsageError, UsageParser, parse_first
 from pressor.runtime.inputs.config import (
-    ORACLE_DEFAULT_WHY,
     RunConfig,
     add_run_options,
     positive,
+    resolve_controller,
     run_config,
 )
+from pressor.runtime.inputs.defaults import DEFAULT_SCENARIO
 from pressor.runtime.shell.placement import CpuChoice, parse_lockstep_cpus
 
-DEFAULT_SCENARIO = "paper-tracking"
 DEFAULT_PATIENT_SEED = 1
 #: longest simulated run (s)
 MAX_DURATION_S = 7 * 86400.0
@@ -118,7 +118,7 @@ def _seed(text: str) -> int:
 def sil_parser() -> UsageParser:
     """The ``pressor sil`` option parser: the runtime's options plus the device's."""
     p = UsageParser(prog="pressor sil", description="device process + runtime over a serial link")
-    add_run_options(p, "oracle", ORACLE_DEFAULT_WHY)
+    add_run_options(p)
     p.add_argument(
         "--scenario",
         default=DEFAULT_SCENARIO,
@@ -167,6 +167,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
     from pressor.runtime.inputs.config import load_controller
 
     args = sil_parser().parse_args(argv)
+    resolve_controller(args)
     if args.rrd is None:
         args.rrd = Path(
             f"pressor_sil_{_file_label(args.controller)}_{Path(args.scenario).stem}"

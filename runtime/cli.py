@@ -48,9 +48,7 @@ from pressor.runtime.inputs.dosing import add_dosing_options
 
 def _run_parser() -> UsageParser:
     p = UsageParser(prog="pressor run", description="the controller runtime alone on a serial port")
-    add_run_options(
-        p, "estimated", "; default estimated: a real device sends no scheduling parameters"
-    )
+    add_run_options(p)
     p.add_argument("--port", required=True, help="device path or pyserial URL")
     p.add_argument(
         "--ticks",

@@ -46,6 +46,13 @@ PATIENT_MODELS: dict[str, str] = {
     "phenylephrine-2c": "pressor.hil_sim.patients.phenylephrine:Phenylephrine2C",
     "norepinephrine": "pressor.hil_sim.patients.norepinephrine:Norepinephrine1C",
 }
+#: name -> the drug whose infusion each shipped model answers (docs/PATIENTS.md)
+PATIENT_MODEL_DRUG: dict[str, str] = {
+    "paper": "phenylephrine",
+    "pkpd": "phenylephrine",
+    "phenylephrine-2c": "phenylephrine",
+    "norepinephrine": "norepinephrine",
+}
 
 #: members a model class must have (methods, except the mapping ``coefficient_units``)
 CLASS_MEMBERS = ("from_seed", "step", "coefficients", "max_delta_map_mmhg", "coefficient_units")
@@ -117,6 +124,11 @@ class PatientModel(Protocol):
 
 class PatientModelError(ValueError):
     """A ``--patient-model`` that cannot be used (the message names module, class and reason)."""
+
+
+def model_drug(spec: str) -> str | None:
+    """The drug of a registry model, also with a ``@sensitivity=F`` suffix (None for a plugin)."""
+    return PATIENT_MODEL_DRUG.get(spec.partition("@")[0])
 
 
 def model_spec(spec: str) -> tuple[str, str]:

@@ -36,10 +36,15 @@ SCHEDULE_HELP = (
     " sensitive patient of the design's population and falls only on the MAP's evidence, at"
     " the certified rate (docs/SCHEDULING.md)"
 )
-#: why ``pressor sil`` and ``pressor trial`` still default to the oracle
-ORACLE_DEFAULT_WHY = (
-    "; default oracle here, because with the target step at t = 0, before the drug has moved MAP,"
-    " the estimated LPV's median IAE is still ~1.46x the oracle's (docs/notes/cohort-evidence.md)"
+#: what every command's ``--schedule`` help ends with: its default (pressor.runtime.inputs.defaults)
+SCHEDULE_DEFAULT_HELP = (
+    "; default: cautious for a design on a log-K scale (the default controllers), estimated for"
+    " any other"
+)
+#: what every command's ``--controller`` help says of its default
+CONTROLLER_DEFAULT_HELP = (
+    "default: the drug's design on a log-K scale, lpv:cautious for phenylephrine,"
+    " lpv:norepinephrine-cautious for norepinephrine (docs/DRUGS.md)"
 )
 
 DEFAULT_RATE_HZ = 10.0
@@ -161,13 +166,15 @@ def _cpu_latency(text: str) -> int | None:
     return value
 
 
-def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_why: str) -> None:
+def add_run_options(p: argparse.ArgumentParser) -> None:
     """Add the runtime's options (controller, schedule, rate, outputs, signing, faults, timing) to
-    ``p``; ``--schedule`` defaults to ``schedule_default`` (``schedule_why`` ends its help)."""
+    ``p``; ``--controller`` and ``--schedule`` default to None, resolved by :func:`run_config`
+    (:mod:`pressor.runtime.inputs.defaults`)."""
     p.add_argument(
         "--controller",
-        default="lpv",
-        help="lpv (default: the shipped LPV module; lpv:norepinephrine and lpv:wide-delay the"
+        default=None,
+        help=f"{CONTROLLER_DEFAULT_HELP}; lpv (the shipped LPV module on its fixed box;"
+        " lpv:norepinephrine and lpv:wide-delay the"
         " other shipped designs, docs/DRUGS.md and docs/SCHEDULING.md), pi, smith[:LAMBDA_S]"
         " (Smith predictor, closed-loop time constant LAMBDA_S in s, default 30 s), a generated .py, or your own"
         " class: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed 'pressor.controllers'"
@@ -176,8 +183,8 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
     p.add_argument(
         "--schedule",
         choices=SOURCES,
-        default=schedule_default,
-        help=f"{SCHEDULE_HELP}{schedule_why}",
+        default=None,
+        help=f"{SCHEDULE_HELP}{SCHEDULE_DEFAULT_HELP}",
     )
     p.add_argument(
         "--rate",
@@ -260,6 +267,16 @@ def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_
     )
 
 
+def resolve_controller(args: argparse.Namespace) -> None:
+    """Set ``args.controller`` to the default when none was given: the design of the drug named
+    by ``--drug`` (``pressor run``), else of the default drug
+    (:func:`pressor.runtime.inputs.defaults.default_controller`)."""
+    if args.controller is None:
+        from pressor.runtime.inputs.defaults import default_controller
+
+        args.controller = default_controller(getattr(args, "drug", None))
+
+
 def run_config(
     args: argparse.Namespace, ticks: int = 0, clinician: ClinicianInput | None = None
 ) -> RunConfig:
@@ -295,7 +312,12 @@ def run_config(
             f"--sample-age-limit-s {args.sample_age_limit_s:g}: allowed [1/--rate ="
             f" {1.0 / args.rate:g}, 60] s"
         )
+    resolve_controller(args)
     controller = load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device
+    if args.schedule is None:
+        from pressor.runtime.inputs.defaults import default_schedule
+
+        args.schedule = default_schedule(controller)
     if clinician is not None:  # pressor run: the syringe and patient against design and library
         from pressor.contracts.drug import DrugBinding, binding_of, dose_scaled, drug_agnostic
         from pressor.runtime.inputs.dosing import bind_syringe
