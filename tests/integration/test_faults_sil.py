@@ -48,6 +48,7 @@ PUMP_SCHED = [
 
 def sil(tmp: Path, tag: str, controller: str, faults: list[str], duration: int):
     args = ["sil", "--controller", controller, "--patient-seed", "3", "--duration", str(duration)]
+    args += ["--schedule", "oracle", "--scenario", "paper-tracking"]  # the device's schedule faults
     for f in faults:
         args += ["--fault", f]
     rrd, summary = tmp / f"{tag}.rrd", tmp / f"{tag}.json"

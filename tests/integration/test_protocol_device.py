@@ -286,7 +286,7 @@ def test_lockstep_1hz_quantized_monitor_holds_samples_and_reaches_target(
     dialect: ModuleType, tmp_path: Path
 ) -> None:
     key = write_key(tmp_path / "signing.key")
-    cfg = quantized_1hz(n_ticks=4000, key=read_key(key))
+    cfg = quantized_1hz(n_ticks=9000, key=read_key(key))  # the cautious start: ~8 min
     run = drive(dialect, tmp_path, cfg, key)
     held = dialect.PRESSOR_MAP_QUALITY_HELD
     for tick, value, quality in run.log.samples:  # the device keeps to the rule it is written to

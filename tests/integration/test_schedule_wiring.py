@@ -147,7 +147,8 @@ def estimated_sil(tmp_path_factory):
     rrd, summary = d / "est.rrd", d / "est.json"
     proc = pressor(
         "sil",
-        *("--schedule", "estimated", "--scenario", SCENARIO, "--patient-seed", str(SEED)),
+        *("--controller", "lpv", "--schedule", "estimated", "--scenario", SCENARIO),
+        *("--patient-seed", str(SEED)),
         *("--duration", "900", "--rrd", str(rrd), "--summary", str(summary)),
         cwd=d,
     )
@@ -198,16 +199,40 @@ def test_trial_record_carries_estimation_errors_only_off_the_oracle():
     assert nominal["iae_mmhg_s"] == oracle["iae_mmhg_s"]
 
 
-def test_schedule_option_defaults_estimated_for_run_and_oracle_for_sil_and_trial(tmp_path):
+def test_run_sil_trial_and_the_api_share_one_set_of_defaults(tmp_path):
+    from pressor import api
     from pressor.runtime.cli import _run_parser
-    from pressor.sil import sil_parser
+    from pressor.runtime.inputs.clinician import clinician_input
+    from pressor.runtime.inputs.config import run_config
+    from pressor.sil import sil_config
 
-    assert _run_parser().parse_args(["--port", "x"]).schedule == "estimated"
-    assert sil_parser().parse_args([]).schedule == "oracle"
+    # run: the drug's design on a log-K scale and the cautious start, by --drug
+    args = _run_parser().parse_args(["--port", "x"])
+    cfg = run_config(args, clinician=clinician_input(args))
+    assert (cfg.controller, cfg.schedule) == ("lpv:cautious", "cautious")
+    args = _run_parser().parse_args(
+        ["--port", "x", "--drug", "norepinephrine", "--weight-kg", "70"]
+    )
+    cfg = run_config(args, clinician=clinician_input(args))
+    assert (cfg.controller, cfg.schedule) == ("lpv:norepinephrine-cautious", "cautious")
+    # any other LPV design: the estimate (a real device sends no K, T, tau)
+    args = _run_parser().parse_args(["--port", "x", "--controller", "lpv"])
+    assert run_config(args, clinician=clinician_input(args)).schedule == "estimated"
+    # sil: the same controller, schedule and the trial's scenario
+    sil = sil_config([])
+    assert (sil.run.controller, sil.run.schedule, sil.scenario) == (
+        "lpv:cautious", "cautious", "paper-disturbance",
+    )  # fmt: skip
+    # the API: the patient model's drug's design, its default schedule and scenario
+    res = api.simulate(duration_s=30.0, patient_model="norepinephrine")
+    assert res.controller == "lpv:norepinephrine-cautious" and res.scenario == "paper-disturbance"
+    # the cautious start: K at the population's top, 20000 mmHg per ug/kg/min at 16 ug/ml, 70 kg
+    assert res.trajectory.sched_K[0] == pytest.approx(20000.0 * 16.0 / (60.0 * 70.0))
     for cmd in ("run", "sil", "trial"):
         out = " ".join(pressor(cmd, "--help", cwd=tmp_path).stdout.split())  # unwrapped
         assert "--schedule {oracle,estimated,nominal,validated,cautious}" in out
-        assert ("default estimated" if cmd == "run" else "default oracle") in out
+        assert "default: cautious for a design on a log-K scale" in out
+        assert "lpv:cautious for phenylephrine" in out
     bad = pressor("trial", "--schedule", "guess", "--out", str(tmp_path), cwd=tmp_path)
     assert bad.returncode == 2 and "--schedule" in bad.stderr
 

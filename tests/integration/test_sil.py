@@ -117,7 +117,8 @@ def test_sil_with_shipped_lpv_over_30_min_equals_in_process_simulator(tmp_path):
     rrd, summary = tmp_path / "lpv.rrd", tmp_path / "lpv.json"
     proc = pressor(
         "sil",
-        *("--scenario", "paper-tracking", "--patient-seed", str(SEED), "--duration", "1800"),
+        *("--controller", "lpv", "--schedule", "oracle", "--scenario", "paper-tracking"),
+        *("--patient-seed", str(SEED), "--duration", "1800"),
         *("--rrd", str(rrd), "--summary", str(summary)),
         cwd=tmp_path,
     )

@@ -70,6 +70,7 @@ def test_sil_with_smith_over_the_pty_equals_the_in_process_simulator(tmp_path: P
     proc = pressor(
         "sil",
         *("--controller", "smith:45", "--scenario", "paper-tracking", "--patient-seed", "3"),
+        *("--schedule", "oracle"),
         *("--duration", "300", "--rrd", str(rrd), "--summary", str(summary)),
         cwd=tmp_path,
     )

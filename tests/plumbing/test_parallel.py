@@ -31,7 +31,8 @@ def scenario(short_tracking_scenario: Path) -> Path:
 
 
 def _trial(out: Path, scenario: Path, *extra: str) -> Path:
-    argv = ["--controller", "pi", "--patients", "6", "--seed", "3", "--scenario", str(scenario)]
+    argv = ["--controller", "pi", "--schedule", "oracle", "--patients", "6", "--seed", "3"]
+    argv += ["--scenario", str(scenario)]
     assert main("trial", [*argv, *extra, "--out", str(out)]) == 0
     return out
 

@@ -44,10 +44,10 @@ def test_sil_runs_the_scenarios_duration_unless_duration_is_given():
 
 def test_default_recording_name_names_controller_scenario_and_seed():
     cfg = sil_config(["--controller", "pi", "--patient-seed", "7"])
-    assert cfg.run.rrd == Path("pressor_sil_pi_paper-tracking_seed7.rrd")
+    assert cfg.run.rrd == Path("pressor_sil_pi_paper-disturbance_seed7.rrd")
     assert (cfg.scenario, cfg.duration_s, cfg.link, cfg.signed) == (
-        "paper-tracking",
-        load_scenario("paper-tracking").duration_s,
+        "paper-disturbance",
+        load_scenario("paper-disturbance").duration_s,
         "pty",
         True,
     )
@@ -83,7 +83,7 @@ def test_device_command_carries_scenario_seed_duration_rate_faults_cpu_and_key(t
     assert cmd[:4] == [sys.executable, "-m", "pressor", "device"]
     args = cmd[4:]
     pairs = dict(zip(args[::2], args[1::2], strict=False))
-    assert pairs["--port"] == "/dev/pts/9" and pairs["--scenario"] == "paper-tracking"
+    assert pairs["--port"] == "/dev/pts/9" and pairs["--scenario"] == "paper-disturbance"
     assert pairs["--patient-seed"] == "3" and pairs["--duration"] == "60.0"
     assert pairs["--rate"] == "10.0" and pairs["--cpu"] == "1"
     assert args[args.index("--fault") + 1] == "link-drop:10"

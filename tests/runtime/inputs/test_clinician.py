@@ -199,12 +199,12 @@ def test_a_phenylephrine_design_refuses_another_drug_or_syringe_telling_the_devi
         ),
         (["--target-mmhg", "70", "--target-file", "t"], "--target-mmhg and --target-file"),
         (
-            ["--drug", "norepinephrine"],
+            ["--controller", "lpv", "--drug", "norepinephrine"],
             "--drug norepinephrine: the loaded design (--controller lpv) is for phenylephrine at"
             " 100 ug/ml",
         ),
         (
-            ["--concentration-ug-ml", "200"],
+            ["--controller", "lpv", "--concentration-ug-ml", "200"],
             "--concentration-ug-ml 200: the loaded design (--controller lpv) is for phenylephrine"
             " at 100 ug/ml; its gains count ml/h of that syringe",
         ),

@@ -14,7 +14,7 @@ from pressor.runtime.inputs.config import RunConfig, add_run_options, run_config
 
 def _config(*argv: str, ticks: int = 0) -> RunConfig:
     p = UsageParser(prog="pressor run")
-    add_run_options(p, "estimated", "")
+    add_run_options(p)
     return run_config(p.parse_args(list(argv)), ticks=ticks)
 
 

@@ -362,7 +362,7 @@ def test_every_baseline_runs_on_every_library_drug(controller, drug, conc, weigh
     from pressor.runtime.inputs.dosing import add_dosing_options
 
     p = UsageParser(prog="pressor run")
-    add_run_options(p, "estimated", "")
+    add_run_options(p)
     add_clinician_options(p)
     add_dosing_options(p)
     argv = ["--controller", controller, "--drug", drug, "--concentration-ug-ml", f"{conc:g}"]
@@ -386,7 +386,7 @@ def test_a_dose_design_takes_every_syringe_of_its_drug_the_library_allows():
     from pressor.runtime.inputs.dosing import add_dosing_options
 
     p = UsageParser(prog="pressor run")
-    add_run_options(p, "cautious", "")
+    add_run_options(p)
     add_clinician_options(p)
     add_dosing_options(p)
     base = ["--controller", "lpv:norepinephrine-cautious", "--weight-kg", "70"]

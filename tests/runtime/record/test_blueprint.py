@@ -34,6 +34,7 @@ def run(tmp_path_factory) -> Path:
     )
     proc = pressor(
         "sil",
+        *("--controller", "lpv", "--schedule", "oracle"),  # the device's schedule, clamped
         *("--scenario", "dip.toml", "--fault", f"pump-occlusion:{FAULT_AT_S:g}"),
         *("--rrd", "run.rrd"),
         cwd=d,
@@ -178,7 +179,16 @@ def test_disturbance_and_fault_starts_are_marked_on_the_map_plot(run):
 
 def test_smith_predictor_records_the_schedule_it_used_without_a_design_box(tmp_path):
     proc = pressor(
-        "sil", "--controller", "smith", "--duration", "60", "--rrd", "s.rrd", cwd=tmp_path
+        "sil",
+        "--controller",
+        "smith",
+        "--schedule",
+        "oracle",
+        "--duration",
+        "60",
+        "--rrd",
+        "s.rrd",
+        cwd=tmp_path,
     )
     assert proc.returncode == 0, proc.stderr
     cols = rrd_columns(tmp_path / "s.rrd")

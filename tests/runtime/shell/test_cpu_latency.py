@@ -55,14 +55,14 @@ def test_latency_outside_range_is_refused(bad):
 )
 def test_cpu_latency_request_is_opt_in(option, latency_us):
     p = UsageParser(prog="pressor run")
-    add_run_options(p, "oracle", "")
+    add_run_options(p)
     assert p.parse_args(option).cpu_latency == latency_us
 
 
 @pytest.mark.parametrize("option", [["--cpu-latency", "-5"], ["--cpu-latency", "fast"]])
 def test_bad_cpu_latency_option_is_a_usage_error_naming_it(option):
     p = UsageParser(prog="pressor run")
-    add_run_options(p, "oracle", "")
+    add_run_options(p)
     with pytest.raises(UsageError, match="--cpu-latency"):
         p.parse_args(option)
 

@@ -141,3 +141,19 @@ def test_shipped_design_passes_the_default_verification_from_scratch(
     # the analysis solve reports its iterations on stderr while it runs
     err = capsys.readouterr().err.splitlines()
     assert sum("LMI" in ln and " iter " in ln and "gap" in ln for ln in err) >= 5
+
+
+@pytest.mark.parametrize("name", ["cautious", "norepinephrine_cautious"])
+def test_each_log_k_design_embeds_a_passing_verification_of_its_whole_box(name: str) -> None:
+    from pressor.synthesis.artifact import default_artifact_path, load_artifact
+
+    art = load_artifact(default_artifact_path().parent / f"{name}_design.npz")
+    rep = art.metadata["verification"]
+    assert rep["passed"] is True and rep["delay_stability"]["stable"] is True
+    lmi = rep["analysis_lmi"]
+    assert lmi["certified"] is True and lmi["n_failed_points"] == 0 and lmi["min_margin"] > 0
+    # the dense grid reaches the box's ends: its K spans the whole certified range, >= 100x
+    (k_lo, k_hi) = (float(v) for v in art.box[0])
+    k_axis = rep["grid"]["axes"][0]
+    assert (k_axis[0], k_axis[-1]) == (k_lo, k_hi) and k_hi / k_lo >= 100.0
+    assert art.model_config.k_rate_relative is True
