@@ -274,7 +274,8 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     from pressor.runtime.shell.progress import TerminalProgress
 
     run = config.run
-    signing = load_signing(run, generate=config.signed)
+    key_warnings: list[str] = []  # a --signing-key file every user can read, an all-zero key
+    signing = load_signing(run, generate=config.signed, prog="pressor sil", warnings=key_warnings)
     identity = {
         "controller": run.controller,
         "link": config.link,
@@ -283,6 +284,8 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
         "duration_s": config.duration_s,
         "signed": signing is not None,
     }
+    if key_warnings:  # only then: the summaries of other runs keep their bytes
+        identity["signing_warnings"] = key_warnings
     if config.patient_model != "paper":  # the default's summaries keep their bytes
         identity["patient_model"] = config.patient_model
     cpus = lockstep_cpus(config.cpu, run.realtime)

@@ -75,7 +75,9 @@ def _main_run(argv: Sequence[str]) -> int:
     except UsageError as exc:  # the device waiting in its handshake is told too
         _refuse_on_the_wire(args, str(exc))
         raise
-    signing = load_signing(config, generate=False)  # a bad key: refused before the port opens
+    key_warnings: list[str] = []  # a key file every user can read, an all-zero key
+    # a bad key: refused before the port opens
+    signing = load_signing(config, generate=False, warnings=key_warnings)
     try:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises several types for a bad path/URL
@@ -93,6 +95,8 @@ def _main_run(argv: Sequence[str]) -> int:
         "rate_hz": config.rate_hz,
         "signed": signing is not None,
     }
+    if key_warnings:  # only then: the summaries of other runs keep their bytes
+        identity["signing_warnings"] = key_warnings
     summary, result = run_runtime(port, config, identity, signing)
     return finish(summary, result, config, "pressor run")
 
