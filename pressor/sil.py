@@ -268,7 +268,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     from pressor.link import PtyPair
     from pressor.runtime.core.closed_loop import ControllerError
     from pressor.runtime.inputs.config import load_signing
-    from pressor.runtime.session import run_runtime
+    from pressor.runtime.session import run_runtime, start_run
     from pressor.runtime.shell.interrupt import Interrupted
     from pressor.runtime.shell.placement import lockstep_cpus
     from pressor.runtime.shell.progress import TerminalProgress
@@ -289,6 +289,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     if config.patient_model != "paper":  # the default's summaries keep their bytes
         identity["patient_model"] = config.patient_model
     cpus = lockstep_cpus(config.cpu, run.realtime)
+    start_run()  # from here a stop signal is graceful: the device and the pty are ours to end
     pair = PtyPair.open()
     with tempfile.TemporaryDirectory(prefix="pressor-sil-") as tmp:
         # the key goes to the device through a pipe it inherits (read as /dev/fd/N), never
@@ -334,7 +335,10 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 noisy_band=config.noisy,
             )
         except Interrupted:
-            _stop(proc)  # before the device connected: nothing to keep, one line
+            # before the device connected: nothing to keep, one line; the device is told at once
+            # (SIGTERM: it stops gracefully, or dies while it still imports) rather than waited
+            # for, so that the command ends within a second of the signal
+            _stop(proc, grace_s=0.0)
             raise
         except ControllerError:
             _stop(proc)  # the runtime's own fault: the device only saw the link close
@@ -384,9 +388,10 @@ def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:
 
 
 def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:
-    """Wait for our device process; terminate it (by its pid) if it does not exit in time."""
+    """Wait for our device process; terminate it (by its pid) if it does not exit in time
+    (``grace_s`` 0: at once)."""
     try:
-        return proc.wait(timeout=grace_s)
+        return proc.wait(timeout=grace_s) if grace_s > 0 else _still_running(proc)
     except subprocess.TimeoutExpired:
         proc.terminate()
         try:
@@ -394,6 +399,14 @@ def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:
         except subprocess.TimeoutExpired:
             proc.kill()
             return proc.wait()
+
+
+def _still_running(proc: subprocess.Popen) -> int:
+    """``proc``'s exit code if it has exited; else raise :class:`subprocess.TimeoutExpired`."""
+    code = proc.poll()
+    if code is None:
+        raise subprocess.TimeoutExpired(proc.args, 0.0)
+    return code
 
 
 def _main(argv: Sequence[str]) -> int:

@@ -66,7 +66,7 @@ def _run_parser() -> UsageParser:
 def _main_run(argv: Sequence[str]) -> int:
     from pressor.link import fast_port, open_port
     from pressor.runtime.inputs.config import load_signing
-    from pressor.runtime.session import run_runtime
+    from pressor.runtime.session import run_runtime, start_run
     from pressor.runtime.summary import finish
 
     args = _run_parser().parse_args(argv)
@@ -78,6 +78,7 @@ def _main_run(argv: Sequence[str]) -> int:
     key_warnings: list[str] = []  # a key file every user can read, an all-zero key
     # a bad key: refused before the port opens
     signing = load_signing(config, generate=False, warnings=key_warnings)
+    start_run()  # from here a stop signal is graceful: the safe command, the record kept
     try:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises several types for a bad path/URL

@@ -26,7 +26,13 @@ from pressor.runtime.inputs.clinician import (
 from pressor.runtime.inputs.config import RunConfig, load_controller
 from pressor.runtime.inputs.controller_loader import controller_name
 from pressor.runtime.shell.boundary import Unwritten
-from pressor.runtime.shell.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
+from pressor.runtime.shell.interrupt import (
+    Interrupted,
+    begin_run,
+    exit_code,
+    stop_on_signals,
+    stop_requested,
+)
 from pressor.runtime.shell.placement import Pinned
 from pressor.runtime.summary import build_summary
 
@@ -455,6 +461,15 @@ def _write_failed_summary(config: RunConfig, identity: dict[str, Any], exc: Exce
     if config.summary is not None:
         why = f"{type(exc).__name__}: {exc}"
         _write_summary(config.summary, {**identity, "ticks": 0, "ended": why, "error": why})
+
+
+def start_run() -> None:
+    """Call before a command opens its port or starts its device: from here a stop signal is a
+    graceful stop (:func:`pressor.runtime.shell.interrupt.begin_run`); one that came while the
+    command started raises :class:`Interrupted` (``before the run started``: nothing to keep)."""
+    begin_run()
+    if (stop := stop_requested()) is not None:
+        raise Interrupted(stop, "before the run started")
 
 
 def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequence[str]) -> int:

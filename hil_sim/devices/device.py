@@ -60,7 +60,7 @@ from pressor.hil_sim.devices.device_options import (
     make_world,
 )
 from pressor.plumbing.usage import UsageError, run_command
-from pressor.runtime.shell.interrupt import exit_code, signal_name, stop_requested
+from pressor.runtime.shell.interrupt import begin_run, exit_code, signal_name, stop_requested
 from pressor.runtime.shell.placement import pin_thread
 
 if TYPE_CHECKING:  # numpy: imported when a run keeps the true MAP, not for --help
@@ -115,6 +115,7 @@ def _main(command: str, argv: Sequence[str]) -> int:
 
     # the key first: a bad key file is refused (exit 2, one line naming it) before any port opens
     signing = _load_signing(args.signing_key, args.no_signing, f"pressor {command}")
+    begin_run()  # from here a stop signal is graceful (FINISHED heartbeat, .tlog kept)
     try:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises SerialException / ValueError for bad URLs
