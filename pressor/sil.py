@@ -38,7 +38,7 @@ import os
 import subprocess
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -258,9 +258,15 @@ def device_command(
     return cmd
 
 
-def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
+def run_sil(
+    config: SilConfig, on_tick: Callable[[int, int, int, float], object] | None = None
+) -> tuple[dict[str, Any], Any]:
     """Start the device process on a fresh pty, run the runtime against it; return
     ``(summary, result)`` (:func:`pressor.runtime.session.run_runtime`).
+
+    ``on_tick`` is the loop's per-tick callback ``(tick, state, fault bits, command ml/h)``
+    (e.g. ``benchmarks/memory_soak.py``'s memory probe); on a terminal the status line takes
+    its place.
 
     A device that exits with a usage error turns into a :class:`UsageError` with its message;
     any other device output is printed on stderr when the run fails or the device exits non-zero.
@@ -328,7 +334,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 cpus=cpus,
                 on_connected=pair.close_follower,
                 peer_alive=lambda: proc.poll() is None,
-                on_tick=progress if progress.enabled else None,
+                on_tick=progress if progress.enabled else on_tick,
                 before_close=None
                 if truth_file is None
                 else lambda rec: _add_truth(rec, proc, truth_file),

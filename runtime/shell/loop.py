@@ -167,7 +167,9 @@ class Loop:
         )
         self.timing = TimingStats(self.period_s)
         self.trajectory = (
-            Trajectory() if history_ticks is None else Trajectory(int(history_ticks), ring=True)
+            Trajectory(period_s=self.period_s)
+            if history_ticks is None
+            else Trajectory(int(history_ticks), ring=True, period_s=self.period_s)
         )
         self.on_tick = on_tick
         self.heartbeat_every = max(1, int(heartbeat_every))
@@ -531,4 +533,5 @@ class Loop:
             wall_s=perf_counter_s() - self._wall0,
             stop_signal=self._stop_signal,
             boundary=self.boundary.summary(),
+            kept_bytes=self.trajectory.nbytes,
         )
