@@ -393,8 +393,10 @@ def load_signing(
             )
     try:
         signing = Signing.from_file(path)
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"--signing-key {path}: {exc}") from None
+    except OSError as exc:
+        raise UsageError(f"--signing-key {path}: cannot read: {exc.strerror or exc}") from None
+    except ValueError as exc:  # its text names the file
+        raise UsageError(f"--signing-key {exc}") from None
     for line in key_file_warnings(path, signing.key):
         print(f"{prog}: warning: {line}", file=sys.stderr)
         if warnings is not None:

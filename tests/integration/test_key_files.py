@@ -33,7 +33,18 @@ def test_a_bad_key_file_is_refused_naming_the_file_before_the_port_opens(tmp_pat
     assert out.returncode == 2
     [line] = _lines(out.stderr)
     assert line.startswith(f"pressor {command}: --signing-key") and str(key) in line, line
+    assert line.count(str(key)) == 1  # named once
     assert NO_PORT not in line
+
+
+def test_a_bad_key_file_ends_pressor_sil_before_it_starts_its_device(tmp_path):
+    key = tmp_path / "spaced.key"
+    key.write_text("0123 4567 89ab cdef xyz\n")  # whitespace is fine, 'xyz' is not hex
+    out = pressor("sil", "--controller", "pi", "--signing-key", str(key), cwd=tmp_path)
+    assert out.returncode == 2
+    [line] = _lines(out.stderr)
+    assert line.startswith(f"pressor sil: --signing-key {key}: signing key has 24 bytes"), line
+    assert not list(tmp_path.glob("*.rrd")) and not list(tmp_path.glob(".*"))  # nothing started
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
