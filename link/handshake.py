@@ -1,4 +1,5 @@
-"""What each end checks in the handshake, and the one line it gives for each failure.
+"""What each end checks in the handshake, and the one line it gives for each failure; a received
+hello read as a :class:`Hello` (:func:`hello_of`).
 
 :class:`link.Session` calls these: :func:`signing_mismatch` on every frame read while waiting
 for the peer's hello (the first frame showing the peer signs differently ends the handshake), then
@@ -9,6 +10,8 @@ for the peer's hello (the first frame showing the peer signs differently ends th
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from pressor.link.counters import HelloRefused
 from pressor.link.messages import (
@@ -26,6 +29,30 @@ from pressor.link.messages import (
     ROLE_RUNTIME,
     Hello,
 )
+
+
+def field_text(value: bytes | str) -> str:
+    """A ``char[N]`` field as text (pymavlink hands out bytes or str, NUL padding removed)."""
+    text = value.decode("ascii", "replace") if isinstance(value, bytes) else value
+    return text.rstrip("\0")
+
+
+def hello_of(msg: Any) -> Hello:
+    """A received PRESSOR_HELLO message object as a :class:`Hello`."""
+    return Hello(
+        field_text(msg.name),
+        msg.patient_seed,
+        msg.sample_period_s,
+        msg.sensor_noise_mmhg,
+        msg.n_ticks,
+        msg.link_mode,
+        msg.role,
+        msg.protocol_version,
+        field_text(msg.drug),
+        msg.concentration_ug_ml,
+        msg.pump_max_ml_h,
+    )
+
 
 #: role value -> name, for refusal texts
 ROLE_NAMES = {ROLE_RUNTIME: "runtime", ROLE_DEVICE: "device"}

@@ -20,7 +20,7 @@ from typing import Any
 
 from pressor.link.counters import HelloRefused
 from pressor.link.dialect import pressor as mavlink
-from pressor.link.handshake import hello_change
+from pressor.link.handshake import hello_change, hello_of
 from pressor.link.messages import (
     LINK_LOCKSTEP,
     MODE_AUTO,
@@ -30,7 +30,7 @@ from pressor.link.messages import (
     PumpStatus,
     TickInputs,
 )
-from pressor.link.session import Session, hello_of
+from pressor.link.session import Session
 
 _ID_SCHED = mavlink.MAVLINK_MSG_ID_SCHEDULING_PARAMS
 _ID_TARGET = mavlink.MAVLINK_MSG_ID_MAP_TARGET

@@ -28,7 +28,7 @@ from pressor.link.counters import (
     SigningMismatch,
 )
 from pressor.link.dialect import pressor as mavlink
-from pressor.link.handshake import check_peer_hello, signing_mismatch
+from pressor.link.handshake import check_peer_hello, field_text, hello_of, signing_mismatch
 from pressor.link.messages import (
     PROTOCOL_VERSION,
     REFUSAL_SIGNING,
@@ -39,6 +39,9 @@ from pressor.link.messages import (
 )
 from pressor.link.signing import Signing
 from pressor.link.tlog import TlogWriter
+
+#: ``hello_of`` is re-exported: it was defined here
+__all__ = ["ManualClock", "Session", "hello_of"]
 
 _ID_HEARTBEAT = mavlink.MAVLINK_MSG_ID_PRESSOR_HEARTBEAT
 _ID_HELLO = mavlink.MAVLINK_MSG_ID_PRESSOR_HELLO
@@ -51,29 +54,6 @@ _MAV_STATE = {
     mavlink.PRESSOR_STATE_FINISHED: mavlink.MAV_STATE_STANDBY,
     mavlink.PRESSOR_STATE_FAULT: mavlink.MAV_STATE_CRITICAL,
 }
-
-
-def _text(value: bytes | str) -> str:
-    """A ``char[N]`` field as text (pymavlink hands out bytes or str, NUL padding removed)."""
-    text = value.decode("ascii", "replace") if isinstance(value, bytes) else value
-    return text.rstrip("\0")
-
-
-def hello_of(msg: Any) -> Hello:
-    """A received PRESSOR_HELLO message object as a :class:`Hello`."""
-    return Hello(
-        _text(msg.name),
-        msg.patient_seed,
-        msg.sample_period_s,
-        msg.sensor_noise_mmhg,
-        msg.n_ticks,
-        msg.link_mode,
-        msg.role,
-        msg.protocol_version,
-        _text(msg.drug),
-        msg.concentration_ug_ml,
-        msg.pump_max_ml_h,
-    )
 
 
 class ManualClock:
@@ -330,7 +310,7 @@ class Session:
         self.peer_heartbeat = Heartbeat(tick, state)
 
     def _on_refusal(self, msg: Any) -> None:
-        self.peer_refusal = (int(msg.reason), _text(msg.text))
+        self.peer_refusal = (int(msg.reason), field_text(msg.text))
 
     def _on_hello(self, msg: Any) -> None:
         self.peer_system_id = msg.get_srcSystem()

@@ -12,13 +12,16 @@ with the session's run clock instead, so those runs are byte-identical.
 Provisioning. ``pressor run`` and ``pressor device`` sign by default with the key file at
 :func:`default_key_path` (``$XDG_CONFIG_HOME/pressor/signing.key``, else
 ``~/.config/pressor/signing.key``), made by ``pressor keygen`` and copied to the other end;
-``--signing-key FILE`` names another, ``--no-signing`` turns signing off (with a warning).
+``--signing-key FILE`` names another, ``--no-signing`` turns signing off (with a warning). A key
+file readable by every user, or a key of all zeros, loads with a warning
+(:func:`key_file_warnings`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import stat
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +34,36 @@ MAVLINK_EPOCH_UNIX_S = 1420070400
 def wall_clock_s() -> float:
     """Seconds since the MAVLink signing epoch (the signing timestamps' wall clock)."""
     return time.time() - MAVLINK_EPOCH_UNIX_S
+
+
+def key_file_warnings(path: str | Path, key: bytes) -> list[str]:
+    """What is unsafe about a key file that loaded (one line each, naming the file): readable by
+    every user of the host (anyone there can sign pump commands), or a key of all zero bytes (a
+    placeholder, not a secret).
+
+    Parameters
+    ----------
+    path
+        The key file (its mode is read; a file that cannot be stat'ed gives no mode warning).
+    key
+        The key loaded from it (:meth:`Signing.from_file`).
+    """
+    out = []
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        mode = 0
+    if stat.S_ISREG(mode) and mode & stat.S_IROTH:
+        out.append(
+            f"signing key {path}: readable by every user (mode {stat.S_IMODE(mode):04o}):"
+            f" anyone on this host can sign pump commands; chmod 600 {path}"
+        )
+    if not any(key):
+        out.append(
+            f"signing key {path}: all {len(key)} bytes are zero, a placeholder anyone can sign"
+            " with; make a real one with 'pressor keygen'"
+        )
+    return out
 
 
 def default_key_path() -> Path:
@@ -68,7 +101,8 @@ class Signing:
 
     @classmethod
     def from_file(cls, path: str | Path, *, link_id: int = 0, require: bool = True) -> Signing:
-        """Load a key file: 32 raw bytes or 64 hexadecimal characters (whitespace ignored).
+        """Load a key file: 32 raw bytes or 64 hexadecimal characters (whitespace anywhere in
+        them ignored: spaces, tabs, line breaks, as when a key is pasted in groups or lines).
 
         Raises
         ------
@@ -76,15 +110,13 @@ class Signing:
             Naming the file and what is wrong with it.
         """
         raw = Path(path).read_bytes()
-        text = raw.strip()
-        key: bytes
+        text = b"".join(raw.split())  # every ASCII whitespace byte, not only at the ends
+        key = raw
         if len(text) == 2 * SIGNING_KEY_BYTES:
             try:
                 key = bytes.fromhex(text.decode("ascii"))
             except (UnicodeDecodeError, ValueError):
                 key = raw
-        else:
-            key = raw
         if len(key) != SIGNING_KEY_BYTES:
             raise ValueError(
                 f"{path}: signing key has {len(raw)} bytes, need {SIGNING_KEY_BYTES} raw bytes "

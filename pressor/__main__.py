@@ -2,6 +2,11 @@
 
 import sys
 
-from pressor.cli import main
+try:
+    from pressor.cli import main
 
-sys.exit(main())
+    code = main()
+except KeyboardInterrupt:  # Ctrl-C before pressor.cli took the signal over: one line, no traceback
+    print("pressor: interrupted by SIGINT", file=sys.stderr)
+    code = 130
+sys.exit(code)

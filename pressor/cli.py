@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import signal
 import sys
 
 from pressor.plumbing.usage import USAGE_EXIT, usage_exit
@@ -53,6 +54,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
 #: come before numpy's import, which importing the command's module already triggers
 #: (:mod:`pressor.synthesis.solver.blas_threads`)
 ONE_BLAS_THREAD = frozenset({"synth", "verify", "trial"})
+#: the long-running bedside commands that stop gracefully on SIGINT / SIGTERM
+#: (:mod:`pressor.runtime.shell.interrupt`): their handler is installed before their imports
+STOPPABLE = frozenset({"run", "sil", "device"})
 
 
 def _usage() -> str:
@@ -91,13 +95,20 @@ def main(argv: list[str] | None = None) -> int:
     command, rest = args[0], args[1:]
     if command not in COMMANDS:
         return usage_exit("pressor", f"unknown command {command!r}; one of: {', '.join(COMMANDS)}")
+    if command in STOPPABLE:  # before its imports: a Ctrl-C while they load is a stop request
+        from pressor.runtime.shell.interrupt import arm_early
+
+        arm_early(f"pressor {command}")
     if command in ONE_BLAS_THREAD:
         from pressor.synthesis.solver.blas_threads import single_blas_thread
 
         single_blas_thread()
-    module = importlib.import_module(COMMANDS[command][0])
     try:
+        module = importlib.import_module(COMMANDS[command][0])
         return int(module.main(command, rest))
+    except KeyboardInterrupt:  # a command that does not stop gracefully: one line, no traceback
+        print(f"pressor {command}: interrupted by SIGINT", file=sys.stderr)
+        return 128 + signal.SIGINT
     except BrokenPipeError:
         # the reader went away (`pressor faults | head`): what it wanted it has; say nothing, and
         # keep the interpreter's own flush of stdout at exit from raising again

@@ -38,7 +38,7 @@ import os
 import subprocess
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -259,9 +259,15 @@ def device_command(
     return cmd
 
 
-def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
+def run_sil(
+    config: SilConfig, on_tick: Callable[[int, int, int, float], object] | None = None
+) -> tuple[dict[str, Any], Any]:
     """Start the device process on a fresh pty, run the runtime against it; return
     ``(summary, result)`` (:func:`pressor.runtime.session.run_runtime`).
+
+    ``on_tick`` is the loop's per-tick callback ``(tick, state, fault bits, command ml/h)``
+    (e.g. ``benchmarks/memory_soak.py``'s memory probe); on a terminal the status line takes
+    its place.
 
     A device that exits with a usage error turns into a :class:`UsageError` with its message;
     any other device output is printed on stderr when the run fails or the device exits non-zero.
@@ -269,13 +275,14 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
     from pressor.link import PtyPair
     from pressor.runtime.core.closed_loop import ControllerError
     from pressor.runtime.inputs.config import load_signing
-    from pressor.runtime.session import run_runtime
+    from pressor.runtime.session import run_runtime, start_run
     from pressor.runtime.shell.interrupt import Interrupted
     from pressor.runtime.shell.placement import lockstep_cpus
     from pressor.runtime.shell.progress import TerminalProgress
 
     run = config.run
-    signing = load_signing(run, generate=config.signed)
+    key_warnings: list[str] = []  # a --signing-key file every user can read, an all-zero key
+    signing = load_signing(run, generate=config.signed, prog="pressor sil", warnings=key_warnings)
     identity = {
         "controller": run.controller,
         "link": config.link,
@@ -284,9 +291,12 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
         "duration_s": config.duration_s,
         "signed": signing is not None,
     }
+    if key_warnings:  # only then: the summaries of other runs keep their bytes
+        identity["signing_warnings"] = key_warnings
     if config.patient_model != "paper":  # the default's summaries keep their bytes
         identity["patient_model"] = config.patient_model
     cpus = lockstep_cpus(config.cpu, run.realtime)
+    start_run()  # from here a stop signal is graceful: the device and the pty are ours to end
     pair = PtyPair.open()
     with tempfile.TemporaryDirectory(prefix="pressor-sil-") as tmp:
         # the key goes to the device through a pipe it inherits (read as /dev/fd/N), never
@@ -325,14 +335,17 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 cpus=cpus,
                 on_connected=pair.close_follower,
                 peer_alive=lambda: proc.poll() is None,
-                on_tick=progress if progress.enabled else None,
+                on_tick=progress if progress.enabled else on_tick,
                 before_close=None
                 if truth_file is None
                 else lambda rec: _add_truth(rec, proc, truth_file),
                 noisy_band=config.noisy,
             )
         except Interrupted:
-            _stop(proc)  # before the device connected: nothing to keep, one line
+            # before the device connected: nothing to keep, one line; the device is told at once
+            # (SIGTERM: it stops gracefully, or dies while it still imports) rather than waited
+            # for, so that the command ends within a second of the signal
+            _stop(proc, grace_s=0.0)
             raise
         except ControllerError:
             _stop(proc)  # the runtime's own fault: the device only saw the link close
@@ -382,9 +395,10 @@ def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:
 
 
 def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:
-    """Wait for our device process; terminate it (by its pid) if it does not exit in time."""
+    """Wait for our device process; terminate it (by its pid) if it does not exit in time
+    (``grace_s`` 0: at once)."""
     try:
-        return proc.wait(timeout=grace_s)
+        return proc.wait(timeout=grace_s) if grace_s > 0 else _still_running(proc)
     except subprocess.TimeoutExpired:
         proc.terminate()
         try:
@@ -392,6 +406,14 @@ def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:
         except subprocess.TimeoutExpired:
             proc.kill()
             return proc.wait()
+
+
+def _still_running(proc: subprocess.Popen) -> int:
+    """``proc``'s exit code if it has exited; else raise :class:`subprocess.TimeoutExpired`."""
+    code = proc.poll()
+    if code is None:
+        raise subprocess.TimeoutExpired(proc.args, 0.0)
+    return code
 
 
 def _main(argv: Sequence[str]) -> int:

@@ -64,7 +64,7 @@ def _run_parser() -> UsageParser:
 def _main_run(argv: Sequence[str]) -> int:
     from pressor.link import fast_port, open_port
     from pressor.runtime.inputs.config import load_signing
-    from pressor.runtime.session import run_runtime
+    from pressor.runtime.session import run_runtime, start_run
     from pressor.runtime.summary import finish
 
     args = _run_parser().parse_args(argv)
@@ -73,7 +73,10 @@ def _main_run(argv: Sequence[str]) -> int:
     except UsageError as exc:  # the device waiting in its handshake is told too
         _refuse_on_the_wire(args, str(exc))
         raise
-    signing = load_signing(config, generate=False)  # a bad key: refused before the port opens
+    key_warnings: list[str] = []  # a key file every user can read, an all-zero key
+    # a bad key: refused before the port opens
+    signing = load_signing(config, generate=False, warnings=key_warnings)
+    start_run()  # from here a stop signal is graceful: the safe command, the record kept
     try:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises several types for a bad path/URL
@@ -91,6 +94,8 @@ def _main_run(argv: Sequence[str]) -> int:
         "rate_hz": config.rate_hz,
         "signed": signing is not None,
     }
+    if key_warnings:  # only then: the summaries of other runs keep their bytes
+        identity["signing_warnings"] = key_warnings
     summary, result = run_runtime(port, config, identity, signing)
     return finish(summary, result, config, "pressor run")
 

@@ -6,16 +6,23 @@ kept, the one of a run that went wrong first of all: the ``.tlog`` is written in
 durable every 0.5 s (:class:`pressor.link.tlog.TlogWriter`), the ``.rrd`` is moved into place however the
 run ended, and a run that fails after its first tick (the loop sent the safe command first) or is
 refused before it writes its ``--summary`` (``ended``, ``error``) before the error is raised.
-:func:`run_guarded` gives both commands their exit codes.
+What a run leaves (its summary on every exit path) and the commands' exit codes
+(:func:`run_guarded`) are in :mod:`pressor.runtime.ending`.
 """
 
 from __future__ import annotations
 
-import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from pressor.plumbing.usage import USAGE_EXIT, run_command
+from pressor.runtime.ending import (  # run_guarded, start_run: re-exported, their old home
+    late_record_error,
+    run_guarded,
+    start_run,
+    summarize,
+    write_failed_summary,
+    write_summary,
+)
 from pressor.runtime.inputs.clinician import (
     TARGET_MAX_MMHG,
     TARGET_MIN_MMHG,
@@ -26,9 +33,8 @@ from pressor.runtime.inputs.clinician import (
 from pressor.runtime.inputs.config import RunConfig, load_controller
 from pressor.runtime.inputs.controller_loader import controller_name
 from pressor.runtime.shell.boundary import Unwritten
-from pressor.runtime.shell.interrupt import Interrupted, exit_code, stop_on_signals, stop_requested
+from pressor.runtime.shell.interrupt import Interrupted, stop_requested
 from pressor.runtime.shell.placement import Pinned
-from pressor.runtime.summary import build_summary
 
 if TYPE_CHECKING:  # the stages' types; at run time each stage imports what it needs, when it runs
     from pressor.contracts.controller import Controller
@@ -57,7 +63,7 @@ def run_runtime(
     """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result).
 
     The stages, in order: :func:`_handshake`, :func:`_build_supervisor`, :func:`_open_recorder`,
-    :func:`_run_loop`, :func:`_close_recording`, :func:`_summarize`.
+    :func:`_run_loop`, :func:`_close_recording`, :func:`pressor.runtime.ending.summarize`.
 
     Parameters
     ----------
@@ -121,7 +127,7 @@ def run_runtime(
             peer = _handshake(ep, config, controller, clinician, peer_alive, handshake_timeout_s,
                               on_connected)  # fmt: skip
         except Exception as exc:  # refused, a link error: the record says so, then the error
-            _write_failed_summary(config, identity, exc)
+            write_failed_summary(config, identity, exc)
             raise
         identity = _run_identity(identity, config, peer)
         sup = _build_supervisor(config, controller, clinician, peer)
@@ -136,16 +142,16 @@ def run_runtime(
         ep.close()  # the device sees the end at once; the record is written after
         if tlog is not None:
             tlog.close()  # its last write may fail too: the summary says so
-            _late_record_error(result, "tlog", tlog.error)
+            late_record_error(result, "tlog", tlog.error)
         if recorder is not None:
             _close_recording(recorder, result, clinician, before_close)
-            _late_record_error(result, "recording", recorder.error)
+            late_record_error(result, "recording", recorder.error)
             recorder = None
-        summary = _summarize(result, identity, config, controller, clinician, sup, peer, target,
+        summary = summarize(result, identity, config, controller, clinician, sup, peer, target,
                              events, noisy_band)  # fmt: skip
         if result.error is not None:  # the loop failed after the safe command: keep the record
             if config.summary is not None:
-                _write_summary(config.summary, summary)
+                write_summary(config.summary, summary)
             raise result.error
         ok = True
         return summary, result
@@ -390,117 +396,4 @@ def _close_recording(
     recorder.close()
 
 
-def _summarize(
-    result: LoopResult,
-    identity: dict[str, Any],
-    config: RunConfig,
-    controller: Controller,
-    clinician: ClinicianInput,
-    sup: Supervisor,
-    peer: Hello,
-    target: TargetSource | None,
-    events: list[tuple[str, float]] | None,
-    noisy_band: bool,
-) -> dict[str, Any]:
-    """The run's metric summary, with the fault report when faults were injected and, for
-    ``pressor run``, where the target came from, the syringe and the dose."""
-    report = None
-    if config.fault_specs:
-        from pressor.contracts.faults import fault_report
-        from pressor.runtime.core.supervisor_config import FAULT_BITS, sched_limits_of
-
-        report = fault_report(
-            list(config.fault_specs),
-            result.trajectory,
-            FAULT_BITS,
-            config.period_s,
-            scheduled=sched_limits_of(controller)[0] is not None,
-        )
-    summary = build_summary(
-        result,
-        identity,
-        controller.max_rate_ml_h,
-        noisy=noisy_band,
-        faults=report,
-        events=events,
-    )
-    if target is not None and not target.own_target:  # pressor sil --clinician-stdin
-        record = target.summary()
-        summary["clinician"] = {"acks": record["acks"], "commands": record.get("commands", [])}
-    if config.clinician is not None:  # pressor run: where the target came from, the syringe
-        summary["target"] = {"source": "device"} if target is None else target.summary()
-        summary["syringe"] = {
-            "drug": clinician.drug,
-            "concentration_ug_ml": clinician.concentration_ug_ml,
-            "pump_max_ml_h": float(peer.pump_max_ml_h),
-        }
-        if clinician.dose_limits is not None:
-            from pressor.runtime.inputs.dosing import dose_summary
-
-            summary["dose"] = dose_summary(
-                result.trajectory["command_ml_h"],
-                config.period_s,
-                clinician,
-                sup.detections,
-                result.trajectory["sim_time_s"],  # elapsed time: a skipped stretch is charged
-            )
-    return summary
-
-
-def _late_record_error(result: LoopResult, name: str, error: str | None) -> None:
-    """File a writer failure found only when the writer closed (its last write) in the run's
-    record errors, as the loop files the ones it sees (:mod:`pressor.runtime.shell.boundary`)."""
-    if error is not None:
-        result.boundary.setdefault("record", {}).setdefault(name, error)
-
-
-def _write_summary(path: Any, summary: dict[str, Any]) -> None:
-    """Write ``summary`` to ``path`` (JSON); a disk that fails is one line on stderr, not a second
-    error on top of the run's own."""
-    from pressor.runtime.summary import write_json
-
-    try:
-        write_json(path, summary)
-    except OSError as exc:
-        print(f"pressor: summary {path}: cannot be written: {exc.strerror or exc}", file=sys.stderr)
-
-
-def _write_failed_summary(config: RunConfig, identity: dict[str, Any], exc: Exception) -> None:
-    """The summary of a run that ended before its first tick (refused, the link failed): its
-    identity, no ticks, and why (``ended``, ``error``)."""
-    if config.summary is not None:
-        why = f"{type(exc).__name__}: {exc}"
-        _write_summary(config.summary, {**identity, "ticks": 0, "ended": why, "error": why})
-
-
-def run_guarded(prog: str, handler: Callable[[Sequence[str]], int], argv: Sequence[str]) -> int:
-    """Run a runtime command with its exit codes.
-
-    0 success; 1 the run completed but a check failed, or the device stalled or the link failed,
-    or the controller raised under ``pressor sil``
-    (:class:`pressor.runtime.core.closed_loop.ControllerError`; ``pressor run`` holds instead,
-    :mod:`pressor.runtime.core.supervisor`) (one line on stderr); 2 bad usage or input
-    (:func:`pressor.plumbing.usage.run_command`), or the device's hello refused (:class:`link.Refusal`: one
-    line, the device was told); 130 / 143 stopped by SIGINT / SIGTERM
-    (:mod:`pressor.runtime.shell.interrupt`: the run stops at a tick boundary, commands the safe rate, and
-    keeps its outputs).
-    """
-    from pressor.link import LinkError, Refusal
-    from pressor.runtime.core.closed_loop import ControllerError
-    from pressor.runtime.shell.loop import DeviceStalled
-
-    def guarded(args: Sequence[str]) -> int:
-        with stop_on_signals():
-            try:
-                return handler(args)
-            except Refusal as exc:  # a hello refused, by either end: the other was told why
-                print(f"{prog}: {exc}", file=sys.stderr)
-                return USAGE_EXIT
-            except (DeviceStalled, LinkError, ControllerError) as exc:
-                print(f"{prog}: {exc}", file=sys.stderr)
-                return 1
-            except Interrupted as exc:
-                print(f"{prog}: {exc}", file=sys.stderr)
-                return exit_code(exc.signum)
-
-    return run_command(prog, guarded, argv)
+__all__ = ["run_runtime", "run_guarded", "start_run"]

@@ -90,7 +90,8 @@ RUNTIME_ALLOWED: dict[str, frozenset[str]] = {
     "shell": frozenset({"core", "record"}),
     "inputs": frozenset({"core", "estimation", "shell"}),
     "summary": frozenset({"core", "inputs", "shell"}),
-    "session": frozenset({"core", "estimation", "inputs", "record", "shell", "summary"}),
+    "ending": frozenset({"core", "inputs", "shell", "summary"}),
+    "session": frozenset({"core", "ending", "estimation", "inputs", "record", "shell", "summary"}),
     "cli": frozenset({"core", "inputs", "session", "summary"}),
 }
 

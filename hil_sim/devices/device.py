@@ -60,7 +60,7 @@ from pressor.hil_sim.devices.device_options import (
     make_world,
 )
 from pressor.plumbing.usage import UsageError, run_command
-from pressor.runtime.shell.interrupt import exit_code, signal_name, stop_requested
+from pressor.runtime.shell.interrupt import begin_run, exit_code, signal_name, stop_requested
 from pressor.runtime.shell.placement import pin_thread
 
 if TYPE_CHECKING:  # numpy: imported when a run keeps the true MAP, not for --help
@@ -113,11 +113,13 @@ def _main(command: str, argv: Sequence[str]) -> int:
         open_port,
     )
 
+    # the key first: a bad key file is refused (exit 2, one line naming it) before any port opens
+    signing = _load_signing(args.signing_key, args.no_signing, f"pressor {command}")
+    begin_run()  # from here a stop signal is graceful (FINISHED heartbeat, .tlog kept)
     try:
         port = fast_port(open_port(args.port))
     except Exception as exc:  # pyserial raises SerialException / ValueError for bad URLs
         raise UsageError(f"--port: cannot open {args.port!r}: {exc}") from None
-    signing = _load_signing(args.signing_key, args.no_signing, f"pressor {command}")
     from pressor.hil_sim.scenarios.faults import LinkFaultPort, LinkFaults
 
     link_faults = LinkFaults(world.fault_specs, world.sample_period_s)
@@ -174,7 +176,9 @@ def _parse_faults(texts: list[str]) -> tuple:
 
 
 def _load_signing(path: str | None, no_signing: bool, prog: str) -> Any:
-    from pressor.link.signing import Signing, default_key_path
+    """The device's signing (``None`` with ``--no-signing``, warned); a key file readable by
+    every user or all zeros is warned on stderr (:func:`pressor.link.signing.key_file_warnings`)."""
+    from pressor.link.signing import Signing, default_key_path, key_file_warnings
 
     if no_signing:
         if path is not None:
@@ -189,11 +193,14 @@ def _load_signing(path: str | None, no_signing: bool, prog: str) -> Any:
                 " (the runtime needs the same file), or pass --no-signing"
             )
     try:
-        return Signing.from_file(path)
+        signing = Signing.from_file(path)
     except OSError as exc:
         raise UsageError(f"--signing-key: cannot read {path}: {exc.strerror}") from exc
     except ValueError as exc:
         raise UsageError(f"--signing-key: {exc}") from exc
+    for line in key_file_warnings(path, signing.key):
+        print(f"{prog}: warning: {line}", file=sys.stderr)
+    return signing
 
 
 def run_device(

@@ -61,7 +61,8 @@ bumpless slew; a further failure latches again. Without an acknowledgement input
 run`` without ``--target-stdin`` or ``--target-file``) the latch lasts for the rest of the run.
 
 The fault kinds, their detection bounds and the configuration are in
-:mod:`pressor.runtime.core.supervisor_config`.
+:mod:`pressor.runtime.core.supervisor_config`; the checks that turn each tick's inputs into fault
+bits, in :mod:`pressor.runtime.core.input_checks`.
 
 Deviation from the paper: the paper has no supervisor; this is the IEC 60601-1-10 shell around it.
 """
@@ -71,7 +72,7 @@ from __future__ import annotations
 import math
 
 from pressor.runtime.core.dose_guard import DoseGuard
-from pressor.runtime.core.flatline import FlatlineRules
+from pressor.runtime.core.input_checks import InputChecks
 from pressor.runtime.core.supervisor_config import (
     ADVISORY,
     ALARM_FAULTS,
@@ -92,17 +93,11 @@ from pressor.runtime.core.supervisor_io import (
 __all__ = ["AckOutcome", "Supervisor", "SupervisorInput", "SupervisorOutput"]
 
 #: the fault bits as plain ints: ``faults |= Fault.X`` would turn ``faults`` into an IntFlag, whose
-#: arithmetic runs Python-level enum code at every later ``|`` and ``&`` of the tick
+#: arithmetic runs Python-level enum code at every later ``|`` and ``&`` of the tick (the input
+#: checks' own bits: :mod:`pressor.runtime.core.input_checks`)
 _COMMAND_CLAMPED, _COMMAND_INVALID = int(Fault.COMMAND_CLAMPED), int(Fault.COMMAND_INVALID)
-_CONTROLLER_FAULT = int(Fault.CONTROLLER_FAULT)
-_ESTIMATE_OUT_OF_BOX = int(Fault.ESTIMATE_OUT_OF_BOX)
-_ESTIMATOR_FALLBACK, _LINK_ERRORS = int(Fault.ESTIMATOR_FALLBACK), int(Fault.LINK_ERRORS)
-_LINK_LOSS, _MAP_FLATLINE = int(Fault.LINK_LOSS), int(Fault.MAP_FLATLINE)
-_MAP_NAN, _MAP_RANGE = int(Fault.MAP_NAN), int(Fault.MAP_RANGE)
-_MAP_SPIKE, _PUMP_ALARM = int(Fault.MAP_SPIKE), int(Fault.PUMP_ALARM)
-_PUMP_MISMATCH, _SCHED_INVALID = int(Fault.PUMP_MISMATCH), int(Fault.SCHED_INVALID)
-_SCHED_OUT_OF_BOX, _SCHED_RATE = int(Fault.SCHED_OUT_OF_BOX), int(Fault.SCHED_RATE)
-_SENSOR_QUALITY, _STALE_SAMPLE = int(Fault.SENSOR_QUALITY), int(Fault.STALE_SAMPLE)
+_CONTROLLER_FAULT, _LINK_ERRORS = int(Fault.CONTROLLER_FAULT), int(Fault.LINK_ERRORS)
+_LINK_LOSS, _STALE_SAMPLE = int(Fault.LINK_LOSS), int(Fault.STALE_SAMPLE)
 _TARGET_INVALID = int(Fault.TARGET_INVALID)
 
 #: slack (s) on time comparisons so that k·Ts sums reach a bound that is a whole number of ticks
@@ -152,30 +147,14 @@ class Supervisor:
         self.command_ml_h = 0.0
         self.detections: dict[str, int] = {}
         self._prev_faults = 0
-        self._prev_map: float | None = None
         cfg = self.config
-        self._flat = (
-            FlatlineRules(
-                cfg.sensor_noise_mmhg,
-                cfg.flatline_s,
-                cfg.flatline_eps_mmhg,
-                cfg.flatline_window,
-                cfg.flatline_ratio,
-            )
-            if cfg.sensor_noise_mmhg > 0.0
-            else None
-        )
-        self._flat_fault = 0  # the flatline verdict of the last new sample, held between them
-        self._prev_sched: tuple[float, float, float] | None = None
-        self._prev_sched_s = 0.0
+        self._checks = InputChecks(cfg)  # the input checks and the history they keep
         self._fault_since_s: float | None = None
         self._good_since_s: float | None = None
         self._now_s = 0.0
         self._short_mmhg = math.nan
         self._run_controller = False
         self._entry_state = State.STARTUP
-        self._mismatch_since_s: float | None = None
-        self._out_of_box_since_s: float | None = None
         self._ack_requested = False
         self.last_ack: AckOutcome | None = None
         self._clinician: tuple[str, float] | None = None
@@ -183,9 +162,6 @@ class Supervisor:
         self._manual_ml_h = 0.0
         self._latched = 0  # faults kept until acknowledged (controller faults, DEVICE_CHANGED)
         self._latch = cfg.controller_faults == "latch"
-        # the largest delivered rate a pump status may report (ml/h; float32 on the wire)
-        pump_max = cfg.max_rate_ml_h if cfg.pump_max_ml_h is None else cfg.pump_max_ml_h
-        self._pump_max_ml_h = pump_max * (1.0 + 1e-6)
         limits = cfg.dose_limits
         #: the drug library's limits on the final command (None: no library)
         self.dose_guard = None if limits is None else DoseGuard(limits, cfg.sample_period_s)
@@ -212,103 +188,12 @@ class Supervisor:
         ``last_ack``."""
         self._ack_requested = True
 
-    # -- input checks ---------------------------------------------------------------------------
-    def _check_map(self, now_s: float, map_mmhg: float, quality: int, new: bool) -> int:
-        cfg = self.config
-        faults = 0
-        if quality & cfg.quality_mask:
-            faults |= _SENSOR_QUALITY
-        if not math.isfinite(map_mmhg):
-            return faults | _MAP_NAN
-        if not cfg.map_min_mmhg <= map_mmhg <= cfg.map_max_mmhg:
-            return faults | _MAP_RANGE
-        if self._prev_map is not None and abs(map_mmhg - self._prev_map) > cfg.spike_mmhg:
-            faults |= _MAP_SPIKE
-        self._prev_map = map_mmhg
-        if self._flat is not None:
-            if new:
-                self._flat_fault = _MAP_FLATLINE if self._flat.update(now_s, map_mmhg) else 0
-            faults |= self._flat_fault
-        return faults
-
-    def _check_sched(self, now_s: float, K: float, T_s: float, tau_s: float, valid: bool) -> int:
-        # written out for the three parameters: this runs every tick of every trial patient
-        cfg = self.config
-        if not (cfg.sched_required or cfg.sched_box or cfg.sched_rate_bounds):
-            return 0
-        isfinite = math.isfinite
-        if not (valid and isfinite(K) and isfinite(T_s) and isfinite(tau_s)):
-            self._prev_sched = None
-            return _SCHED_INVALID
-        faults = 0
-        box = cfg.sched_box
-        if box is not None:
-            (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
-            if not (k_lo <= K <= k_hi and t_lo <= T_s <= t_hi and d_lo <= tau_s <= d_hi):
-                faults |= _SCHED_OUT_OF_BOX
-        prev = self._prev_sched
-        if cfg.sched_rate_bounds is not None and prev is not None:
-            dt = now_s - self._prev_sched_s
-            if dt > 0.0:
-                tol = cfg.sched_rate_tolerance
-                b_k, b_t, b_d = cfg.sched_rate_bounds
-                if (
-                    abs(K - prev[0]) > tol * b_k * dt
-                    or abs(T_s - prev[1]) > tol * b_t * dt
-                    or abs(tau_s - prev[2]) > tol * b_d * dt
-                ):
-                    faults |= _SCHED_RATE
-        if prev is None or now_s > self._prev_sched_s:
-            self._prev_sched = (K, T_s, tau_s)
-            self._prev_sched_s = now_s
-        return faults
-
-    def _check_estimate(self, now_s: float, inp: SupervisorInput) -> int:
-        """``ESTIMATOR_FALLBACK`` and ``ESTIMATE_OUT_OF_BOX`` (the box held for estimate_box_s)."""
-        cfg = self.config
-        faults = 0 if inp.estimate_healthy else _ESTIMATOR_FALLBACK
-        box = cfg.sched_box
-        if box is None:
-            return faults
-        (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
-        if k_lo <= inp.K <= k_hi and t_lo <= inp.T_s <= t_hi and d_lo <= inp.tau_s <= d_hi:
-            self._out_of_box_since_s = None
-            return faults
-        if self._out_of_box_since_s is None:
-            self._out_of_box_since_s = now_s
-        if now_s - self._out_of_box_since_s >= cfg.estimate_box_s - _EPS_S:
-            faults |= _ESTIMATE_OUT_OF_BOX
-        return faults
-
-    def _check_pump(self, now_s: float, delivered: float, alarms: int) -> int:
-        cfg = self.config
-        if delivered != delivered:  # no fresh status: neither fault nor evidence of health
-            return 0
-        if not 0.0 <= delivered <= self._pump_max_ml_h:  # no pump delivers that: inf, < 0, > max
-            self._mismatch_since_s = now_s
-            return _PUMP_MISMATCH | (_PUMP_ALARM if alarms & cfg.pump_alarm_mask else 0)
-        faults = 0
-        if alarms & cfg.pump_alarm_mask:
-            # the held command stays the runtime's own: a status (the watchdog bit's included)
-            # never sets what the runtime commands (docs/PROTOCOL.md, "Quality and alarm bits")
-            faults |= _PUMP_ALARM
-        sent = self.command_ml_h
-        if alarms & cfg.pump_alarm_mask or abs(delivered - sent) <= max(
-            cfg.pump_mismatch_abs_ml_h, cfg.pump_mismatch_rel * abs(sent)
-        ):
-            self._mismatch_since_s = None
-        else:
-            if self._mismatch_since_s is None:
-                self._mismatch_since_s = now_s
-            if now_s - self._mismatch_since_s >= cfg.pump_mismatch_s - _EPS_S:
-                faults |= _PUMP_MISMATCH
-        return faults
-
     # -- the two phases of a tick -----------------------------------------------------------------
     def assess(self, inp: SupervisorInput) -> bool:
         """Check this tick's inputs and update the state; return True if the controller is to run."""
         now_s = inp.now_s
         cfg = self.config
+        checks = self._checks
         self._now_s = now_s
         self._short_mmhg = inp.target_mmhg - inp.map_mmhg  # how far below the target (dose guard)
         self._entry_state = self.state
@@ -318,15 +203,15 @@ class Supervisor:
         if inp.sample_age_s > cfg.stale_after_s + _EPS_S:  # the limit itself is not stale
             faults |= _STALE_SAMPLE
         else:
-            faults |= self._check_map(now_s, inp.map_mmhg, inp.quality, inp.sample_age_s == 0.0)
-            faults |= self._check_sched(now_s, inp.K, inp.T_s, inp.tau_s, inp.sched_valid)
+            faults |= checks.map(now_s, inp.map_mmhg, inp.quality, inp.sample_age_s == 0.0)
+            faults |= checks.sched(now_s, inp.K, inp.T_s, inp.tau_s, inp.sched_valid)
             if not cfg.map_min_mmhg <= inp.target_mmhg <= cfg.map_max_mmhg:  # False for NaN too
                 faults |= _TARGET_INVALID
         if inp.link_errors:
             faults |= _LINK_ERRORS
-        faults |= self._check_pump(now_s, inp.pump_delivered_ml_h, inp.pump_alarms)
+        faults |= checks.pump(now_s, inp.pump_delivered_ml_h, inp.pump_alarms, self.command_ml_h)
         if inp.estimated:
-            faults |= self._check_estimate(now_s, inp)
+            faults |= checks.estimate(now_s, inp)
         faults |= inp.boundary_faults | self._latched
         self.faults = faults
         state = self.state

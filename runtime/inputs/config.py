@@ -10,6 +10,7 @@ past this boundary the run code trusts its configuration.
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -392,14 +393,22 @@ def load_controller(spec: str, period_s: float) -> Any:
         raise UsageError(f"--controller {spec}: {exc}{hint}") from None
 
 
-def load_signing(config: RunConfig, generate: bool) -> Any:
+def load_signing(
+    config: RunConfig,
+    generate: bool,
+    prog: str = "pressor run",
+    warnings: list[str] | None = None,
+) -> Any:
     """The link's :class:`Signing`, or ``None`` with ``--no-signing``.
 
     From ``--signing-key``; else a fresh key if ``generate`` (``pressor sil``); else the key file
     at :func:`pressor.link.signing.default_key_path` (``pressor run``). A key file that is missing or
-    cannot be read is a :class:`UsageError` saying how to make one.
+    cannot be read is a :class:`UsageError` saying how to make one. Called before any port opens.
+    A key file readable by every user or a key of all zeros
+    (:func:`pressor.link.signing.key_file_warnings`) is one line ``PROG: warning: ...`` each on
+    stderr, also appended to ``warnings`` (for the run's summary) when given.
     """
-    from pressor.link.signing import Signing, default_key_path
+    from pressor.link.signing import Signing, default_key_path, key_file_warnings
 
     if not config.signed:
         return None
@@ -414,6 +423,13 @@ def load_signing(config: RunConfig, generate: bool) -> Any:
                 " (the device needs the same file), or pass --no-signing"
             )
     try:
-        return Signing.from_file(path)
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"--signing-key {path}: {exc}") from None
+        signing = Signing.from_file(path)
+    except OSError as exc:
+        raise UsageError(f"--signing-key {path}: cannot read: {exc.strerror or exc}") from None
+    except ValueError as exc:  # its text names the file
+        raise UsageError(f"--signing-key {exc}") from None
+    for line in key_file_warnings(path, signing.key):
+        print(f"{prog}: warning: {line}", file=sys.stderr)
+        if warnings is not None:
+            warnings.append(line)
+    return signing

@@ -5,25 +5,10 @@ the pump status and the link's health to the closed-loop core (:mod:`pressor.run
 same core the in-process trial runs), send the command, record. The loop holds only link I/O,
 recording and its own timing (:class:`~pressor.runtime.shell.timing.TimingStats`).
 
-Two ways to keep time (injected clocks, :mod:`pressor.runtime.shell.clock`):
-
-Lockstep (default in ``pressor sil``)
-    The device sends tick k's sample and waits for tick k's command (PX4 SITL style); the
-    :class:`~pressor.runtime.shell.clock.VirtualClock` follows the sample's sim time, in the in-process
-    simulator's order, so a clean serial run reproduces it sample for sample. A device silent for
-    ``stall_timeout_s`` of *wall* time ends the run (:class:`DeviceStalled`) rather than a link
-    loss, which would make the trajectory depend on host load.
-
-    Link stalls in virtual time: a stalled link is a device that keeps simulating without
-    exchanging frames, so the next sample is tick k > last + 1. The loop runs the silent ticks
-    last+1 … k−1 through the supervisor on the virtual clock (sample age and link silence growing
-    one period per tick), recording them with MAP NaN and sending nothing, so STALE_SAMPLE (HOLD)
-    and LINK_LOSS (FAILSAFE) fall on exactly the ticks a wall-clock runtime would log them.
-
-Real time (``--realtime``)
-    Ticks are released at absolute deadlines ``t0 + k·Ts``
-    (:class:`~pressor.runtime.shell.clock.MonotonicClock`); the newest sample is answered, sample age and
-    link silence are wall-clock (real watchdogs), and lateness and skipped periods are counted.
+Two ways to keep time, lockstep (default in ``pressor sil``) and real time (``--realtime``), are
+the drivers of :mod:`pressor.runtime.shell.drivers`; :class:`Loop` runs them
+(:meth:`Loop.run_lockstep`, :meth:`Loop.run_realtime`) and holds the per-tick work and the
+run's account.
 
 Execution time = wall time from release (sample decoded, or deadline reached) to the command
 written; recording comes after. Real-time ticks run slower than lockstep ones: after a period
@@ -35,7 +20,6 @@ from __future__ import annotations
 
 import math
 from contextlib import suppress
-from dataclasses import replace
 from typing import Any, Protocol
 
 from pressor.contracts.controller import Controller
@@ -47,7 +31,6 @@ from pressor.link import (
     STATE_FAULT,
     STATE_FINISHED,
     STATE_RUNNING,
-    LinkClosedError,
     LinkError,
     RuntimeSession,
     TickInputs,
@@ -59,24 +42,19 @@ from pressor.runtime.core.supervisor import AckOutcome, Supervisor
 from pressor.runtime.core.supervisor_config import DOSE_FAULTS, State
 from pressor.runtime.record.recorder import Recorder
 from pressor.runtime.shell.boundary import Boundary
-from pressor.runtime.shell.clock import (
-    MonotonicClock,
-    PeriodicSchedule,
-    VirtualClock,
-    perf_counter_s,
-)
-from pressor.runtime.shell.interrupt import signal_name, stop_requested
+from pressor.runtime.shell.clock import MonotonicClock, perf_counter_s
+from pressor.runtime.shell.drivers import DeviceStalled, lockstep, realtime
+from pressor.runtime.shell.interrupt import signal_name
 from pressor.runtime.shell.timing import TimingStats
 from pressor.runtime.shell.trajectory import LoopResult, Trajectory
+
+#: re-exported: where the runtime's callers have always imported it from
+__all__ = ["DeviceStalled", "Loop", "TickTarget"]
 
 _NAN = math.nan
 _DOSE_FAULTS = int(DOSE_FAULTS)
 #: the INFUSION_COMMAND mode of each state (the others: SAFE, the supervisor's fallback)
 _MODES = {State.AUTO: MODE_AUTO, State.STOPPED: MODE_STOP, State.MANUAL: MODE_MANUAL}
-
-
-class DeviceStalled(RuntimeError):
-    """The device sent no sample for ``stall_timeout_s`` (wall clock) in lockstep."""
 
 
 class TickTarget(Protocol):
@@ -167,7 +145,9 @@ class Loop:
         )
         self.timing = TimingStats(self.period_s)
         self.trajectory = (
-            Trajectory() if history_ticks is None else Trajectory(int(history_ticks), ring=True)
+            Trajectory(period_s=self.period_s)
+            if history_ticks is None
+            else Trajectory(int(history_ticks), ring=True, period_s=self.period_s)
         )
         self.on_tick = on_tick
         self.heartbeat_every = max(1, int(heartbeat_every))
@@ -231,7 +211,7 @@ class Loop:
         pump = ep.pump_status if send else None
         if pump is not None and pump.tick == inp.tick:
             self.trajectory.delivered(pump.tick, bound.delivered(pump.delivered_ml_h))
-        health = LinkHealth(sample_age_s, link_silence_s, self._link_errors(), boundary_faults)
+        health = LinkHealth(sample_age_s, link_silence_s, self.link_errors(), boundary_faults)
         rec = self.core.step(inp, now_s, pump, health)
         out = rec.supervisor
         command, state = out.command_ml_h, out.state
@@ -265,7 +245,7 @@ class Loop:
             target.log_command(self.sup.last_command, said, inp.tick, inp.sim_time_s, self.recorder)
         return command
 
-    def _link_errors(self) -> int:
+    def link_errors(self) -> int:
         """Frames the link layer discarded since the previous tick."""
         total = self.ep.counters.discarded()
         new = total - self._link_errors_seen
@@ -274,7 +254,8 @@ class Loop:
 
     # ------------------------------------------------------------------ drivers
     def run_lockstep(self, n_ticks: int, stall_timeout_s: float = 10.0) -> LoopResult:
-        """Answer the device's samples one by one until ``n_ticks`` are answered (0: until it ends).
+        """Answer the device's samples one by one until ``n_ticks`` are answered (0: until it ends)
+        (:func:`pressor.runtime.shell.drivers.lockstep`).
 
         On any exit the pump is left with a command: a stop signal and a failure (the device
         stalled, an internal error) send the safe command first (:meth:`_fail_safe`); a failure
@@ -282,122 +263,12 @@ class Loop:
         ``Exception`` is raised again after the safe command).
         """
         try:
-            return self._lockstep(n_ticks, stall_timeout_s)
+            return lockstep(self, n_ticks, stall_timeout_s)
         except Exception as exc:
             return self._failed(exc)
         except BaseException as exc:
             self._fail_safe(exc)
             raise
-
-    def _lockstep(self, n_ticks: int, stall_timeout_s: float) -> LoopResult:
-        clock = VirtualClock()
-        ep = self.ep
-        self._wall0 = perf_counter_s()
-        self._link_errors()  # what the handshake saw is not a fault of tick 0
-        answered = 0
-        last: TickInputs | None = None
-        ended = "completed"
-        poll_s = min(0.5, stall_timeout_s)
-        while n_ticks == 0 or answered < n_ticks:
-            waited = 0.0
-            inp = None
-            try:
-                while inp is None:
-                    if (stop := stop_requested()) is not None:
-                        break
-                    inp = ep.wait_for_sample(poll_s)
-                    if inp is None:
-                        if ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FINISHED:
-                            break
-                        waited += poll_s
-                        if waited >= stall_timeout_s:
-                            raise DeviceStalled(
-                                f"device sent no sample for {stall_timeout_s} s after"
-                                f" {answered} ticks"
-                            )
-            except LinkClosedError:
-                ended = "device closed the link"
-                break
-            if inp is None:  # the device finished, or a stop signal came
-                ended = "device finished" if stop is None else self._stop_safe(last, stop)
-                break
-            if last is not None and inp.tick > last.tick + 1:
-                self._silent_ticks(last, inp.tick, clock)
-                answered += inp.tick - last.tick - 1
-            release = perf_counter_s()
-            inp, bad_time = self.boundary.sample_time(inp)
-            clock.advance_to(max(inp.sim_time_s, clock.now_s()))
-            self.tick(inp, clock.now_s(), release, boundary_faults=bad_time)
-            last = inp
-            answered += 1
-        if last is not None and ended in ("completed", "device finished"):
-            self._await_final_status(last.tick + 1, stall_timeout_s)
-        self._finish()
-        return self.result(ended)
-
-    def _await_final_status(self, status_tick: int, timeout_s: float) -> None:
-        """Read the pump status that follows the last answered tick (the rate delivered over it).
-
-        Waits until it arrives, the device finishes or closes the link, or ``timeout_s`` (s, wall).
-        """
-        ep = self.ep
-        waited, poll_s = 0.0, min(0.05, timeout_s)
-        try:
-            while waited < timeout_s:
-                status = ep.pump_status
-                if status is not None and status.tick >= status_tick:
-                    break
-                if ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FINISHED:
-                    break
-                ep.poll(poll_s)
-                waited += poll_s
-        except LinkClosedError:
-            pass
-        status = ep.pump_status
-        if status is not None and status.tick == status_tick:
-            self.trajectory.delivered(status.tick, self.boundary.delivered(status.delivered_ml_h))
-
-    def _silent_ticks(self, last: TickInputs, resume_tick: int, clock: VirtualClock) -> None:
-        """Run ticks last.tick+1 … resume_tick−1 (nothing arrived) on the virtual clock.
-
-        At most :meth:`_settle_ticks` of them one by one: by then the link loss has put the
-        supervisor in FAILSAFE and its ramp has reached the safe rate, so every later silent tick
-        would repeat the last one. The rest are skipped in one step (counted in the ticks per
-        state, one event in the record), so a tick number that jumps by 10^6 or to 2^32 costs
-        the same as a long link stall.
-        """
-        ts = self.period_s
-        end = min(resume_tick, last.tick + 1 + self._settle_ticks())
-        for j in range(last.tick + 1, end):
-            now = j * ts
-            age = (j - last.tick) * ts  # whole ticks: sim time on the wire is float32
-            clock.advance_to(now)
-            silent = replace(last, tick=j, sim_time_s=now)
-            self.tick(
-                silent,
-                clock.now_s(),
-                perf_counter_s(),
-                sample_age_s=age,
-                link_silence_s=age,
-                send=False,
-            )
-        skipped = resume_tick - end
-        if skipped > 0:
-            self.ticks_in_state[self.sup.state] += skipped
-            clock.advance_to((resume_tick - 1) * ts)
-            self.events.note(
-                end,
-                end * ts,
-                f"link silent: ticks {end}-{resume_tick - 1} ({skipped} ticks) skipped in one"
-                f" step, {self.sup.state.name} at {self.sup.command_ml_h:g} ml/h",
-            )
-
-    def _settle_ticks(self) -> int:
-        """Silent ticks (count) after which the supervisor's output no longer changes: the link
-        loss, then the FAILSAFE ramp over the whole pump range, and one tick of margin."""
-        cfg = self.sup.config
-        settle_s = cfg.link_loss_after_s + cfg.max_rate_ml_h / cfg.failsafe_ramp_ml_h_per_s
-        return math.ceil(settle_s / self.period_s) + 2
 
     def run_realtime(
         self,
@@ -405,72 +276,23 @@ class Loop:
         first_sample_timeout_s: float = 10.0,
         clock: MonotonicClock | None = None,
     ) -> LoopResult:
-        """Run on the wall clock with absolute deadlines for ``n_ticks`` periods (0: until the end).
+        """Run on the wall clock with absolute deadlines for ``n_ticks`` periods (0: until the end)
+        (:func:`pressor.runtime.shell.drivers.realtime`).
 
         Each period answers the newest sample received; stale samples and link silence feed the
         supervisor's watchdogs. Exits as :meth:`run_lockstep` does (the safe command first).
         """
         try:
-            return self._realtime(n_ticks, first_sample_timeout_s, clock)
+            return realtime(self, n_ticks, first_sample_timeout_s, clock)
         except Exception as exc:
             return self._failed(exc)
         except BaseException as exc:
             self._fail_safe(exc)
             raise
 
-    def _realtime(
-        self, n_ticks: int, first_sample_timeout_s: float, clock: MonotonicClock | None
-    ) -> LoopResult:
-        ep = self.ep
-        first = ep.wait_for_sample(first_sample_timeout_s)
-        if first is None:
-            raise DeviceStalled(f"no first sample within {first_sample_timeout_s} s")
-        clock = clock or MonotonicClock()
+    def start_wall_clock(self) -> None:
+        """The run starts now (its ``wall_s``): a driver calls it as its first tick nears."""
         self._wall0 = perf_counter_s()
-        sched = PeriodicSchedule(self.period_s, origin_s=clock.now_s())
-        newest: TickInputs = first
-        last_sample_s = last_frame_s = sched.origin_s
-        frames_seen = ep.counters.frames_received
-        skipped = 0
-        ended = "completed"
-        k = 0
-        while n_ticks == 0 or k < n_ticks:
-            if (stop := stop_requested()) is not None:
-                ended = self._stop_safe(newest, stop)
-                break
-            deadline = sched.deadline_s()
-            now = clock.wait_until(deadline)
-            release = perf_counter_s()
-            try:
-                ep.poll(0.0)
-            except LinkClosedError:
-                ended = "device closed the link"
-                break
-            fresh = ep.newest_sample()  # older unanswered samples are superseded, not queued
-            if fresh is not None:
-                newest = fresh
-                last_sample_s = now
-            if ep.counters.frames_received != frames_seen:
-                frames_seen = ep.counters.frames_received
-                last_frame_s = now
-            checked, bad_time = self.boundary.sample_time(newest)
-            self.tick(
-                checked,
-                now,
-                release,
-                sample_age_s=now - last_sample_s,
-                link_silence_s=now - last_frame_s,
-                lateness_s=now - deadline,
-                skipped=skipped,
-                boundary_faults=bad_time,
-            )
-            k += 1
-            if ep.peer_heartbeat is not None and ep.peer_heartbeat[1] == STATE_FINISHED:
-                ended = "device finished"
-                break
-            _, skipped = sched.next_release(clock.now_s())
-        self._finish()
-        return self.result(ended)
 
     # ------------------------------------------------------------------ ending
     def safe_rate_ml_h(self) -> float:
@@ -479,7 +301,7 @@ class Loop:
         safe = self.sup.config.safe_rate_ml_h
         return self._last_command if safe is None else safe
 
-    def _stop_safe(self, last: TickInputs | None, signum: int) -> str:
+    def stop_safe(self, last: TickInputs | None, signum: int) -> str:
         """Stop on a signal: command the safe rate (:meth:`safe_rate_ml_h`, mode SAFE), or with
         ``on_stop="zero"`` 0 ml/h (mode STOP), for the tick after ``last``; return the ``ended``
         text."""
@@ -508,7 +330,8 @@ class Loop:
         result.error = exc
         return result
 
-    def _finish(self) -> None:
+    def finish(self) -> None:
+        """Tell the device the run is over (a FINISHED heartbeat)."""
         with suppress(LinkError, OSError):
             self.ep.send_heartbeat(self.trajectory.last_tick() or 0, STATE_FINISHED)
 
@@ -531,4 +354,5 @@ class Loop:
             wall_s=perf_counter_s() - self._wall0,
             stop_signal=self._stop_signal,
             boundary=self.boundary.summary(),
+            kept_bytes=self.trajectory.nbytes,
         )

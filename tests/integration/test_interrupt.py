@@ -88,6 +88,52 @@ def test_signal_stops_sil_keeping_recording_tlog_and_summary(tmp_path, sig):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries left
 
 
+def _exit_s_after_signal(proc: subprocess.Popen, sig: signal.Signals) -> tuple[float, str]:
+    """Send ``sig`` to ``proc``; the wall seconds until it exited, and its stderr."""
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    proc.wait(timeout=30)
+    elapsed = time.monotonic() - t0
+    return elapsed, proc.stderr.read()
+
+
+def test_ctrl_c_ends_a_lockstep_sil_within_1_s_with_one_line_and_the_true_map_recorded(tmp_path):
+    rrd, summary = tmp_path / "run.rrd", tmp_path / "s.json"
+    proc = _start(
+        "sil", "--controller", "pi", "--duration", "3600", "--rrd", str(rrd),
+        "--summary", str(summary), cwd=tmp_path,
+    )  # fmt: skip
+    try:
+        _wait_for(lambda: any(p.name.startswith(".run.rrd") for p in tmp_path.iterdir()), 60)
+        time.sleep(1.0)  # mid-run: an hour in lockstep takes several seconds
+        elapsed_s, err = _exit_s_after_signal(proc, signal.SIGINT)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130
+    _assert_one_line(err, "pressor sil", signal.SIGINT)  # no "device exited with ..."
+    assert elapsed_s <= 1.0, f"exit {elapsed_s:.2f} s after SIGINT"
+    ticks = json.loads(summary.read_text())["ticks"]
+    assert 10 <= ticks < 36000
+    columns = rrd_columns(rrd)
+    assert len(columns["/patient/map_mmhg"]) == ticks
+    true_map = columns["/patient/map_true_mmhg"]  # the device's truth up to the stop
+    assert set(range(ticks)) <= set(true_map) and all(30 < v < 200 for v in true_map.values())
+
+
+@pytest.mark.parametrize("delay_s", [0.3, 0.6, 1.0])
+def test_ctrl_c_while_sil_starts_ends_it_within_1_s_with_one_line(tmp_path, delay_s):
+    proc = _start("sil", "--controller", "pi", "--rrd", str(tmp_path / "run.rrd"), cwd=tmp_path)
+    try:
+        time.sleep(delay_s)  # still loading: its imports, the scenario, the controller
+        elapsed_s, err = _exit_s_after_signal(proc, signal.SIGINT)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130
+    _assert_one_line(err, "pressor sil", signal.SIGINT)
+    assert elapsed_s <= 1.0, f"exit {elapsed_s:.2f} s after SIGINT"
+    assert not list(tmp_path.iterdir())  # nothing started, nothing left
+
+
 def _device_thread(pair: PtyPair, stop: threading.Event, key: Path) -> threading.Thread:
     """A simulated device (the project's world) driving the runtime from this process."""
     from pressor.hil_sim.devices.device import run_device

@@ -13,6 +13,7 @@ from pressor.link import (
     Signing,
 )
 from pressor.link.dialect import pressor as mavlink
+from pressor.link.signing import key_file_warnings
 from tests.support.link_doubles import SinkPort, collect, drain, loop_pair
 
 
@@ -60,6 +61,34 @@ def test_a_key_file_in_hex_or_raw_loads_and_a_bad_one_names_the_file(tmp_path):
     with pytest.raises(ValueError, match="short"):
         Signing.from_file(tmp_path / "short")
     assert Signing.generate().key != Signing.generate().key  # per-run keys differ
+
+
+def test_whitespace_inside_a_hex_key_file_is_ignored(tmp_path):
+    s = Signing.generate(seed=5)
+    h = s.key.hex()
+    grouped = " ".join(h[i : i + 8] for i in range(0, 64, 8))  # pasted in groups
+    lines = "\n".join(h[i : i + 16] for i in range(0, 64, 16))  # or over lines
+    for name, text in (("groups", grouped), ("lines", f"  {lines}\r\n"), ("tabs", "\t".join(h))):
+        (tmp_path / name).write_text(text)
+        assert Signing.from_file(tmp_path / name).key == s.key, name
+
+
+def test_a_hex_key_with_a_non_hex_character_is_refused_naming_the_file(tmp_path):
+    (tmp_path / "typo").write_text("g" + Signing.generate(seed=6).key.hex()[1:] + "\n")
+    with pytest.raises(ValueError, match="typo: signing key has 65 bytes"):
+        Signing.from_file(tmp_path / "typo")
+
+
+def test_key_file_warnings_name_a_file_every_user_can_read_and_an_all_zero_key(tmp_path):
+    good = Signing.generate(seed=7).write(tmp_path / "good")  # mode 0600, as keygen writes it
+    assert key_file_warnings(good, Signing.from_file(good).key) == []
+    shared = Signing.generate(seed=7).write(tmp_path / "shared")
+    shared.chmod(0o644)
+    [line] = key_file_warnings(shared, Signing.from_file(shared).key)
+    assert str(shared) in line and "every user (mode 0644)" in line and "chmod 600" in line
+    zero = Signing(bytes(32)).write(tmp_path / "zero")
+    [line] = key_file_warnings(zero, Signing.from_file(zero).key)
+    assert str(zero) in line and "zero" in line and "pressor keygen" in line
 
 
 def test_a_signed_frame_with_a_corrupted_timestamp_does_not_lock_out_later_frames():

@@ -224,7 +224,8 @@ def test_bad_device_input_exits_2_with_one_line_naming_the_option(args, needle, 
 
 
 def test_an_unopenable_port_exits_2(tmp_path, capsys):
-    rc = device_main("device", ["--port", str(tmp_path / "missing-tty")])
+    # unsigned: the key is checked before the port (tests/integration/test_key_files.py)
+    rc = device_main("device", ["--port", str(tmp_path / "missing-tty"), "--no-signing"])
     assert rc == 2 and "--port" in capsys.readouterr().err
 
 
