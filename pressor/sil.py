@@ -398,7 +398,7 @@ def _main(argv: Sequence[str]) -> int:
 
     config = sil_config(argv)
     summary, result = run_sil(config)
-    return finish(summary, result, config.run, "pressor sil")
+    return finish(summary, result, config.run, "pressor sil", drug=config.drug)
 
 
 def main(command: str, argv: list[str]) -> int:
