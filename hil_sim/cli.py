@@ -53,40 +53,47 @@ def _scenarios(argv: Sequence[str]) -> int:
 def _fmt(v: Any) -> str:
     if v is None:
         return "-"
-    return f"{v:.4g}" if abs(v) < 1e4 else f"{v:.0f}"
+    text = f"{v:.4g}" if abs(v) < 1e4 else f"{v:.0f}"
+    return text[1:] if text.startswith("-") and float(text) == 0.0 else text
 
 
 def format_table(summary: dict[str, Any]) -> str:
-    """The terminal table: median and the bad 10 % tail of every metric, reachable patients first.
+    """The terminal table: median and the bad 10 % tail of every metric, reachable patients first,
+    each metric named in words with its unit (:func:`pressor.contracts.metrics.labels.label`).
 
-    The tail is p90 for errors and times and p10 where higher is better (time in band).
+    The tail is p90 for errors and times and p10 where higher is better (time in band). A ``-`` is
+    a figure no patient has (``null`` counts the patients without it: docs/METRICS.md, "null
+    when").
     """
     from pressor.contracts.metrics import HIGHER_IS_BETTER, RUN_METRICS
+    from pressor.contracts.metrics.labels import label
 
     m = summary["metrics"]
-    model = f" patient_model={summary['patient_model']}" if "patient_model" in summary else ""
+    model = f", patient model {summary['patient_model']}" if "patient_model" in summary else ""
+    width = max(len(label(k)) for k in RUN_METRICS) + 1
     lines = [
-        f"trial: controller={summary['controller']} scenario={summary['scenario']}{model}"
-        f" seed={summary['cohort_seed']} patients={summary['n_patients']}"
-        f" (reachable {m['n_reachable']}, unreachable {m['n_unreachable']},"
-        f" unstable {m['n_unstable']})",
-        f"{'metric':<24}{'median':>10}{'worst 10%':>10}{'n':>5}{'null':>5}"
-        f" | {'unreach. median':>15}{'worst 10%':>10}",
+        f"trial: controller {summary['controller']}, scenario {summary['scenario']}{model},"
+        f" cohort seed {summary['cohort_seed']}, {summary['n_patients']} patients:"
+        f" {m['n_reachable']} reachable, {m['n_unreachable']} unreachable (listed below),"
+        f" {m['n_unstable']} unstable",
+        f"{'reachable patients':<{width}}{'median':>10}{'worst 10%':>10}{'n':>5}{'null':>5}"
+        f" | {'unreachable: median':>19}{'worst 10%':>10}",
     ]
     for key in RUN_METRICS:
         r = m["reachable"][key]
         u = m["unreachable"][key]
         tail = "p10" if key in HIGHER_IS_BETTER else "p90"
         lines.append(
-            f"{key:<24}{_fmt(r['median']):>10}{_fmt(r[tail]):>10}{r['n']:>5}{r['n_null']:>5}"
-            f" | {_fmt(u['median']):>15}{_fmt(u[tail]):>10}"
+            f"{label(key):<{width}}{_fmt(r['median']):>10}{_fmt(r[tail]):>10}{r['n']:>5}"
+            f"{r['n_null']:>5} | {_fmt(u['median']):>19}{_fmt(u[tail]):>10}"
         )
-    for label, d in m["disturbances"].items():
-        lines.append(f"{label} at {_fmt(d['start_s'])} s (reachable patients):")
+    for name, d in m["disturbances"].items():
+        lines.append(f"{name} at {_fmt(d['start_s'])} s (reachable patients):")
         for key in ("peak_abs_deviation_mmhg", "recovery_s", "iae_mmhg_s"):
             r = d[key]
             lines.append(
-                f"  {key:<22}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}{r['n']:>5}{r['n_null']:>5}"
+                f"  {label(key):<{width - 2}}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}"
+                f"{r['n']:>5}{r['n_null']:>5}"
             )
     if "estimation" in summary:
         e = summary["estimation"]
@@ -94,11 +101,22 @@ def format_table(summary: dict[str, Any]) -> str:
             f"schedule {summary['schedule']}: median second-half error K {_fmt(e['K_rel_err_pct'])} %,"
             f" T {_fmt(e['T_rel_err_pct'])} %, tau {_fmt(e['tau_abs_err_s'])} s"
         )
-    if summary["unreachable_patient_seeds"]:
-        lines.append(f"unreachable patient seeds: {summary['unreachable_patient_seeds']}")
     if summary["unstable_patient_seeds"]:
-        lines.append(f"unstable patient seeds: {summary['unstable_patient_seeds']}")
+        lines.append(
+            "unstable (MAP not finite, or still swinging across the band in the last quarter):"
+            f" patients {', '.join(str(x) for x in summary['unstable_patient_seeds'])}"
+        )
     return "\n".join(lines)
+
+
+def format_unreachable(records: list[dict[str, Any]]) -> str:
+    """What "unreachable" means and each unreachable patient with why; ``""`` for none."""
+    from pressor.hil_sim.trials.words import UNREACHABLE_MEANS, unreachable_lines
+
+    lines = unreachable_lines(records)
+    if not lines:
+        return ""
+    return "\n".join([f"{UNREACHABLE_MEANS}:", *(f"  {line}" for line in lines)])
 
 
 def _progress_bar(done: int, total: int) -> None:
@@ -234,6 +252,9 @@ def _trial(argv: Sequence[str]) -> int:
             trajectories[spec] = trajectory
         write_outputs(out, records[spec], summary)
         print(format_table(summary))
+        unreachable = format_unreachable(records[spec])
+        if unreachable:
+            print(unreachable)
         print(f"wrote {out / 'patients.json'}, {out / 'patients.csv'}, {out / 'summary.json'}")
     comparison = compare_controllers(records) if len(specs) > 1 else {}
     if comparison:
