@@ -134,12 +134,14 @@ def _progress_bar(done: int, total: int) -> None:
 def _trial(argv: Sequence[str]) -> int:
     from pressor.runtime.estimation.sources import SOURCES
     from pressor.runtime.inputs.config import ORACLE_DEFAULT_WHY, SCHEDULE_HELP
+    from pressor.runtime.inputs.controller_loader import shipped_specs
 
     p = UsageParser(prog="pressor trial", description="in-silico cohort trial of a controller")
     p.add_argument(
         "--controller",
         default="pi",
-        help="pi | smith[:LAMBDA_S] (Smith predictor, lambda 30 s) | lpv | PATH to a generated "
+        help=f"a shipped controller: {' | '.join(shipped_specs())} (pressor designs lists them;"
+        " smith: Smith predictor, lambda 30 s) | PATH to a generated "
         "module | a plugin class MODULE:CLASS[:ARGS] or FILE.py:CLASS[:ARGS] or an installed "
         "'pressor.controllers' entry point NAME[:ARGS] (ARGS: key=value,...); several, "
         "comma-separated (lpv,pi,smith), run the same cohort under each and compare them per "
@@ -224,6 +226,14 @@ def _trial(argv: Sequence[str]) -> int:
             load_controller(spec, period)
         except ControllerSpecError as exc:
             raise UsageError(str(exc)) from None
+    folders = [controller_dir_name(spec) for spec in specs]
+    if len(specs) > 1 and len(set(folders)) != len(folders):
+        dup = next(f for f in folders if folders.count(f) > 1)
+        same = [spec for spec, f in zip(specs, folders, strict=True) if f == dup]
+        raise UsageError(
+            f"field '--controller': {' and '.join(same)} would write the same folder {dup!r}"
+            " under --out; rename one file or class"
+        )
     _remove_stale_outputs(args.out)
     records: dict[str, list[dict[str, Any]]] = {}
     trajectories: dict[str, dict[str, Any]] = {}

@@ -47,6 +47,34 @@ PATIENT_MODELS: dict[str, str] = {
     "norepinephrine": "pressor.hil_sim.patients.norepinephrine:Norepinephrine1C",
 }
 
+#: name -> (drug and syringe its ml/h count, what it is, its source) of every shipped model, for
+#: ``pressor patients`` (docs/PATIENTS.md gives the equations and ranges); a model added to
+#: :data:`PATIENT_MODELS` gets its line here (tests/hil_sim/patients/test_patient_model.py)
+PATIENT_MODEL_NOTES: dict[str, tuple[str, str, str]] = {
+    "paper": (
+        "phenylephrine",
+        "nonlinear first order plus time-varying delay, K, T, tau driven by the infusion",
+        "Tasoujian, Grigoriadis and Franchek, DSCC 2019 (Table 1)",
+    ),
+    "pkpd": (
+        "phenylephrine 100 µg/ml",
+        "two-compartment kinetics, effect site, sigmoid Emax, tachyphylaxis (a benchmark"
+        " population, not fitted values)",
+        "Hengstmann and Goronzy 1982; Sheiner et al. 1979; Porchet, Benowitz and Sheiner 1988",
+    ),
+    "phenylephrine-2c": (
+        "phenylephrine 100 µg/ml",
+        "label two-compartment kinetics, effect site, Emax, baroreflex-like counter-regulation",
+        "US label (FDA NDA 203826) after Hengstmann and Goronzy 1982; Su et al. 2023",
+    ),
+    "norepinephrine": (
+        "norepinephrine 16 µg/ml",
+        "one compartment with severity-dependent clearance, endogenous production, effect site,"
+        " Hill curve, turnover counter-regulation",
+        "Beloeil et al., Br J Anaesth 2005; Li et al., Clin Pharmacokinet 2024",
+    ),
+}
+
 #: members a model class must have (methods, except the mapping ``coefficient_units``)
 CLASS_MEMBERS = ("from_seed", "step", "coefficients", "max_delta_map_mmhg", "coefficient_units")
 #: numeric members a model instance must have (attributes or properties, float)

@@ -67,9 +67,35 @@ from pressor.runtime.inputs.controller_loader import load_controller
 
 
 def controller_dir_name(spec: str) -> str:
-    """A file-name-safe name for a controller spec (``smith:45`` -> ``smith_45``, a path -> stem)."""
-    base = Path(spec).stem if spec.endswith(".py") else spec
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", base)
+    """A readable, file-name-safe name for a controller spec: ``smith:45`` -> ``smith_45``,
+    ``lpv:wide-delay`` -> ``lpv_wide-delay``, a generated module's path -> its stem, a plugin ->
+    its file stem (or module's last part, or entry point name), class and arguments
+    (``/tmp/x/gspi.py:GSPI:kp0=3.0`` -> ``gspi_GSPI_kp0_3.0``, ``pkg.ctrl:Gain`` -> ``ctrl_Gain``)."""
+    from pressor.runtime.inputs.controller_loader import LPV_PREFIX, SMITH_PREFIX
+    from pressor.runtime.inputs.controller_plugin import (
+        ControllerPluginError,
+        is_plugin_spec,
+        split_spec,
+    )
+
+    head = spec.partition(":")[0]
+    base = spec
+    if spec.endswith(".py"):
+        base = Path(spec).stem
+    elif head not in (LPV_PREFIX, SMITH_PREFIX, "pi") and is_plugin_spec(spec):
+        try:
+            module, cls, args = split_spec(spec)
+        except ControllerPluginError:
+            pass
+        else:
+            if is_plugin_spec(head):  # an installed entry point's name
+                stem = head
+            elif module.endswith(".py"):
+                stem = Path(module).stem
+            else:
+                stem = module.rpartition(".")[2]
+            base = "_".join(part for part in (stem, cls, args) if part)
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", base).strip("_") or "controller"
 
 
 def scenario_events(scenario: Scenario) -> list[Event]:

@@ -161,11 +161,15 @@ def _cpu_latency(text: str) -> int | None:
 def add_run_options(p: argparse.ArgumentParser, schedule_default: str, schedule_why: str) -> None:
     """Add the runtime's options (controller, schedule, rate, outputs, signing, faults, timing) to
     ``p``; ``--schedule`` defaults to ``schedule_default`` (``schedule_why`` ends its help)."""
+    from pressor.runtime.inputs.controller_loader import design_specs
+
+    designs = design_specs()
     p.add_argument(
         "--controller",
         default="lpv",
-        help="lpv (default: the shipped LPV module; lpv:norepinephrine and lpv:wide-delay the"
-        " other shipped designs, docs/DRUGS.md and docs/SCHEDULING.md), pi, smith[:LAMBDA_S]"
+        help=f"{designs[0]} (default: the shipped LPV module; {', '.join(designs[1:])} the"
+        " other shipped designs, docs/DRUGS.md and docs/SCHEDULING.md; pressor designs lists"
+        " them), pi, smith[:LAMBDA_S]"
         " (Smith predictor, closed-loop time constant LAMBDA_S in s, default 30 s), a generated .py, or your own"
         " class: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed 'pressor.controllers'"
         " entry point NAME[:ARGS] (ARGS: key=value,...; pressor.runtime.inputs.controller_plugin)",
