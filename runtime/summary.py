@@ -347,7 +347,7 @@ def print_summary(
     if "dose" in summary:  # pressor run: the drug library
         d = summary["dose"]
         print(
-            f"dose limits ({d['unit']}): hard {d['hard_max']:g}, soft {d['soft_max']:g}"
+            f"dose limits ({d['unit'].replace('ug', 'µg')}): hard {d['hard_max']:g}, soft {d['soft_max']:g}"
             + (f"; {d['detections']}" if d["detections"] else ""),
             file=out,
         )
