@@ -59,7 +59,13 @@ class PIController:
         Proportional gain in (ml/h)/mmHg, ≥ 0.
     ki
         Integral gain in (ml/h)/(mmHg·s), ≥ 0.
+
+    Bound to no drug (``DRUG_AGNOSTIC``, :func:`pressor.contracts.drug.drug_agnostic`): the gains are in
+    ml/h for the nominal patient K ≈ 0.55 mmHg/(ml/h), which the usual syringes of every shipped
+    drug share (docs/DRUGS.md), so ``pressor run`` runs it on the drug the clinician names.
     """
+
+    DRUG_AGNOSTIC = True
 
     def __init__(
         self,

@@ -110,7 +110,12 @@ class SmithController:
         Closed-loop time constant λ in s, in [LAMBDA_MIN_S, LAMBDA_MAX_S] (default 30).
     tau_max_s
         Longest delay the delay line holds (s), in [0, 600]; τ is clamped to [0, tau_max_s].
+
+    Bound to no drug (``DRUG_AGNOSTIC``, :func:`pressor.contracts.drug.drug_agnostic`): it is scheduled
+    on the K, T, τ it is given, in ml/h of whatever syringe the schedule counts.
     """
+
+    DRUG_AGNOSTIC = True
 
     def __init__(
         self,

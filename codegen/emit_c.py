@@ -170,12 +170,13 @@ def _reference_fields(spec: EmitSpec) -> str:
         f"    double qbuf[{PU}NBUF];            /* past delay-free model MAP (ring buffer), mmHg */\n"
         "    int32_t phead;\n"
         "    int32_t anchored;\n"
+        "    double sf;                       /* the part the model cannot reach, lagged, mmHg */\n"
     )
 
 
 def _reset_fn(nz: int, nk: int, reference: bool) -> str:
     pf = (
-        "    s->m0 = s->y0 = s->ym = s->rm = s->uff = 0.0;\n"
+        "    s->m0 = s->y0 = s->ym = s->rm = s->uff = s->sf = 0.0;\n"
         f"    for (j = 0; j < {PU}NBUF; ++j) s->pbuf[j] = s->qbuf[j] = 0.0;\n"
         "    s->phead = 0;\n"
         "    s->anchored = 0;\n"

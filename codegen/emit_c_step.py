@@ -14,20 +14,23 @@ from pressor.codegen.fixed_point import FixedPointPlan
 __all__ = ["step_fixed", "step_float"]
 
 
-def _rho_c(fixed: bool) -> str:
+def _rho_c(fixed: bool, spec: EmitSpec) -> str:
     """Clamp and rate-limit physical rho (double), bounded binary search, fractions fr[0..2]."""
     L = []
+    if spec.bumpless:
+        L.append("    started = s->started;")
+        L.append("    kold = s->r[0];")
     for i, name in enumerate(("K", "T", "tau")):
         L.append(f"    x = {name};")
         L.append(f"    if (x < {PU}LO{i}) {{ x = {PU}LO{i}; clamped = 1; }}")
         L.append(f"    else if (x > {PU}HI{i}) {{ x = {PU}HI{i}; clamped = 1; }}")
         L.append("    if (s->started) {")
-        L.append(
-            f"        if (x > s->r[{i}] + {PU}RSTEP{i}) {{ x = s->r[{i}] + {PU}RSTEP{i}; limited = 1; }}"
-        )
-        L.append(
-            f"        else if (x < s->r[{i}] - {PU}RSTEP{i}) {{ x = s->r[{i}] - {PU}RSTEP{i}; limited = 1; }}"
-        )
+        if i == 0 and spec.k_rate_relative:  # log-K rates: a multiplicative limiter
+            up, dn = f"s->r[0] * {PU}KUP", f"s->r[0] * {PU}KDN"
+        else:
+            up, dn = f"s->r[{i}] + {PU}RSTEP{i}", f"s->r[{i}] - {PU}RSTEP{i}"
+        L.append(f"        if (x > {up}) {{ x = {up}; limited = 1; }}")
+        L.append(f"        else if (x < {dn}) {{ x = {dn}; limited = 1; }}")
         L.append("    }")
         L.append(f"    s->r[{i}] = x;")
         L.append(f"    lo = 0; hi = {PU}N{i} - 1;")
@@ -47,20 +50,17 @@ def _rho_c(fixed: bool) -> str:
     return "\n".join(L)
 
 
-def _reference_c() -> str:
-    """The prefilter, the same double operations in the same order as the Python module."""
+def _reference_c(spec: EmitSpec) -> str:
+    """The prefilter on the feedback's rho, the same double operations in the same order as the
+    Python module."""
+    tp = f"{PU}PF_TLAG" if spec.reference_lag_s is not None else "s->r[1]"
     return f"""
     if (!s->anchored) {{ s->m0 = map_mmhg; s->anchored = 1; }}
     rr = target_mmhg - s->m0;
-    kp = K;
+    kp = s->r[0];
     if (kp < {PU}PF_KLO) kp = {PU}PF_KLO;
-    else if (kp > {PU}HI0) kp = {PU}HI0;
-    tp = T;
-    if (tp < {PU}LO1) tp = {PU}LO1;
-    else if (tp > {PU}HI1) tp = {PU}HI1;
-    dp = tau;
-    if (dp < {PU}LO2) dp = {PU}LO2;
-    else if (dp > {PU}HI2) dp = {PU}HI2;
+    tp = {tp};
+    dp = s->r[2];
     ik = 1.0 / kp;
     dp = dp * {PU}INV_TS;
     n = (int32_t)dp;
@@ -84,20 +84,61 @@ def _reference_c() -> str:
     ud = s->pbuf[i] + (s->pbuf[j] - s->pbuf[i]) * fdp;
     s->phead += 1;
     if (s->phead == {PU}NBUF) s->phead = 0;
-    rm = s->m0 + s->ym;
+    ym = s->ym;
     s->ym = s->ym + cs * (kp * ud - s->ym);
+    sh = rr - kp * {PU}MAX_RATE_ML_H; /* what the model cannot reach at the pump's maximum */
+    if (sh < 0.0) sh = 0.0;
+    sf = s->sf;
+    s->sf = sf + cs * (sh - sf);
+    rm = s->m0 + ym + sf;
     s->rm = rm;
     s->uff = uff;
     e = rm - map_mmhg;"""
 
 
-def _input_c(reference: bool) -> str:
-    return f"""    e = target_mmhg - map_mmhg;
-    if (e - e != 0.0 || K - K != 0.0 || T - T != 0.0 || tau - tau != 0.0) {{
+def _bumpless_c(fixed: bool) -> str:
+    """The Smith law's bumpless integral, the same double operations as the Python module."""
+    s1, s3, qe, back = (
+        (f"{PU}BL_Q1", f"{PU}BL_Q3", f"{PU}BL_QE", f"{PU}BL_INV_Q3")
+        if fixed
+        else (f"{PU}BL_S1", f"{PU}BL_S3", f"{PU}E_LIM", f"{PU}BL_INV_S3")
+    )
+    if fixed:
+        clamp = """        if (bx > 2147483647.0) bx = 2147483647.0;
+        else if (bx < -2147483647.0) bx = -2147483647.0;
+        s->z[3] = (int32_t)bx;"""
+    else:
+        clamp = """        if (bx > 1.0) bx = 1.0;
+        else if (bx < -1.0) bx = -1.0;
+        s->z[3] = bx;"""
+    return f"""    if (started && s->r[0] != kold) {{ /* bumpless integral: K moved from kold */
+        double q, yh, yd, ee, xe, bx;
+        q = s->r[0] / kold;
+        yh = (double)v[1] * {s1};
+        yd = (double)v[5] * {s1};
+        ee = (double)v[6] * {qe};
+        xe = (double)v[3] * {s3};
+        xe = q * xe + (1.0 - q) * (s->r[2] * (yh + yd) * 0.5 - s->r[1] * (ee - yh + yd));
+        bx = xe * {back};
+{clamp}
+        v[3] = s->z[3];
+    }}
+"""
+
+
+def _input_c() -> str:
+    return """    e = target_mmhg - map_mmhg;
+    if (e - e != 0.0 || K - K != 0.0 || T - T != 0.0 || tau - tau != 0.0) {
         s->input_invalid = 1;
         return s->out;
-    }}
-    s->input_invalid = 0;{_reference_c() if reference else ""}
+    }
+    s->input_invalid = 0;"""
+
+
+def _error_c(spec: EmitSpec) -> str:
+    """After the rho block: the prefilter (sets e = r_m - MAP) and the error's clamp."""
+    ref = _reference_c(spec) if spec.reference is not None else ""
+    return f"""{ref}
     if (e > {PU}E_LIM) e = {PU}E_LIM;
     else if (e < -{PU}E_LIM) e = -{PU}E_LIM;"""
 
@@ -146,7 +187,7 @@ def _reference_decl(reference: bool, share: str) -> str:
     if not reference:
         return ""
     return (
-        "    double rr, kp, tp, dp, ik, pr, uff, cap, need, hs, cs, fdp, ud, rm;\n"
+        "    double rr, kp, tp, dp, ik, pr, uff, cap, need, hs, cs, fdp, ud, rm, ym, sh, sf;\n"
         f"    {share} uffs, uhi;\n"
     )
 
@@ -158,6 +199,10 @@ def _ff_share_c(reference: bool, fixed: bool) -> str:
     if fixed:
         return f"    uffs = (int64_t)(uff * {PU}U_TO_Q);\n    uhi = {PU}U_MAX_Q - uffs;\n"
     return f"    uffs = uff * {PU}INV_U_SCALE;\n    uhi = {PU}U_MAX_S - uffs;\n"
+
+
+def _kold_decl(spec: EmitSpec) -> str:
+    return "    int32_t started;\n    double kold;" if spec.bumpless else ""
 
 
 def step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) -> str:
@@ -174,12 +219,13 @@ def step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) -
     int64_t acc, dz[{nz - 1}], un, dxe, xs;
     const {ctype} *cp[8];
     uint8_t clamped = 0, limited = 0, freeze = 0;
-{_reference_decl(ref, "int64_t")}{_input_c(ref)}
+{_kold_decl(spec)}
+{_reference_decl(ref, "int64_t")}{_input_c()}
+{_rho_c(True, spec)}{_error_c(spec)}
     x = e * {PU}E_TO_Q;
     if (x > 2147483647.0) x = 2147483647.0;
     else if (x < -2147483647.0) x = -2147483647.0;
     ve = (int32_t)x;
-{_rho_c(True)}
     one = INT32_C(1) << {W};
     t00 = (int32_t)(((int64_t)(one - fr[0]) * (one - fr[1])) >> {W});
     t01 = (int32_t)(((int64_t)(one - fr[0]) * fr[1]) >> {W});
@@ -199,7 +245,7 @@ def step_fixed(spec: EmitSpec, plan: FixedPointPlan, nk: int, nz: int, W: int) -
     n = (int32_t)dd;
     fd = (int32_t)((dd - n) * {PU}WONE);
 {_delay_c(True, nk, nz, W)}
-    b = (idx[0] * {nt} + idx[1]) * {na} + idx[2];
+{_bumpless_c(True) if spec.bumpless else ""}    b = (idx[0] * {nt} + idx[1]) * {na} + idx[2];
     for (k = 0; k < 8; ++k) cp[k] = {P}tab[b + {P}corner[k]];
     for (k = 0; k < {PU}NENT; ++k) {{
         acc = 0;
@@ -239,9 +285,10 @@ def step_float(spec: EmitSpec, nk: int, nz: int) -> str:
     int32_t idx[3], n, h, i, j, k, c, b, lo, hi, mid;
     const double *cp;
     uint8_t clamped = 0, limited = 0, freeze = 0;
-{_reference_decl(ref, "double")}{_input_c(ref)}
+{_kold_decl(spec)}
+{_reference_decl(ref, "double")}{_input_c()}
+{_rho_c(False, spec)}{_error_c(spec)}
     ve = e * {PU}E_TO_S;
-{_rho_c(False)}
     t00 = (1.0 - fr[0]) * (1.0 - fr[1]);
     t01 = (1.0 - fr[0]) * fr[1];
     t10 = fr[0] * (1.0 - fr[1]);
@@ -255,7 +302,7 @@ def step_float(spec: EmitSpec, nk: int, nz: int) -> str:
     n = (int32_t)d;
     fd = d - n;
 {_delay_c(False, nk, nz, 0)}
-    b = (idx[0] * {nt} + idx[1]) * {na} + idx[2];
+{_bumpless_c(False) if spec.bumpless else ""}    b = (idx[0] * {nt} + idx[1]) * {na} + idx[2];
     for (k = 0; k < {nz - 1}; ++k) dz[k] = 0.0;
     for (c = 0; c < 8; ++c) {{
         cp = {P}tab[b + {P}corner[c]];

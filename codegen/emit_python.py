@@ -92,7 +92,7 @@ Drug (DRUG, DRUG_CONCENTRATION_UG_ML): {spec.drug.name} at {spec.drug.concentrat
 The gains (K in mmHg/(ml/h)) count ml/h of this syringe: pressor run refuses another drug or
 concentration (docs/DRUGS.md).
 
-{_reference_doc(spec)}Scaling (power of two, common to all nodes): {scales}; e: {plan.e_scale:g} mmHg (clamp).
+{_reference_doc(spec)}{_log_k_doc(spec)}Scaling (power of two, common to all nodes): {scales}; e: {plan.e_scale:g} mmHg (clamp).
 Q-formats ({plan.fmt}): states, e and x_d Q0.31 int32 (saturating); grid coordinates Q11.20;
 weights Q{31 - plan.weight_bits}.{plan.weight_bits}; coefficients |q| <= 2^{plan.coef_bits}-1 with
 per-row shifts {plan.row_shift.tolist()}; 64-bit accumulators; arithmetic right shifts; rounding
@@ -109,17 +109,41 @@ def _reference_doc(spec: EmitSpec) -> str:
     if spec.reference is None:
         return ""
     lam, frac, k_min = spec.reference
+    lag = (
+        f"a fixed lag T = {spec.reference_lag_s!r} s"
+        if spec.reference_lag_s is not None
+        else "the scheduled T"
+    )
     return f"""Two degrees of freedom (pressor.synthesis.problem.reference; lambda {lam!r} s, pump fraction
 {frac!r}, K floor {k_min!r} mmHg/(ml/h)): a scheduled first-order-plus-delay model anchored at the first valid
 MAP after reset generates the reference MAP r_m and the feedforward
 u_ff = clamp((p + T (dr - p) / lambda) / K, 0, cap), with p = y0 + y_m - y0(t - tau) (Smith
 prediction), dr = target - anchor and cap = max(fraction * MAX_RATE_ML_H, min(MAX_RATE_ML_H,
-dr / K)). The model runs on K clamped to [K floor, box upper K] and T, tau clamped to the box (not
-rate limited), in double in both modes (two divisions, by the clamped K and T). The controller
-above regulates e = r_m - MAP; its command state is clamped to [-u_ff, MAX_RATE_ML_H - u_ff]
-(conditional integration against the total) and the output is u_fb + u_ff.
+dr / K)). The model runs on the feedback's own K and tau (clamped to the box and rate limited, K
+not below the floor) and {lag}, in double in both modes (two divisions, by K and T). What it
+cannot reach at the pump's maximum, max(0, dr - K MAX_RATE_ML_H), joins r_m through the model's
+lag. The controller above regulates e = r_m - MAP; its command state is clamped to
+[-u_ff, MAX_RATE_ML_H - u_ff] (conditional integration against the total) and the output is
+u_fb + u_ff.
 
 """
+
+
+def _log_k_doc(spec: EmitSpec) -> str:
+    """Header paragraph on the log-K rate limit and the bumpless integral (empty otherwise)."""
+    if not spec.k_rate_relative:
+        return ""
+    up = spec.rate_bounds[0] if spec.k_rate_up_per_s is None else spec.k_rate_up_per_s
+    text = f"""Log-K scheduling (K_RATE_RELATIVE): K is rate limited in ln K, falls at most
+{spec.rate_bounds[0]!r} and rises at most {up!r} per s (K_RATE_FALL_PER_S, K_RATE_UP_PER_S;
+RATE_BOUNDS[0] is the largest |dK/dt| that allows, at the box's top).
+"""
+    if spec.bumpless:
+        text += """Bumpless integral (pressor.synthesis.families.smith.law): at a tick whose K moved from K to K',
+x_e <- q x_e + (1 - q)(tau (yh + yd) / 2 - T e_p), q = K'/K, yh = x_k1, yd = x_k1(t - tau),
+e_p = e - yh + yd, so the law's command rate does not jump with K.
+"""
+    return text + "\n"
 
 
 def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
@@ -144,6 +168,11 @@ def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
         f"DRUG_CONCENTRATION_UG_ML = {py_float(spec.drug.concentration_ug_ml)}"
         "  # ug/ml: the syringe whose ml/h the gains count"
     )
+    if spec.population is not None:
+        add(
+            f"POPULATION_K_UG_KG_MIN = ({py_float(spec.population[0])}, "
+            f"{py_float(spec.population[1])})  # mmHg per ug/kg/min: the patients the design is for"
+        )
     add(f"GRID_LO = ({', '.join(py_float(x) for x in spec.lo)})  # K mmHg/(ml/h), T s, tau s")
     add(f"GRID_HI = ({', '.join(py_float(x) for x in spec.hi)})")
     add(f"GRID_COUNTS = {tuple(int(x) for x in spec.counts)!r}")
@@ -155,12 +184,30 @@ def emit_python(spec: EmitSpec, plan: FixedPointPlan, tables_hash: str) -> str:
     for i in range(3):
         add(f"_NODES{i} = GRID_NODES[{i}]")
         add(f"_INVW{i} = ({', '.join(py_float(x) for x in spec.inv_widths(i))},)  # 1/width")
-    add(f"RATE_BOUNDS = ({', '.join(py_float(x) for x in spec.rate_bounds)})  # per s")
+    if spec.k_rate_relative:
+        # the supervisor checks |dK/dt| against RATE_BOUNDS[0]: the loosest absolute rate a
+        # log-K limiter allows (at the box's top); the limiter itself is relative (below)
+        up = spec.rate_bounds[0] if spec.k_rate_up_per_s is None else spec.k_rate_up_per_s
+        k_abs = max(spec.rate_bounds[0], up) * spec.hi[0]
+        rates = (k_abs, *spec.rate_bounds[1:])
+        add(f"RATE_BOUNDS = ({', '.join(py_float(x) for x in rates)})  # per s (K: at the top)")
+    else:
+        add(f"RATE_BOUNDS = ({', '.join(py_float(x) for x in spec.rate_bounds)})  # per s")
     add(f"REFERENCE_ENABLED = {spec.reference is not None}")
     if spec.reference is not None:
         add(f"REFERENCE_LAMBDA_S = {py_float(spec.reference[0])}")
         add(f"REFERENCE_PUMP_FRACTION = {py_float(spec.reference[1])}")
         add(f"REFERENCE_K_MIN = {py_float(spec.reference[2])}  # mmHg/(ml/h)")
+        if spec.reference_lag_s is not None:
+            add(f"REFERENCE_LAG_S = {py_float(spec.reference_lag_s)}")
+    if spec.k_rate_relative:
+        up = spec.rate_bounds[0] if spec.k_rate_up_per_s is None else spec.k_rate_up_per_s
+        add("K_RATE_RELATIVE = True  # K is rate limited in ln K")
+        add(
+            f"K_RATE_FALL_PER_S = {py_float(spec.rate_bounds[0])}  # bound on the fall of ln K, 1/s"
+        )
+        add(f"K_RATE_UP_PER_S = {py_float(up)}  # bound on the rise of ln K, 1/s")
+        add(f"BUMPLESS = {spec.bumpless}")
     add(f"DELAY_BUFFER_LEN = {c['NBUF']}")
     add(f"N_K = {nk}")
     add(f"E_LIM_MMHG = {py_float(plan.e_scale)}")
@@ -269,6 +316,7 @@ def _reset_reference(spec: EmitSpec) -> str:
         self._phead = 0
         self._rm = 0.0
         self._uff = 0.0
+        self._sf = 0.0
 """
 
 

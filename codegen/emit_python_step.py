@@ -13,30 +13,21 @@ from pressor.codegen.emit_spec import EmitSpec
 __all__ = ["fixed_step", "float_step"]
 
 
-def _clamp_lines(var: str, src: str, i: int, lo: str = "") -> list[str]:
-    lo = lo or f"_LO{i}"
-    indent = "        "
-    return [
-        f"{indent}{var} = {src}",
-        f"{indent}if {var} < {lo}:",
-        f"{indent}    {var} = {lo}",
-        f"{indent}elif {var} > _HI{i}:",
-        f"{indent}    {var} = _HI{i}",
-    ]
-
-
-def _reference_lines() -> list[str]:
+def _reference_lines(spec: EmitSpec) -> list[str]:
     """The prefilter (pressor.synthesis.problem.reference), in double in both modes; sets e = r_m - MAP,
-    uff."""
+    uff. It runs on the feedback's own rho (clamped to the box and rate limited: r), K floored at
+    the prefilter's K floor, T the fixed lag when the design sets one."""
     L = []
     L.append("        if not self._anchored:")
     L.append("            self._m0 = map_mmhg")
     L.append("            self._anchored = True")
     L.append("        m0 = self._m0")
     L.append("        rr = target_mmhg - m0")
-    L += _clamp_lines("kp", "K", 0, lo="_PF_KLO")
-    L += _clamp_lines("tp", "T", 1)
-    L += _clamp_lines("dp", "tau", 2)
+    L.append("        kp = r[0]")
+    L.append("        if kp < _PF_KLO:")
+    L.append("            kp = _PF_KLO")
+    L.append("        tp = _PF_TLAG" if spec.reference_lag_s is not None else "        tp = r[1]")
+    L.append("        dp = r[2]")
     L.append("        ik = 1.0 / kp")
     L.append("        y0 = self._y0")
     L.append("        ym = self._ym")
@@ -75,14 +66,21 @@ def _reference_lines() -> list[str]:
     L.append("            ph = 0")
     L.append("        self._phead = ph")
     L.append("        self._ym = ym + cs * (kp * ud - ym)")
-    L.append("        rm = m0 + ym")
+    # what the model cannot reach at the pump's maximum joins the reference through its lag, so
+    # the feedback brings MAP to the target whenever the pump can (the model's K may be too low)
+    L.append("        sh = rr - kp * MAX_RATE_ML_H")
+    L.append("        if sh < 0.0:")
+    L.append("            sh = 0.0")
+    L.append("        sf = self._sf")
+    L.append("        self._sf = sf + cs * (sh - sf)")
+    L.append("        rm = m0 + ym + sf")
     L.append("        self._rm = rm")
     L.append("        self._uff = uff")
     L.append("        e = rm - map_mmhg")
     return L
 
 
-def _rho_block(fixed: bool) -> list[str]:
+def _rho_block(fixed: bool, spec: EmitSpec) -> list[str]:
     """Clamp and rate-limit physical rho, locate the cell; leaves i0..i2 and fa, fb, fc, and x2 = tau
     (fractions in [0, 1] as floats, or quantised to the weight format in integer mode)."""
     L = []
@@ -90,6 +88,8 @@ def _rho_block(fixed: bool) -> list[str]:
     L.append("        limited = False")
     L.append("        r = self._r")
     L.append("        started = self._started")
+    if spec.bumpless:
+        L.append("        kold = r[0]")
     for i, (name, fr) in enumerate((("K", "fa"), ("T", "fb"), ("tau", "fc"))):
         L.append(f"        x = {name}")
         L.append(f"        if x < _LO{i}:")
@@ -100,11 +100,15 @@ def _rho_block(fixed: bool) -> list[str]:
         L.append("            clamped = True")
         L.append("        if started:")
         L.append(f"            p = r[{i}]")
-        L.append(f"            if x > p + _RSTEP{i}:")
-        L.append(f"                x = p + _RSTEP{i}")
+        if i == 0 and spec.k_rate_relative:  # log-K rates: a multiplicative limiter
+            up, dn = "p * _KUP", "p * _KDN"
+        else:
+            up, dn = f"p + _RSTEP{i}", f"p - _RSTEP{i}"
+        L.append(f"            if x > {up}:")
+        L.append(f"                x = {up}")
         L.append("                limited = True")
-        L.append(f"            elif x < p - _RSTEP{i}:")
-        L.append(f"                x = p - _RSTEP{i}")
+        L.append(f"            elif x < {dn}:")
+        L.append(f"                x = {dn}")
         L.append("                limited = True")
         L.append(f"        r[{i}] = x")
         L.append("        lo = 0")
@@ -137,7 +141,7 @@ def _entry_rows(entries: list[tuple[int, int]], nz: int) -> dict[int, list[tuple
     return rows
 
 
-def _common_head(fixed: bool, reference: bool) -> list[str]:
+def _common_head(fixed: bool) -> list[str]:
     L = []
     sig = "(self, map_mmhg, target_mmhg, K, T, tau)"
     L.append(f"    def {'_step_fixed' if fixed else '_step_float'}{sig}:")
@@ -150,12 +154,61 @@ def _common_head(fixed: bool, reference: bool) -> list[str]:
     L.append("            st.input_invalid = True")
     L.append("            return self._out")
     L.append("        st.input_invalid = False")
-    if reference:
-        L += _reference_lines()
+    return L
+
+
+def _error_lines(spec: EmitSpec, fixed: bool) -> list[str]:
+    """After the rho block: the prefilter (sets e = r_m - MAP), the error's clamp and v_e."""
+    L = _reference_lines(spec) if spec.reference is not None else []
     L.append("        if e > _E_LIM:")
     L.append("            e = _E_LIM")
     L.append("        elif e < -_E_LIM:")
     L.append("            e = -_E_LIM")
+    if fixed:
+        L.append("        v_e = int(e * _E_TO_Q)")
+        L.append("        if v_e > _QMAX:")
+        L.append("            v_e = _QMAX")
+        L.append("        elif v_e < -_QMAX:")
+        L.append("            v_e = -_QMAX")
+    else:
+        L.append("        v_e = e * _E_TO_S")
+    return L
+
+
+def _bumpless_lines(fixed: bool) -> list[str]:
+    """The Smith law's bumpless integral (pressor.synthesis.families.smith.law): when the scheduled K moved
+    from kold to r[0], x_e <- q x_e + (1 - q)(tau (yh + yd) / 2 - T e_p), q = r[0] / kold, with
+    yh = x_k1 (the model output), yd its delayed value, e_p = e - yh + yd; in double, the same
+    operations in both modes (the integer mode converts its Q0.31 values in and out)."""
+    s1, s3, qe, back = (
+        ("_BL_Q1", "_BL_Q3", "_BL_QE", "_BL_INV_Q3")
+        if fixed
+        else ("_BL_S1", "_BL_S3", "_E_LIM", "_BL_INV_S3")
+    )
+    L = []
+    L.append("        if started and r[0] != kold:")
+    L.append("            q = r[0] / kold")
+    L.append(f"            yh = v1 * {s1}")
+    L.append(f"            yd = v5 * {s1}")
+    L.append(f"            ee = v6 * {qe}")
+    L.append(f"            xe = v3 * {s3}")
+    L.append(
+        "            xe = q * xe + (1.0 - q) * (r[2] * (yh + yd) * 0.5 - r[1] * (ee - yh + yd))"
+    )
+    L.append(f"            x = xe * {back}")
+    if fixed:
+        L.append("            if x > 2147483647.0:")
+        L.append("                x = 2147483647.0")
+        L.append("            elif x < -2147483647.0:")
+        L.append("                x = -2147483647.0")
+        L.append("            x = int(x)")
+    else:
+        L.append("            if x > 1.0:")
+        L.append("                x = 1.0")
+        L.append("            elif x < -1.0:")
+        L.append("                x = -1.0")
+    L.append("            z[3] = x")
+    L.append("            v3 = x")
     return L
 
 
@@ -289,11 +342,13 @@ def _update_lines(fixed: bool, nk: int, reference: bool) -> list[str]:
 def float_step(
     spec: EmitSpec, entries: list[tuple[int, int]], offs: list[int], nk: int, nz: int
 ) -> str:
-    L = _common_head(False, spec.reference is not None)
-    L.append("        v_e = e * _E_TO_S")
-    L += _rho_block(False)
+    L = _common_head(False)
+    L += _rho_block(False, spec)
+    L += _error_lines(spec, False)
     L += _corner_lines(False)
     L += _delay_lines(False, nk)
+    if spec.bumpless:
+        L += _bumpless_lines(False)
     rows = _entry_rows(entries, nz)
     L.append(f"        b = (i0 * {spec.counts[1]} + i1) * {spec.counts[2]} + i2")
     L.append("        t = _TF")
@@ -313,15 +368,13 @@ def float_step(
 def fixed_step(
     spec: EmitSpec, entries: list[tuple[int, int]], offs: list[int], nk: int, nz: int
 ) -> str:
-    L = _common_head(True, spec.reference is not None)
-    L.append("        v_e = int(e * _E_TO_Q)")
-    L.append("        if v_e > _QMAX:")
-    L.append("            v_e = _QMAX")
-    L.append("        elif v_e < -_QMAX:")
-    L.append("            v_e = -_QMAX")
-    L += _rho_block(True)
+    L = _common_head(True)
+    L += _rho_block(True, spec)
+    L += _error_lines(spec, True)
     L += _corner_lines(True)
     L += _delay_lines(True, nk)
+    if spec.bumpless:
+        L += _bumpless_lines(True)
     L.append(f"        b = (i0 * {spec.counts[1]} + i1) * {spec.counts[2]} + i2")
     L.append("        t = _TQ")
     for ci, off in enumerate(offs):

@@ -43,6 +43,20 @@ class EmitSpec:
         (:mod:`pressor.synthesis.problem.reference`), or None: the controller then sees the target directly.
     drug
         The drug and syringe concentration (µg/ml) the gains are for.
+    k_rate_relative
+        False: the K rate bound (``rate_bounds[0]``) is |dK/dt|; True: it bounds the fall of
+        ln K (1/s) and ``k_rate_up_per_s`` its rise (the limiter is then multiplicative).
+    k_rate_up_per_s
+        The bound on the rise of ln K (1/s) when ``k_rate_relative`` (None: ``rate_bounds[0]``).
+    reference_lag_s
+        The prefilter model's fixed lag T (s), or None: the feedback's scheduled T.
+    bumpless
+        Emit the Smith law's bumpless integral (:mod:`pressor.synthesis.families.smith.law`): when the
+        scheduled K moves from K to K', x_e <- ρ x_e + (1 - ρ)(τ(ŷ + ŷ(t - τ))/2 - T e_p),
+        ρ = K'/K (needs a two-state controller, x_k = [û, ŷ]).
+    population
+        The patients' sensitivity range in mmHg per µg/kg/min (the design's ``[population]``),
+        or None.
     """
 
     nodes: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
@@ -56,6 +70,11 @@ class EmitSpec:
     budgets: dict[str, tuple[float, str]]
     reference: tuple[float, float, float] | None = None
     drug: DrugBinding = DEFAULT_BINDING
+    k_rate_relative: bool = False
+    k_rate_up_per_s: float | None = None
+    reference_lag_s: float | None = None
+    bumpless: bool = False
+    population: tuple[float, float] | None = None
 
     @property
     def lo(self) -> tuple[float, float, float]:
@@ -109,6 +128,19 @@ def derived_constants(spec: EmitSpec, plan: FixedPointPlan) -> dict[str, float |
         c[f"HI{i}"] = float(spec.hi[i])
         c[f"N{i}"] = int(spec.counts[i])
         c[f"RSTEP{i}"] = float(spec.rate_bounds[i] * ts)
+    if spec.k_rate_relative:
+        up = spec.rate_bounds[0] if spec.k_rate_up_per_s is None else spec.k_rate_up_per_s
+        c["KDN"] = math.exp(-spec.rate_bounds[0] * ts)
+        c["KUP"] = math.exp(up * ts)
+    if spec.bumpless:
+        s1, s3 = float(plan.state_scale[1]), float(plan.state_scale[spec.n_k + 1])
+        c["BL_S1"] = s1
+        c["BL_S3"] = s3
+        c["BL_INV_S3"] = 1.0 / s3
+        c["BL_Q1"] = s1 / 2.0**31
+        c["BL_Q3"] = s3 / 2.0**31
+        c["BL_INV_Q3"] = 2.0**31 / s3
+        c["BL_QE"] = plan.e_scale / 2.0**31
     for i in range(nz - 1):
         c[f"F{i}"] = int(plan.row_shift[i])
     if spec.reference is not None:
@@ -120,6 +152,8 @@ def derived_constants(spec: EmitSpec, plan: FixedPointPlan) -> dict[str, float |
         c["PF_SIXTH"] = 1.0 / 6.0
         c["INV_U_SCALE"] = 1.0 / float(plan.state_scale[spec.n_k])
         c["U_TO_Q"] = 2.0**31 / float(plan.state_scale[spec.n_k])
+        if spec.reference_lag_s is not None:
+            c["PF_TLAG"] = float(spec.reference_lag_s)
     return c
 
 

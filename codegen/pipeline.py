@@ -106,6 +106,9 @@ class LoadedDesign:
         The drug and syringe concentration the gains are for (the artifact's ``design.drug``,
         phenylephrine at 100 µg/ml when it names none); emitted as ``DRUG`` and
         ``DRUG_CONCENTRATION_UG_ML``.
+    k_rate_relative, k_rate_up_per_s, reference_lag_s, bumpless, population
+        As :class:`pressor.codegen.emit_spec.EmitSpec`'s (from the artifact's model, prefilter and
+        family).
     """
 
     sha256: str
@@ -119,6 +122,11 @@ class LoadedDesign:
     synthesis_counts: tuple[int, int, int]
     reference: tuple[float, float, float] | None = None
     drug: DrugBinding = DEFAULT_BINDING
+    k_rate_relative: bool = False
+    k_rate_up_per_s: float | None = None
+    reference_lag_s: float | None = None
+    bumpless: bool = False
+    population: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -197,6 +205,12 @@ def load_design(path: str | Path) -> LoadedDesign:
         if (ref := art.reference).enabled
         else None,
         drug=art.drug,
+        k_rate_relative=(model := art.model_config).k_rate_relative,
+        k_rate_up_per_s=model.k_rate_up_per_s,
+        reference_lag_s=ref.lag_s if ref.enabled else None,
+        # the Smith law absorbs a change of K in its integral on a log-K scale
+        bumpless=model.k_rate_relative and art.family.structure == "smith",
+        population=art.population,
     )
 
 
@@ -267,6 +281,11 @@ def emit(
         budgets=BUDGETS,
         reference=design.reference,
         drug=design.drug,
+        k_rate_relative=design.k_rate_relative,
+        k_rate_up_per_s=design.k_rate_up_per_s,
+        reference_lag_s=design.reference_lag_s,
+        bumpless=design.bumpless,
+        population=design.population,
     )
     thash = array_hash(plan.q_tables, plan.scaled_tables)
     if target == "python":

@@ -292,6 +292,20 @@ def _markers(
     ]
 
 
+def _dose(config: RunConfig, clinician: ClinicianInput) -> Any:
+    """The syringe and patient a schedule converts doses with: the clinician's syringe and weight;
+    without a weight, ``pressor sil``'s simulated patient is the reference adult and ``pressor
+    run``'s the lightest adult the drug library admits (the most sensitive per ml/h: the cautious
+    side)."""
+    from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale
+    from pressor.runtime.inputs.drug_library import WEIGHT_MIN_KG
+
+    weight = clinician.weight_kg
+    if weight is None:
+        weight = WEIGHT_MIN_KG if config.clinician is not None else REFERENCE_WEIGHT_KG
+    return DoseScale(clinician.concentration_ug_ml, weight)
+
+
 def _run_loop(
     config: RunConfig,
     controller: Controller,
@@ -317,7 +331,9 @@ def _run_loop(
         "recorder": recorder,
         "heartbeat_every": round(config.rate_hz),
         "on_tick": on_tick,
-        "schedule": make_schedule(config.schedule, config.period_s),
+        "schedule": make_schedule(
+            config.schedule, config.period_s, controller, _dose(config, clinician)
+        ),
         "prog": "pressor run" if config.clinician is not None else "pressor sil",
         "ack_input": clinician.target_stdin or clinician.target_file is not None,
     }

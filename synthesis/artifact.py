@@ -168,6 +168,17 @@ class ControllerArtifact:
         return drug_of(self.metadata)
 
     @property
+    def population(self) -> tuple[float, float] | None:
+        """The design's patient sensitivity range (mmHg per µg/kg/min, ``design.population``), or
+        None when it names none."""
+        design = self.metadata.get("design")
+        pop = design.get("population") if isinstance(design, dict) else None
+        if pop is None:
+            return None
+        lo, hi = (float(v) for v in pop["K_ug_kg_min"])
+        return (lo, hi)
+
+    @property
     def model_config(self) -> ModelConfig:
         """The design's :class:`~pressor.synthesis.problem.config.ModelConfig`."""
         return ModelConfig.from_dict(self.metadata["model"])

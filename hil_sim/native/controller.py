@@ -53,6 +53,7 @@ def _state_struct(n_k: int, nbuf: int) -> type[ctypes.Structure]:
             ("qbuf", d * nbuf),
             ("phead", i32),
             ("anchored", i32),
+            ("sf", d),
         ]
 
     return State

@@ -183,7 +183,7 @@ def _simulate_patient(
         supervisor = Supervisor(cfg)
         max_rate = min(max_rate, dose_limits.hard_max_ml_h)
     try:
-        source = native_schedule(make_schedule(schedule, sample_period_s))
+        source = native_schedule(make_schedule(schedule, sample_period_s, controller))
         traj = simulate(world, controller, supervisor=supervisor, schedule=source)
     except ControllerError as exc:  # name the patient too (the message crosses processes)
         raise ControllerError(

@@ -15,13 +15,15 @@
 :func:`make_schedule`
     The source named by ``--schedule``: oracle and nominal from :mod:`pressor.runtime.core.scheduling`
     (the protocol, :class:`~pressor.runtime.core.scheduling.Schedule`), estimated from here, validated
-    from :mod:`pressor.runtime.estimation.validated`.
+    from :mod:`pressor.runtime.estimation.validated`, cautious (the population's most sensitive patient
+    first, lowered on evidence) from :mod:`pressor.runtime.estimation.cautious`.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 from pressor.runtime.core.estimate import Estimate
 from pressor.runtime.core.scheduling import (
@@ -33,9 +35,11 @@ from pressor.runtime.core.scheduling import (
 )
 
 if TYPE_CHECKING:  # the estimator's settings load the shipped design (~0.7 MB): not for --help
+    from pressor.contracts.drug import DoseScale
     from pressor.runtime.estimation.estimator import DelayBankEstimator
+    from pressor.runtime.estimation.settings import EstimatorSettings
 
-SOURCES = ("oracle", "estimated", "nominal", "validated")
+SOURCES = ("oracle", "estimated", "nominal", "validated", "cautious")
 #: the cautious rule's full shift (standard deviations) and the relative standard deviation from
 #: which it applies in full (below, the shift shrinks in proportion): tuned on cohort seed 11
 CAUTION_SIGMA = 0.75
@@ -128,17 +132,91 @@ class EstimatedSchedule:
         return self._schedule
 
 
-def make_schedule(source: str, sample_period_s: float = 0.1) -> ScheduleSource:
-    """The scheduling source named ``source`` (one of :data:`SOURCES`) at ``sample_period_s`` (s)."""
+def _design_of(controller: object | None) -> tuple[Any, Any] | None:
+    """The box and rates ``controller`` declares when they are not the shipped phenylephrine
+    design's (whose sources keep their tuned defaults), else None."""
+    if controller is None:
+        return None
+    from pressor.runtime.core.supervisor_config import sched_limits_of
+    from pressor.runtime.estimation.settings import DESIGN_BOX, DESIGN_RATES
+
+    box, rates = sched_limits_of(controller)  # type: ignore[arg-type]
+    if box is None or rates is None:
+        return None
+    if tuple(box) == tuple(DESIGN_BOX) and tuple(rates) == tuple(DESIGN_RATES):
+        return None
+    return box, rates
+
+
+def settings_for_box(box: Any) -> EstimatorSettings:
+    """The estimator's settings for a design whose box is ``box`` (((K lo, hi) mmHg/(ml/h), (T lo,
+    hi) s, (τ lo, hi) s)): the prior at the box's geometric-mean K and T and its delay range's
+    lower end + 5 s (the shipped prior's place in its box, τ 15 s in 10-45 s), the plausible K
+    within 5x of the box, the delay bank and the caution's edges on the box, no T drift (the
+    paper model's law is phenylephrine's). The shipped phenylephrine design keeps
+    :data:`pressor.runtime.estimation.settings.DEFAULT_SETTINGS`."""
+    from pressor.runtime.estimation.settings import DEFAULT_SETTINGS
+
+    (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = ((float(a), float(b)) for a, b in box)
+    base = DEFAULT_SETTINGS
+    return replace(
+        base,
+        prior=(math.sqrt(k_lo * k_hi), math.sqrt(t_lo * t_hi), d_lo + 5.0),
+        tau_range_s=(d_lo, d_hi + 1.0),
+        tau_prior_s=(d_lo + 5.0, base.tau_prior_s[1]),
+        K_plausible=(k_lo / 5.0, k_hi * 5.0),
+        T_plausible_s=(
+            min(base.T_plausible_s[0], t_lo / 5.0),
+            max(base.T_plausible_s[1], 2.5 * t_hi),
+        ),
+        box=((k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi)),
+        T_drift_per_ml_h=0.0,
+    )
+
+
+def make_schedule(
+    source: str,
+    sample_period_s: float = 0.1,
+    controller: object | None = None,
+    dose: DoseScale | None = None,
+) -> ScheduleSource:
+    """The scheduling source named ``source`` (one of :data:`SOURCES`) at ``sample_period_s`` (s).
+
+    ``controller`` is the controller the source schedules: ``cautious`` reads its design (box,
+    certified ln K rates, patient population: :func:`pressor.runtime.estimation.cautious.envelope_of`;
+    required); ``estimated`` and ``validated`` take its box and rates when they are not the
+    shipped phenylephrine design's (:func:`settings_for_box`: another drug's design schedules
+    inside its own box, not phenylephrine's); ``dose`` the syringe and patient to convert the
+    population's doses with (default: the design's syringe and the reference adult).
+    """
     if source == "oracle":
         return OracleSchedule()
     if source == "nominal":
         return NominalSchedule()
+    design = _design_of(controller)
     if source == "estimated":
-        return EstimatedSchedule(sample_period_s=sample_period_s)
+        if design is None:
+            return EstimatedSchedule(sample_period_s=sample_period_s)
+        from pressor.runtime.estimation.estimator import DelayBankEstimator
+
+        settings = settings_for_box(design[0])
+        est = DelayBankEstimator(sample_period_s, settings)
+        return EstimatedSchedule(est, sample_period_s)
     if source == "validated":
         # imported here: only this opt-in source needs the model bank and the generated module
+        from pressor.runtime.estimation.estimator import DelayBankEstimator
         from pressor.runtime.estimation.validated import ValidatedSchedule
 
-        return ValidatedSchedule(sample_period_s=sample_period_s)
+        if design is None:
+            return ValidatedSchedule(sample_period_s=sample_period_s)
+        box, rates = design
+        est = DelayBankEstimator(sample_period_s, settings_for_box(box))
+        start = settings_for_box(box).prior
+        return ValidatedSchedule(est, sample_period_s, start=start, box=box, rate_bounds=rates)
+    if source == "cautious":
+        from pressor.runtime.estimation.cautious import CautiousSchedule, envelope_of
+
+        if controller is None:
+            raise ValueError("--schedule cautious needs the controller it schedules (its design)")
+        return CautiousSchedule(envelope_of(controller), sample_period_s, dose)
     raise ValueError(f"schedule source {source!r} not one of {SOURCES}")

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  dfb7195a5376dbc896d9e984a0745bc1850ab07d9e37f55972f0d7a1f4e0a314
-Content hash:     c1f029b896b85746e284c56ce74e3642e1d8a2ab70fb94b293a3911186f880df
+Content hash:     4278afecc10ade33a3162ece40d1a7a2ec1e973e693d04b20aa587c3c109848c
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -34,10 +34,12 @@ Two degrees of freedom (pressor.synthesis.problem.reference; lambda 10.0 s, pump
 MAP after reset generates the reference MAP r_m and the feedforward
 u_ff = clamp((p + T (dr - p) / lambda) / K, 0, cap), with p = y0 + y_m - y0(t - tau) (Smith
 prediction), dr = target - anchor and cap = max(fraction * MAX_RATE_ML_H, min(MAX_RATE_ML_H,
-dr / K)). The model runs on K clamped to [K floor, box upper K] and T, tau clamped to the box (not
-rate limited), in double in both modes (two divisions, by the clamped K and T). The controller
-above regulates e = r_m - MAP; its command state is clamped to [-u_ff, MAX_RATE_ML_H - u_ff]
-(conditional integration against the total) and the output is u_fb + u_ff.
+dr / K)). The model runs on the feedback's own K and tau (clamped to the box and rate limited, K
+not below the floor) and the scheduled T, in double in both modes (two divisions, by K and T). What it
+cannot reach at the pump's maximum, max(0, dr - K MAX_RATE_ML_H), joins r_m through the model's
+lag. The controller above regulates e = r_m - MAP; its command state is clamped to
+[-u_ff, MAX_RATE_ML_H - u_ff] (conditional integration against the total) and the output is
+u_fb + u_ff.
 
 Scaling (power of two, common to all nodes): x_k0: 512, x_k1: 256, u: 512 ml/h, x_e: 32768 mmHg*s; e: 128 mmHg (clamp).
 Q-formats (q31): states, e and x_d Q0.31 int32 (saturating); grid coordinates Q11.20;
@@ -51,9 +53,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '7dd040bb34a74b6d45ad1cf0bb858ec674d467d4042017d261a5e72719d482f4'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '10153c26863bedc7291ac9bde73c9a798bdd5fbf461c96d66a11aadc16f21ef5'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'dfb7195a5376dbc896d9e984a0745bc1850ab07d9e37f55972f0d7a1f4e0a314'
-CONTENT_HASH = 'c1f029b896b85746e284c56ce74e3642e1d8a2ab70fb94b293a3911186f880df'
+CONTENT_HASH = '4278afecc10ade33a3162ece40d1a7a2ec1e973e693d04b20aa587c3c109848c'
 TABLES_SHA256 = 'ee6c66965a0be6e07132b41278679c4be1511a020ef076743511fde55cbfe5f4'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
@@ -2856,6 +2858,7 @@ class Controller:
         self._phead = 0
         self._rm = 0.0
         self._uff = 0.0
+        self._sf = 0.0
 
     def state(self):
         """Internal state as a tuple (z..., scheduled rho K, T, tau) for tests and logging."""
@@ -2873,73 +2876,6 @@ class Controller:
             st.input_invalid = True
             return self._out
         st.input_invalid = False
-        if not self._anchored:
-            self._m0 = map_mmhg
-            self._anchored = True
-        m0 = self._m0
-        rr = target_mmhg - m0
-        kp = K
-        if kp < _PF_KLO:
-            kp = _PF_KLO
-        elif kp > _HI0:
-            kp = _HI0
-        tp = T
-        if tp < _LO1:
-            tp = _LO1
-        elif tp > _HI1:
-            tp = _HI1
-        dp = tau
-        if dp < _LO2:
-            dp = _LO2
-        elif dp > _HI2:
-            dp = _HI2
-        ik = 1.0 / kp
-        y0 = self._y0
-        ym = self._ym
-        dp = dp * _INV_TS
-        n = int(dp)
-        fd = dp - n
-        ph = self._phead
-        i = ph - n
-        if i < 0:
-            i += _NBUF
-        j = i - 1
-        if j < 0:
-            j += _NBUF
-        qb = self._qbuf
-        qb[ph] = y0
-        a = qb[i]
-        pr = y0 + (ym - (a + (qb[j] - a) * fd))  # Smith correction for a moving tau
-        uff = (pr + tp * (rr - pr) * _PF_INV_LAMBDA) * ik
-        cap = _PF_UMAX
-        need = rr * ik
-        if need > cap:
-            cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need
-        if uff > cap:
-            uff = cap
-        elif uff < 0.0:
-            uff = 0.0
-        hs = _PF_TS / tp
-        cs = hs * (1.0 - hs * (0.5 - hs * _PF_SIXTH))  # 1 - exp(-Ts/T)
-        self._y0 = y0 + cs * (kp * uff - y0)
-        pb = self._pbuf
-        pb[ph] = uff
-        a = pb[i]
-        ud = a + (pb[j] - a) * fd
-        ph += 1
-        if ph == _NBUF:
-            ph = 0
-        self._phead = ph
-        self._ym = ym + cs * (kp * ud - ym)
-        rm = m0 + ym
-        self._rm = rm
-        self._uff = uff
-        e = rm - map_mmhg
-        if e > _E_LIM:
-            e = _E_LIM
-        elif e < -_E_LIM:
-            e = -_E_LIM
-        v_e = e * _E_TO_S
         clamped = False
         limited = False
         r = self._r
@@ -3039,6 +2975,68 @@ class Controller:
             fc = 0.0
         x2 = x
         self._started = True
+        if not self._anchored:
+            self._m0 = map_mmhg
+            self._anchored = True
+        m0 = self._m0
+        rr = target_mmhg - m0
+        kp = r[0]
+        if kp < _PF_KLO:
+            kp = _PF_KLO
+        tp = r[1]
+        dp = r[2]
+        ik = 1.0 / kp
+        y0 = self._y0
+        ym = self._ym
+        dp = dp * _INV_TS
+        n = int(dp)
+        fd = dp - n
+        ph = self._phead
+        i = ph - n
+        if i < 0:
+            i += _NBUF
+        j = i - 1
+        if j < 0:
+            j += _NBUF
+        qb = self._qbuf
+        qb[ph] = y0
+        a = qb[i]
+        pr = y0 + (ym - (a + (qb[j] - a) * fd))  # Smith correction for a moving tau
+        uff = (pr + tp * (rr - pr) * _PF_INV_LAMBDA) * ik
+        cap = _PF_UMAX
+        need = rr * ik
+        if need > cap:
+            cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need
+        if uff > cap:
+            uff = cap
+        elif uff < 0.0:
+            uff = 0.0
+        hs = _PF_TS / tp
+        cs = hs * (1.0 - hs * (0.5 - hs * _PF_SIXTH))  # 1 - exp(-Ts/T)
+        self._y0 = y0 + cs * (kp * uff - y0)
+        pb = self._pbuf
+        pb[ph] = uff
+        a = pb[i]
+        ud = a + (pb[j] - a) * fd
+        ph += 1
+        if ph == _NBUF:
+            ph = 0
+        self._phead = ph
+        self._ym = ym + cs * (kp * ud - ym)
+        sh = rr - kp * MAX_RATE_ML_H
+        if sh < 0.0:
+            sh = 0.0
+        sf = self._sf
+        self._sf = sf + cs * (sh - sf)
+        rm = m0 + ym + sf
+        self._rm = rm
+        self._uff = uff
+        e = rm - map_mmhg
+        if e > _E_LIM:
+            e = _E_LIM
+        elif e < -_E_LIM:
+            e = -_E_LIM
+        v_e = e * _E_TO_S
         ga = 1.0 - fa
         gb = 1.0 - fb
         gc = 1.0 - fc
@@ -3175,77 +3173,6 @@ class Controller:
             st.input_invalid = True
             return self._out
         st.input_invalid = False
-        if not self._anchored:
-            self._m0 = map_mmhg
-            self._anchored = True
-        m0 = self._m0
-        rr = target_mmhg - m0
-        kp = K
-        if kp < _PF_KLO:
-            kp = _PF_KLO
-        elif kp > _HI0:
-            kp = _HI0
-        tp = T
-        if tp < _LO1:
-            tp = _LO1
-        elif tp > _HI1:
-            tp = _HI1
-        dp = tau
-        if dp < _LO2:
-            dp = _LO2
-        elif dp > _HI2:
-            dp = _HI2
-        ik = 1.0 / kp
-        y0 = self._y0
-        ym = self._ym
-        dp = dp * _INV_TS
-        n = int(dp)
-        fd = dp - n
-        ph = self._phead
-        i = ph - n
-        if i < 0:
-            i += _NBUF
-        j = i - 1
-        if j < 0:
-            j += _NBUF
-        qb = self._qbuf
-        qb[ph] = y0
-        a = qb[i]
-        pr = y0 + (ym - (a + (qb[j] - a) * fd))  # Smith correction for a moving tau
-        uff = (pr + tp * (rr - pr) * _PF_INV_LAMBDA) * ik
-        cap = _PF_UMAX
-        need = rr * ik
-        if need > cap:
-            cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need
-        if uff > cap:
-            uff = cap
-        elif uff < 0.0:
-            uff = 0.0
-        hs = _PF_TS / tp
-        cs = hs * (1.0 - hs * (0.5 - hs * _PF_SIXTH))  # 1 - exp(-Ts/T)
-        self._y0 = y0 + cs * (kp * uff - y0)
-        pb = self._pbuf
-        pb[ph] = uff
-        a = pb[i]
-        ud = a + (pb[j] - a) * fd
-        ph += 1
-        if ph == _NBUF:
-            ph = 0
-        self._phead = ph
-        self._ym = ym + cs * (kp * ud - ym)
-        rm = m0 + ym
-        self._rm = rm
-        self._uff = uff
-        e = rm - map_mmhg
-        if e > _E_LIM:
-            e = _E_LIM
-        elif e < -_E_LIM:
-            e = -_E_LIM
-        v_e = int(e * _E_TO_Q)
-        if v_e > _QMAX:
-            v_e = _QMAX
-        elif v_e < -_QMAX:
-            v_e = -_QMAX
         clamped = False
         limited = False
         r = self._r
@@ -3348,6 +3275,72 @@ class Controller:
         fc = int(fc * _WONE)
         x2 = x
         self._started = True
+        if not self._anchored:
+            self._m0 = map_mmhg
+            self._anchored = True
+        m0 = self._m0
+        rr = target_mmhg - m0
+        kp = r[0]
+        if kp < _PF_KLO:
+            kp = _PF_KLO
+        tp = r[1]
+        dp = r[2]
+        ik = 1.0 / kp
+        y0 = self._y0
+        ym = self._ym
+        dp = dp * _INV_TS
+        n = int(dp)
+        fd = dp - n
+        ph = self._phead
+        i = ph - n
+        if i < 0:
+            i += _NBUF
+        j = i - 1
+        if j < 0:
+            j += _NBUF
+        qb = self._qbuf
+        qb[ph] = y0
+        a = qb[i]
+        pr = y0 + (ym - (a + (qb[j] - a) * fd))  # Smith correction for a moving tau
+        uff = (pr + tp * (rr - pr) * _PF_INV_LAMBDA) * ik
+        cap = _PF_UMAX
+        need = rr * ik
+        if need > cap:
+            cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need
+        if uff > cap:
+            uff = cap
+        elif uff < 0.0:
+            uff = 0.0
+        hs = _PF_TS / tp
+        cs = hs * (1.0 - hs * (0.5 - hs * _PF_SIXTH))  # 1 - exp(-Ts/T)
+        self._y0 = y0 + cs * (kp * uff - y0)
+        pb = self._pbuf
+        pb[ph] = uff
+        a = pb[i]
+        ud = a + (pb[j] - a) * fd
+        ph += 1
+        if ph == _NBUF:
+            ph = 0
+        self._phead = ph
+        self._ym = ym + cs * (kp * ud - ym)
+        sh = rr - kp * MAX_RATE_ML_H
+        if sh < 0.0:
+            sh = 0.0
+        sf = self._sf
+        self._sf = sf + cs * (sh - sf)
+        rm = m0 + ym + sf
+        self._rm = rm
+        self._uff = uff
+        e = rm - map_mmhg
+        if e > _E_LIM:
+            e = _E_LIM
+        elif e < -_E_LIM:
+            e = -_E_LIM
+        v_e = int(e * _E_TO_Q)
+        if v_e > _QMAX:
+            v_e = _QMAX
+        elif v_e < -_QMAX:
+            v_e = -_QMAX
         ga = (1 << _W) - fa
         gb = (1 << _W) - fb
         gc = (1 << _W) - fc

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/wide_delay_design.npz --target python --fixed-point q31
 Artifact sha256:  ad2d3ee0d3c878a86986c0e35ad944b61bae23f60ccd354fb99cbe0863882f7f
-Content hash:     0a330a9d577196702fe114fbc9f3c8e00574ac50c05004544691a9bd3c78f011
+Content hash:     ebe9e94f93d92161f04f428a05a417a3e6820f7fafd8d3794b117194858352e9
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -34,10 +34,12 @@ Two degrees of freedom (pressor.synthesis.problem.reference; lambda 10.0 s, pump
 MAP after reset generates the reference MAP r_m and the feedforward
 u_ff = clamp((p + T (dr - p) / lambda) / K, 0, cap), with p = y0 + y_m - y0(t - tau) (Smith
 prediction), dr = target - anchor and cap = max(fraction * MAX_RATE_ML_H, min(MAX_RATE_ML_H,
-dr / K)). The model runs on K clamped to [K floor, box upper K] and T, tau clamped to the box (not
-rate limited), in double in both modes (two divisions, by the clamped K and T). The controller
-above regulates e = r_m - MAP; its command state is clamped to [-u_ff, MAX_RATE_ML_H - u_ff]
-(conditional integration against the total) and the output is u_fb + u_ff.
+dr / K)). The model runs on the feedback's own K and tau (clamped to the box and rate limited, K
+not below the floor) and the scheduled T, in double in both modes (two divisions, by K and T). What it
+cannot reach at the pump's maximum, max(0, dr - K MAX_RATE_ML_H), joins r_m through the model's
+lag. The controller above regulates e = r_m - MAP; its command state is clamped to
+[-u_ff, MAX_RATE_ML_H - u_ff] (conditional integration against the total) and the output is
+u_fb + u_ff.
 
 Scaling (power of two, common to all nodes): x_k0: 512, x_k1: 256, u: 512 ml/h, x_e: 131072 mmHg*s; e: 128 mmHg (clamp).
 Q-formats (q31): states, e and x_d Q0.31 int32 (saturating); grid coordinates Q11.20;
@@ -51,9 +53,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'ce8c63dfdc769c1c054bb04a698b1305cd8768a6002dee6c14b34d47c1d0fd29'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '3c345185c04d2f7f3b0c16b2083f0c9ab0734ef3f868089bc58154e80a0b84f3'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'ad2d3ee0d3c878a86986c0e35ad944b61bae23f60ccd354fb99cbe0863882f7f'
-CONTENT_HASH = '0a330a9d577196702fe114fbc9f3c8e00574ac50c05004544691a9bd3c78f011'
+CONTENT_HASH = 'ebe9e94f93d92161f04f428a05a417a3e6820f7fafd8d3794b117194858352e9'
 TABLES_SHA256 = 'f3c30f718d27be8028c1d76cf6e67d235a0013fd4e967765f976832a2c426561'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/wide_delay_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
@@ -3892,6 +3894,7 @@ class Controller:
         self._phead = 0
         self._rm = 0.0
         self._uff = 0.0
+        self._sf = 0.0
 
     def state(self):
         """Internal state as a tuple (z..., scheduled rho K, T, tau) for tests and logging."""
@@ -3909,73 +3912,6 @@ class Controller:
             st.input_invalid = True
             return self._out
         st.input_invalid = False
-        if not self._anchored:
-            self._m0 = map_mmhg
-            self._anchored = True
-        m0 = self._m0
-        rr = target_mmhg - m0
-        kp = K
-        if kp < _PF_KLO:
-            kp = _PF_KLO
-        elif kp > _HI0:
-            kp = _HI0
-        tp = T
-        if tp < _LO1:
-            tp = _LO1
-        elif tp > _HI1:
-            tp = _HI1
-        dp = tau
-        if dp < _LO2:
-            dp = _LO2
-        elif dp > _HI2:
-            dp = _HI2
-        ik = 1.0 / kp
-        y0 = self._y0
-        ym = self._ym
-        dp = dp * _INV_TS
-        n = int(dp)
-        fd = dp - n
-        ph = self._phead
-        i = ph - n
-        if i < 0:
-            i += _NBUF
-        j = i - 1
-        if j < 0:
-            j += _NBUF
-        qb = self._qbuf
-        qb[ph] = y0
-        a = qb[i]
-        pr = y0 + (ym - (a + (qb[j] - a) * fd))  # Smith correction for a moving tau
-        uff = (pr + tp * (rr - pr) * _PF_INV_LAMBDA) * ik
-        cap = _PF_UMAX
-        need = rr * ik
-        if need > cap:
-            cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need
-        if uff > cap:
-            uff = cap
-        elif uff < 0.0:
-            uff = 0.0
-        hs = _PF_TS / tp
-        cs = hs * (1.0 - hs * (0.5 - hs * _PF_SIXTH))  # 1 - exp(-Ts/T)
-        self._y0 = y0 + cs * (kp * uff - y0)
-        pb = self._pbuf
-        pb[ph] = uff
-        a = pb[i]
-        ud = a + (pb[j] - a) * fd
-        ph += 1
-        if ph == _NBUF:
-            ph = 0
-        self._phead = ph
-        self._ym = ym + cs * (kp * ud - ym)
-        rm = m0 + ym
-        self._rm = rm
-        self._uff = uff
-        e = rm - map_mmhg
-        if e > _E_LIM:
-            e = _E_LIM
-        elif e < -_E_LIM:
-            e = -_E_LIM
-        v_e = e * _E_TO_S
         clamped = False
         limited = False
         r = self._r
@@ -4075,6 +4011,68 @@ class Controller:
             fc = 0.0
         x2 = x
         self._started = True
+        if not self._anchored:
+            self._m0 = map_mmhg
+            self._anchored = True
+        m0 = self._m0
+        rr = target_mmhg - m0
+        kp = r[0]
+        if kp < _PF_KLO:
+            kp = _PF_KLO
+        tp = r[1]
+        dp = r[2]
+        ik = 1.0 / kp
+        y0 = self._y0
+        ym = self._ym
+        dp = dp * _INV_TS
+        n = int(dp)
+        fd = dp - n
+        ph = self._phead
+        i = ph - n
+        if i < 0:
+            i += _NBUF
+        j = i - 1
+        if j < 0:
+            j += _NBUF
+        qb = self._qbuf
+        qb[ph] = y0
+        a = qb[i]
+        pr = y0 + (ym - (a + (qb[j] - a) * fd))  # Smith correction for a moving tau
+        uff = (pr + tp * (rr - pr) * _PF_INV_LAMBDA) * ik
+        cap = _PF_UMAX
+        need = rr * ik
+        if need > cap:
+            cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need
+        if uff > cap:
+            uff = cap
+        elif uff < 0.0:
+            uff = 0.0
+        hs = _PF_TS / tp
+        cs = hs * (1.0 - hs * (0.5 - hs * _PF_SIXTH))  # 1 - exp(-Ts/T)
+        self._y0 = y0 + cs * (kp * uff - y0)
+        pb = self._pbuf
+        pb[ph] = uff
+        a = pb[i]
+        ud = a + (pb[j] - a) * fd
+        ph += 1
+        if ph == _NBUF:
+            ph = 0
+        self._phead = ph
+        self._ym = ym + cs * (kp * ud - ym)
+        sh = rr - kp * MAX_RATE_ML_H
+        if sh < 0.0:
+            sh = 0.0
+        sf = self._sf
+        self._sf = sf + cs * (sh - sf)
+        rm = m0 + ym + sf
+        self._rm = rm
+        self._uff = uff
+        e = rm - map_mmhg
+        if e > _E_LIM:
+            e = _E_LIM
+        elif e < -_E_LIM:
+            e = -_E_LIM
+        v_e = e * _E_TO_S
         ga = 1.0 - fa
         gb = 1.0 - fb
         gc = 1.0 - fc
@@ -4211,77 +4209,6 @@ class Controller:
             st.input_invalid = True
             return self._out
         st.input_invalid = False
-        if not self._anchored:
-            self._m0 = map_mmhg
-            self._anchored = True
-        m0 = self._m0
-        rr = target_mmhg - m0
-        kp = K
-        if kp < _PF_KLO:
-            kp = _PF_KLO
-        elif kp > _HI0:
-            kp = _HI0
-        tp = T
-        if tp < _LO1:
-            tp = _LO1
-        elif tp > _HI1:
-            tp = _HI1
-        dp = tau
-        if dp < _LO2:
-            dp = _LO2
-        elif dp > _HI2:
-            dp = _HI2
-        ik = 1.0 / kp
-        y0 = self._y0
-        ym = self._ym
-        dp = dp * _INV_TS
-        n = int(dp)
-        fd = dp - n
-        ph = self._phead
-        i = ph - n
-        if i < 0:
-            i += _NBUF
-        j = i - 1
-        if j < 0:
-            j += _NBUF
-        qb = self._qbuf
-        qb[ph] = y0
-        a = qb[i]
-        pr = y0 + (ym - (a + (qb[j] - a) * fd))  # Smith correction for a moving tau
-        uff = (pr + tp * (rr - pr) * _PF_INV_LAMBDA) * ik
-        cap = _PF_UMAX
-        need = rr * ik
-        if need > cap:
-            cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need
-        if uff > cap:
-            uff = cap
-        elif uff < 0.0:
-            uff = 0.0
-        hs = _PF_TS / tp
-        cs = hs * (1.0 - hs * (0.5 - hs * _PF_SIXTH))  # 1 - exp(-Ts/T)
-        self._y0 = y0 + cs * (kp * uff - y0)
-        pb = self._pbuf
-        pb[ph] = uff
-        a = pb[i]
-        ud = a + (pb[j] - a) * fd
-        ph += 1
-        if ph == _NBUF:
-            ph = 0
-        self._phead = ph
-        self._ym = ym + cs * (kp * ud - ym)
-        rm = m0 + ym
-        self._rm = rm
-        self._uff = uff
-        e = rm - map_mmhg
-        if e > _E_LIM:
-            e = _E_LIM
-        elif e < -_E_LIM:
-            e = -_E_LIM
-        v_e = int(e * _E_TO_Q)
-        if v_e > _QMAX:
-            v_e = _QMAX
-        elif v_e < -_QMAX:
-            v_e = -_QMAX
         clamped = False
         limited = False
         r = self._r
@@ -4384,6 +4311,72 @@ class Controller:
         fc = int(fc * _WONE)
         x2 = x
         self._started = True
+        if not self._anchored:
+            self._m0 = map_mmhg
+            self._anchored = True
+        m0 = self._m0
+        rr = target_mmhg - m0
+        kp = r[0]
+        if kp < _PF_KLO:
+            kp = _PF_KLO
+        tp = r[1]
+        dp = r[2]
+        ik = 1.0 / kp
+        y0 = self._y0
+        ym = self._ym
+        dp = dp * _INV_TS
+        n = int(dp)
+        fd = dp - n
+        ph = self._phead
+        i = ph - n
+        if i < 0:
+            i += _NBUF
+        j = i - 1
+        if j < 0:
+            j += _NBUF
+        qb = self._qbuf
+        qb[ph] = y0
+        a = qb[i]
+        pr = y0 + (ym - (a + (qb[j] - a) * fd))  # Smith correction for a moving tau
+        uff = (pr + tp * (rr - pr) * _PF_INV_LAMBDA) * ik
+        cap = _PF_UMAX
+        need = rr * ik
+        if need > cap:
+            cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need
+        if uff > cap:
+            uff = cap
+        elif uff < 0.0:
+            uff = 0.0
+        hs = _PF_TS / tp
+        cs = hs * (1.0 - hs * (0.5 - hs * _PF_SIXTH))  # 1 - exp(-Ts/T)
+        self._y0 = y0 + cs * (kp * uff - y0)
+        pb = self._pbuf
+        pb[ph] = uff
+        a = pb[i]
+        ud = a + (pb[j] - a) * fd
+        ph += 1
+        if ph == _NBUF:
+            ph = 0
+        self._phead = ph
+        self._ym = ym + cs * (kp * ud - ym)
+        sh = rr - kp * MAX_RATE_ML_H
+        if sh < 0.0:
+            sh = 0.0
+        sf = self._sf
+        self._sf = sf + cs * (sh - sf)
+        rm = m0 + ym + sf
+        self._rm = rm
+        self._uff = uff
+        e = rm - map_mmhg
+        if e > _E_LIM:
+            e = _E_LIM
+        elif e < -_E_LIM:
+            e = -_E_LIM
+        v_e = int(e * _E_TO_Q)
+        if v_e > _QMAX:
+            v_e = _QMAX
+        elif v_e < -_QMAX:
+            v_e = -_QMAX
         ga = (1 << _W) - fa
         gb = (1 << _W) - fb
         gc = (1 << _W) - fc

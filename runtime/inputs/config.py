@@ -298,11 +298,17 @@ def run_config(
         )
     controller = load_controller(args.controller, 1.0 / args.rate)  # fail fast, before a device
     if clinician is not None:  # pressor run: the syringe and patient against design and library
-        from pressor.contracts.drug import binding_of
+        from pressor.contracts.drug import DrugBinding, binding_of, dose_scaled, drug_agnostic
         from pressor.runtime.inputs.dosing import bind_syringe
 
         try:
-            design = binding_of(controller)
+            if drug_agnostic(controller):  # a baseline: the clinician's drug and syringe
+                design = DrugBinding(clinician.drug, clinician.concentration_ug_ml)
+            else:
+                design = binding_of(controller)
+                if dose_scaled(controller) and clinician.concentration_given:
+                    # sized in doses: any syringe of its drug the library allows
+                    design = DrugBinding(design.name, clinician.concentration_ug_ml)
         except ValueError as exc:
             raise UsageError(f"--controller {args.controller}: {exc}") from None
         clinician = bind_syringe(

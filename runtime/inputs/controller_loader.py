@@ -13,7 +13,11 @@ closed-loop time constant (30 s); ``smith:45`` sets λ = 45 s (allowed range in 
 ``runtime/generated/lpv_norepinephrine.py`` of ``synthesis/data/norepinephrine_design.npz``);
 ``lpv:wide-delay`` names phenylephrine's design for a schedule sent from outside the loop with
 delays to 200 s (``runtime/generated/lpv_wide_delay.py`` of
-``synthesis/data/wide_delay_design.npz``); a path names any module written by ``pressor codegen``
+``synthesis/data/wide_delay_design.npz``); ``lpv:cautious`` phenylephrine's design on a log-K scale
+for the cautious start (``--schedule cautious``; ``runtime/generated/lpv_cautious.py`` of
+``synthesis/data/cautious_design.npz``), ``lpv:norepinephrine-cautious`` norepinephrine's
+(``runtime/generated/lpv_norepinephrine_cautious.py`` of
+``synthesis/data/norepinephrine_cautious_design.npz``); a path names any module written by ``pressor codegen``
 (``--target python``). Loading a generated module imports it from its file: it must be the standard
 library-only module codegen writes, exposing a ``Controller`` class. A process imports the same
 verified text once (every load still checks the file first) and gives each load a fresh controller.
@@ -46,6 +50,8 @@ LPV_DESIGNS: dict[str, Path] = {
     "phenylephrine": DEFAULT_LPV_MODULE,
     "norepinephrine": GENERATED_DIR / "lpv_norepinephrine.py",
     "wide-delay": GENERATED_DIR / "lpv_wide_delay.py",
+    "cautious": GENERATED_DIR / "lpv_cautious.py",
+    "norepinephrine-cautious": GENERATED_DIR / "lpv_norepinephrine_cautious.py",
 }
 LPV_PREFIX = "lpv"
 #: the baselines every comparison shows: ``--controller`` spec -> one line (pressor designs)

@@ -239,8 +239,9 @@ class SolverConfig:
 class DesignConfig:
     """A full design: model, grid, solver settings, line-search candidates, the prefilter, the
     controller family (:mod:`pressor.synthesis.families.registry`; a family without a synthesis LMI leaves
-    the solver settings but ``time_scale_s`` unused) and the drug and syringe concentration its
-    gains are for (:class:`pressor.contracts.drug.DrugBinding`)."""
+    the solver settings but ``time_scale_s`` unused), the drug and syringe concentration its
+    gains are for (:class:`pressor.contracts.drug.DrugBinding`) and, optionally, the sensitivity range of
+    the patients it is for in mmHg per µg/kg/min (``population``, the cautious start's prior)."""
 
     model: ModelConfig
     grid_points: tuple[int, int, int]
@@ -250,6 +251,7 @@ class DesignConfig:
     lambda2_candidates: tuple[float, ...] = (0.5, 1.0, 2.0)
     lambda3_candidates: tuple[float, ...] = (0.25, 0.5, 1.0)
     drug: DrugBinding = DEFAULT_BINDING
+    population: tuple[float, float] | None = None
     source: str = "<default>"
     raw: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
 
@@ -287,4 +289,6 @@ class DesignConfig:
         }
         if not self.controller.is_default:
             out["controller"] = self.controller.to_dict()
+        if self.population is not None:
+            out["population"] = {"K_ug_kg_min": list(self.population)}
         return out

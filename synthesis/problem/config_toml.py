@@ -35,6 +35,11 @@ A design is described by a TOML file with the sections below (all physical units
                  (:class:`pressor.contracts.drug.DrugBinding`); carried into the artifact
                  (``design.drug``) and the generated module (``DRUG``,
                  ``DRUG_CONCENTRATION_UG_ML``); ``pressor run`` refuses any other (docs/DRUGS.md)
+    [population] optional: K_ug_kg_min = [lo, hi] (mmHg per µg/kg/min, each in [1e-3, 1e7]): the
+                 sensitivity of the patients the design is for, in doses (the 0.1x-10x range of
+                 the drug's patient models); the cautious start schedules on its top, converted to
+                 ml/h of the syringe and patient at hand (docs/notes/cautious-start.md); carried
+                 into the artifact (``design.population``) and the module (``POPULATION_K_UG_KG_MIN``)
     [reference]  enabled (bool), lambda_s (s, in [1, 1000]), pump_fraction (in [0.1, 1]),
                  k_min (mmHg/(ml/h), in [0.0001, box K upper]), optional lag_s (s, in [1, 2000]:
                  the model's fixed lag; absent: the scheduled T)
@@ -101,7 +106,10 @@ K_RELATIVE_RANGE = (0.0, 0.2)
 OPTIONAL_KEYS = {
     "rates": ("K_relative_per_s", "K_relative_up_per_s"),
     "reference": ("lag_s",),
+    "population": ("K_ug_kg_min",),
 }
+#: the range of a population's sensitivity (mmHg per µg/kg/min)
+POPULATION_K_RANGE = (1e-3, 1e7)
 
 
 #: Optional [weights] keys (not in the shipped TOML, whose design uses performance = "integral").
@@ -137,15 +145,14 @@ def _merge_check_keys(source: str, table: dict[str, Any], default: dict[str, Any
     """Unknown sections/keys are errors (a typo must not silently fall back to a default)."""
     default = {**default, "weights": {**default.get("weights", {}), **SHAPING_DEFAULTS}}
     for section, body in table.items():
-        if section not in default:
+        if section not in default and section not in OPTIONAL_KEYS:
             raise field_error(source, section, "<section>", f"one of {sorted(default)}")
         if not isinstance(body, dict):
             raise field_error(source, section, body, "a TOML table")
         for key in body:
-            if key not in default[section] and key not in OPTIONAL_KEYS.get(section, ()):
-                raise field_error(
-                    source, f"{section}.{key}", body[key], f"one of {sorted(default[section])}"
-                )
+            if key not in default.get(section, {}) and key not in OPTIONAL_KEYS.get(section, ()):
+                allowed = sorted({*default.get(section, {}), *OPTIONAL_KEYS.get(section, ())})
+                raise field_error(source, f"{section}.{key}", body[key], f"one of {allowed}")
 
 
 def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfig:
@@ -298,6 +305,15 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
             rates[0],
             "used with [controller] structure 'smith' and weights.performance 'integral'",
         )
+    population = None
+    if "population" in table:
+        val = table["population"].get("K_ug_kg_min")
+        if not isinstance(val, list | tuple) or len(val) != 2:
+            raise field_error(source, "population.K_ug_kg_min", val, "a list [lower, upper]")
+        lo, hi = (check("population.K_ug_kg_min", v, *POPULATION_K_RANGE) for v in val)
+        if not lo < hi:
+            raise field_error(source, "population.K_ug_kg_min", val, "a list with lower < upper")
+        population = (lo, hi)
     return DesignConfig(
         model=model,
         grid_points=grid,
@@ -307,6 +323,7 @@ def parse_config(table: dict[str, Any], source: str = "<config>") -> DesignConfi
         lambda2_candidates=cands[0],
         lambda3_candidates=cands[1],
         drug=_parse_drug(table, source, default),
+        population=population,
         source=source,
         raw=table,
     )

@@ -8,9 +8,10 @@ anchor), so it cannot destabilise the certified loop; it only changes the refere
 and the input it gets added to. Speed of tracking then comes from the prefilter, not from the
 feedback bandwidth.
 
-The law (physical units, time in s; K mmHg/(ml/h), T s, tau s the scheduled model, clamped to the
-design box except K, whose floor is ``k_min``; lambda_s, pump_fraction and k_min from the design's
-``[reference]`` section)::
+The law (physical units, time in s; K mmHg/(ml/h), T s, tau s the model: the feedback's own
+scheduled values, clamped to the design box and rate limited to its certified rates, K not below
+``k_min``, T the fixed ``lag_s`` when the design sets one; lambda_s, pump_fraction, k_min and lag_s
+from the design's ``[reference]`` section)::
 
     m0      = MAP at the first valid sample after reset            (the anchor, mmHg)
     Δr(t)   = target(t) − m0                                         (mmHg)
@@ -20,8 +21,17 @@ design box except K, whose floor is ``k_min``; lambda_s, pump_fraction and k_min
     u_ff    = clamp(u_law, 0, cap)
     T·dy0/dt = −y0 + K·u_ff(t)                                       (delay-free model, mmHg)
     T·dy_m/dt = −y_m + K·u_ff(t − τ)                                 (the model with its delay)
-    r_m     = m0 + y_m                                               (reference MAP, mmHg)
+    T·ds/dt  = −s + max(0, Δr − K·u_max)                             (what the model cannot reach)
+    r_m     = m0 + y_m + s                                           (reference MAP, mmHg)
 
+* The model runs on the feedback's K, T, τ after the generated module's clamp and rate limit, so
+  the feedforward never pushes harder than the certified feedback is scheduled for: an estimate
+  that jumps (or a K below the box) reaches the feedforward at the certified rate, as it reaches
+  the feedback (before, the model took the reported K unlimited, and a feedback at K 0.69 ran
+  beside a feedforward sized for 0.25: issue 41).
+* s: when the model's K cannot reach the target at the pump's maximum, r_m still goes there, so
+  the feedback brings MAP to the target whenever the pump can (before, r_m stopped at
+  m0 + K·u_max and MAP settled short with the pump at 60 ml/h).
 * p is a Smith predictor of the delayed model: with constant τ, y_m(t) = y0(t − τ) and p = y0.
   When τ moves (a vasopressor's transport delay stretches while the infusion is high), the
   delayed input is played slower or faster than it was sent and y_m departs from y0(t − τ); the
@@ -39,9 +49,9 @@ design box except K, whose floor is ``k_min``; lambda_s, pump_fraction and k_min
 * Target changes mid-run are inputs of the same model: no re-anchoring, no jump of r_m or y0.
   The anchor m0 only sets the feedforward's steady level: if the patient was not at rest at the
   anchor, the feedback integral absorbs the difference (r_m still ends at the target).
-* K, T, τ vary over time: the model is simulated with the current values (the delayed model has
-  the patient's own structure, K(t)·u(t − τ(t))), so on a patient that is this model the MAP is
-  r_m and the feedback sees no error at all.
+* K, T, τ vary over time: the model is simulated with the current (rate-limited) values (the
+  delayed model has the patient's own structure, K(t)·u(t − τ(t))), so on a patient that is this
+  model the MAP is r_m and the feedback sees no error at all.
 
 Anti-windup with the feedback: the total command is u_fb + u_ff, clamped to [0, u_max]; the
 feedback's own command state is therefore clamped to [−u_ff, u_max − u_ff] and its integrators
@@ -166,7 +176,8 @@ def frozen_step_reference(
     step_mmhg
         Target step Δr (mmHg).
     K, T_s, tau_s
-        Frozen model: mmHg/(ml/h), s, s (K > 0, T > 0, tau >= 0).
+        Frozen model: mmHg/(ml/h), s, s (K > 0, T > 0, tau >= 0); T is ``cfg.lag_s`` when the
+        design fixes the model's lag.
     cfg
         The prefilter configuration (``enabled`` is not consulted).
     max_rate_ml_h
@@ -178,6 +189,8 @@ def frozen_step_reference(
         Feedforward (ml/h) at t and model MAP deviation r_m − m0 (mmHg) at t.
     """
     t = np.asarray(t_s, dtype=float)
+    if cfg.lag_s is not None:  # the model's lag is the design's fixed one
+        T_s = cfg.lag_s
     if not (K > 0 and T_s > 0 and tau_s >= 0 and max_rate_ml_h > 0):
         raise ValueError(f"need K > 0, T > 0, tau >= 0, max_rate > 0; got {K, T_s, tau_s}")
     lam, dr = cfg.lambda_s, float(step_mmhg)

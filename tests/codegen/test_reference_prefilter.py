@@ -23,6 +23,7 @@ from pressor.synthesis.problem.reference import ReferenceConfig, frozen_step_ref
 from tests.codegen.test_pipeline import built  # noqa: F401
 from tests.support.codegen_helpers import (
     BOX,
+    RATES,
     TS,
     CController,
     emit_targets,
@@ -43,12 +44,15 @@ def pf(built, tmp_path_factory):  # noqa: F811
 
 class LawReference:
     """The prefilter law written independently: exact exponential decay, full histories indexed by
-    sample number, T and tau clamped to the box, K to [K_MIN, box upper K] (no rate limit)."""
+    sample number, on the feedback's own rho (clamped to the box, then each parameter moved by at
+    most its rate bound per sample), K not below K_MIN; what the model cannot reach at the pump's
+    maximum joins the reference through the model's lag."""
 
     def __init__(self, box: np.ndarray, lam: float, frac: float, max_rate: float) -> None:
         self.box, self.lam, self.frac, self.max_rate = box, lam, frac, max_rate
         self.anchor: float | None = None
-        self.y0 = self.ym = 0.0
+        self.y0 = self.ym = self.sf = 0.0
+        self.rho: list[float] | None = None
         self.u_hist: list[float] = []
         self.y0_hist: list[float] = []
 
@@ -65,10 +69,14 @@ class LawReference:
     def step(self, map_mmhg: float, target: float, K: float, T: float, tau: float):
         if self.anchor is None:
             self.anchor = map_mmhg
-        lows = (K_MIN, self.box[1, 0], self.box[2, 0])
-        k, t, a = (
-            min(max(v, lo), hi) for v, lo, hi in zip((K, T, tau), lows, self.box[:, 1], strict=True)
-        )
+        rho = [min(max(v, lo), hi) for v, (lo, hi) in zip((K, T, tau), self.box, strict=True)]
+        if self.rho is not None:
+            rho = [
+                min(max(v, p - r * TS), p + r * TS)
+                for v, p, r in zip(rho, self.rho, RATES, strict=True)
+            ]
+        self.rho = rho
+        k, t, a = max(rho[0], K_MIN), rho[1], rho[2]
         d = a / TS
         dr = target - self.anchor
         self.y0_hist.append(self.y0)
@@ -79,8 +87,9 @@ class LawReference:
         c = 1.0 - math.exp(-TS / t)
         self.y0 += c * (k * u - self.y0)
         self.u_hist.append(u)
-        r_m = self.anchor + self.ym
+        r_m = self.anchor + self.ym + self.sf
         self.ym += c * (k * self._delayed(self.u_hist, d) - self.ym)
+        self.sf += c * (max(0.0, dr - k * self.max_rate) - self.sf)
         return r_m, u
 
 

@@ -206,7 +206,7 @@ def test_schedule_option_defaults_estimated_for_run_and_oracle_for_sil_and_trial
     assert sil_parser().parse_args([]).schedule == "oracle"
     for cmd in ("run", "sil", "trial"):
         out = " ".join(pressor(cmd, "--help", cwd=tmp_path).stdout.split())  # unwrapped
-        assert "--schedule {oracle,estimated,nominal,validated}" in out
+        assert "--schedule {oracle,estimated,nominal,validated,cautious}" in out
         assert ("default estimated" if cmd == "run" else "default oracle") in out
     bad = pressor("trial", "--schedule", "guess", "--out", str(tmp_path), cwd=tmp_path)
     assert bad.returncode == 2 and "--schedule" in bad.stderr

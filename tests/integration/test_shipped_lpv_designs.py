@@ -21,6 +21,8 @@ DATA = Path(pl.REPO_ROOT) / "synthesis" / "data"
 ARTIFACTS = {
     "norepinephrine": DATA / "norepinephrine_design.npz",
     "wide-delay": DATA / "wide_delay_design.npz",
+    "cautious": DATA / "cautious_design.npz",
+    "norepinephrine-cautious": DATA / "norepinephrine_cautious_design.npz",
 }
 
 

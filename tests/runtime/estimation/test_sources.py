@@ -198,10 +198,17 @@ def test_estimated_schedules_on_the_estimate_once_learned():
 
 
 def test_make_schedule_builds_each_named_source():
-    assert SOURCES == ("oracle", "estimated", "nominal", "validated")
-    assert [make_schedule(name).source for name in SOURCES] == list(SOURCES)
+    from pressor.runtime.inputs.config import load_controller
+
+    assert SOURCES == ("oracle", "estimated", "nominal", "validated", "cautious")
+    cautious = load_controller("lpv:cautious", 0.1)
+    assert [make_schedule(name, 0.1, cautious).source for name in SOURCES] == list(SOURCES)
     with pytest.raises(ValueError, match="not one of"):
         make_schedule("truth")
+    with pytest.raises(ValueError, match="needs the controller"):
+        make_schedule("cautious")
+    with pytest.raises(ValueError, match="log-K"):
+        make_schedule("cautious", 0.1, load_controller("lpv", 0.1))
 
 
 def test_estimation_imports_no_numpy_solver_or_simulator():
@@ -212,3 +219,32 @@ def test_estimation_imports_no_numpy_solver_or_simulator():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_another_drugs_design_schedules_inside_its_own_box_from_the_first_tick():
+    # lpv:norepinephrine (K 0.1-3.2, T 150-750 s, tau 20-55 s): the estimated and validated sources
+    # take its box, not phenylephrine's (whose caution put T at 100 s, outside it, at tick 0)
+    import math
+
+    from pressor.runtime.core.scheduling import ScheduleInput
+    from pressor.runtime.core.supervisor_config import sched_limits_of
+    from pressor.runtime.estimation.settings import DESIGN_BOX
+    from pressor.runtime.inputs.config import load_controller
+
+    ne = load_controller("lpv:norepinephrine", 0.1)
+    box, _ = sched_limits_of(ne)
+    for name in ("estimated", "validated", "nominal"):
+        source = make_schedule(name, 0.1, ne)
+        if name == "nominal":
+            continue
+        for tick in range(600):
+            mp = 55.0 + 0.01 * tick
+            s = source.update(ScheduleInput(mp, 0, 5.0, math.nan, math.nan, math.nan, False))
+            assert all(
+                lo <= v <= hi for v, (lo, hi) in zip((s.K, s.T_s, s.tau_s), box, strict=True)
+            )
+    # the shipped phenylephrine design keeps its tuned sources
+    ph = make_schedule("estimated", 0.1, load_controller("lpv", 0.1))
+    assert ph.estimator.box == make_schedule("estimated", 0.1).estimator.box
+    assert make_schedule("estimated", 0.1, ne).estimator.box == tuple(box)
+    assert tuple(box) != tuple(DESIGN_BOX)

@@ -336,3 +336,72 @@ def test_artifact_metadata_drug_is_checked_and_absent_reads_as_the_default():
     meta = {**art.metadata, "design": {**art.metadata["design"], "drug": {"name": ""}}}
     with pytest.raises(ArtifactError, match="metadata.design.drug"):
         make_artifact(meta, art.coefficients, art.nodes)
+
+
+@pytest.mark.parametrize("controller", ["pi", "smith"])
+@pytest.mark.parametrize(
+    ("drug", "conc", "weight"),
+    [
+        ("phenylephrine", 100.0, None),
+        ("norepinephrine", 16.0, "70"),
+        ("norepinephrine", 64.0, "30"),
+    ],
+)
+def test_every_baseline_runs_on_every_library_drug(controller, drug, conc, weight):
+    # pressor run --controller pi|smith --drug D --concentration-ug-ml C: bound to the clinician's
+    # syringe (checked against the library), and a device announcing it is accepted
+    from types import SimpleNamespace
+
+    from pressor.plumbing.usage import UsageParser
+    from pressor.runtime.inputs.clinician import (
+        add_clinician_options,
+        check_device_hello,
+        clinician_input,
+    )
+    from pressor.runtime.inputs.config import add_run_options, run_config
+    from pressor.runtime.inputs.dosing import add_dosing_options
+
+    p = UsageParser(prog="pressor run")
+    add_run_options(p, "estimated", "")
+    add_clinician_options(p)
+    add_dosing_options(p)
+    argv = ["--controller", controller, "--drug", drug, "--concentration-ug-ml", f"{conc:g}"]
+    argv += [] if weight is None else ["--weight-kg", weight]
+    args = p.parse_args(argv)
+    cfg = run_config(args, clinician=clinician_input(args))
+    assert (cfg.clinician.drug, cfg.clinician.concentration_ug_ml) == (drug, conc)
+    peer = SimpleNamespace(drug=drug, concentration_ug_ml=conc, pump_max_ml_h=120.0)
+    check_device_hello(peer, 120.0, cfg.clinician)
+    # a drug-bound design is still refused another drug
+    if drug != "phenylephrine":
+        lpv = p.parse_args(["--controller", "lpv", *argv[2:]])
+        with pytest.raises(UsageError, match="loaded design"):
+            run_config(lpv, clinician=clinician_input(lpv))
+
+
+def test_a_dose_design_takes_every_syringe_of_its_drug_the_library_allows():
+    from pressor.plumbing.usage import UsageParser
+    from pressor.runtime.inputs.clinician import add_clinician_options, clinician_input
+    from pressor.runtime.inputs.config import add_run_options, run_config
+    from pressor.runtime.inputs.dosing import add_dosing_options
+
+    p = UsageParser(prog="pressor run")
+    add_run_options(p, "cautious", "")
+    add_clinician_options(p)
+    add_dosing_options(p)
+    base = ["--controller", "lpv:norepinephrine-cautious", "--weight-kg", "70"]
+    for conc in (16.0, 32.0, 64.0):
+        args = p.parse_args([*base, "--concentration-ug-ml", f"{conc:g}"])
+        cfg = run_config(args, clinician=clinician_input(args))
+        assert (cfg.clinician.drug, cfg.clinician.concentration_ug_ml) == ("norepinephrine", conc)
+    args = p.parse_args(base)  # no syringe given: the design's
+    assert run_config(args, clinician=clinician_input(args)).clinician.concentration_ug_ml == 16.0
+    args = p.parse_args([*base, "--concentration-ug-ml", "20"])
+    with pytest.raises(UsageError, match="allowed 16, 32, 64"):
+        run_config(args, clinician=clinician_input(args))
+    # a design in ml/h of one syringe still refuses another
+    args = p.parse_args(
+        ["--controller", "lpv:norepinephrine", *base[2:], "--concentration-ug-ml", "32"]
+    )
+    with pytest.raises(UsageError, match="count ml/h of that syringe"):
+        run_config(args, clinician=clinician_input(args))

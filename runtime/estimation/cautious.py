@@ -1,0 +1,251 @@
+"""The cautious start: schedule on the most sensitive patient, and let evidence lower K.
+
+The premise (issue 41): the bedside knows the MAP, the delivered rate, the drug, the syringe, the
+weight and the target from the first second, nothing more, so the first doses are blind. This
+source makes them safe by construction and lets the MAP's response buy speed:
+
+* **Start at the top.** K̂ starts at the top of the design's patient population
+  (``POPULATION_K_UG_KG_MIN``, mmHg per µg/kg/min, converted once to ml/h of the syringe and
+  patient at hand, :class:`pressor.contracts.drug.DoseScale`). The controller's gains are 1/K̂ (the
+  feedback's and the feedforward's: the generated module's prefilter runs on the feedback's own,
+  rate-limited K), so the first commands are what the most sensitive patient of the range needs,
+  and no more: on that patient they land on the target; on any other they fall short.
+* **Lower K only on evidence.** Let ``s_slow(t)`` be the response of a unit-gain patient with the
+  box's slowest lag and longest delay (T_hi, τ_hi) to the rate the pump delivered, and ``Δy`` the
+  MAP's change since the first sample. Any first-order patient of the box with sensitivity K has
+  risen at least ``K s_slow`` by now (for a rate that has not been cut: the start), so when
+  ``Δy < K̂ s_slow − m`` the patient is less sensitive than K̂, at most
+  ``K_up = (Δy + m)/s_slow``; K̂ falls toward K_up. No response after the longest delay is such
+  evidence (Δy stays 0 while s_slow grows); a response is evidence too, of how far K̂ may fall.
+  The margin ``m = margin_mmhg + margin_rel K̂ s_slow`` covers the monitor's noise and a patient
+  slower than the box.
+* **Raise K on the contrary evidence.** When ``Δy > K̂ s_fast + m`` (s_fast: the fastest patient
+  of the box, T_lo, τ_lo) the patient is more sensitive than K̂, at least ``(Δy − m)/s_fast``; K̂
+  rises toward it (a higher K̂ is the cautious direction).
+* **At the certified rates.** K̂ falls at most at the design's certified fall of ln K and rises at
+  most at its certified rise (``RATE_BOUNDS[0]`` / ``K_RATE_UP_PER_S`` of a log-K design, times
+  ``rate_fraction``), inside its box; T and τ are fixed at the box's geometric-mean T and mean τ.
+  The design's certificate covers these rates (falls fast, rises slowly: a falling K is the
+  benign direction, :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`), and its module's
+  bumpless integral keeps the command continuous while K̂ moves
+  (:mod:`pressor.synthesis.families.smith.law`).
+
+Why this evidence and not the online fit (:class:`pressor.runtime.estimation.sources.EstimatedSchedule`):
+measured (docs/notes/cautious-start.md), a fit scheduled from the first minute reads K/T, not K
+and T apart, and lands up to 2x low (the step then overshot 55 %); a set of fits kept to those
+that explain the data (least squares over a bank of T and τ) was faster but let K̂ go below the
+patient at 10x (20 % overshoot). The bound above needs no fit: it is the largest sensitivity the
+box's slowest patient is compatible with, so it never crosses a first-order patient of the box
+from above while the rate rises. Its price is speed: K̂ approaches the patient as fast as the
+slowest patient of the box would have answered (the box's T_hi).
+
+Why this T and τ. The feedback's integral gain is g/(K T): scheduled on the box's low T it was too
+strong for the two-compartment phenylephrine patients (step overshoot p90 26 % against 5 % on
+the geometric-mean T, same cohort); the feedforward's opening push is T/λ times the steady
+infusion and is kept small by the design's fixed reference lag (``[reference] lag_s``), not by
+this source.
+
+What is not covered. The evidence assumes the drug's effect rises with the dose (a vasopressor) and
+that the baseline does not fall while it is read: a haemorrhage lowers Δy and reads as a less
+sensitive patient (K̂ falls, the loop gets bolder). Measured on the paper-disturbance scenario the
+loop stays inside ±5 mmHg through it; the certificate covers K̂ = K, not K̂ ≠ K.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from typing import Any
+
+from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale, binding_of
+from pressor.runtime.core.scheduling import Schedule, ScheduleInput
+from pressor.runtime.estimation.gate import SampleGate
+
+__all__ = ["CautiousSchedule", "DesignEnvelope", "envelope_of"]
+
+
+@dataclass(frozen=True)
+class DesignEnvelope:
+    """What a generated log-K module declares that the cautious source needs.
+
+    Attributes
+    ----------
+    box
+        ((K lo, hi) mmHg/(ml/h), (T lo, hi) s, (τ lo, hi) s) of the design.
+    fall_per_s, rise_per_s
+        The certified bounds on the fall and the rise of ln K (1/s).
+    population
+        (lo, hi) sensitivity of the design's patients (mmHg per µg/kg/min).
+    concentration_ug_ml
+        The syringe the design names (µg/ml).
+    """
+
+    box: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
+    fall_per_s: float
+    rise_per_s: float
+    population: tuple[float, float]
+    concentration_ug_ml: float
+
+
+def envelope_of(controller: Any) -> DesignEnvelope:
+    """The :class:`DesignEnvelope` a generated module declares (on the instance or its module).
+
+    Raises
+    ------
+    ValueError
+        A controller that is not a log-K design with a patient population (``K_RATE_RELATIVE``,
+        ``POPULATION_K_UG_KG_MIN``, ``GRID_LO``/``GRID_HI``, ``RATE_BOUNDS``), naming what is
+        missing.
+    """
+    module = sys.modules.get(type(controller).__module__)
+
+    def find(name: str) -> Any:
+        for src in (controller, module):
+            if src is not None and hasattr(src, name):
+                return getattr(src, name)
+        return None
+
+    names = ("GRID_LO", "GRID_HI", "RATE_BOUNDS", "K_RATE_RELATIVE", "POPULATION_K_UG_KG_MIN")
+    missing = [n for n in names if find(n) is None]
+    if missing or not find("K_RATE_RELATIVE"):
+        raise ValueError(
+            f"--schedule cautious needs a design on a log-K scale with a patient population"
+            f" ([rates] K_relative_per_s, [population]); the controller"
+            f" {type(controller).__qualname__!r} declares no {', '.join(missing or names[3:4])}"
+        )
+    lo, hi = find("GRID_LO"), find("GRID_HI")
+    box = tuple((float(a), float(b)) for a, b in zip(lo, hi, strict=True))
+    fall = float(find("K_RATE_FALL_PER_S") or find("RATE_BOUNDS")[0])
+    rise = float(find("K_RATE_UP_PER_S") or fall)
+    pop = tuple(float(v) for v in find("POPULATION_K_UG_KG_MIN"))
+    return DesignEnvelope(
+        box,  # type: ignore[arg-type]
+        fall,
+        rise,
+        pop,  # type: ignore[arg-type]
+        binding_of(controller).concentration_ug_ml,
+    )
+
+
+class _UnitLag:
+    """A unit-gain first-order lag with a delay, driven by the delivered rate's history (exact
+    discretisation for a rate held over each tick; the delay read with linear interpolation)."""
+
+    __slots__ = ("a", "d", "y")
+
+    def __init__(self, T_s: float, tau_s: float, sample_period_s: float) -> None:
+        self.a = math.exp(-sample_period_s / T_s)
+        self.d = tau_s / sample_period_s
+        self.y = 0.0
+
+    def step(self, hist: list[float], head: int) -> float:
+        n = len(hist)
+        k = int(self.d)
+        f = self.d - k
+        i = (head - 1 - k) % n
+        j = (i - 1) % n
+        u = hist[i] + (hist[j] - hist[i]) * f
+        self.y = self.a * self.y + (1.0 - self.a) * u
+        return self.y
+
+
+class CautiousSchedule:
+    """Schedule K̂ from the population's top down, on evidence (module docstring).
+
+    Parameters
+    ----------
+    envelope
+        The design's box, certified ln K rates, population and syringe (:func:`envelope_of`).
+    sample_period_s
+        Tick period (s), > 0.
+    dose
+        The syringe and patient (default: the design's syringe and the reference adult,
+        :data:`pressor.contracts.drug.REFERENCE_WEIGHT_KG`, as the simulated patients are): converts the
+        population's doses to ml/h once.
+    margin_mmhg, margin_rel
+        The evidence margin m = margin_mmhg + margin_rel × (the response K̂ predicts), mmHg and 1,
+        each >= 0.
+    rate_fraction
+        Share of the certified ln K rates the source moves at, in (0, 1] (the module limits to the
+        full rates; a fraction keeps its limiter idle).
+    T_s, tau_s
+        The lag (s) and delay (s) to schedule on; default the box's geometric-mean T and its
+        longest τ (module docstring).
+
+    The sample gate (:class:`pressor.runtime.estimation.gate.SampleGate`) keeps bad samples out of the
+    evidence, but not a MAP that does not move: here no movement is the evidence (a frozen
+    transducer is the supervisor's to catch, by its flatline rules).
+    """
+
+    source = "cautious"
+
+    def __init__(
+        self,
+        envelope: DesignEnvelope,
+        sample_period_s: float = 0.1,
+        dose: DoseScale | None = None,
+        margin_mmhg: float = 1.0,
+        margin_rel: float = 0.1,
+        rate_fraction: float = 0.9,
+        T_s: float | None = None,
+        tau_s: float | None = None,
+    ) -> None:
+        if not (math.isfinite(sample_period_s) and sample_period_s > 0.0):
+            raise ValueError(f"sample_period_s={sample_period_s!r} must be finite and > 0")
+        for name, value in (("margin_mmhg", margin_mmhg), ("margin_rel", margin_rel)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name}={value!r} must be finite and >= 0")
+        if not 0.0 < rate_fraction <= 1.0:
+            raise ValueError(f"rate_fraction={rate_fraction!r} must be in (0, 1]")
+        self.envelope = env = envelope
+        self.dose = dose or DoseScale(env.concentration_ug_ml, REFERENCE_WEIGHT_KG)
+        (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = env.box
+        self.k_top = min(max(self.dose.k_ml_h(env.population[1]), k_lo), k_hi)
+        self.k_floor = min(max(self.dose.k_ml_h(env.population[0]), k_lo), self.k_top)
+        self.T_s = math.sqrt(t_lo * t_hi) if T_s is None else float(T_s)
+        self.tau_s = d_hi if tau_s is None else float(tau_s)
+        ts = float(sample_period_s)
+        self._down = math.exp(-rate_fraction * env.fall_per_s * ts)
+        self._up = math.exp(rate_fraction * env.rise_per_s * ts)
+        self._m, self._rel = float(margin_mmhg), float(margin_rel)
+        self._hist = [0.0] * (int(math.ceil(d_hi / ts)) + 3)
+        self._head = 0
+        self._slow = _UnitLag(t_hi, d_hi, ts)
+        self._fast = _UnitLag(t_lo, d_lo, ts)
+        self._gate = SampleGate(ts, flatline_s=1e9)  # no flatline rule (class docstring)
+        self._anchor: float | None = None
+        self.K = self.k_top
+        self._schedule = Schedule(self.K, self.T_s, self.tau_s, "cautious", True, True, True,
+                                  "prior")  # fmt: skip
+
+    def update(self, inputs: ScheduleInput) -> Schedule:
+        """Feed one tick (the delivered rate, the MAP sample) and schedule on K̂."""
+        u = inputs.delivered_ml_h
+        hist = self._hist
+        hist[self._head] = u if u == u and u >= 0.0 else 0.0
+        self._head = (self._head + 1) % len(hist)
+        s_slow = self._slow.step(hist, self._head)
+        s_fast = self._fast.step(hist, self._head)
+        y = inputs.map_mmhg
+        if not self._gate.accept(y, inputs.quality):
+            return self._schedule
+        if self._anchor is None:
+            self._anchor = y
+            return self._schedule
+        dy = y - self._anchor
+        k = self.K
+        pred = k * s_slow
+        m = self._m + self._rel * pred
+        if s_slow > 0.0 and dy < pred - m:  # less response than the slowest K̂ patient
+            k = max(k * self._down, (dy + m) / s_slow, self.k_floor)
+        else:
+            pred_f = k * s_fast
+            m_f = self._m + self._rel * pred_f
+            if s_fast > 0.0 and dy > pred_f + m_f:  # more than the fastest K̂ patient could give
+                k = min(k * self._up, (dy - m_f) / s_fast, self.k_top)
+        if k != self.K:
+            self.K = k
+            self._schedule = Schedule(k, self.T_s, self.tau_s, "cautious", True, True, False,
+                                      "evidence")  # fmt: skip
+        return self._schedule
