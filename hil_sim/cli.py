@@ -22,6 +22,29 @@ from typing import Any
 from pressor.contracts.checks import check_int_range, check_range
 from pressor.hil_sim.patients.patient_model import add_patient_model_option
 from pressor.plumbing.usage import UsageError, UsageParser, run_command, usage_exit
+from pressor.runtime.inputs.clinician import add_syringe_options, add_target_option
+from pressor.runtime.inputs.dosing import add_weight_option
+
+#: longest simulated time per patient (s), as :func:`pressor.api.trial`'s ``duration_s``
+MAX_DURATION_S = 7 * 86400.0
+MIN_DURATION_S = 1.0
+#: what the trial's clinical options mean
+TRIAL_TARGET_HELP = (
+    "an absolute MAP target (mmHg, {rng}) for every patient from the scenario's step time on, in"
+    " place of the scenario's step above each patient's baseline (default: the scenario's step)"
+)
+TRIAL_DRUG_HELP = (
+    "drug in the syringe: must be the design's (a drug-agnostic baseline, pi or smith: the"
+    " patient model's); recorded with every patient (default: that drug)"
+)
+TRIAL_CONCENTRATION_HELP = (
+    "syringe concentration (ug/ml): must be the one whose ml/h the design counts (a baseline:"
+    " the patient model's); the doses in ug/kg/min are converted with it (default: that one)"
+)
+TRIAL_WEIGHT_HELP = (
+    "the patients' weight (kg, {rng}): the records' and the table's doses in ug/kg/min are per"
+    " this weight (default: the 70 kg reference adult the patient models count, said so)"
+)
 
 
 def _scenarios(argv: Sequence[str]) -> int:
@@ -70,6 +93,8 @@ def format_table(summary: dict[str, Any]) -> str:
 
     m = summary["metrics"]
     model = f", patient model {summary['patient_model']}" if "patient_model" in summary else ""
+    if "target_mmhg" in summary:
+        model += f", target {summary['target_mmhg']:g} mmHg (absolute)"
     width = max(len(label(k)) for k in RUN_METRICS) + 1
     lines = [
         f"trial: controller {summary['controller']}, scenario {summary['scenario']}{model},"
@@ -95,6 +120,8 @@ def format_table(summary: dict[str, Any]) -> str:
                 f"  {label(key):<{width - 2}}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}"
                 f"{r['n']:>5}{r['n_null']:>5}"
             )
+    if "infusion" in summary:
+        lines.append(format_infusion(summary["infusion"]))
     if "estimation" in summary:
         e = summary["estimation"]
         lines.append(
@@ -107,6 +134,26 @@ def format_table(summary: dict[str, Any]) -> str:
             f" patients {', '.join(str(x) for x in summary['unstable_patient_seeds'])}"
         )
     return "\n".join(lines)
+
+
+def format_infusion(infusion: dict[str, Any]) -> str:
+    """The table's infusion line: the drug and syringe, the weight (the reference adult said as
+    such) and the median over every patient of the mean and peak rate, in ml/h and µg/kg/min."""
+    w = infusion["weight_kg"]
+    weight = (
+        f"weight {w:g} kg"
+        if infusion["weight_given"]
+        else f"per kg at a {w:g} kg reference weight (no --weight-kg)"
+    )
+
+    def both(key: str) -> str:
+        rate, dose = infusion[f"median_{key}_rate_ml_h"], infusion[f"median_{key}_dose_ug_kg_min"]
+        return f"{_fmt(rate)} ml/h = {_fmt(dose)} µg/kg/min"
+
+    return (
+        f"infusion (median over all patients): mean {both('mean')}, peak {both('peak')};"
+        f" {infusion['drug']} {infusion['concentration_ug_ml']:g} µg/ml, {weight}"
+    )
 
 
 def format_unreachable(records: list[dict[str, Any]]) -> str:
@@ -181,6 +228,17 @@ def _trial(argv: Sequence[str]) -> int:
         " (default: %(default)g)",
     )
     p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help=f"simulated time per patient (s, allowed [{MIN_DURATION_S:g}, {MAX_DURATION_S:g}];"
+        " default: the scenario's duration_s)",
+    )
+    add_target_option(p, TRIAL_TARGET_HELP)
+    add_syringe_options(p, TRIAL_DRUG_HELP, TRIAL_CONCENTRATION_HELP)
+    add_weight_option(p, TRIAL_WEIGHT_HELP)
+    p.add_argument(
         "--out",
         required=True,
         type=Path,
@@ -194,10 +252,18 @@ def _trial(argv: Sequence[str]) -> int:
         check_int_range("--jobs", args.jobs, 1, 64)
         check_range("--rate", args.rate, 0.1, 1000.0, unit="Hz")
         check_range("--sensitivity", args.sensitivity, 0.05, 20.0, unit="(dimensionless)")
+        if args.duration is not None:
+            check_range("--duration", args.duration, MIN_DURATION_S, MAX_DURATION_S, unit="s")
     except ValueError as e:
         p.error(str(e))
 
-    from pressor.hil_sim.patients.patient_model import PatientModelError, check_model_for_scenario
+    import dataclasses
+
+    from pressor.hil_sim.patients.patient_model import (
+        PatientModelError,
+        check_model_for_scenario,
+        check_syringe,
+    )
     from pressor.hil_sim.patients.sensitivity import with_sensitivity
     from pressor.hil_sim.scenarios.scenario import ScenarioError, load_scenario
     from pressor.hil_sim.trials.paired import compare_controllers, format_comparison
@@ -212,6 +278,10 @@ def _trial(argv: Sequence[str]) -> int:
     period = 1.0 / args.rate
     try:
         scenario = load_scenario(args.scenario)
+        if args.duration is not None:
+            scenario = dataclasses.replace(scenario, duration_s=args.duration)
+        if args.target_mmhg is not None:
+            scenario = dataclasses.replace(scenario, target_mmhg=args.target_mmhg)
         patient_model = with_sensitivity(args.patient_model, args.sensitivity)
         check_model_for_scenario(patient_model, scenario.name, scenario.frozen is not None)
     except (ScenarioError, PatientModelError) as exc:
@@ -221,10 +291,14 @@ def _trial(argv: Sequence[str]) -> int:
         raise UsageError(
             f"field '--controller' = {args.controller!r}: name each controller once, comma-separated"
         )
+    drugs = {}
     for spec in specs:
         try:
-            load_controller(spec, period)
-        except ControllerSpecError as exc:
+            controller = load_controller(spec, period)
+            drugs[spec] = check_syringe(
+                controller, spec, args.patient_model, args.drug, args.concentration_ug_ml
+            )
+        except (ControllerSpecError, PatientModelError) as exc:
             raise UsageError(str(exc)) from None
     folders = [controller_dir_name(spec) for spec in specs]
     if len(specs) > 1 and len(set(folders)) != len(folders):
@@ -252,6 +326,8 @@ def _trial(argv: Sequence[str]) -> int:
                 scheduler=args.scheduler,
                 schedule=args.schedule,
                 patient_model=patient_model,
+                drug=drugs[spec],
+                weight_kg=args.weight_kg,
             )
         except ControllerError as exc:  # a plugin that raised: one line, exit 1
             print(f"pressor trial: {exc}", file=sys.stderr)

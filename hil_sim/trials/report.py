@@ -110,6 +110,13 @@ def envelope_figure(
         ax_map.axhline(band, color="k", linestyle=":", linewidth=0.8, zorder=2)
     ax_map.set_ylabel("true MAP − target (mmHg)")
     ax_rate.set_ylabel("infusion delivered (ml/h)")
+    per_ml_h = _dose_per_ml_h(records)
+    if per_ml_h is not None:  # the same infusion in µg/kg/min on the right-hand axis
+        factor, label = per_ml_h
+        dose = ax_rate.secondary_yaxis(
+            "right", functions=(lambda r: r * factor, lambda d: d / factor)
+        )
+        dose.set_ylabel(label)
     ax_rate.set_xlabel("time (min)")
     if ax_map.get_lines()[0].get_label().endswith("p10–p90)"):
         ax_map.legend(loc="lower right", fontsize=8)
@@ -118,6 +125,64 @@ def envelope_figure(
     ax_map.set_title(f"MAP and infusion, reachable patients ({'; '.join(counts)})")
     fig.tight_layout()
     return fig
+
+
+def _dose_per_ml_h(records: Mapping[str, Sequence[Mapping[str, Any]]]) -> tuple[float, str] | None:
+    """µg/kg/min per ml/h of the records' syringe and weight, and the dose axis' label; ``None``
+    when the records carry no ``infusion`` or their controllers' syringes differ."""
+    seen = {
+        (r["infusion"]["drug"], r["infusion"]["concentration_ug_ml"], r["infusion"]["weight_kg"])
+        for recs in records.values()
+        for r in recs
+        if "infusion" in r
+    }
+    if len(seen) != 1:
+        return None
+    drug, c, w = seen.pop()
+    return c / (60.0 * w), f"dose (µg/kg/min; {drug} {c:g} µg/ml, {w:g} kg)"
+
+
+def infusion_section(records: Mapping[str, Sequence[Mapping[str, Any]]]) -> str:
+    """The report's "Infusion" section: per controller the drug, syringe and weight (a reference
+    weight said as such) and the median over every patient of the mean and peak infusion in ml/h
+    and µg/kg/min; ``""`` when the records carry no ``infusion``."""
+    from pressor.hil_sim.trials.trial import infusion_summary
+
+    heads = (
+        "controller",
+        "drug",
+        "syringe (µg/ml)",
+        "weight (kg)",
+        "mean rate (ml/h)",
+        "mean dose (µg/kg/min)",
+        "peak rate (ml/h)",
+        "peak dose (µg/kg/min)",
+    )
+    rows = []
+    for name, recs in records.items():
+        inf = infusion_summary(recs)
+        if inf is None:
+            continue
+        weight = f"{inf['weight_kg']:g}" + ("" if inf["weight_given"] else " (reference)")
+        cells = [name, inf["drug"], f"{inf['concentration_ug_ml']:g}", weight] + [
+            "-" if inf[f"median_{k}"] is None else f"{inf[f'median_{k}']:.3g}"
+            for k in (
+                "mean_rate_ml_h",
+                "mean_dose_ug_kg_min",
+                "peak_rate_ml_h",
+                "peak_dose_ug_kg_min",
+            )
+        ]
+        rows.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
+    if not rows:
+        return ""
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in heads)
+    return (
+        "<h2>Infusion (median over all patients)</h2><p>The mean rate is the drug given over the"
+        " run; doses in µg/kg/min are per the weight shown (the 70 kg reference adult the patient"
+        " models count when no weight was given).</p>"
+        f"<table><tr>{head}</tr>{''.join(rows)}</table>"
+    )
 
 
 def distribution_figure(records: Mapping[str, Sequence[Mapping[str, Any]]]) -> Any:
@@ -262,6 +327,9 @@ def write_report(
     if len(records) > 1:
         figures.append(_paired_figure(records))
     body = [f"<h1>{html.escape(title)}</h1>", patients_section(records)]
+    infusion = infusion_section(records)
+    if infusion:
+        body.append(infusion)
     if comparison:
         body += [
             "<h2>Paired comparison (patients reachable under both)</h2>",
