@@ -458,11 +458,14 @@ def finish(
     config: RunConfig,
     prog: str = "pressor",
     drug: Any = None,
+    weight_kg: float | None = None,
 ) -> int:
     """Print the summary, write the ``--summary`` / ``--timing`` files; return the exit code.
 
     ``drug`` is the design's :class:`pressor.contracts.drug.DrugBinding` for the printed doses
-    when the summary names no syringe (``pressor sil``; ``None``: the shipped designs').
+    when the summary names no syringe (``pressor sil``; ``None``: the shipped designs');
+    ``weight_kg`` the patient's weight (kg) for the doses per kg when the run's clinician input
+    has none (``pressor sil --weight-kg``).
 
     Returns
     -------
@@ -489,7 +492,7 @@ def finish(
             "host": result.host,
         }
         lost += _write_output("timing", config.timing, status, written)
-    weight = None if config.clinician is None else config.clinician.weight_kg
+    weight = weight_kg if config.clinician is None else config.clinician.weight_kg
     context = run_context(summary, result, drug, weight)
     print_summary(
         summary, result.timing, context=context, sched_advise=config.sched_faults != "hold"
