@@ -388,7 +388,7 @@ def run_sil(config: SilConfig) -> tuple[dict[str, Any], Any]:
                 on_tick=progress if progress.enabled else None,
                 before_close=None
                 if truth_file is None
-                else lambda rec: _add_truth(rec, proc, truth_file),
+                else lambda rec: _add_truth(rec, proc, truth_file, config.drug, config.weight_kg),
                 noisy_band=config.noisy,
             )
         except Interrupted:
@@ -427,10 +427,20 @@ def _key_pipe(signing: Any) -> int:
     return read_fd
 
 
-def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:
-    """Add the device's true MAP to the recording once the device has ended and written it
-    (``pressor device --truth-out``); a device that did not write it leaves the series out."""
-    from pressor.hil_sim.patients.truth import load_truth
+def _add_truth(
+    recorder: Any,
+    proc: subprocess.Popen,
+    truth_file: Path,
+    drug: DrugBinding = DEFAULT_BINDING,
+    weight_kg: float | None = None,
+) -> None:
+    """Add the device's true MAP, and the dose its pump delivered in µg/min and µg/kg/min (of
+    ``drug``'s syringe, per ``weight_kg`` or the 70 kg reference adult), to the recording once the
+    device has ended and written them (``pressor device --truth-out``); a device that did not
+    write them leaves the series out."""
+    from pressor.contracts.drug import REFERENCE_WEIGHT_KG
+    from pressor.hil_sim.patients.truth import load_truth, load_truth_rate
+    from pressor.runtime.record.blueprint import DELIVERED_DOSE_ENTITIES
 
     try:
         proc.wait(timeout=10.0)
@@ -439,6 +449,23 @@ def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:
     if truth_file.is_file():
         ticks, times_s, map_true = load_truth(truth_file)
         recorder.log_series("/patient/map_true_mmhg", "MAP true (mmHg)", ticks, times_s, map_true)
+        rate = load_truth_rate(truth_file)
+        if rate is not None:
+            c = drug.concentration_ug_ml
+            w = REFERENCE_WEIGHT_KG if weight_kg is None else weight_kg
+            per = f"{w:g} kg" if weight_kg is not None else f"{w:g} kg reference"
+            per_min, per_kg = DELIVERED_DOSE_ENTITIES
+            label = f"{drug.name} {c:g} ug/ml"
+            recorder.log_series(
+                per_min, f"dose delivered (ug/min, {label})", ticks, times_s, rate * c / 60.0
+            )
+            recorder.log_series(
+                per_kg,
+                f"dose delivered (ug/kg/min, {per})",
+                ticks,
+                times_s,
+                rate * c / (60.0 * w),
+            )
 
 
 def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:

@@ -85,3 +85,27 @@ def test_a_sil_run_holds_the_absolute_target_and_gives_doses_per_kg_of_the_weigh
     assert peak_dose == pytest.approx(peak_ml_h * 100.0 / (60 * 60), abs=0.01)
     summary = json.loads((tmp_path / "s.json").read_text())
     assert (summary["target_mmhg"], summary["weight_kg"]) == (80.0, 60.0)
+
+
+def test_the_recording_shows_the_delivered_dose_per_kg_beside_the_infusion(tmp_path):
+    from tests.runtime.record.test_blueprint import blueprint_rows, views
+    from tests.support.sil_helpers import rrd_columns
+
+    proc = _sil(
+        "--controller", "pi", "--duration", "20", "--weight-kg", "50", "--rrd", "r.rrd",
+        "--no-signing", cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    cols = rrd_columns(tmp_path / "r.rrd")
+    rate, per_kg = cols["/pump/rate_ml_h"], cols["/dose/delivered_ug_kg_min"]
+    assert max(per_kg.values()) > 0.0
+    # the dose at each tick is the rate the pump reported at that tick, in the syringe's units
+    for k in range(1, 200, 37):
+        assert per_kg[k] == pytest.approx(rate[k] * 100.0 / (60.0 * 50.0), rel=1e-6)
+        assert cols["/dose/delivered_ug_min"][k] == pytest.approx(rate[k] * 100.0 / 60.0, rel=1e-6)
+    v = views(blueprint_rows(tmp_path / "r.rrd"))
+    assert v["Dose delivered (ug/min, ug/kg/min)"]["contents"] == [
+        "/dose/delivered_ug_min",
+        "/dose/delivered_ug_kg_min",
+    ]
+    assert "Infusion (ml/h)" in v
