@@ -53,6 +53,7 @@ from pressor.contracts.drug import DrugBinding
 from pressor.hil_sim.episode import Trajectory
 from pressor.hil_sim.patients.patient_model import (
     DEFAULT_PATIENT_MODEL,
+    PATIENT_MODELS,
     check_model_for_scenario,
     check_syringe,
 )
@@ -282,6 +283,11 @@ def controller_spec(controller: str | type, args: Mapping[str, Any] | None = Non
     ValueError
         ``args`` with a string spec, or a value that does not survive the spec's text.
     """
+    if not isinstance(controller, str | type):
+        raise ValueError(
+            f"controller = {controller!r}: allowed a controller spec (str: 'lpv', 'pi',"
+            " 'smith:45', a generated module's path, 'MODULE:CLASS[:ARGS]') or a controller class"
+        )
     if isinstance(controller, str):
         if args:
             raise ValueError("controller_args: give them in the spec (MODULE:CLASS:key=value,...)")
@@ -433,6 +439,11 @@ def _checked(
 def _with_sensitivity(patient_model: str, sensitivity: float) -> str:
     """:func:`pressor.hil_sim.patients.sensitivity.with_sensitivity`, its errors naming the API's
     arguments (``patient_model``, ``sensitivity``)."""
+    if not isinstance(patient_model, str):
+        raise ValueError(
+            f"patient_model = {patient_model!r}: allowed a model name (str: one of"
+            f" {', '.join(PATIENT_MODELS)}) or 'MODULE:CLASS'"
+        )
     with _in_api_terms():
         return with_sensitivity(patient_model, sensitivity)
 
@@ -491,8 +502,7 @@ def simulate(
     -------
     SimulationResult
     """
-    if not 0 <= patient_seed < 2**63:
-        raise ValueError(f"patient_seed = {patient_seed!r}: allowed [0, 2**63)")
+    check_int_range("patient_seed", patient_seed, 0, 2**63 - 1)
     patient_model = _with_sensitivity(patient_model, sensitivity)
     clinical = _Clinical(target_mmhg, drug, concentration_ug_ml, weight_kg)
     spec, sc, period_s, binding = _checked(

@@ -100,6 +100,24 @@ def test_api_errors_name_the_api_argument_value_and_range(kwargs, start, short_s
         assert str(info.value).startswith(start), str(info.value)
 
 
+@pytest.mark.parametrize(
+    ("call", "start"),
+    [
+        (lambda sc: api.simulate(123, sc), "controller = 123: allowed a controller spec (str"),
+        (lambda sc: api.trial(None, sc, n_patients=1), "controller = None: allowed a controller"),
+        (lambda sc: api.compare([1, 2], sc, n_patients=1), "controller = 1: allowed a controller"),
+        (lambda sc: api.simulate("pi", sc, patient_seed="x"), "patient_seed = 'x': must be an"),
+        (lambda sc: api.simulate("pi", sc, patient_model=3), "patient_model = 3: allowed a model"),
+    ],
+)
+def test_a_value_of_the_wrong_type_is_a_value_error_naming_the_argument(
+    call, start, short_scenario
+):
+    with pytest.raises(ValueError) as info:
+        call(short_scenario)
+    assert str(info.value).startswith(start), str(info.value)
+
+
 def test_an_unusable_scheduler_is_named_as_the_api_argument(short_scenario):
     with pytest.raises(BackendError, match=r"^scheduler 'bogus://x': not a Dask scheduler address"):
         api.trial("pi", short_scenario, n_patients=1, scheduler="bogus://x")
