@@ -22,6 +22,29 @@ from typing import Any
 from pressor.contracts.checks import check_int_range, check_range
 from pressor.hil_sim.patients.patient_model import add_patient_model_option
 from pressor.plumbing.usage import UsageError, UsageParser, run_command, usage_exit
+from pressor.runtime.inputs.clinician import add_syringe_options, add_target_option
+from pressor.runtime.inputs.dosing import add_weight_option
+
+#: longest simulated time per patient (s), as :func:`pressor.api.trial`'s ``duration_s``
+MAX_DURATION_S = 7 * 86400.0
+MIN_DURATION_S = 1.0
+#: what the trial's clinical options mean
+TRIAL_TARGET_HELP = (
+    "an absolute MAP target (mmHg, {rng}) for every patient from the scenario's step time on, in"
+    " place of the scenario's step above each patient's baseline (default: the scenario's step)"
+)
+TRIAL_DRUG_HELP = (
+    "drug in the syringe: must be the design's (a drug-agnostic baseline, pi or smith: the"
+    " patient model's); recorded with every patient (default: that drug)"
+)
+TRIAL_CONCENTRATION_HELP = (
+    "syringe concentration (ug/ml): must be the one whose ml/h the design counts (a baseline:"
+    " the patient model's); the doses in ug/kg/min are converted with it (default: that one)"
+)
+TRIAL_WEIGHT_HELP = (
+    "the patients' weight (kg, {rng}): the records' and the table's doses in ug/kg/min are per"
+    " this weight (default: the 70 kg reference adult the patient models count, said so)"
+)
 
 
 def _scenarios(argv: Sequence[str]) -> int:
@@ -53,52 +76,94 @@ def _scenarios(argv: Sequence[str]) -> int:
 def _fmt(v: Any) -> str:
     if v is None:
         return "-"
-    return f"{v:.4g}" if abs(v) < 1e4 else f"{v:.0f}"
+    text = f"{v:.4g}" if abs(v) < 1e4 else f"{v:.0f}"
+    return text[1:] if text.startswith("-") and float(text) == 0.0 else text
 
 
 def format_table(summary: dict[str, Any]) -> str:
-    """The terminal table: median and the bad 10 % tail of every metric, reachable patients first.
+    """The terminal table: median and the bad 10 % tail of every metric, reachable patients first,
+    each metric named in words with its unit (:func:`pressor.contracts.metrics.labels.label`).
 
-    The tail is p90 for errors and times and p10 where higher is better (time in band).
+    The tail is p90 for errors and times and p10 where higher is better (time in band). A ``-`` is
+    a figure no patient has (``null`` counts the patients without it: docs/METRICS.md, "null
+    when").
     """
     from pressor.contracts.metrics import HIGHER_IS_BETTER, RUN_METRICS
+    from pressor.contracts.metrics.labels import label
 
     m = summary["metrics"]
-    model = f" patient_model={summary['patient_model']}" if "patient_model" in summary else ""
+    model = f", patient model {summary['patient_model']}" if "patient_model" in summary else ""
+    if "target_mmhg" in summary:
+        model += f", target {summary['target_mmhg']:g} mmHg (absolute)"
+    width = max(len(label(k)) for k in RUN_METRICS) + 1
     lines = [
-        f"trial: controller={summary['controller']} scenario={summary['scenario']}{model}"
-        f" seed={summary['cohort_seed']} patients={summary['n_patients']}"
-        f" (reachable {m['n_reachable']}, unreachable {m['n_unreachable']},"
-        f" unstable {m['n_unstable']})",
-        f"{'metric':<24}{'median':>10}{'worst 10%':>10}{'n':>5}{'null':>5}"
-        f" | {'unreach. median':>15}{'worst 10%':>10}",
+        f"trial: controller {summary['controller']}, scenario {summary['scenario']}{model},"
+        f" cohort seed {summary['cohort_seed']}, {summary['n_patients']} patients:"
+        f" {m['n_reachable']} reachable, {m['n_unreachable']} unreachable (listed below),"
+        f" {m['n_unstable']} unstable",
+        f"{'reachable patients':<{width}}{'median':>10}{'worst 10%':>10}{'n':>5}{'null':>5}"
+        f" | {'unreachable: median':>19}{'worst 10%':>10}",
     ]
     for key in RUN_METRICS:
         r = m["reachable"][key]
         u = m["unreachable"][key]
         tail = "p10" if key in HIGHER_IS_BETTER else "p90"
         lines.append(
-            f"{key:<24}{_fmt(r['median']):>10}{_fmt(r[tail]):>10}{r['n']:>5}{r['n_null']:>5}"
-            f" | {_fmt(u['median']):>15}{_fmt(u[tail]):>10}"
+            f"{label(key):<{width}}{_fmt(r['median']):>10}{_fmt(r[tail]):>10}{r['n']:>5}"
+            f"{r['n_null']:>5} | {_fmt(u['median']):>19}{_fmt(u[tail]):>10}"
         )
-    for label, d in m["disturbances"].items():
-        lines.append(f"{label} at {_fmt(d['start_s'])} s (reachable patients):")
+    for name, d in m["disturbances"].items():
+        lines.append(f"{name} at {_fmt(d['start_s'])} s (reachable patients):")
         for key in ("peak_abs_deviation_mmhg", "recovery_s", "iae_mmhg_s"):
             r = d[key]
             lines.append(
-                f"  {key:<22}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}{r['n']:>5}{r['n_null']:>5}"
+                f"  {label(key):<{width - 2}}{_fmt(r['median']):>10}{_fmt(r['p90']):>10}"
+                f"{r['n']:>5}{r['n_null']:>5}"
             )
+    if "infusion" in summary:
+        lines.append(format_infusion(summary["infusion"]))
     if "estimation" in summary:
         e = summary["estimation"]
         lines.append(
             f"schedule {summary['schedule']}: median second-half error K {_fmt(e['K_rel_err_pct'])} %,"
             f" T {_fmt(e['T_rel_err_pct'])} %, tau {_fmt(e['tau_abs_err_s'])} s"
         )
-    if summary["unreachable_patient_seeds"]:
-        lines.append(f"unreachable patient seeds: {summary['unreachable_patient_seeds']}")
     if summary["unstable_patient_seeds"]:
-        lines.append(f"unstable patient seeds: {summary['unstable_patient_seeds']}")
+        lines.append(
+            "unstable (MAP not finite, or still swinging across the band in the last quarter):"
+            f" patients {', '.join(str(x) for x in summary['unstable_patient_seeds'])}"
+        )
     return "\n".join(lines)
+
+
+def format_infusion(infusion: dict[str, Any]) -> str:
+    """The table's infusion line: the drug and syringe, the weight (the reference adult said as
+    such) and the median over every patient of the mean and peak rate, in ml/h and µg/kg/min."""
+    w = infusion["weight_kg"]
+    weight = (
+        f"weight {w:g} kg"
+        if infusion["weight_given"]
+        else f"per kg at a {w:g} kg reference weight (no --weight-kg)"
+    )
+
+    def both(key: str) -> str:
+        rate, dose = infusion[f"median_{key}_rate_ml_h"], infusion[f"median_{key}_dose_ug_kg_min"]
+        return f"{_fmt(rate)} ml/h = {_fmt(dose)} µg/kg/min"
+
+    return (
+        f"infusion (median over all patients): mean {both('mean')}, peak {both('peak')};"
+        f" {infusion['drug']} {infusion['concentration_ug_ml']:g} µg/ml, {weight}"
+    )
+
+
+def format_unreachable(records: list[dict[str, Any]]) -> str:
+    """What "unreachable" means and each unreachable patient with why; ``""`` for none."""
+    from pressor.hil_sim.trials.words import UNREACHABLE_MEANS, unreachable_lines
+
+    lines = unreachable_lines(records)
+    if not lines:
+        return ""
+    return "\n".join([f"{UNREACHABLE_MEANS}:", *(f"  {line}" for line in lines)])
 
 
 def _progress_bar(done: int, total: int) -> None:
@@ -120,13 +185,15 @@ def _trial(argv: Sequence[str]) -> int:
         SCHEDULE_DEFAULT_HELP,
         SCHEDULE_HELP,
     )
+    from pressor.runtime.inputs.controller_loader import shipped_specs
     from pressor.runtime.inputs.defaults import DEFAULT_SCENARIO
 
     p = UsageParser(prog="pressor trial", description="in-silico cohort trial of a controller")
     p.add_argument(
         "--controller",
         default=None,
-        help=f"{CONTROLLER_DEFAULT_HELP}; pi | smith[:LAMBDA_S] (Smith predictor, lambda 30 s) | lpv | PATH to a generated "
+        help=f"{CONTROLLER_DEFAULT_HELP}; a shipped controller: {' | '.join(shipped_specs())}"
+        " (pressor designs lists them; smith: Smith predictor, lambda 30 s) | PATH to a generated "
         "module | a plugin class MODULE:CLASS[:ARGS] or FILE.py:CLASS[:ARGS] or an installed "
         "'pressor.controllers' entry point NAME[:ARGS] (ARGS: key=value,...); several, "
         "comma-separated (lpv,pi,smith), run the same cohort under each and compare them per "
@@ -170,6 +237,17 @@ def _trial(argv: Sequence[str]) -> int:
         " (default: %(default)g)",
     )
     p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help=f"simulated time per patient (s, allowed [{MIN_DURATION_S:g}, {MAX_DURATION_S:g}];"
+        " default: the scenario's duration_s)",
+    )
+    add_target_option(p, TRIAL_TARGET_HELP)
+    add_syringe_options(p, TRIAL_DRUG_HELP, TRIAL_CONCENTRATION_HELP)
+    add_weight_option(p, TRIAL_WEIGHT_HELP)
+    p.add_argument(
         "--out",
         required=True,
         type=Path,
@@ -183,10 +261,18 @@ def _trial(argv: Sequence[str]) -> int:
         check_int_range("--jobs", args.jobs, 1, 64)
         check_range("--rate", args.rate, 0.1, 1000.0, unit="Hz")
         check_range("--sensitivity", args.sensitivity, 0.05, 20.0, unit="(dimensionless)")
+        if args.duration is not None:
+            check_range("--duration", args.duration, MIN_DURATION_S, MAX_DURATION_S, unit="s")
     except ValueError as e:
         p.error(str(e))
 
-    from pressor.hil_sim.patients.patient_model import PatientModelError, check_model_for_scenario
+    import dataclasses
+
+    from pressor.hil_sim.patients.patient_model import (
+        PatientModelError,
+        check_model_for_scenario,
+        check_syringe,
+    )
     from pressor.hil_sim.patients.sensitivity import with_sensitivity
     from pressor.hil_sim.scenarios.scenario import ScenarioError, load_scenario
     from pressor.hil_sim.trials.paired import compare_controllers, format_comparison
@@ -202,6 +288,10 @@ def _trial(argv: Sequence[str]) -> int:
     period = 1.0 / args.rate
     try:
         scenario = load_scenario(args.scenario)
+        if args.duration is not None:
+            scenario = dataclasses.replace(scenario, duration_s=args.duration)
+        if args.target_mmhg is not None:
+            scenario = dataclasses.replace(scenario, target_mmhg=args.target_mmhg)
         patient_model = with_sensitivity(args.patient_model, args.sensitivity)
         check_model_for_scenario(patient_model, scenario.name, scenario.frozen is not None)
     except (ScenarioError, PatientModelError) as exc:
@@ -210,19 +300,32 @@ def _trial(argv: Sequence[str]) -> int:
         from pressor.hil_sim.patients.patient_model import model_drug
         from pressor.runtime.inputs.defaults import default_controller
 
-        args.controller = default_controller(model_drug(args.patient_model))
+        drug = model_drug(args.patient_model)
+        args.controller = default_controller(None if drug is None else drug.name)
     specs = split_controller_list(args.controller)
     if "" in specs or len(set(specs)) != len(specs):
         raise UsageError(
             f"field '--controller' = {args.controller!r}: name each controller once, comma-separated"
         )
+    drugs = {}
     schedules: dict[str, str] = {}
     for spec in specs:
         try:
             controller = load_controller(spec, period)
-        except ControllerSpecError as exc:
+            drugs[spec] = check_syringe(
+                controller, spec, args.patient_model, args.drug, args.concentration_ug_ml
+            )
+        except (ControllerSpecError, PatientModelError) as exc:
             raise UsageError(str(exc)) from None
         schedules[spec] = args.schedule or default_schedule(controller)
+    folders = [controller_dir_name(spec) for spec in specs]
+    if len(specs) > 1 and len(set(folders)) != len(folders):
+        dup = next(f for f in folders if folders.count(f) > 1)
+        same = [spec for spec, f in zip(specs, folders, strict=True) if f == dup]
+        raise UsageError(
+            f"field '--controller': {' and '.join(same)} would write the same folder {dup!r}"
+            " under --out; rename one file or class"
+        )
     _remove_stale_outputs(args.out)
     records: dict[str, list[dict[str, Any]]] = {}
     trajectories: dict[str, dict[str, Any]] = {}
@@ -241,6 +344,8 @@ def _trial(argv: Sequence[str]) -> int:
                 scheduler=args.scheduler,
                 schedule=schedules[spec],
                 patient_model=patient_model,
+                drug=drugs[spec],
+                weight_kg=args.weight_kg,
             )
         except ControllerError as exc:  # a plugin that raised: one line, exit 1
             print(f"pressor trial: {exc}", file=sys.stderr)
@@ -251,6 +356,9 @@ def _trial(argv: Sequence[str]) -> int:
             trajectories[spec] = trajectory
         write_outputs(out, records[spec], summary)
         print(format_table(summary))
+        unreachable = format_unreachable(records[spec])
+        if unreachable:
+            print(unreachable)
         print(f"wrote {out / 'patients.json'}, {out / 'patients.csv'}, {out / 'summary.json'}")
     comparison = compare_controllers(records) if len(specs) > 1 else {}
     if comparison:

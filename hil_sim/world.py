@@ -159,9 +159,19 @@ class World:
         return self.tick * self.sample_period_s
 
     def target_at(self, t_s: float) -> float:
-        """The clinician's target (mmHg) at ``t_s``: baseline, then baseline + step from t0."""
+        """The clinician's target (mmHg) at ``t_s``: baseline, then baseline + step from t0 (the
+        scenario's absolute ``target_mmhg`` instead, when it has one)."""
         sc = self.scenario
-        return self.baseline_mmhg + (sc.step_mmhg if t_s >= sc.step_time_s - 1e-9 else 0.0)
+        if t_s < sc.step_time_s - 1e-9:
+            return self.baseline_mmhg
+        return self.baseline_mmhg + sc.step_mmhg if sc.target_mmhg is None else sc.target_mmhg
+
+    @property
+    def step_mmhg(self) -> float:
+        """This patient's target step (mmHg): the scenario's, or its absolute target minus this
+        patient's baseline."""
+        sc = self.scenario
+        return sc.step_mmhg if sc.target_mmhg is None else sc.target_mmhg - self.baseline_mmhg
 
     def true_map_mmhg(self) -> float:
         """True MAP now (mmHg): baseline + ΔMAP + disturbances."""
@@ -270,7 +280,8 @@ class World:
         from pressor.contracts.metrics import reachable_band_mmhg
 
         sc = self.scenario
-        band = reachable_band_mmhg(sc.step_mmhg if sc.step_mmhg != 0.0 else None, sc.noisy)
+        step = self.step_mmhg
+        band = reachable_band_mmhg(step if step != 0.0 else None, sc.noisy)
         top = sc.pump.max_rate_ml_h if max_rate_ml_h is None else max_rate_ml_h
         achievable = self.patient.max_delta_map_mmhg(top)
         return self.required_delta_mmhg() - band <= achievable

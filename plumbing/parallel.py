@@ -92,6 +92,11 @@ def _run_dask(
         ) from exc
     try:
         client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT_S)
+    except ValueError as exc:  # an address Dask cannot parse (an unknown scheme)
+        raise BackendError(
+            f"--scheduler {scheduler!r}: not a Dask scheduler address ({exc}); e.g."
+            " tcp://127.0.0.1:8786"
+        ) from exc
     except (OSError, TimeoutError) as exc:
         raise BackendError(
             f"--scheduler {scheduler!r}: no Dask scheduler answered within "

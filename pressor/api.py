@@ -49,10 +49,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pressor.contracts.checks import check_int_range, check_range
+from pressor.contracts.drug import DrugBinding
 from pressor.hil_sim.episode import Trajectory
 from pressor.hil_sim.patients.patient_model import (
     DEFAULT_PATIENT_MODEL,
+    PATIENT_MODELS,
     check_model_for_scenario,
+    check_syringe,
     model_drug,
 )
 from pressor.hil_sim.patients.sensitivity import with_sensitivity
@@ -62,12 +65,16 @@ from pressor.hil_sim.trials.trial import (
     _csv_text,
     _simulate_patient,
     controller_dir_name,
+    infusion_record,
     run_cohort,
     write_outputs,
 )
 from pressor.plumbing.files import write_atomic
+from pressor.plumbing.parallel import BackendError
+from pressor.runtime.core.closed_loop import ControllerError
 from pressor.runtime.core.supervisor_config import ALARM_FAULTS, State
 from pressor.runtime.estimation.sources import SOURCES
+from pressor.runtime.inputs.clinician import TARGET_MAX_MMHG, TARGET_MIN_MMHG
 from pressor.runtime.inputs.controller_loader import load_controller
 from pressor.runtime.inputs.controller_plugin import split_controller_list
 from pressor.runtime.inputs.defaults import DEFAULT_SCENARIO, default_controller, default_schedule
@@ -278,6 +285,11 @@ def controller_spec(controller: str | type, args: Mapping[str, Any] | None = Non
     ValueError
         ``args`` with a string spec, or a value that does not survive the spec's text.
     """
+    if not isinstance(controller, str | type):
+        raise ValueError(
+            f"controller = {controller!r}: allowed a controller spec (str: 'lpv', 'pi',"
+            " 'smith:45', a generated module's path, 'MODULE:CLASS[:ARGS]') or a controller class"
+        )
     if isinstance(controller, str):
         if args:
             raise ValueError("controller_args: give them in the spec (MODULE:CLASS:key=value,...)")
@@ -294,36 +306,96 @@ def controller_spec(controller: str | type, args: Mapping[str, Any] | None = Non
     return spec
 
 
-def _scenario(scenario: str | Path | Scenario, duration_s: float | None) -> Scenario:
+def _scenario(
+    scenario: str | Path | Scenario, duration_s: float | None, target_mmhg: float | None = None
+) -> Scenario:
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     if duration_s is not None:
         check_range("duration_s", duration_s, 1.0, 7 * 86400.0, unit="s")
         sc = dataclasses.replace(sc, duration_s=float(duration_s))
+    if target_mmhg is not None:
+        check_range("target_mmhg", target_mmhg, TARGET_MIN_MMHG, TARGET_MAX_MMHG, unit="mmHg")
+        sc = dataclasses.replace(sc, target_mmhg=float(target_mmhg))
     return sc
 
 
-#: command-line option -> the API's argument, for errors raised by the loaders both share
+@dataclass(frozen=True)
+class _Clinical:
+    """The API's clinical arguments: an absolute target (mmHg), the syringe's drug and
+    concentration (µg/ml) and the patients' weight (kg); ``None``: not given."""
+
+    target_mmhg: float | None = None
+    drug: str | None = None
+    concentration_ug_ml: float | None = None
+    weight_kg: float | None = None
+
+    def check(self) -> None:
+        """Each value in its range, errors naming the API's argument."""
+        from pressor.contracts.drug import MAX_CONCENTRATION_UG_ML
+        from pressor.runtime.inputs.clinician import parse_drug
+        from pressor.runtime.inputs.drug_library import WEIGHT_MAX_KG, WEIGHT_MIN_KG
+
+        if self.drug is not None:
+            if not isinstance(self.drug, str):
+                raise ValueError(f"drug = {self.drug!r}: allowed a drug name (str)")
+            try:
+                parse_drug(self.drug)
+            except ValueError as exc:
+                raise ValueError(f"drug {exc}") from None
+        if self.concentration_ug_ml is not None:
+            check_range(
+                "concentration_ug_ml",
+                self.concentration_ug_ml,
+                0.0,
+                MAX_CONCENTRATION_UG_ML,
+                lo_open=True,
+                unit="ug/ml",
+            )
+        if self.weight_kg is not None:
+            check_range("weight_kg", self.weight_kg, WEIGHT_MIN_KG, WEIGHT_MAX_KG, unit="kg")
+
+
+#: command-line option -> the API's argument, for errors raised by the code both share
 _API_NAMES = {
     "--controller": "controller",
     "--scenario": "scenario",
     "--patient-model": "patient_model",
+    "--scheduler": "scheduler",
 }
-_OPTION = re.compile(r"^(field ')?(--controller|--scenario|--patient-model)\b")
+_OPTION = re.compile(r"^(field ')?(--controller|--scenario|--patient-model|--scheduler)\b")
 
 
 @contextmanager
 def _in_api_terms() -> Iterator[None]:
-    """Re-raise a loader's :class:`ValueError` that names a command-line option (``--controller
-    'x': ...``) with the API's argument in its place (``controller 'x': ...``), same type."""
+    """Re-raise an error of the code the command line shares (a loader's :class:`ValueError`, a
+    :class:`pressor.plumbing.parallel.BackendError`, a
+    :class:`pressor.runtime.core.closed_loop.ControllerError`) that names a command-line option
+    (``--controller 'x': ...``) with the API's argument in its place (``controller 'x': ...``),
+    same type."""
     try:
         yield
-    except ValueError as exc:
+    except (ValueError, BackendError, ControllerError) as exc:
         text = str(exc)
         match = _OPTION.match(text)
         if match is None:
             raise
         renamed = (match.group(1) or "") + _API_NAMES[match.group(2)] + text[match.end() :]
         raise type(exc)(renamed) from None
+
+
+def _check_rate(rate_hz: float, sc: Scenario) -> float:
+    """The loop period (s) of ``rate_hz`` (Hz), which must be a whole multiple of the scenario's
+    patient step (as :class:`pressor.hil_sim.world.World` requires); errors name ``rate_hz``."""
+    check_range("rate_hz", rate_hz, 0.1, 1000.0, unit="Hz")
+    period_s = 1.0 / rate_hz
+    n_sub = round(period_s / sc.internal_step_s)
+    if n_sub < 1 or abs(n_sub * sc.internal_step_s - period_s) > 1e-9 * period_s:
+        raise ValueError(
+            f"rate_hz = {rate_hz!r}: its period {period_s:g} s must be a whole multiple of"
+            f" scenario {sc.name!r}'s patient step {sc.internal_step_s:g} s (e.g. rate_hz ="
+            f" {1.0 / sc.internal_step_s:g})"
+        )
+    return period_s
 
 
 def _checked(
@@ -334,28 +406,54 @@ def _checked(
     rate_hz: float,
     schedule: str | None,
     patient_model: str,
-) -> tuple[str, Scenario, float, str]:
-    """(spec, scenario, period s, schedule) after the checks ``pressor trial`` makes before it
-    runs, the defaults resolved as ``pressor trial`` resolves them (the patient model's drug's
-    design, its default schedule: :mod:`pressor.runtime.inputs.defaults`); errors name the API's
-    arguments (``controller``), not the command line's (``--controller``)."""
+    clinical: _Clinical = _Clinical(),
+) -> tuple[str, Scenario, float, str, DrugBinding]:
+    """(spec, scenario, period s, schedule, the run's drug and syringe) after the checks
+    ``pressor trial`` makes before it runs (a design meets only its drug:
+    :func:`pressor.hil_sim.patients.patient_model.check_syringe`), the defaults resolved as
+    ``pressor trial`` resolves them (the patient model's drug's design and that design's
+    schedule: :mod:`pressor.runtime.inputs.defaults`); errors name the API's arguments
+    (``controller``), not the command line's (``--controller``)."""
     check_range("rate_hz", rate_hz, 0.1, 1000.0, unit="Hz")
     if schedule is not None and schedule not in SOURCES:
         raise ValueError(f"schedule = {schedule!r}: allowed {', '.join(SOURCES)}")
     if controller is None:
-        controller = default_controller(model_drug(patient_model))
+        with _in_api_terms():
+            binding = model_drug(patient_model)
+        controller = default_controller(None if binding is None else binding.name)
     spec = controller_spec(controller, controller_args)
     if isinstance(controller, str) and len(split_controller_list(controller)) > 1:
         raise ValueError(
             f"controller = {controller!r} names several controllers: compare([...]) runs several"
             " on the same patients"
         )
+    clinical.check()
     with _in_api_terms():
-        sc = _scenario(scenario, duration_s)
+        sc = _scenario(scenario, duration_s, clinical.target_mmhg)
         check_model_for_scenario(patient_model, sc.name, sc.frozen is not None)
-        period_s = 1.0 / rate_hz
+        period_s = _check_rate(rate_hz, sc)
         loaded = load_controller(spec, period_s)  # fail fast, naming the spec
-    return spec, sc, period_s, schedule or default_schedule(loaded)
+        drug = check_syringe(
+            loaded,
+            spec,
+            patient_model,
+            None if clinical.drug is None else clinical.drug.strip().lower(),
+            clinical.concentration_ug_ml,
+            fields=("controller", "patient_model", "drug", "concentration_ug_ml"),
+        )
+    return spec, sc, period_s, schedule or default_schedule(loaded), drug
+
+
+def _with_sensitivity(patient_model: str, sensitivity: float) -> str:
+    """:func:`pressor.hil_sim.patients.sensitivity.with_sensitivity`, its errors naming the API's
+    arguments (``patient_model``, ``sensitivity``)."""
+    if not isinstance(patient_model, str):
+        raise ValueError(
+            f"patient_model = {patient_model!r}: allowed a model name (str: one of"
+            f" {', '.join(PATIENT_MODELS)}) or 'MODULE:CLASS'"
+        )
+    with _in_api_terms():
+        return with_sensitivity(patient_model, sensitivity)
 
 
 def simulate(
@@ -369,6 +467,10 @@ def simulate(
     schedule: str | None = None,
     patient_model: str = DEFAULT_PATIENT_MODEL,
     sensitivity: float = 1.0,
+    target_mmhg: float | None = None,
+    drug: str | None = None,
+    concentration_ug_ml: float | None = None,
+    weight_kg: float | None = None,
 ) -> SimulationResult:
     """Simulate one patient in process, as one patient of ``pressor trial``.
 
@@ -397,18 +499,37 @@ def simulate(
     sensitivity
         The patient's drug sensitivity × this factor (dimensionless, [0.05, 20];
         :mod:`pressor.hil_sim.patients.sensitivity`); 1 (default) runs the model as drawn, byte for byte.
+    target_mmhg
+        An absolute MAP target (mmHg, [50, 120]) from the scenario's step time on, in place of
+        the scenario's step above the patient's baseline; default the scenario's step.
+    drug, concentration_ug_ml
+        The syringe's drug and concentration (µg/ml), checked against the run's: the design's (a
+        drug-agnostic baseline, ``pi`` or ``smith``: the patient model's); a design for another
+        drug than the patient model's is refused naming both. Default: the run's.
+    weight_kg
+        The patient's weight (kg, [30, 250]) the record's doses in µg/kg/min are per; default
+        the 70 kg reference adult (the record's ``infusion.weight_given`` is then false).
 
     Returns
     -------
     SimulationResult
     """
-    if not 0 <= patient_seed < 2**63:
-        raise ValueError(f"patient_seed = {patient_seed!r}: allowed [0, 2**63)")
-    patient_model = with_sensitivity(patient_model, sensitivity)
-    spec, sc, period_s, schedule = _checked(
-        controller, controller_args, scenario, duration_s, rate_hz, schedule, patient_model
+    check_int_range("patient_seed", patient_seed, 0, 2**63 - 1)
+    patient_model = _with_sensitivity(patient_model, sensitivity)
+    clinical = _Clinical(target_mmhg, drug, concentration_ug_ml, weight_kg)
+    spec, sc, period_s, schedule, binding = _checked(
+        controller,
+        controller_args,
+        scenario,
+        duration_s,
+        rate_hz,
+        schedule,
+        patient_model,
+        clinical,
     )
-    record, traj = _simulate_patient(sc, spec, patient_seed, period_s, schedule, patient_model)
+    with _in_api_terms():  # a controller that raises: ControllerError naming `controller`
+        record, traj = _simulate_patient(sc, spec, patient_seed, period_s, schedule, patient_model)
+    record["infusion"] = infusion_record(record, binding, weight_kg, sc.duration_s)
     return SimulationResult(spec, sc.name, int(patient_seed), record, traj)
 
 
@@ -428,6 +549,10 @@ def trial(
     sensitivity: float = 1.0,
     trajectories: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    target_mmhg: float | None = None,
+    drug: str | None = None,
+    concentration_ug_ml: float | None = None,
+    weight_kg: float | None = None,
 ) -> TrialResult:
     """Run a cohort trial, as ``pressor trial`` does (same records for the same arguments).
 
@@ -456,6 +581,9 @@ def trial(
         Also keep every patient's trajectory at 1 Hz (:attr:`TrialResult.trajectories`).
     progress
         Called with ``(done, total)`` after each patient.
+    target_mmhg, drug, concentration_ug_ml, weight_kg
+        As :func:`simulate`, for every patient (``pressor trial --target-mmhg``, ``--drug``,
+        ``--concentration-ug-ml``, ``--weight-kg``).
 
     Returns
     -------
@@ -467,23 +595,34 @@ def trial(
         ("jobs", jobs, 1, 64),
     ):
         check_int_range(name, value, lo, hi)
-    patient_model = with_sensitivity(patient_model, sensitivity)
-    spec, sc, period_s, schedule = _checked(
-        controller, controller_args, scenario, duration_s, rate_hz, schedule, patient_model
+    patient_model = _with_sensitivity(patient_model, sensitivity)
+    clinical = _Clinical(target_mmhg, drug, concentration_ug_ml, weight_kg)
+    spec, sc, period_s, schedule, binding = _checked(
+        controller,
+        controller_args,
+        scenario,
+        duration_s,
+        rate_hz,
+        schedule,
+        patient_model,
+        clinical,
     )
-    records, summary, traj = run_cohort(
-        sc,
-        spec,
-        seed,
-        n_patients,
-        traced=trajectories,
-        jobs=jobs,
-        sample_period_s=period_s,
-        progress=progress,
-        scheduler=scheduler,
-        schedule=schedule,
-        patient_model=patient_model,
-    )
+    with _in_api_terms():  # an unusable scheduler, a controller that raises
+        records, summary, traj = run_cohort(
+            sc,
+            spec,
+            seed,
+            n_patients,
+            traced=trajectories,
+            jobs=jobs,
+            sample_period_s=period_s,
+            progress=progress,
+            scheduler=scheduler,
+            schedule=schedule,
+            patient_model=patient_model,
+            drug=binding,
+            weight_kg=weight_kg,
+        )
     return TrialResult(spec, sc.name, int(seed), n_patients, records, summary, traj)
 
 
@@ -502,6 +641,10 @@ def compare(
     sensitivity: float = 1.0,
     trajectories: bool = False,
     progress: Callable[[str, int, int], None] | None = None,
+    target_mmhg: float | None = None,
+    drug: str | None = None,
+    concentration_ug_ml: float | None = None,
+    weight_kg: float | None = None,
 ) -> ComparisonResult:
     """Run several controllers on the same patients and compare them in pairs, as ``pressor trial
     --controller A,B,...`` does (the same records and the same ``comparison.json``).
@@ -513,7 +656,7 @@ def compare(
         one comma-separated string of specs (``"lpv,pi"``); each named once. The first is compared
         with each of the others.
     scenario, n_patients, seed, jobs, scheduler, duration_s, rate_hz, schedule, patient_model, \
-sensitivity, trajectories
+sensitivity, trajectories, target_mmhg, drug, concentration_ug_ml, weight_kg
         As :func:`trial`, the same for every controller (``schedule`` None: each controller's
         default).
     progress
@@ -536,6 +679,7 @@ sensitivity, trajectories
             f"controllers = {specs!r}: name two or more controllers, each once (one controller:"
             " trial())"
         )
+    clinical = _Clinical(target_mmhg, drug, concentration_ug_ml, weight_kg)
     for spec in specs:  # every controller checked before any runs
         _checked(
             spec,
@@ -544,7 +688,8 @@ sensitivity, trajectories
             duration_s,
             rate_hz,
             schedule,
-            with_sensitivity(patient_model, sensitivity),
+            _with_sensitivity(patient_model, sensitivity),
+            clinical,
         )
     trials: dict[str, TrialResult] = {}
     for spec in specs:
@@ -562,6 +707,10 @@ sensitivity, trajectories
             sensitivity=sensitivity,
             trajectories=trajectories,
             progress=None if progress is None else (lambda d, t, s=spec: progress(s, d, t)),
+            target_mmhg=target_mmhg,
+            drug=drug,
+            concentration_ug_ml=concentration_ug_ml,
+            weight_kg=weight_kg,
         )
     comparison = compare_controllers({spec: r.records for spec, r in trials.items()})
     first = trials[specs[0]]

@@ -32,6 +32,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "emit a standalone scheduled controller (python or C) from an artifact",
     ),
     "scenarios": ("pressor.hil_sim.cli", "list the named SIL scenarios"),
+    "patients": ("pressor.listing", "list the simulated patient models: drug, what, source"),
+    "designs": ("pressor.listing", "list the shipped controller designs and baselines"),
     "trial": ("pressor.hil_sim.cli", "in-silico cohort trial of a controller on seeded patients"),
     "device": (
         "pressor.hil_sim.devices.device",

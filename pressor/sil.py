@@ -47,16 +47,35 @@ from pressor.contracts.checks import check_int_range
 from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
 from pressor.hil_sim.patients.patient_model import add_patient_model_option
 from pressor.plumbing.usage import USAGE_EXIT, UsageError, UsageParser, parse_first
+from pressor.runtime.inputs.clinician import add_syringe_options, add_target_option
 from pressor.runtime.inputs.config import (
     RunConfig,
     add_run_options,
     positive,
-    resolve_controller,
     run_config,
 )
 from pressor.runtime.inputs.defaults import DEFAULT_SCENARIO
+from pressor.runtime.inputs.dosing import add_weight_option
 from pressor.runtime.shell.placement import CpuChoice, parse_lockstep_cpus
 
+#: what the clinical options mean for ``pressor sil``
+SIL_TARGET_HELP = (
+    "an absolute MAP target (mmHg, {rng}) the simulated device sends from the scenario's step"
+    " time on, in place of the scenario's step above the patient's baseline (default: the"
+    " scenario's step)"
+)
+SIL_DRUG_HELP = (
+    "drug in the syringe, which the simulated device announces: must be the loaded design's, and"
+    " the design must be for the patient model's drug (default: the design's)"
+)
+SIL_CONCENTRATION_HELP = (
+    "syringe concentration (ug/ml) the simulated device announces: must be the one whose ml/h"
+    " the design counts (default: the design's)"
+)
+SIL_WEIGHT_HELP = (
+    "the patient's weight (kg, {rng}): the summary's doses in ug/kg/min are per this weight"
+    " (default: a 70 kg reference adult, said so)"
+)
 DEFAULT_PATIENT_SEED = 1
 #: longest simulated run (s)
 MAX_DURATION_S = 7 * 86400.0
@@ -92,6 +111,12 @@ class SilConfig:
     drug
         The loaded design's drug and syringe (:func:`pressor.contracts.drug.binding_of`): the device is
         told to announce them (``--drug``, ``--concentration-ug-ml``).
+    target_mmhg
+        ``--target-mmhg``: an absolute target (mmHg) the device sends in place of the scenario's
+        step; ``None``: the scenario's step.
+    weight_kg
+        ``--weight-kg``: the patient's weight (kg) the summary's doses per kg are for; ``None``:
+        the 70 kg reference adult.
     """
 
     run: RunConfig
@@ -105,6 +130,8 @@ class SilConfig:
     noisy: bool
     patient_model: str = "paper"
     drug: DrugBinding = DEFAULT_BINDING
+    target_mmhg: float | None = None
+    weight_kg: float | None = None
 
 
 def _seed(text: str) -> int:
@@ -151,9 +178,12 @@ def sil_parser() -> UsageParser:
         action="store_true",
         help="the clinician's lines on stdin while running: 'stop' (0 ml/h now, held), 'manual"
         " RATE' (ml/h, held), 'resume' (back to automatic control), 'ack' (acknowledge an"
-        " alarm); the target stays the scenario's (default: off)",
+        " alarm); the target stays the device's, the scenario's or --target-mmhg (default: off)",
     )
     add_patient_model_option(p)
+    add_target_option(p, SIL_TARGET_HELP)
+    add_syringe_options(p, SIL_DRUG_HELP, SIL_CONCENTRATION_HELP)
+    add_weight_option(p, SIL_WEIGHT_HELP)
     return p
 
 
@@ -161,28 +191,44 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
     """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
     disturbance events (raises :class:`pressor.plumbing.usage.UsageError`)."""
     from pressor.contracts.drug import binding_of
-    from pressor.hil_sim.patients.patient_model import PatientModelError, check_model_for_scenario
+    from pressor.hil_sim.patients.patient_model import (
+        PatientModelError,
+        check_drug,
+        check_model_for_scenario,
+    )
     from pressor.hil_sim.scenarios.scenario import ScenarioError, is_scenario_path, load_scenario
     from pressor.hil_sim.trials.trial import scenario_events
     from pressor.runtime.inputs.config import load_controller
 
     args = sil_parser().parse_args(argv)
-    resolve_controller(args)
+    if args.controller is None:  # the design for the simulated patient's drug
+        from pressor.hil_sim.patients.patient_model import PatientModelError, model_drug
+        from pressor.runtime.inputs.defaults import default_controller
+
+        try:
+            binding = model_drug(args.patient_model)
+        except PatientModelError as exc:
+            raise UsageError(str(exc)) from None
+        args.controller = default_controller(None if binding is None else binding.name)
     if args.rrd is None:
         args.rrd = Path(
             f"pressor_sil_{_file_label(args.controller)}_{Path(args.scenario).stem}"
             f"_seed{args.patient_seed}.rrd"
         )
     run = replace(run_config(args), clinician_stdin=args.clinician_stdin)
+    controller = load_controller(args.controller, 1.0 / args.rate)
     try:
-        drug = binding_of(load_controller(args.controller, 1.0 / args.rate))
+        drug = binding_of(controller)
     except ValueError as exc:
         raise UsageError(f"--controller {args.controller}: {exc}") from None
     try:
         scenario = load_scenario(args.scenario)
         check_model_for_scenario(args.patient_model, scenario.name, scenario.frozen is not None)
+        # a design meets only its drug; the syringe given is the design's (pressor run's rule)
+        check_drug(controller, args.controller, args.patient_model)
     except (ScenarioError, PatientModelError) as exc:
         raise UsageError(str(exc)) from None
+    _check_syringe(args, drug)
     if args.link != "pty":
         raise UsageError(
             f"--link {args.link}: pressor sil starts the device on a pty it creates; for a device"
@@ -203,7 +249,23 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         noisy=scenario.noisy,
         patient_model=args.patient_model,
         drug=drug,
+        target_mmhg=args.target_mmhg,
+        weight_kg=args.weight_kg,
     )
+
+
+def _check_syringe(args: argparse.Namespace, drug: DrugBinding) -> None:
+    """Refuse a ``--drug`` or ``--concentration-ug-ml`` that is not the syringe the runtime end
+    binds the loaded controller to (``drug``; a drug-agnostic baseline: the shipped designs'),
+    naming both, as ``pressor run`` refuses one that is not the design's."""
+    import math
+
+    where = f"the loaded controller (--controller {args.controller}) runs on {drug.describe()}"
+    if args.drug is not None and args.drug != drug.name:
+        raise UsageError(f"--drug {args.drug}: {where}")
+    conc = args.concentration_ug_ml
+    if conc is not None and not math.isclose(conc, drug.concentration_ug_ml, rel_tol=1e-6):
+        raise UsageError(f"--concentration-ug-ml {conc:g}: {where}")
 
 
 def _file_label(spec: str) -> str:
@@ -256,6 +318,8 @@ def device_command(
     if config.drug != DEFAULT_BINDING:  # the default's command line is unchanged
         cmd += ["--drug", config.drug.name]
         cmd += ["--concentration-ug-ml", repr(config.drug.concentration_ug_ml)]
+    if config.target_mmhg is not None:
+        cmd += ["--target-mmhg", repr(config.target_mmhg)]
     return cmd
 
 
@@ -295,6 +359,10 @@ def run_sil(
         identity["signing_warnings"] = key_warnings
     if config.patient_model != "paper":  # the default's summaries keep their bytes
         identity["patient_model"] = config.patient_model
+    if config.target_mmhg is not None:
+        identity["target_mmhg"] = config.target_mmhg
+    if config.weight_kg is not None:
+        identity["weight_kg"] = config.weight_kg
     cpus = lockstep_cpus(config.cpu, run.realtime)
     start_run()  # from here a stop signal is graceful: the device and the pty are ours to end
     pair = PtyPair.open()
@@ -338,7 +406,7 @@ def run_sil(
                 on_tick=progress if progress.enabled else on_tick,
                 before_close=None
                 if truth_file is None
-                else lambda rec: _add_truth(rec, proc, truth_file),
+                else lambda rec: _add_truth(rec, proc, truth_file, config.drug, config.weight_kg),
                 noisy_band=config.noisy,
             )
         except Interrupted:
@@ -380,10 +448,20 @@ def _key_pipe(signing: Any) -> int:
     return read_fd
 
 
-def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:
-    """Add the device's true MAP to the recording once the device has ended and written it
-    (``pressor device --truth-out``); a device that did not write it leaves the series out."""
-    from pressor.hil_sim.patients.truth import load_truth
+def _add_truth(
+    recorder: Any,
+    proc: subprocess.Popen,
+    truth_file: Path,
+    drug: DrugBinding = DEFAULT_BINDING,
+    weight_kg: float | None = None,
+) -> None:
+    """Add the device's true MAP, and the dose its pump delivered in µg/min and µg/kg/min (of
+    ``drug``'s syringe, per ``weight_kg`` or the 70 kg reference adult), to the recording once the
+    device has ended and written them (``pressor device --truth-out``); a device that did not
+    write them leaves the series out."""
+    from pressor.contracts.drug import REFERENCE_WEIGHT_KG
+    from pressor.hil_sim.patients.truth import load_truth, load_truth_rate
+    from pressor.runtime.record.blueprint import DELIVERED_DOSE_ENTITIES
 
     try:
         proc.wait(timeout=10.0)
@@ -392,6 +470,23 @@ def _add_truth(recorder: Any, proc: subprocess.Popen, truth_file: Path) -> None:
     if truth_file.is_file():
         ticks, times_s, map_true = load_truth(truth_file)
         recorder.log_series("/patient/map_true_mmhg", "MAP true (mmHg)", ticks, times_s, map_true)
+        rate = load_truth_rate(truth_file)
+        if rate is not None:
+            c = drug.concentration_ug_ml
+            w = REFERENCE_WEIGHT_KG if weight_kg is None else weight_kg
+            per = f"{w:g} kg" if weight_kg is not None else f"{w:g} kg reference"
+            per_min, per_kg = DELIVERED_DOSE_ENTITIES
+            label = f"{drug.name} {c:g} ug/ml"
+            recorder.log_series(
+                per_min, f"dose delivered (ug/min, {label})", ticks, times_s, rate * c / 60.0
+            )
+            recorder.log_series(
+                per_kg,
+                f"dose delivered (ug/kg/min, {per})",
+                ticks,
+                times_s,
+                rate * c / (60.0 * w),
+            )
 
 
 def _stop(proc: subprocess.Popen, grace_s: float = 2.0) -> int | None:
@@ -421,7 +516,9 @@ def _main(argv: Sequence[str]) -> int:
 
     config = sil_config(argv)
     summary, result = run_sil(config)
-    return finish(summary, result, config.run, "pressor sil")
+    return finish(
+        summary, result, config.run, "pressor sil", drug=config.drug, weight_kg=config.weight_kg
+    )
 
 
 def main(command: str, argv: list[str]) -> int:

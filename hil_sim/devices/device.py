@@ -311,7 +311,7 @@ def run_device(
         clock.t = world.sim_time_s
         obs = observe()
         if truth is not None:
-            truth.record(k, obs.sim_time_s, world.true_map_mmhg())
+            truth.record(k, obs.sim_time_s, world.true_map_mmhg(), world.pump.delivered_ml_h)
         if down is not None and _link_down_tick(ep, world, link_faults, k, obs, hello):
             if realtime:
                 _sleep_until(ep, t0 + (k + 1) * ts)

@@ -10,7 +10,12 @@ from typing import Any
 from pressor.contracts.controller import DESIGN_CONCENTRATION_UG_ML, DESIGN_DRUG
 from pressor.hil_sim.patients.patient_model import add_patient_model_option
 from pressor.plumbing.usage import UsageError, UsageParser
-from pressor.runtime.inputs.clinician import argtype, parse_concentration, parse_drug
+from pressor.runtime.inputs.clinician import (
+    add_target_option,
+    argtype,
+    parse_concentration,
+    parse_drug,
+)
 from pressor.runtime.shell.placement import parse_cpu
 
 #: default wall-clock timeouts (s)
@@ -109,14 +114,20 @@ def device_parser(command: str) -> UsageParser:
         help="write the simulated patient's true MAP per tick (mmHg) to FILE.npz when the device"
         " ends (default: none; pressor sil adds it to its recording)",
     )
+    add_target_option(
+        p,
+        "an absolute MAP target (mmHg, {rng}) sent as MAP_TARGET from the scenario's step time on,"
+        " in place of the scenario's step above the patient's baseline (default: the scenario's"
+        " step)",
+    )
     add_patient_model_option(p)
     return p
 
 
 def make_world(args: argparse.Namespace, faults: tuple = ()) -> Any:
     """The :class:`pressor.hil_sim.world.World` of the parsed options: ``--scenario``, ``--patient-seed``,
-    ``--rate`` (Hz), ``--patient-model``, and the pump's maximum replaced by ``--pump-max-ml-h``
-    (ml/h) if given; ``faults`` injected. Bad input raises :class:`UsageError` naming the option."""
+    ``--rate`` (Hz), ``--patient-model``, the pump's maximum replaced by ``--pump-max-ml-h``
+    (ml/h) and the target by ``--target-mmhg`` (mmHg, absolute) if given; ``faults`` injected. Bad input raises :class:`UsageError` naming the option."""
     from pressor.hil_sim.patients.patient_model import PatientModelError
     from pressor.hil_sim.scenarios.scenario import ScenarioError, load_scenario
     from pressor.hil_sim.world import World
@@ -130,6 +141,8 @@ def make_world(args: argparse.Namespace, faults: tuple = ()) -> Any:
             sc = replace(sc, pump=replace(sc.pump, max_rate_ml_h=args.pump_max_ml_h))
         except ValueError as exc:  # e.g. the scenario's safe rate above the new maximum
             raise UsageError(f"--pump-max-ml-h {args.pump_max_ml_h:g}: {exc}") from exc
+    if getattr(args, "target_mmhg", None) is not None:
+        sc = replace(sc, target_mmhg=args.target_mmhg)
     try:
         return World(sc, args.patient_seed, 1.0 / args.rate, faults, args.patient_model)
     except PatientModelError as exc:

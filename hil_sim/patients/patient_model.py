@@ -34,7 +34,9 @@ import functools
 import importlib
 import math
 from collections.abc import Mapping
-from typing import ClassVar, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+from pressor.contracts.drug import DrugBinding
 
 #: the model a run uses when none is named
 DEFAULT_PATIENT_MODEL = "paper"
@@ -46,12 +48,44 @@ PATIENT_MODELS: dict[str, str] = {
     "phenylephrine-2c": "pressor.hil_sim.patients.phenylephrine:Phenylephrine2C",
     "norepinephrine": "pressor.hil_sim.patients.norepinephrine:Norepinephrine1C",
 }
-#: name -> the drug whose infusion each shipped model answers (docs/PATIENTS.md)
-PATIENT_MODEL_DRUG: dict[str, str] = {
-    "paper": "phenylephrine",
-    "pkpd": "phenylephrine",
-    "phenylephrine-2c": "phenylephrine",
-    "norepinephrine": "norepinephrine",
+
+#: name -> (drug and syringe its ml/h count, what it is, its source) of every shipped model, for
+#: ``pressor patients`` (docs/PATIENTS.md gives the equations and ranges); a model added to
+#: :data:`PATIENT_MODELS` gets its line here (tests/hil_sim/patients/test_patient_model.py)
+PATIENT_MODEL_NOTES: dict[str, tuple[str, str, str]] = {
+    "paper": (
+        "phenylephrine",
+        "nonlinear first order plus time-varying delay, K, T, tau driven by the infusion",
+        "Tasoujian, Grigoriadis and Franchek, DSCC 2019 (Table 1)",
+    ),
+    "pkpd": (
+        "phenylephrine 100 µg/ml",
+        "two-compartment kinetics, effect site, sigmoid Emax, tachyphylaxis (a benchmark"
+        " population, not fitted values)",
+        "Hengstmann and Goronzy 1982; Sheiner et al. 1979; Porchet, Benowitz and Sheiner 1988",
+    ),
+    "phenylephrine-2c": (
+        "phenylephrine 100 µg/ml",
+        "label two-compartment kinetics, effect site, Emax, baroreflex-like counter-regulation",
+        "US label (FDA NDA 203826) after Hengstmann and Goronzy 1982; Su et al. 2023",
+    ),
+    "norepinephrine": (
+        "norepinephrine 16 µg/ml",
+        "one compartment with severity-dependent clearance, endogenous production, effect site,"
+        " Hill curve, turnover counter-regulation",
+        "Beloeil et al., Br J Anaesth 2005; Li et al., Clin Pharmacokinet 2024",
+    ),
+}
+
+#: name -> the drug and syringe (µg/ml) each shipped model is a patient of: its ml/h count that
+#: syringe's (docs/PATIENTS.md). A design meets only its drug (:func:`check_drug`); a model added to
+#: :data:`PATIENT_MODELS` gets its drug here (tests/hil_sim/patients/test_patient_model.py). A plugin
+#: model names its own with class attributes ``DRUG`` and ``DRUG_CONCENTRATION_UG_ML``.
+PATIENT_MODEL_DRUGS: dict[str, DrugBinding] = {
+    "paper": DrugBinding("phenylephrine", 100.0),
+    "pkpd": DrugBinding("phenylephrine", 100.0),
+    "phenylephrine-2c": DrugBinding("phenylephrine", 100.0),
+    "norepinephrine": DrugBinding("norepinephrine", 16.0),  # norepinephrine.CONCENTRATION_UG_ML
 }
 
 #: members a model class must have (methods, except the mapping ``coefficient_units``)
@@ -124,11 +158,6 @@ class PatientModel(Protocol):
 
 class PatientModelError(ValueError):
     """A ``--patient-model`` that cannot be used (the message names module, class and reason)."""
-
-
-def model_drug(spec: str) -> str | None:
-    """The drug of a registry model, also with a ``@sensitivity=F`` suffix (None for a plugin)."""
-    return PATIENT_MODEL_DRUG.get(spec.partition("@")[0])
 
 
 def model_spec(spec: str) -> tuple[str, str]:
@@ -248,3 +277,121 @@ def add_patient_model_option(parser: argparse.ArgumentParser) -> None:
 
 def _is_number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and not math.isnan(value)
+
+
+def model_drug(spec: str) -> DrugBinding | None:
+    """The drug and syringe the patients of ``spec`` (a registry name, ``MODULE:CLASS``, either
+    with ``@sensitivity=F``) are patients of: :data:`PATIENT_MODEL_DRUGS`, or a plugin class's
+    ``DRUG`` and ``DRUG_CONCENTRATION_UG_ML``; ``None`` for a plugin that names none.
+
+    Raises
+    ------
+    PatientModelError
+        A model that does not load (:func:`load_patient_model`), or a plugin's drug that is not
+        valid.
+    """
+    from pressor.hil_sim.patients.sensitivity import split_spec  # it imports this module
+
+    base = split_spec(spec)[0]
+    if base in PATIENT_MODEL_DRUGS:
+        return PATIENT_MODEL_DRUGS[base]
+    cls = load_patient_model(base)
+    if not hasattr(cls, "DRUG"):
+        return None
+    try:
+        return DrugBinding(str(cls.DRUG), float(getattr(cls, "DRUG_CONCENTRATION_UG_ML", math.nan)))
+    except ValueError as exc:
+        raise PatientModelError(f"--patient-model {spec!r}: {exc}") from None
+
+
+def check_drug(
+    controller: Any,
+    controller_spec: str,
+    patient_model: str,
+    *,
+    controller_field: str = "--controller",
+    model_field: str = "--patient-model",
+) -> DrugBinding:
+    """The drug and syringe a run of ``controller`` on ``patient_model``'s patients uses: a design
+    meets only its drug (:func:`pressor.contracts.drug.binding_of`); a drug-agnostic controller
+    (:func:`pressor.contracts.drug.drug_agnostic`: the PI and Smith baselines) takes the model's.
+
+    Parameters
+    ----------
+    controller
+        The loaded controller.
+    controller_spec, patient_model
+        What the caller named them (for the message).
+    controller_field, model_field
+        The caller's names of the two (``--controller`` on the command line, ``controller`` in
+        :mod:`pressor.api`).
+
+    Raises
+    ------
+    PatientModelError
+        One line naming both drugs, when the design's drug is not the model's.
+    """
+    from pressor.contracts.drug import DEFAULT_BINDING, binding_of, drug_agnostic
+
+    theirs = model_drug(patient_model)
+    if drug_agnostic(controller):
+        return DEFAULT_BINDING if theirs is None else theirs
+    ours = binding_of(controller)
+    if theirs is not None and theirs.name != ours.name:
+        raise PatientModelError(
+            f"{controller_field} {controller_spec}: a {ours.name} design ({ours.describe()})"
+            f" meets only {ours.name} patients, and {model_field} {patient_model} is a"
+            f" {theirs.name} patient ({theirs.describe()}); choose a {theirs.name} design"
+            " ('pressor designs' lists them) or a drug-agnostic baseline (pi, smith)"
+        )
+    return ours
+
+
+def check_syringe(
+    controller: Any,
+    controller_spec: str,
+    patient_model: str,
+    drug: str | None = None,
+    concentration_ug_ml: float | None = None,
+    *,
+    fields: tuple[str, str, str, str] = (
+        "--controller",
+        "--patient-model",
+        "--drug",
+        "--concentration-ug-ml",
+    ),
+) -> DrugBinding:
+    """:func:`check_drug`, then the clinician's ``drug`` and ``concentration_ug_ml`` (µg/ml; each
+    ``None`` when not given) checked against it: a simulated run's ml/h count the design's syringe
+    (a drug-agnostic controller: the patient model's), so another drug or syringe is refused
+    naming both, as ``pressor run`` refuses one that is not the design's.
+
+    Parameters
+    ----------
+    fields
+        The caller's names of the controller, the patient model, the drug and the concentration
+        (the command line's options by default; :mod:`pressor.api` passes its arguments' names).
+
+    Raises
+    ------
+    PatientModelError
+        One line naming the value given and the run's drug or syringe.
+    """
+    from pressor.contracts.drug import drug_agnostic
+
+    c_field, m_field, d_field, k_field = fields
+    binding = check_drug(
+        controller, controller_spec, patient_model, controller_field=c_field, model_field=m_field
+    )
+    whose = (
+        f"{m_field} {patient_model}'s patients count ml/h of"
+        if drug_agnostic(controller)
+        else f"the loaded design ({c_field} {controller_spec}) is for"
+    )
+    if drug is not None and drug != binding.name:
+        raise PatientModelError(f"{d_field} {drug}: {whose} {binding.describe()}")
+    if concentration_ug_ml is not None and not math.isclose(
+        concentration_ug_ml, binding.concentration_ug_ml, rel_tol=1e-6
+    ):
+        raise PatientModelError(f"{k_field} {concentration_ug_ml:g}: {whose} {binding.describe()}")
+    return binding

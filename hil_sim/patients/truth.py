@@ -3,7 +3,9 @@
 The runtime sees only what the monitor reports (noise, quantisation, faults); a simulated device
 also knows the MAP the monitor measured. ``pressor device --truth-out FILE.npz`` keeps it and
 writes it when the device ends (however it ends), and ``pressor sil`` adds it to the runtime's
-recording as ``/patient/map_true_mmhg``, so the viewer shows measured and true MAP together.
+recording as ``/patient/map_true_mmhg``, so the viewer shows measured and true MAP together. The
+pump's delivered rate at each tick is kept beside it (``rate_ml_h``): ``pressor sil`` turns it into
+the dose delivered in µg/min and µg/kg/min for the viewer's dose panel.
 Nothing of it crosses the link: the protocol stays what a real monitor can send.
 """
 
@@ -31,22 +33,32 @@ class TruthLog:
         self._ticks = np.zeros(n_ticks, dtype=np.int64)
         self._times = np.zeros(n_ticks, dtype=np.float64)
         self._map = np.zeros(n_ticks, dtype=np.float64)
+        self._rate = np.full(n_ticks, np.nan, dtype=np.float64)
         self._n = 0
 
-    def record(self, tick: int, sim_time_s: float, map_true_mmhg: float) -> None:
-        """Keep tick ``tick``'s true MAP (mmHg) at ``sim_time_s`` (s); ticks past the reserved
-        count are ignored."""
+    def record(
+        self, tick: int, sim_time_s: float, map_true_mmhg: float, rate_ml_h: float = np.nan
+    ) -> None:
+        """Keep tick ``tick``'s true MAP (mmHg) and the pump's delivered rate (ml/h) at
+        ``sim_time_s`` (s); ticks past the reserved count are ignored."""
         n = self._n
         if n < len(self._ticks):
             self._ticks[n], self._times[n], self._map[n] = tick, sim_time_s, map_true_mmhg
+            self._rate[n] = rate_ml_h
             self._n = n + 1
 
     def save(self, path: str | Path) -> None:
         """Write the ticks recorded so far as ``.npz`` (``tick``, ``sim_time_s``,
-        ``map_true_mmhg``), atomically."""
+        ``map_true_mmhg``, ``rate_ml_h``), atomically."""
         buf = io.BytesIO()
         n = self._n
-        np.savez(buf, tick=self._ticks[:n], sim_time_s=self._times[:n], map_true_mmhg=self._map[:n])
+        np.savez(
+            buf,
+            tick=self._ticks[:n],
+            sim_time_s=self._times[:n],
+            map_true_mmhg=self._map[:n],
+            rate_ml_h=self._rate[:n],
+        )
         write_atomic(Path(path), buf.getvalue())
 
 
@@ -54,3 +66,10 @@ def load_truth(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(tick, sim_time_s, map_true_mmhg)`` from a file :meth:`TruthLog.save` wrote."""
     with np.load(path) as data:
         return data["tick"], data["sim_time_s"], data["map_true_mmhg"]
+
+
+def load_truth_rate(path: str | Path) -> np.ndarray | None:
+    """The pump's delivered rate per tick (ml/h) from a file :meth:`TruthLog.save` wrote, on the
+    ticks of :func:`load_truth`; ``None`` for a file without it."""
+    with np.load(path) as data:
+        return data["rate_ml_h"] if "rate_ml_h" in data.files else None

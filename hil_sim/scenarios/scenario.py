@@ -82,6 +82,9 @@ class Scenario:
         Patient integration step (s).
     step_mmhg, step_time_s
         Target step above baseline (mmHg) and its time (s).
+    target_mmhg
+        An absolute target (mmHg) from ``step_time_s`` on, in place of ``baseline + step_mmhg``
+        (the clinician's ``--target-mmhg``; the baseline before); ``None``: the relative step.
     pump, sensor
         Device configurations.
     disturbances
@@ -103,6 +106,7 @@ class Scenario:
     disturbances: tuple[Disturbance, ...] = ()
     faults: tuple[FaultSpec, ...] = ()
     source: str = field(default="<memory>", compare=False)
+    target_mmhg: float | None = None
 
     @property
     def noisy(self) -> bool:

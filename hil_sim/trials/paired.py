@@ -8,6 +8,9 @@ where both runs have a value (reachable in both, metric not null):
 * ``n`` — the number of such pairs;
 * ``win_rate_pct`` — the share of pairs where the first controller is strictly better (lower, or
   higher for :data:`pressor.contracts.metrics.HIGHER_IS_BETTER`);
+* ``wins``, ``ties``, ``losses`` — the pairs where the first controller is better, equal (within
+  :data:`TIE_REL` of the larger magnitude: 100 % against 100 % in band is a tie, not a loss) and
+  worse; every table shows these three, since a win rate alone counts ties as losses;
 * ``median_ratio`` — the median over pairs of first/second (pairs whose second value is 0 are left
   out of the ratio; ``None`` when none is left);
 * ``median_difference`` — the median of first − second, in the metric's unit;
@@ -41,6 +44,8 @@ PAIRED_METRICS: tuple[str, ...] = (
 EVENT_PAIRED_METRICS: tuple[str, ...] = ("peak_deviation_mmhg", "recovery_s", "iae_mmhg_s")
 #: pairs below this count get no p-value (the signed-rank test has no power there)
 MIN_PAIRS_FOR_P = 6
+#: two values closer than this fraction of the larger magnitude are a tie (float noise is no win)
+TIE_REL = 1e-9
 
 
 def _event_values(record: Mapping[str, Any]) -> dict[str, float | None]:
@@ -106,9 +111,13 @@ def _stats(metric: str, pairs: list[tuple[dict, dict]]) -> dict[str, Any]:
             "median_ratio": None,
             "median_difference": None,
             "wilcoxon_p": None,
+            "wins": 0,
+            "ties": 0,
+            "losses": 0,
         }
     higher = metric.split(".")[-1] in HIGHER_IS_BETTER
-    wins = (a > b) if higher else (a < b)
+    ties = np.abs(a - b) <= TIE_REL * np.maximum(np.abs(a), np.abs(b))
+    wins = ((a > b) if higher else (a < b)) & ~ties
     nonzero = b != 0.0
     diff = a - b
     p_value = None
@@ -120,6 +129,9 @@ def _stats(metric: str, pairs: list[tuple[dict, dict]]) -> dict[str, Any]:
         "median_ratio": float(np.median(a[nonzero] / b[nonzero])) if np.any(nonzero) else None,
         "median_difference": float(np.median(diff)),
         "wilcoxon_p": p_value,
+        "wins": int(np.count_nonzero(wins)),
+        "ties": int(np.count_nonzero(ties)),
+        "losses": int(n - np.count_nonzero(wins) - np.count_nonzero(ties)),
     }
 
 
@@ -145,29 +157,43 @@ def compare_controllers(
     }
 
 
-#: the statistics of one metric, in the order every table shows them
+#: the statistics of one metric, in the order every table shows them (``wins``, ``ties`` and
+#: ``losses`` are one cell, ``W/T/L``, in place of the win rate)
 STAT_KEYS = ("n", "win_rate_pct", "median_ratio", "median_difference", "wilcoxon_p")
+#: the column heads of :func:`stat_cells`
+STAT_HEADS = ("n", "wins / ties / losses", "median ratio", "median diff", "Wilcoxon p")
 
 
 def stat_cells(stats: Mapping[str, Any]) -> list[str]:
-    """One metric's statistics as table cells, in :data:`STAT_KEYS` order (3 digits, "—" for null)."""
-    return [
-        "—"
-        if stats[k] is None
-        else f"{stats[k]:.3g}"
-        if isinstance(stats[k], float)
-        else str(stats[k])
-        for k in STAT_KEYS
-    ]
+    """One metric's statistics as table cells, in :data:`STAT_HEADS` order (3 digits, "—" for
+    null): ``n``, ``wins / ties / losses`` (``3 / 2 / 1``), the median ratio and difference and p."""
+
+    def cell(k: str) -> str:
+        v = stats[k]
+        return "—" if v is None else f"{v:.3g}" if isinstance(v, float) else str(v)
+
+    wtl = "—" if not stats["n"] else f"{stats['wins']} / {stats['ties']} / {stats['losses']}"
+    return [cell("n"), wtl, *(cell(k) for k in STAT_KEYS[2:])]
 
 
 def format_comparison(comparison: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
-    """A terminal table of :func:`compare_controllers`: one block per pair, one row per metric."""
+    """A terminal table of :func:`compare_controllers`: one block per pair, one row per metric
+    named in words (:func:`pressor.hil_sim.trials.words.metric_label`)."""
+    from pressor.hil_sim.trials.words import metric_label
+
     lines = []
     for pair, metrics in comparison.items():
-        lines.append(f"paired: {pair} (reachable patients; win = first better)")
-        lines.append(f"  {'metric':<34} {'n':>4} {'win %':>6} {'ratio':>7} {'diff':>9} {'p':>8}")
+        width = max([len(metric_label(m)) for m in metrics] + [6])
+        lines.append(
+            f"paired: {pair} (patients reachable in both; wins / ties / losses of the first;"
+            " ratio and diff: first against second)"
+        )
+        lines.append(
+            f"  {'metric':<{width}} {'n':>4} {'W / T / L':>13} {'ratio':>7} {'diff':>9} {'p':>8}"
+        )
         for metric, st in metrics.items():
-            n, win, ratio, diff, p = stat_cells(st)
-            lines.append(f"  {metric:<34} {n:>4} {win:>6} {ratio:>7} {diff:>9} {p:>8}")
+            n, wtl, ratio, diff, p = stat_cells(st)
+            lines.append(
+                f"  {metric_label(metric):<{width}} {n:>4} {wtl:>13} {ratio:>7} {diff:>9} {p:>8}"
+            )
     return "\n".join(lines)

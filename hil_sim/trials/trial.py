@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DrugBinding, dose_ug_kg_min
 from pressor.contracts.metrics import (
     EVENT_KINDS,
     EVENT_METRICS,
@@ -67,9 +68,35 @@ from pressor.runtime.inputs.controller_loader import load_controller
 
 
 def controller_dir_name(spec: str) -> str:
-    """A file-name-safe name for a controller spec (``smith:45`` -> ``smith_45``, a path -> stem)."""
-    base = Path(spec).stem if spec.endswith(".py") else spec
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", base)
+    """A readable, file-name-safe name for a controller spec: ``smith:45`` -> ``smith_45``,
+    ``lpv:wide-delay`` -> ``lpv_wide-delay``, a generated module's path -> its stem, a plugin ->
+    its file stem (or module's last part, or entry point name), class and arguments
+    (``/tmp/x/gspi.py:GSPI:kp0=3.0`` -> ``gspi_GSPI_kp0_3.0``, ``pkg.ctrl:Gain`` -> ``ctrl_Gain``)."""
+    from pressor.runtime.inputs.controller_loader import LPV_PREFIX, SMITH_PREFIX
+    from pressor.runtime.inputs.controller_plugin import (
+        ControllerPluginError,
+        is_plugin_spec,
+        split_spec,
+    )
+
+    head = spec.partition(":")[0]
+    base = spec
+    if spec.endswith(".py"):
+        base = Path(spec).stem
+    elif head not in (LPV_PREFIX, SMITH_PREFIX, "pi") and is_plugin_spec(spec):
+        try:
+            module, cls, args = split_spec(spec)
+        except ControllerPluginError:
+            pass
+        else:
+            if is_plugin_spec(head):  # an installed entry point's name
+                stem = head
+            elif module.endswith(".py"):
+                stem = Path(module).stem
+            else:
+                stem = module.rpartition(".")[2]
+            base = "_".join(part for part in (stem, cls, args) if part)
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", base).strip("_") or "controller"
 
 
 def scenario_events(scenario: Scenario) -> list[Event]:
@@ -163,7 +190,8 @@ def _simulate_patient(
         raise ControllerError(
             f"--controller {controller_spec!r}, patient seed {patient_seed}: {exc}"
         ) from None
-    has_step = scenario.step_mmhg != 0.0
+    step_mmhg = world.step_mmhg  # an absolute target: this patient's distance to it
+    has_step = step_mmhg != 0.0
     metrics = run_metrics(
         traj.t_s,
         traj.map_true_mmhg,
@@ -171,7 +199,7 @@ def _simulate_patient(
         traj.rate_ml_h,
         max_rate_ml_h=scenario.pump.max_rate_ml_h,
         step_time_s=scenario.step_time_s if has_step else None,
-        step_mmhg=scenario.step_mmhg if has_step else None,
+        step_mmhg=step_mmhg if has_step else None,
         noisy=scenario.noisy,
         reachable=world.reachable(max_rate),
         map_true_mmhg=traj.map_true_mmhg,
@@ -316,6 +344,58 @@ def run_trial_traced(
     return records, arrays
 
 
+def infusion_record(
+    record: dict[str, Any], drug: DrugBinding, weight_kg: float | None, duration_s: float
+) -> dict[str, Any]:
+    """The record's ``infusion``: the drug and syringe, the weight the doses are per, and the mean
+    and peak infusion in ml/h and µg/kg/min.
+
+    Parameters
+    ----------
+    record
+        A patient's record (its ``drug_total_ml``, ml, and ``max_rate_ml_h``, ml/h).
+    drug
+        The drug and syringe (µg/ml) the run's ml/h count.
+    weight_kg
+        The patient's weight (kg); ``None``: the 70 kg reference adult the patient models count
+        (:data:`pressor.contracts.drug.REFERENCE_WEIGHT_KG`), said so by ``weight_given`` false.
+    duration_s
+        The run's length (s): the mean rate is the drug given over it.
+    """
+    w = REFERENCE_WEIGHT_KG if weight_kg is None else float(weight_kg)
+    c = float(drug.concentration_ug_ml)
+    total, peak = record.get("drug_total_ml"), record.get("max_rate_ml_h")
+    mean = None if total is None else total * 3600.0 / duration_s
+
+    def per_kg(rate: float | None) -> float | None:
+        return None if rate is None else dose_ug_kg_min(rate, c, w)
+
+    return {
+        "drug": drug.name,
+        "concentration_ug_ml": c,
+        "weight_kg": w,
+        "weight_given": weight_kg is not None,
+        "mean_rate_ml_h": mean,
+        "peak_rate_ml_h": peak,
+        "mean_dose_ug_kg_min": per_kg(mean),
+        "peak_dose_ug_kg_min": per_kg(peak),
+    }
+
+
+def infusion_summary(records: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
+    """The summary's ``infusion``: drug, syringe and weight of the records' ``infusion`` and the
+    median over patients of the mean and peak rate (ml/h) and dose (µg/kg/min); ``None`` when the
+    records carry none."""
+    if not records or "infusion" not in records[0]:
+        return None
+    first = records[0]["infusion"]
+    doc = {k: first[k] for k in ("drug", "concentration_ug_ml", "weight_kg", "weight_given")}
+    for key in ("mean_rate_ml_h", "peak_rate_ml_h", "mean_dose_ug_kg_min", "peak_dose_ug_kg_min"):
+        values = [r["infusion"][key] for r in records if r["infusion"][key] is not None]
+        doc[f"median_{key}"] = float(np.median(values)) if values else None
+    return doc
+
+
 def run_cohort(
     scenario: Scenario,
     controller_spec: str,
@@ -323,17 +403,25 @@ def run_cohort(
     n_patients: int,
     *,
     traced: bool = False,
+    drug: DrugBinding | None = None,
+    weight_kg: float | None = None,
     **options: Any,
 ) -> tuple[list[dict[str, Any]], dict[str, Any], dict[str, np.ndarray] | None]:
     """What ``pressor trial`` and :func:`pressor.api.trial` run for one controller.
 
     ``options`` are :func:`run_trial`'s (``jobs``, ``sample_period_s``, ``progress``,
-    ``scheduler``, ``schedule``, ``patient_model``). Returns the records, the summary
-    (:func:`summarize`) and, when ``traced``, the trajectories of :func:`run_trial_traced`.
+    ``scheduler``, ``schedule``, ``patient_model``). ``drug`` (the run's drug and syringe,
+    :func:`pressor.hil_sim.patients.patient_model.check_drug`) and ``weight_kg`` (kg; ``None``: the
+    reference adult) give every record its ``infusion`` (:func:`infusion_record`) and the summary
+    its own (:func:`infusion_summary`). Returns the records, the summary (:func:`summarize`) and,
+    when ``traced``, the trajectories of :func:`run_trial_traced`.
     """
     run = run_trial_traced if traced else run_trial
     result = run(scenario, controller_spec, cohort_seed, n_patients, **options)
     records, trajectories = result if traced else (result, None)
+    if drug is not None:
+        for r in records:
+            r["infusion"] = infusion_record(r, drug, weight_kg, scenario.duration_s)
     summary = summarize(
         records,
         scenario,
@@ -361,6 +449,8 @@ def summarize(
     doc: dict[str, Any] = {"scenario": scenario.name, "controller": controller_spec}
     if patient_model != DEFAULT_PATIENT_MODEL:  # the default's summaries keep their bytes
         doc["patient_model"] = patient_model
+    if scenario.target_mmhg is not None:  # a relative step's summaries keep their bytes
+        doc["target_mmhg"] = float(scenario.target_mmhg)
     doc |= {
         "cohort_seed": int(cohort_seed),
         "n_patients": len(records),
@@ -369,6 +459,9 @@ def summarize(
         "coefficient_units": {k: units[k] for k in (records[0]["coefficients"] if records else {})},
         "metrics": aggregate(records),
     }
+    infusion = infusion_summary(records)
+    if infusion is not None:
+        doc["infusion"] = infusion
     if schedule != "oracle":  # oracle summaries keep their bytes
         doc["schedule"] = schedule
         doc["estimation"] = {
@@ -379,6 +472,8 @@ def summarize(
 
 
 _EVENT_COLUMNS = ("start_s",) + EVENT_METRICS
+#: the record's ``infusion`` figures that ``patients.csv`` has a column for (units in the names)
+_DOSE_COLUMNS = ("mean_rate_ml_h", "mean_dose_ug_kg_min", "peak_dose_ug_kg_min")
 
 
 def _csv_text(records: Sequence[dict[str, Any]], units: dict[str, str]) -> str:
@@ -388,6 +483,7 @@ def _csv_text(records: Sequence[dict[str, Any]], units: dict[str, str]) -> str:
         + list(RUN_METRICS)
         + ["reachable", "stable", "commands_out_of_range"]
     )
+    dose_keys = list(_DOSE_COLUMNS) if records and "infusion" in records[0] else []
     # Every patient of a trial runs the same scenario, so the first one's events name the columns.
     labels = event_labels([d["kind"] for d in records[0]["disturbances"]]) if records else []
     ranges = list(records[0]["schedule_range"]) if records else []
@@ -396,6 +492,7 @@ def _csv_text(records: Sequence[dict[str, Any]], units: dict[str, str]) -> str:
         + [f"{k} ({units[k]})" for k in coeff_keys]
         + [f"{name}_{end}" for name in ranges for end in ("min", "max")]
         + scalar_keys
+        + dose_keys
         + [f"{label}_{col}" for label in labels for col in _EVENT_COLUMNS]
     )
     buf = io.StringIO()
@@ -405,6 +502,7 @@ def _csv_text(records: Sequence[dict[str, Any]], units: dict[str, str]) -> str:
         row = [r["patient_seed"]] + [r["coefficients"][k] for k in coeff_keys]
         row += [v for name in ranges for v in r["schedule_range"][name]]
         row += [r[k] for k in scalar_keys]
+        row += [r["infusion"][k] for k in dose_keys]
         row += [d[col] for d in r["disturbances"] for col in _EVENT_COLUMNS]
         writer.writerow(["" if v is None else repr(v) if isinstance(v, float) else v for v in row])
     return buf.getvalue()

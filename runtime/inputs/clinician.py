@@ -218,18 +218,62 @@ def parse_drug(text: str) -> str:
     return name
 
 
-def add_clinician_options(p: argparse.ArgumentParser) -> None:
-    """Add ``--target-mmhg``, ``--target-file``, ``--target-stdin``, ``--drug`` and
-    ``--concentration-ug-ml`` to ``p`` (``pressor run``)."""
-    rng = f"allowed [{TARGET_MIN_MMHG:g}, {TARGET_MAX_MMHG:g}]"
+#: what ``--target-mmhg`` means for ``pressor run``
+RUN_TARGET_HELP = (
+    "the runtime's own MAP target (mmHg, {rng}); the device's MAP_TARGET is then ignored and not"
+    " required (default: the device's MAP_TARGET)"
+)
+#: what ``--drug`` and ``--concentration-ug-ml`` mean for ``pressor run``
+RUN_DRUG_HELP = (
+    "drug in the syringe: must be the loaded design's, and the device's hello must announce the"
+    f" same (default: the design's; the shipped one's is {DESIGN_DRUG})"
+)
+RUN_CONCENTRATION_HELP = (
+    "syringe concentration (ug/ml): must be the one whose ml/h the design's gain K (mmHg per ml/h)"
+    " counts, and the device's hello must announce the same (default: the design's; the shipped"
+    f" one's is {DESIGN_CONCENTRATION_UG_ML:g})"
+)
+
+
+def target_range_text() -> str:
+    """``allowed [50, 120]``: the MAP targets accepted from any source (mmHg)."""
+    return f"allowed [{TARGET_MIN_MMHG:g}, {TARGET_MAX_MMHG:g}]"
+
+
+def add_target_option(p: argparse.ArgumentParser, help_text: str = RUN_TARGET_HELP) -> None:
+    """Add ``--target-mmhg MMHG`` (a MAP target in [50, 120] mmHg, default ``None``) to ``p``;
+    ``{rng}`` in ``help_text`` reads the allowed range."""
     p.add_argument(
         "--target-mmhg",
         type=argtype("--target-mmhg", parse_target),
         default=None,
         metavar="MMHG",
-        help=f"the runtime's own MAP target (mmHg, {rng}); the device's MAP_TARGET is"
-        " then ignored and not required (default: the device's MAP_TARGET)",
+        help=help_text.format(rng=target_range_text()),
     )
+
+
+def add_syringe_options(
+    p: argparse.ArgumentParser,
+    drug_help: str = RUN_DRUG_HELP,
+    concentration_help: str = RUN_CONCENTRATION_HELP,
+) -> None:
+    """Add ``--drug`` and ``--concentration-ug-ml`` (checked names and µg/ml, default ``None``)
+    to ``p``."""
+    p.add_argument("--drug", type=argtype("--drug", parse_drug), default=None, help=drug_help)
+    p.add_argument(
+        "--concentration-ug-ml",
+        type=argtype("--concentration-ug-ml", parse_concentration),
+        default=None,
+        metavar="UG_ML",
+        help=concentration_help,
+    )
+
+
+def add_clinician_options(p: argparse.ArgumentParser) -> None:
+    """Add ``--target-mmhg``, ``--target-file``, ``--target-stdin``, ``--drug`` and
+    ``--concentration-ug-ml`` to ``p`` (``pressor run``)."""
+    rng = target_range_text()
+    add_target_option(p)
     p.add_argument(
         "--target-file",
         type=Path,
@@ -250,22 +294,7 @@ def add_clinician_options(p: argparse.ArgumentParser) -> None:
         " control; the same lines work in --target-file); needs --target-mmhg or --target-file"
         " for the starting target (default: off)",
     )
-    p.add_argument(
-        "--drug",
-        type=argtype("--drug", parse_drug),
-        default=None,
-        help="drug in the syringe: must be the loaded design's, and the device's hello must"
-        f" announce the same (default: the design's; the shipped one's is {DESIGN_DRUG})",
-    )
-    p.add_argument(
-        "--concentration-ug-ml",
-        type=argtype("--concentration-ug-ml", parse_concentration),
-        default=None,
-        metavar="UG_ML",
-        help="syringe concentration (ug/ml): must be the one whose ml/h the design's gain K"
-        " (mmHg per ml/h) counts, and the device's hello must announce the same (default: the"
-        f" design's; the shipped one's is {DESIGN_CONCENTRATION_UG_ML:g})",
-    )
+    add_syringe_options(p)
 
 
 def clinician_input(args: argparse.Namespace) -> ClinicianInput:

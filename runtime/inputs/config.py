@@ -171,12 +171,14 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     """Add the runtime's options (controller, schedule, rate, outputs, signing, faults, timing) to
     ``p``; ``--controller`` and ``--schedule`` default to None, resolved by :func:`run_config`
     (:mod:`pressor.runtime.inputs.defaults`)."""
+    from pressor.runtime.inputs.controller_loader import design_specs
+
+    designs = design_specs()
     p.add_argument(
         "--controller",
         default=None,
-        help=f"{CONTROLLER_DEFAULT_HELP}; lpv (the shipped LPV module on its fixed box;"
-        " lpv:norepinephrine and lpv:wide-delay the"
-        " other shipped designs, docs/DRUGS.md and docs/SCHEDULING.md), pi, smith[:LAMBDA_S]"
+        help=f"{CONTROLLER_DEFAULT_HELP}; {', '.join(designs)} (the shipped designs,"
+        " docs/DRUGS.md and docs/SCHEDULING.md; pressor designs lists them), pi, smith[:LAMBDA_S]"
         " (Smith predictor, closed-loop time constant LAMBDA_S in s, default 30 s), a generated .py, or your own"
         " class: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed 'pressor.controllers'"
         " entry point NAME[:ARGS] (ARGS: key=value,...; pressor.runtime.inputs.controller_plugin)",

@@ -37,7 +37,7 @@ from pathlib import Path
 from types import ModuleType
 
 from pressor.baselines.pi import PIController
-from pressor.baselines.smith import LAMBDA_MAX_S, LAMBDA_MIN_S, SmithController
+from pressor.baselines.smith import LAMBDA_DEFAULT_S, LAMBDA_MAX_S, LAMBDA_MIN_S, SmithController
 from pressor.contracts.controller import Controller
 from pressor.contracts.module_hash import ARTIFACT_SHA_LINE, MODULE_SHA_LINE, module_text_sha256
 
@@ -54,9 +54,62 @@ LPV_DESIGNS: dict[str, Path] = {
     "norepinephrine-cautious": GENERATED_DIR / "lpv_norepinephrine_cautious.py",
 }
 LPV_PREFIX = "lpv"
+#: the baselines every comparison shows: ``--controller`` spec -> one line (pressor designs)
+BASELINES: dict[str, str] = {
+    "pi": "baseline: the paper's fixed PI controller (not scheduled on K, T, tau)",
+    "smith[:LAMBDA_S]": "baseline: a hand-tuned scheduled Smith predictor, closed-loop time"
+    f" constant LAMBDA_S s (default {LAMBDA_DEFAULT_S:g}, allowed {LAMBDA_MIN_S:g}-{LAMBDA_MAX_S:g})",
+}
 #: (path, text sha256) -> the module imported from that text: a cohort loads the same module once
 #: per process instead of once per patient (≈ 0.1 s for the shipped module's 0.7 MB)
 _LOADED: dict[tuple[str, str], ModuleType] = {}
+
+
+def design_specs() -> list[str]:
+    """The ``--controller`` spec of every shipped LPV design, read from :data:`LPV_DESIGNS` (a new
+    entry appears here, in ``pressor designs``, in the help and the errors): ``lpv`` for the default
+    module, ``lpv:NAME`` for each other one."""
+    return [
+        LPV_PREFIX if path == DEFAULT_LPV_MODULE else f"{LPV_PREFIX}:{name}"
+        for name, path in LPV_DESIGNS.items()
+    ]
+
+
+def shipped_specs() -> list[str]:
+    """Every shipped controller's spec: the LPV designs (:func:`design_specs`), then the baselines."""
+    return [*design_specs(), *BASELINES]
+
+
+def shipped_specs_text() -> str:
+    """``lpv, lpv:norepinephrine, lpv:wide-delay, pi, smith[:LAMBDA_S]``: for helps and errors."""
+    return ", ".join(shipped_specs())
+
+
+def design_header(path: Path) -> dict[str, object]:
+    """The constants a generated module states before its code (``DRUG``,
+    ``DRUG_CONCENTRATION_UG_ML``, ``GRID_LO``, ``GRID_HI``, ``RATE_BOUNDS``,
+    ``GENERATION_COMMAND``, ...), read from its text without importing it (a shipped module is
+    0.7 MB); ``{}`` when the file cannot be read."""
+    import ast
+    import re
+
+    line = re.compile(r"^([A-Z][A-Z0-9_]*) = (.+?)(?:\s+#.*)?$")
+    out: dict[str, object] = {}
+    try:
+        with open(path, encoding="utf-8") as f:
+            for i, text in enumerate(f):
+                if i > 200 or text.startswith(("def ", "class ")):
+                    break
+                m = line.match(text.rstrip("\n"))
+                if m is None:
+                    continue
+                try:
+                    out[m.group(1)] = ast.literal_eval(m.group(2))
+                except (ValueError, SyntaxError):
+                    continue
+    except OSError:
+        return {}
+    return out
 
 
 class ControllerSpecError(ValueError):
@@ -99,7 +152,7 @@ def lpv_design_module(spec: str) -> Path | None:
     if name not in LPV_DESIGNS:
         raise ControllerSpecError(
             f"--controller {spec!r}: no shipped design named {name!r}; one of"
-            f" {', '.join(f'lpv:{d}' for d in LPV_DESIGNS)}"
+            f" {', '.join(f'lpv:{d}' for d in LPV_DESIGNS)} (pressor designs lists them)"
         )
     return LPV_DESIGNS[name]
 
@@ -222,9 +275,10 @@ def load_controller(
     path = named if named is not None else Path(spec)
     if named is None and path.suffix != ".py":
         raise ControllerSpecError(
-            f"--controller {spec!r}: expected 'pi', 'smith[:LAMBDA_S]', 'lpv', a path to a generated"
-            " .py module, or a plugin: MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed"
-            " 'pressor.controllers' entry point (pressor.runtime.inputs.controller_plugin)"
+            f"--controller {spec!r}: expected a shipped controller ({shipped_specs_text()};"
+            " pressor designs lists them), a path to a generated .py module, or a plugin:"
+            " MODULE:CLASS[:ARGS], FILE.py:CLASS[:ARGS] or an installed 'pressor.controllers'"
+            " entry point (pressor.runtime.inputs.controller_plugin)"
         )
     module = load_generated_module(path, artifact_sha256)
     command = str(getattr(module, "GENERATION_COMMAND", ""))

@@ -41,18 +41,30 @@ def parse_weight(text: str) -> float:
     return number_in(text, WEIGHT_MIN_KG, WEIGHT_MAX_KG, "kg")
 
 
-def add_dosing_options(p: argparse.ArgumentParser) -> None:
-    """Add ``--weight-kg``, ``--confirm-above-soft-limit`` and ``--drug-library`` to ``p``
-    (``pressor run``)."""
+#: what ``--weight-kg`` means for ``pressor run``
+RUN_WEIGHT_HELP = (
+    "the patient's weight (kg, {rng}): required when the drug library doses the drug per kg"
+    " (norepinephrine), optional otherwise (phenylephrine, dosed in ug/min; with it the summary"
+    " also gives ug/kg/min)"
+)
+
+
+def add_weight_option(p: argparse.ArgumentParser, help_text: str = RUN_WEIGHT_HELP) -> None:
+    """Add ``--weight-kg KG`` (in [30, 250] kg, default ``None``) to ``p``; ``{rng}`` in
+    ``help_text`` reads the allowed range."""
     p.add_argument(
         "--weight-kg",
         type=argtype("--weight-kg", parse_weight),
         default=None,
         metavar="KG",
-        help=f"the patient's weight (kg, allowed [{WEIGHT_MIN_KG:g}, {WEIGHT_MAX_KG:g}]): required"
-        " when the drug library doses the drug per kg (norepinephrine), optional otherwise"
-        " (phenylephrine, dosed in ug/min; with it the summary also gives ug/kg/min)",
+        help=help_text.format(rng=f"allowed [{WEIGHT_MIN_KG:g}, {WEIGHT_MAX_KG:g}]"),
     )
+
+
+def add_dosing_options(p: argparse.ArgumentParser) -> None:
+    """Add ``--weight-kg``, ``--confirm-above-soft-limit`` and ``--drug-library`` to ``p``
+    (``pressor run``)."""
+    add_weight_option(p)
     p.add_argument(
         "--confirm-above-soft-limit",
         action="store_true",

@@ -46,6 +46,8 @@ SERIES_COLORS: dict[str, tuple[int, int, int]] = {
     "/pump/command_ml_h": _BROWN,
     "/pump/rate_ml_h": _GREEN,
     "/pump/volume_ml": _GREEN,
+    "/dose/delivered_ug_min": _GREEN,
+    "/dose/delivered_ug_kg_min": _PURPLE,
     "/schedule/K": _BLUE,
     "/schedule/T_s": _BLUE,
     "/schedule/tau_s": _BLUE,
@@ -107,10 +109,16 @@ DOSE_ENTITIES = (
 )
 
 
+#: the delivered dose of a ``pressor sil`` recording (the simulated pump's delivered rate in the
+#: syringe's µg/min and, per the patient's weight or the 70 kg reference, µg/kg/min)
+DELIVERED_DOSE_ENTITIES = ("/dose/delivered_ug_min", "/dose/delivered_ug_kg_min")
+
+
 def default_blueprint(dose: bool = False) -> rrb.Blueprint:
-    """The layout the viewer opens on: MAP, infusion, volume, scheduling, timing and safety; with
-    ``dose`` (``pressor run``) the commanded dose (µg/min, µg/kg/min) and the drug library's hard
-    and soft maxima beside the infusion in ml/h."""
+    """The layout the viewer opens on: MAP, infusion in ml/h with the dose beside it, volume,
+    scheduling, timing and safety. The dose plot holds, with ``dose`` (``pressor run``), the
+    commanded dose (µg/min, µg/kg/min) and the drug library's hard and soft maxima, else
+    (``pressor sil``) the dose the simulated pump delivered (µg/min, µg/kg/min)."""
     infusion = [
         _plot(
             "Infusion (ml/h)",
@@ -119,6 +127,8 @@ def default_blueprint(dose: bool = False) -> rrb.Blueprint:
     ]
     if dose:
         infusion.append(_plot("Dose (ug/min, ug/kg/min; library maxima)", list(DOSE_ENTITIES)))
+    else:
+        infusion.append(_plot("Dose delivered (ug/min, ug/kg/min)", list(DELIVERED_DOSE_ENTITIES)))
     infusion.append(_plot("Volume infused (ml)", ["/pump/volume_ml"]))
     return rrb.Blueprint(
         rrb.Vertical(
@@ -132,7 +142,7 @@ def default_blueprint(dose: bool = False) -> rrb.Blueprint:
                     FAULT_MARKERS,
                 ],
             ),
-            rrb.Horizontal(*infusion, column_shares=[3, 2, 1] if dose else [3, 1]),
+            rrb.Horizontal(*infusion, column_shares=[3, 2, 1]),
             rrb.Horizontal(*(_sched_view(i) for i in range(len(SCHED_VARS)))),
             rrb.Horizontal(
                 _plot("Loop timing (us)", ["/loop/exec_us", "/loop/lateness_us"]),

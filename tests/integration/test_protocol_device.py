@@ -328,3 +328,7 @@ def test_the_norepinephrine_design_runs_against_a_norepinephrine_device(
     args = ("--controller", "lpv:norepinephrine", "--schedule", "oracle", "--weight-kg", "70")
     run = drive(dialect, tmp_path, cfg, key, *args)
     assert_lockstep_reaches_target(run, cfg.n_ticks)
+    # the summary a person reads: the drug, its syringe, the weight and the dose per kg
+    assert "drug: norepinephrine 16 µg/ml; patient weight 70 kg" in run.stdout
+    infusion = next(x for x in run.stdout.splitlines() if x.startswith("infusion: "))
+    assert "ml/h = " in infusion and "µg/kg/min" in infusion

@@ -47,8 +47,22 @@ def two_runs(tmp_path_factory):
 def test_sil_exits_0_and_prints_summary_and_replay_command(two_runs):
     proc, rrd, _ = two_runs[0]
     assert proc.returncode == 0, proc.stderr
-    assert "time_in_band_pct" in proc.stdout
+    assert "time within ±5 mmHg of the target" in proc.stdout
     assert f"rerun {rrd}" in proc.stdout
+
+
+def test_sil_summary_reads_for_a_person_start_map_target_drug_dose_and_no_raw_names(two_runs):
+    proc, _, summary = two_runs[0]
+    out = proc.stdout
+    s = json.loads(summary.read_text())
+    assert "time_in_band_pct" in s["metrics"]  # the JSON keeps the names programs read
+    assert "patient: start MAP " in out and " mmHg, target " in out
+    assert "drug: phenylephrine 100 µg/ml; patient weight not known" in out
+    line = next(x for x in out.splitlines() if x.startswith("infusion: "))
+    assert "ml/h = " in line and "µg/kg/min" in line
+    assert "time_in_band_pct" not in out and "mdpe_pct" not in out
+    assert "{'" not in out and "null" not in out
+    assert "cpu wake-up latency" not in out  # nothing asked for, nothing said
 
 
 def test_sil_trajectory_equals_in_process_simulator(two_runs):

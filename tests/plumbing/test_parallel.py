@@ -93,12 +93,21 @@ def test_a_worker_killed_mid_trial_costs_only_a_retry_not_the_records(tmp_path, 
                 os.kill(pids[0], signal.SIGKILL)
                 killed.append(pids[0])
 
+        from pressor.contracts.drug import DEFAULT_BINDING
         from pressor.hil_sim.scenarios.scenario import load_scenario
-        from pressor.hil_sim.trials.trial import run_trial, summarize, write_outputs
+        from pressor.hil_sim.trials.trial import run_cohort, write_outputs
 
         sc = load_scenario(str(scenario))
-        records = run_trial(sc, "pi", 3, 6, progress=kill_one_worker, scheduler=c.scheduler_address)
-        write_outputs(tmp_path / "killed", records, summarize(records, sc, "pi", 3))
+        records, summary, _ = run_cohort(  # as pressor trial runs it: pi on the paper's drug
+            sc,
+            "pi",
+            3,
+            6,
+            progress=kill_one_worker,
+            scheduler=c.scheduler_address,
+            drug=DEFAULT_BINDING,
+        )
+        write_outputs(tmp_path / "killed", records, summary)
     assert killed
     for name in FILES:
         assert (tmp_path / "killed" / name).read_bytes() == (local / name).read_bytes(), name

@@ -66,3 +66,30 @@ def test_the_first_controller_is_compared_with_each_other_one():
     recs = [_rec(0, 1.0, 90.0)]
     out = compare_controllers({"lpv": recs, "pi": recs, "smith": recs})
     assert list(out) == ["lpv vs pi", "lpv vs smith"]
+
+
+def test_equal_values_are_ties_not_losses():
+    # 100 % against 100 % in band (both perfect) and 0 against 0: ties, never losses
+    a = [_rec(0, 0.0, 100.0), _rec(1, 1.0, 100.0), _rec(2, 3.0, 90.0), _rec(3, 2.0, 80.0)]
+    b = [_rec(0, 0.0, 100.0), _rec(1, 2.0, 100.0), _rec(2, 2.0, 95.0), _rec(3, 2.0, 70.0)]
+    cmp = compare_pair(a, b)
+    band, iae = cmp["time_in_band_pct"], cmp["iae_mmhg_s"]
+    assert (band["wins"], band["ties"], band["losses"]) == (1, 2, 1)
+    assert (iae["wins"], iae["ties"], iae["losses"]) == (1, 2, 1)
+    assert band["wins"] + band["ties"] + band["losses"] == band["n"]
+
+
+def test_tables_show_wins_ties_losses_and_metrics_in_words():
+    from pressor.hil_sim.trials.paired import format_comparison, stat_cells
+
+    a = [_rec(0, 0.0, 100.0), _rec(1, 1.0, 100.0)]
+    b = [_rec(0, 0.0, 100.0), _rec(1, 2.0, 100.0)]
+    out = compare_controllers({"lpv": a, "pi": b})
+    assert stat_cells(out["lpv vs pi"]["time_in_band_pct"])[1] == "0 / 2 / 0"
+    text = format_comparison(out)
+    assert "wins / ties / losses" in text
+    row = next(x for x in text.splitlines() if "time within ±5 mmHg of the target (%)" in x)
+    assert "0 / 2 / 0" in row
+    row = next(x for x in text.splitlines() if "hemorrhage: peak |deviation| (mmHg)" in x)
+    assert "0 / 2 / 0" in row
+    assert "time_in_band_pct" not in text and "iae_mmhg_s" not in text

@@ -48,7 +48,8 @@ def test_trial_outputs_name_seed_coefficients_and_metrics(tmp_path, short_scenar
     assert csv_lines[0].startswith("patient_seed,a_k (s),k0 (mmHg/(ml/h))") and len(csv_lines) == 5
     assert "K_mmhg_per_ml_h_min,K_mmhg_per_ml_h_max,T_s_min" in csv_lines[0]
     text = capsys.readouterr()
-    assert "settling_time_s" in text.out and "median" in text.out
+    assert "settling time (s)" in text.out and "median" in text.out
+    assert "settling_time_s" not in text.out  # the JSON's names stay in the JSON
     assert "4/4 patients" in text.err
 
 
@@ -81,8 +82,8 @@ def test_trial_records_and_csv_carry_step_window_and_disturbance_fields(
         "n_null",
     }
     text = capsys.readouterr().out
-    assert "step_overshoot_pct" in text and "hemorrhage at 120 s" in text
-    assert "peak_abs_deviation_mmhg" in text
+    assert "step: overshoot (%)" in text and "hemorrhage at 120 s" in text
+    assert "peak |deviation| (mmHg)" in text
 
 
 def test_trial_rejects_bad_inputs_with_exit_2_and_one_line(tmp_path, short_scenario, capsys):
@@ -147,3 +148,24 @@ def test_a_reused_out_loses_the_earlier_runs_comparison_and_report(
     assert (out / "patients.json").is_file()
     err = capsys.readouterr().err
     assert "removed" in err and "comparison.json" in err and "report.html" in err
+
+
+def test_the_terminal_explains_each_unreachable_patient_in_words():
+    from pressor.hil_sim.cli import format_unreachable
+
+    records = [
+        {"patient_seed": 7, "reachable": True},
+        {
+            "patient_seed": 8,
+            "reachable": False,
+            "required_delta_mmhg": 30.0,
+            "max_delta_mmhg": 15.07,
+        },
+    ]
+    text = format_unreachable(records)
+    assert text.startswith("unreachable: even at the pump's maximum rate")
+    assert text.splitlines()[1] == (
+        "  patient 8: the pump's maximum cannot raise this patient's MAP by the step:"
+        " 15.1 mmHg reachable of 30.0 asked"
+    )
+    assert format_unreachable(records[:1]) == ""

@@ -91,7 +91,7 @@ def test_viewer_opens_on_the_sim_time_timeline(run):
 
 def test_every_plot_shows_the_whole_run_with_its_legend_in_a_corner(run):
     plots = {n: v for n, v in views(blueprint_rows(run)).items() if v["kind"] == "TimeSeries"}
-    assert len(plots) == 8
+    assert len(plots) == 9  # the dose delivered beside the infusion (issue 40)
     for name, view in plots.items():
         ranges = view["ranges"].values  # one StructArray row per timeline
         assert ranges.field("timeline").to_pylist() == [TIMELINE], name
