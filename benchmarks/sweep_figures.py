@@ -182,10 +182,12 @@ def model_tables(model: str, result: dict[str, Any]) -> str:
     std, strong = result["standard_syringe"], result["stronger_syringe"]
     lines = [
         f"### {model} ({result['drug']}; standard syringe {std['concentration_ug_ml']:g} µg/ml,"
-        f" command ≤ {std['hard_max_ml_h']:g} ml/h and ≤ {std['max_ml_per_hour']:g} ml per hour"
+        f" command ≤ {std['hard_max_ml_h']:g} ml/h and ≤ {std['max_ml_per_hour']:g} ml per hour,"
+        f" held ≤ {std['max_rate_ml_h']:g} ml/h"
         + (
             f"; stronger syringe {strong['concentration_ug_ml']:g} µg/ml,"
-            f" ≤ {strong['hard_max_ml_h']:g} ml/h and ≤ {strong['max_ml_per_hour']:g} ml per hour"
+            f" ≤ {strong['hard_max_ml_h']:g} ml/h and ≤ {strong['max_ml_per_hour']:g} ml per hour,"
+            f" held ≤ {strong['max_rate_ml_h']:g} ml/h"
             if strong
             else "; no stronger syringe in the library"
         )

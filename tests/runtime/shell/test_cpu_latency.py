@@ -86,6 +86,6 @@ def test_sil_timing_reports_the_wake_latency_request_and_placement(tmp_path: Pat
     host = json.loads((tmp_path / "t.json").read_text())["host"]
     writable = os.access(QOS_DEVICE, os.W_OK)
     assert host["cpu_latency"].startswith("held at 0 us" if writable else "not held")
-    assert f"cpu wake-up latency {host['cpu_latency']}" in proc.stdout
+    assert f"CPU wake-up latency request {host['cpu_latency']}" in proc.stdout
     if len(os.sched_getaffinity(0)) >= 2:
         assert host["cpus"][0] != host["cpus"][1]
