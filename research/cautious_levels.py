@@ -2,8 +2,8 @@
 
 Usage::
 
-    python -m benchmarks.cautious_levels --controller lpv --schedule cautious --patients 20 --seed 3
-    python -m benchmarks.cautious_levels --controller lpv:norepinephrine --schedule cautious \\
+    python -m research.cautious_levels --controller lpv:cautious --schedule cautious --patients 20 --seed 3
+    python -m research.cautious_levels --controller lpv:norepinephrine-cautious --schedule cautious \\
         --patient-model norepinephrine --levels 0.5,1,2
 
 Every patient of the cohort ``(--seed, --patients)`` runs ``--scenario`` (default
