@@ -358,6 +358,17 @@ def _run_loop(
         )
         loop_kw["ack_input"] = True
     loop_kw["on_stop"] = config.on_stop
+    if config.status_every_s is not None and (config.clinician is not None or config.realtime):
+        from pressor.runtime.shell.status import StatusLine
+
+        weight = clinician.weight_kg if config.clinician is not None else None
+        loop_kw["status"] = StatusLine(
+            loop_kw["prog"],
+            config.period_s,
+            clinician.concentration_ug_ml,
+            weight,
+            interval_s=config.status_every_s,
+        )
     loop_kw["boundary"] = Boundary(
         config.period_s,
         sup.config.pump_max_ml_h or controller.max_rate_ml_h,

@@ -23,6 +23,7 @@ from pressor.runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S
 from pressor.runtime.estimation.sources import SOURCES
 from pressor.runtime.inputs.clinician import ClinicianInput
 from pressor.runtime.shell.cpu_latency import MAX_LATENCY_US
+from pressor.runtime.shell.status import DEFAULT_STATUS_EVERY_S
 
 #: what ``--schedule`` means, for the help of every command that takes it
 SCHEDULE_HELP = (
@@ -100,6 +101,9 @@ class RunConfig:
     on_stop
         The last command a stop signal sends (``--on-stop``): ``held`` (the safe rate, else the
         last rate held, mode SAFE) or ``zero`` (0 ml/h, mode STOP).
+    status_every_s
+        Wall seconds between two status lines on stderr (``--status-every``;
+        :mod:`pressor.runtime.shell.status`), None with ``--quiet``.
     clinician_stdin
         ``pressor sil --clinician-stdin``: the clinician's ``ack``, ``stop``, ``manual RATE`` and
         ``resume`` on stdin, the target staying the device's (``pressor run`` has them on its
@@ -125,6 +129,7 @@ class RunConfig:
     clinician: ClinicianInput | None = None
     sample_age_limit_s: float = DEFAULT_SAMPLE_AGE_LIMIT_S
     on_stop: str = "held"
+    status_every_s: float | None = None
     clinician_stdin: bool = False
 
     @property
@@ -251,6 +256,16 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         " infusion) or zero (0 ml/h, mode STOP: the infusion stops)",
     )
     p.add_argument(
+        "--status-every",
+        type=positive("--status-every", 3600.0),
+        default=DEFAULT_STATUS_EVERY_S,
+        metavar="S",
+        help="time between two status lines on stderr (s, wall clock: run time, state, MAP, target,"
+        " dose, alarms) while the run lasts; pressor sil prints them in real time only, lockstep"
+        " shows its progress bar instead",
+    )
+    p.add_argument("--quiet", action="store_true", help="no status lines")
+    p.add_argument(
         "--sample-age-limit-s",
         type=positive("--sample-age-limit-s", 60.0),
         default=DEFAULT_SAMPLE_AGE_LIMIT_S,
@@ -366,6 +381,7 @@ def run_config(
         clinician=clinician,
         sample_age_limit_s=args.sample_age_limit_s,
         on_stop=args.on_stop,
+        status_every_s=None if args.quiet else args.status_every,
     )
 
 

@@ -94,6 +94,9 @@ class Loop:
     on_tick
         Called after every tick with ``(tick, state, fault bits, command ml/h)`` (e.g. a
         :class:`pressor.contracts.faults.FaultScorer`'s ``update``).
+    status
+        Called after every tick with its :class:`pressor.runtime.core.closed_loop.TickRecord`
+        (:class:`pressor.runtime.shell.status.StatusLine`: a line for whoever watches), or None.
     schedule
         The scheduling source the core steps the controller on
         (:func:`pressor.runtime.estimation.sources.make_schedule`); default the oracle.
@@ -124,6 +127,7 @@ class Loop:
         heartbeat_every: int = 10,
         history_ticks: int | None = None,
         on_tick: Any = None,
+        status: Any = None,
         schedule: ScheduleSource | None = None,
         prog: str = "pressor",
         ack_input: bool = False,
@@ -150,6 +154,7 @@ class Loop:
             else Trajectory(int(history_ticks), ring=True, period_s=self.period_s)
         )
         self.on_tick = on_tick
+        self.status = status
         self.heartbeat_every = max(1, int(heartbeat_every))
         self.ticks_in_state = [0] * len(State)
         self.events = EventLog(recorder, prog, ack_input=ack_input)
@@ -239,6 +244,8 @@ class Loop:
             self.recorder.record_tick(rec, map_rec, ep.pump_status, bad, exec_s, lateness_s)
         if self.on_tick is not None:
             self.on_tick(inp.tick, int(state), int(out.faults), command)
+        if self.status is not None:
+            self.status(rec)
         if acks and target is not None and self.sup.last_ack is not None:
             target.log_ack(self.sup.last_ack, acks, inp.tick, inp.sim_time_s, self.recorder)
         if said is not None and target is not None and self.sup.last_command is not None:

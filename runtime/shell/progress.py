@@ -13,7 +13,7 @@ import time
 from typing import TextIO
 
 
-def _clock(seconds: float) -> str:
+def clock(seconds: float) -> str:
     """``seconds`` as ``H:MM:SS`` (or ``M:SS`` under an hour)."""
     s = int(seconds)
     h, rest = divmod(s, 3600)
@@ -73,10 +73,10 @@ class TerminalProgress:
         ``wall_s`` wall seconds."""
         sim_s = ticks * self.period_s
         timed_s = sim_s if ticks_timed is None else ticks_timed * self.period_s
-        text = f"sim {_clock(sim_s)}"
+        text = f"sim {clock(sim_s)}"
         if self.total_ticks:
             total_s = self.total_ticks * self.period_s
-            text += f" / {_clock(total_s)} ({100.0 * ticks / self.total_ticks:.0f} %)"
+            text += f" / {clock(total_s)} ({100.0 * ticks / self.total_ticks:.0f} %)"
         if wall_s > 0:
             text += f"  {timed_s / wall_s:.0f}x real time"
         return text
