@@ -82,7 +82,7 @@ LABELS: dict[str, MetricLabel] = {
         _STEP_WINDOW + "; or still outside the band when the first disturbance started",
     ),
     "step_iae_mmhg_s": MetricLabel("step: IAE", "mmHg·s", 0, _STEP_WINDOW),
-    "step_overshoot_mmhg": MetricLabel("step: overshoot", "mmHg", 1, _STEP_WINDOW),
+    "step_overshoot_mmhg": MetricLabel("step: overshoot above the target", "mmHg", 1, _STEP_WINDOW),
     "longest_above_10_mmhg_s": MetricLabel(
         "longest time more than 10 mmHg above the target", "s", 1, _NO_SAMPLE
     ),
