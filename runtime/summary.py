@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +43,16 @@ from pressor.runtime.core.fault_words import describe_detections
 from pressor.runtime.inputs.clinician import describe_target
 from pressor.runtime.inputs.config import RunConfig
 from pressor.runtime.shell.trajectory import held_delivered_ml_h
+
+
+def replay_command(rrd: Any, environ: Mapping[str, str] | None = None) -> str:
+    """The command that replays ``rrd`` on this machine: the native viewer where there is a
+    display (``DISPLAY`` or ``WAYLAND_DISPLAY`` set), else the web viewer on localhost (the
+    native one fails without a display; docs/VIEWER.md)."""
+    env = os.environ if environ is None else environ
+    if env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"):
+        return f"rerun {rrd}"
+    return f"rerun --web-viewer --bind 127.0.0.1 {rrd}  (no display here: open the printed URL)"
 
 
 def _step_of(
@@ -502,7 +514,7 @@ def finish(
     for line in written:
         print(line)
     if config.rrd is not None:
-        print(f"recording: {config.rrd}\nreplay:    rerun {config.rrd}")
+        print(f"recording: {config.rrd}\nreplay:    {replay_command(config.rrd)}")
     if result.stop_signal is not None:
         from pressor.runtime.shell.interrupt import exit_code
 

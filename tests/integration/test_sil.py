@@ -48,7 +48,9 @@ def test_sil_exits_0_and_prints_summary_and_replay_command(two_runs):
     proc, rrd, _ = two_runs[0]
     assert proc.returncode == 0, proc.stderr
     assert "time within ±5 mmHg of the target" in proc.stdout
-    assert f"rerun {rrd}" in proc.stdout
+    from pressor.runtime.summary import replay_command
+
+    assert f"replay:    {replay_command(rrd)}" in proc.stdout  # the child has this environment
 
 
 def test_sil_summary_reads_for_a_person_start_map_target_drug_dose_and_no_raw_names(two_runs):

@@ -200,3 +200,12 @@ def test_terminal_summary_names_each_cause_of_dropped_link_frames_only_when_any(
     out = io.StringIO()
     print_summary(lossy, TIMING, out)
     assert "link dropped: duplicates 3, incomplete_sched 1\n" in out.getvalue()
+
+
+def test_the_replay_hint_is_the_native_viewer_with_a_display_and_the_web_viewer_without():
+    from pressor.runtime.summary import replay_command
+
+    assert replay_command("a.rrd", {"DISPLAY": ":0"}) == "rerun a.rrd"
+    assert replay_command("a.rrd", {"WAYLAND_DISPLAY": "wayland-0"}) == "rerun a.rrd"
+    headless = replay_command("a.rrd", {})
+    assert headless.startswith("rerun --web-viewer --bind 127.0.0.1 a.rrd")
