@@ -190,11 +190,12 @@ def sil_parser() -> UsageParser:
 def sil_config(argv: Sequence[str]) -> SilConfig:
     """Parse and check ``pressor sil`` arguments; the scenario is loaded to read its faults and
     disturbance events (raises :class:`pressor.plumbing.usage.UsageError`)."""
-    from pressor.contracts.drug import binding_of
+    from pressor.contracts.drug import binding_of, drug_agnostic
     from pressor.hil_sim.patients.patient_model import (
         PatientModelError,
         check_drug,
         check_model_for_scenario,
+        model_drug,
     )
     from pressor.hil_sim.scenarios.scenario import ScenarioError, is_scenario_path, load_scenario
     from pressor.hil_sim.trials.trial import scenario_events
@@ -202,7 +203,6 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
 
     args = sil_parser().parse_args(argv)
     if args.controller is None:  # the design for the simulated patient's drug
-        from pressor.hil_sim.patients.patient_model import PatientModelError, model_drug
         from pressor.runtime.inputs.defaults import default_controller
 
         try:
@@ -219,7 +219,10 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
     controller = load_controller(args.controller, 1.0 / args.rate)
     try:
         drug = binding_of(controller)
-    except ValueError as exc:
+        if drug_agnostic(controller):  # a baseline runs on the simulated patient's drug
+            drug = model_drug(args.patient_model) or drug
+            run = replace(run, syringe=drug)
+    except (ValueError, PatientModelError) as exc:
         raise UsageError(f"--controller {args.controller}: {exc}") from None
     try:
         scenario = load_scenario(args.scenario)

@@ -165,12 +165,13 @@ def run_runtime(
 
 def _clinician_for(config: RunConfig, controller: Controller) -> ClinicianInput:
     """The clinician's input: ``pressor run``'s own, or for ``pressor sil`` the loaded design's
-    syringe (a device announcing another is refused)."""
+    syringe, a baseline's the simulated patient's (``config.syringe``); a device announcing
+    another is refused."""
     if config.clinician is not None:
         return config.clinician
     from pressor.contracts.drug import binding_of
 
-    design = binding_of(controller)
+    design = config.syringe or binding_of(controller)
     return ClinicianInput(drug=design.name, concentration_ug_ml=design.concentration_ug_ml)
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from pressor.contracts.checks import check_range
+from pressor.contracts.drug import DrugBinding
 from pressor.contracts.faults import FaultSpec, FaultSpecError, parse_faults
 from pressor.plumbing.usage import UsageError
 from pressor.runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S
@@ -104,6 +105,10 @@ class RunConfig:
     status_every_s
         Wall seconds between two status lines on stderr (``--status-every``;
         :mod:`pressor.runtime.shell.status`), None with ``--quiet``.
+    syringe
+        ``pressor sil`` with a drug-agnostic baseline (PI, Smith): the drug and syringe the
+        simulated device announces (the patient model's), which the runtime end binds it to;
+        None: the loaded design's (:func:`pressor.contracts.drug.binding_of`).
     clinician_stdin
         ``pressor sil --clinician-stdin``: the clinician's ``ack``, ``stop``, ``manual RATE`` and
         ``resume`` on stdin, the target staying the device's (``pressor run`` has them on its
@@ -131,6 +136,7 @@ class RunConfig:
     on_stop: str = "held"
     status_every_s: float | None = None
     clinician_stdin: bool = False
+    syringe: DrugBinding | None = None
 
     @property
     def period_s(self) -> float:

@@ -109,3 +109,16 @@ def test_the_recording_shows_the_delivered_dose_per_kg_beside_the_infusion(tmp_p
         "/dose/delivered_ug_kg_min",
     ]
     assert "Infusion (ml/h)" in v
+
+
+def test_a_baseline_runs_on_the_simulated_patients_drug_and_says_so(tmp_path):
+    cfg = sil_config(["--controller", "pi", "--patient-model", "norepinephrine"])
+    # the device announces the patient's syringe and the runtime end binds the PI to it
+    assert (cfg.drug.name, cfg.drug.concentration_ug_ml) == ("norepinephrine", 16.0)
+    assert cfg.run.syringe == cfg.drug
+    pairs = device_command(cfg, "/dev/pts/9", None, None)
+    assert pairs[pairs.index("--drug") + 1] == "norepinephrine"
+    argv = ["--controller", "smith", "--patient-model", "norepinephrine", "--duration", "20"]
+    proc = _sil(*argv, "--rrd", "r.rrd", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "drug: norepinephrine 16 µg/ml" in proc.stdout
