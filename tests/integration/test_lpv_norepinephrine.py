@@ -42,8 +42,11 @@ def test_sil_tells_the_device_to_announce_the_designs_syringe(tmp_path: Path) ->
     cmd = device_command(config, "/dev/null", None, None)
     assert cmd[cmd.index("--drug") + 1] == "norepinephrine"
     assert float(cmd[cmd.index("--concentration-ug-ml") + 1]) == 16.0
-    default = device_command(sil_config(["--controller", "pi", *argv]), "/dev/null", None, None)
-    assert "--drug" not in default
+    # a baseline runs on the simulated patient's drug: the device announces that syringe
+    pi = device_command(sil_config(["--controller", "pi", *argv]), "/dev/null", None, None)
+    assert pi[pi.index("--drug") + 1] == "norepinephrine"
+    default = device_command(sil_config(["--controller", "pi"]), "/dev/null", None, None)
+    assert "--drug" not in default  # phenylephrine at 100 ug/ml: the device's default
 
 
 def test_the_norepinephrine_lpv_lifts_a_norepinephrine_patient_toward_its_target() -> None:
