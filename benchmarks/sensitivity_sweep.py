@@ -14,7 +14,7 @@ each controller, for each patient model (default ``paper``, ``pkpd``, ``phenylep
 (:mod:`pressor.hil_sim.patients.sensitivity`: each delivered ml/h acts as f ml/h). Each model is played with
 its drug (:data:`MODEL_DRUG`); ``lpv`` in ``--controllers`` is that drug's shipped design
 (:data:`DRUG_LPV`: ``lpv`` for phenylephrine, ``lpv:norepinephrine``; under ``--schedule
-cautious`` its design on a log-K scale, :data:`DRUG_LPV_CAUTIOUS`), the others run as named
+cautious`` its design on a log-K scale, the runtime's default: :data:`pressor.runtime.inputs.defaults.DESIGN_FOR_DRUG`), the others run as named
 (the PI and the Smith predictor have no drug: their gains are in ml/h of phenylephrine's 100 µg/ml
 syringe, and ``pressor run`` refuses a norepinephrine device for them, docs/DRUGS.md; here, in
 process, they run unretuned). All controllers use one scheduling source (``--schedule``, default
@@ -72,7 +72,6 @@ import numpy as np
 from benchmarks.sweep_figures import Throughput, model_tables, row_figures, shortfall_figures
 from benchmarks.sweep_plan import (
     DRUG_LPV,
-    DRUG_LPV_CAUTIOUS,
     MODEL_DRUG,
     REFERENCE_WEIGHT_KG,
     Syringe,
@@ -94,6 +93,7 @@ from pressor.plumbing.parallel import run_ordered
 from pressor.runtime.core.dose_guard import DoseLimits
 from pressor.runtime.core.supervisor_config import State
 from pressor.runtime.estimation.sources import SOURCES
+from pressor.runtime.inputs.defaults import DESIGN_FOR_DRUG
 from pressor.runtime.inputs.drug_library import load_library
 
 #: sensitivity levels (× the model's; dimensionless)
@@ -153,7 +153,7 @@ def run_level(
     standard, stronger = syringes(load_library()[drug], scenario.pump.max_rate_ml_h)
     seeds = cohort_seeds(args.seed, args.patients)
     plan = reach_plan(scenario, model, level, seeds, standard, stronger)
-    lpv = (DRUG_LPV_CAUTIOUS if args.schedule == "cautious" else DRUG_LPV)[drug]
+    lpv = (DESIGN_FOR_DRUG if args.schedule == "cautious" else DRUG_LPV)[drug]
     controllers = [lpv if c == "lpv" else c for c in args.controllers]
     jobs: list[dict[str, Any]] = []
     for controller in controllers:

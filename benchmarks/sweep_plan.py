@@ -42,12 +42,6 @@ MODEL_CONCENTRATION_UG_ML = {
 }
 #: each drug's shipped LPV design, what ``lpv`` in ``--controllers`` runs on its models
 DRUG_LPV = {"phenylephrine": "lpv", "norepinephrine": "lpv:norepinephrine"}
-#: each drug's design on a log-K scale, what ``lpv`` runs under ``--schedule cautious`` (the
-#: cautious start needs a design with a patient population: docs/SCHEDULING.md)
-DRUG_LPV_CAUTIOUS = {
-    "phenylephrine": "lpv:cautious",
-    "norepinephrine": "lpv:norepinephrine-cautious",
-}
 #: the weight (kg) per-kg dose limits are converted at: the models draw no weight, and 70 kg is
 #: the reference adult of the dosing literature (docs/DRUGS.md)
 REFERENCE_WEIGHT_KG = 70.0

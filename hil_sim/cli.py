@@ -297,11 +297,9 @@ def _trial(argv: Sequence[str]) -> int:
     except (ScenarioError, PatientModelError) as exc:
         raise UsageError(str(exc)) from None
     if args.controller is None:
-        from pressor.hil_sim.patients.patient_model import model_drug
-        from pressor.runtime.inputs.defaults import default_controller
+        from pressor.hil_sim.patients.patient_model import default_design
 
-        drug = model_drug(args.patient_model)
-        args.controller = default_controller(None if drug is None else drug.name)
+        args.controller = default_design(args.patient_model)
     specs = split_controller_list(args.controller)
     if "" in specs or len(set(specs)) != len(specs):
         raise UsageError(

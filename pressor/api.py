@@ -56,7 +56,7 @@ from pressor.hil_sim.patients.patient_model import (
     PATIENT_MODELS,
     check_model_for_scenario,
     check_syringe,
-    model_drug,
+    default_design,
 )
 from pressor.hil_sim.patients.sensitivity import with_sensitivity
 from pressor.hil_sim.scenarios.scenario import Scenario, load_scenario
@@ -77,7 +77,7 @@ from pressor.runtime.estimation.sources import SOURCES
 from pressor.runtime.inputs.clinician import TARGET_MAX_MMHG, TARGET_MIN_MMHG
 from pressor.runtime.inputs.controller_loader import load_controller
 from pressor.runtime.inputs.controller_plugin import split_controller_list
-from pressor.runtime.inputs.defaults import DEFAULT_SCENARIO, default_controller, default_schedule
+from pressor.runtime.inputs.defaults import DEFAULT_SCENARIO, default_schedule
 
 if TYPE_CHECKING:  # pragma: no cover
     import pandas
@@ -419,8 +419,7 @@ def _checked(
         raise ValueError(f"schedule = {schedule!r}: allowed {', '.join(SOURCES)}")
     if controller is None:
         with _in_api_terms():
-            binding = model_drug(patient_model)
-        controller = default_controller(None if binding is None else binding.name)
+            controller = default_design(patient_model)
     spec = controller_spec(controller, controller_args)
     if isinstance(controller, str) and len(split_controller_list(controller)) > 1:
         raise ValueError(

@@ -195,6 +195,7 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
         PatientModelError,
         check_drug,
         check_model_for_scenario,
+        default_design,
         model_drug,
     )
     from pressor.hil_sim.scenarios.scenario import ScenarioError, is_scenario_path, load_scenario
@@ -203,13 +204,10 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
 
     args = sil_parser().parse_args(argv)
     if args.controller is None:  # the design for the simulated patient's drug
-        from pressor.runtime.inputs.defaults import default_controller
-
         try:
-            binding = model_drug(args.patient_model)
+            args.controller = default_design(args.patient_model)
         except PatientModelError as exc:
             raise UsageError(str(exc)) from None
-        args.controller = default_controller(None if binding is None else binding.name)
     if args.rrd is None:
         args.rrd = Path(
             f"pressor_sil_{_file_label(args.controller)}_{Path(args.scenario).stem}"

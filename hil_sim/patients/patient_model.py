@@ -304,6 +304,21 @@ def model_drug(spec: str) -> DrugBinding | None:
         raise PatientModelError(f"--patient-model {spec!r}: {exc}") from None
 
 
+def default_design(spec: str) -> str:
+    """The controller a run on ``spec``'s patients defaults to: their drug's design
+    (:func:`pressor.runtime.inputs.defaults.default_controller` of :func:`model_drug`).
+
+    Raises
+    ------
+    PatientModelError
+        As :func:`model_drug`.
+    """
+    from pressor.runtime.inputs.defaults import default_controller
+
+    binding = model_drug(spec)
+    return default_controller(None if binding is None else binding.name)
+
+
 def check_drug(
     controller: Any,
     controller_spec: str,

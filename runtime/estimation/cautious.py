@@ -132,21 +132,22 @@ class _UnitLag:
     """A unit-gain first-order lag with a delay, driven by the delivered rate's history (exact
     discretisation for a rate held over each tick; the delay read with linear interpolation)."""
 
-    __slots__ = ("a", "d", "y")
+    __slots__ = ("a", "b", "k", "f", "y")
 
     def __init__(self, T_s: float, tau_s: float, sample_period_s: float) -> None:
         self.a = math.exp(-sample_period_s / T_s)
-        self.d = tau_s / sample_period_s
+        self.b = 1.0 - self.a
+        d = tau_s / sample_period_s  # the delay in ticks: whole ticks k and the fraction f
+        self.k = int(d)
+        self.f = d - self.k
         self.y = 0.0
 
     def step(self, hist: list[float], head: int) -> float:
         n = len(hist)
-        k = int(self.d)
-        f = self.d - k
-        i = (head - 1 - k) % n
+        i = (head - 1 - self.k) % n
         j = (i - 1) % n
-        u = hist[i] + (hist[j] - hist[i]) * f
-        self.y = self.a * self.y + (1.0 - self.a) * u
+        u = hist[i] + (hist[j] - hist[i]) * self.f
+        self.y = self.a * self.y + self.b * u
         return self.y
 
 

@@ -210,9 +210,11 @@ def make_schedule(
         if design is None:
             return ValidatedSchedule(sample_period_s=sample_period_s)
         box, rates = design
-        est = DelayBankEstimator(sample_period_s, settings_for_box(box))
-        start = settings_for_box(box).prior
-        return ValidatedSchedule(est, sample_period_s, start=start, box=box, rate_bounds=rates)
+        settings = settings_for_box(box)
+        est = DelayBankEstimator(sample_period_s, settings)
+        return ValidatedSchedule(
+            est, sample_period_s, start=settings.prior, box=box, rate_bounds=rates
+        )
     if source == "cautious":
         from pressor.runtime.estimation.cautious import CautiousSchedule, envelope_of
 
