@@ -6,10 +6,11 @@ source makes them safe by construction and lets the MAP's response buy speed:
 
 * **Start at the top.** K̂ starts at the top of the design's patient population
   (``POPULATION_K_UG_KG_MIN``, mmHg per µg/kg/min, converted once to ml/h of the syringe and
-  patient at hand, :class:`pressor.contracts.drug.DoseScale`). The controller's gains are 1/K̂ (the
-  feedback's and the feedforward's: the generated module's prefilter runs on the feedback's own,
-  rate-limited K), so the first commands are what the most sensitive patient of the range needs,
-  and no more: on that patient they land on the target; on any other they fall short.
+  patient at hand, :class:`pressor.contracts.drug.DoseScale`), times the drug's start margin
+  (:data:`CAUTION_FOR_DRUG`), inside the box. The controller's gains are 1/K̂ (the feedback's and
+  the feedforward's: the generated module's prefilter runs on the feedback's own, rate-limited K),
+  so the first commands are what the most sensitive patient of the range needs, and no more: on
+  that patient they land on the target; on any other they fall short.
 * **Lower K only on evidence.** Let ``s_slow(t)`` be the response of a unit-gain patient with the
   box's slowest lag and longest delay (T_hi, τ_hi) to the rate the pump delivered, and ``Δy`` the
   MAP's change since the first sample. Any first-order patient of the box with sensitivity K has
@@ -24,7 +25,8 @@ source makes them safe by construction and lets the MAP's response buy speed:
   rises toward it (a higher K̂ is the cautious direction).
 * **At the certified rates.** K̂ falls at most at the design's certified fall of ln K and rises at
   most at its certified rise (``RATE_BOUNDS[0]`` / ``K_RATE_UP_PER_S`` of a log-K design, times
-  ``rate_fraction``), inside its box; T and τ are fixed at the box's geometric-mean T and longest τ.
+  ``rate_fraction``), inside its box; τ is fixed at the box's longest, T at the drug's
+  (:data:`CAUTION_FOR_DRUG`; by default the box's geometric mean).
   The design's certificate covers these rates (falls fast, rises slowly: a falling K is the
   benign direction, :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`), and its module's
   bumpless integral keeps the command continuous while K̂ moves
@@ -45,6 +47,16 @@ the geometric-mean T, same cohort); the feedforward's opening push is T/λ times
 infusion and is kept small by the design's fixed reference lag (``[reference] lag_s``), not by
 this source.
 
+Why phenylephrine's margin and T (:data:`CAUTION_FOR_DRUG`, chosen on cohort seed 3, judged on
+seed 2026: docs/notes/cautious-start.md). The PK/PD phenylephrine patients (plasma, then an effect
+site, then a sigmoid Emax) answer later than any first-order patient of the box and are locally
+steeper near the target than on average: on the geometric-mean T (200 s) the Smith law's first
+push overshot them (p90 16 % at 1×), and at 10× their local sensitivity near the target exceeds
+the population's top by up to a quarter (max 36 %). Scheduling on T 300 s (a weaker integral, a
+slower predictor) took the 0.5×–1× overshoot p90 to 1–4 %; starting at twice the top took the
+10× max to 12 %, for about a minute more to the target. Norepinephrine keeps the defaults: its
+patients did not overshoot (max 0.4 %), and the same settings cost them 10 minutes.
+
 What is not covered. The evidence assumes the drug's effect rises with the dose (a vasopressor) and
 that the baseline does not fall while it is read: a haemorrhage lowers Δy and reads as a less
 sensitive patient (K̂ falls, the loop gets bolder). Measured on the paper-disturbance scenario the
@@ -62,7 +74,27 @@ from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale, binding_of
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
 from pressor.runtime.estimation.gate import SampleGate
 
-__all__ = ["CautiousSchedule", "DesignEnvelope", "envelope_of"]
+__all__ = ["CAUTION_FOR_DRUG", "Caution", "CautiousSchedule", "DesignEnvelope", "envelope_of"]
+
+
+@dataclass(frozen=True)
+class Caution:
+    """How cautiously a drug's patients are started (module docstring, "Why phenylephrine's").
+
+    Attributes
+    ----------
+    start_margin
+        K̂ starts at this multiple of the population's top (1, >= 1; clamped to the box).
+    T_s
+        The lag the law is scheduled on (s), inside the box; None: the box's geometric-mean T.
+    """
+
+    start_margin: float = 1.0
+    T_s: float | None = None
+
+
+#: the drug's caution (lower-case drug name -> :class:`Caution`); other drugs take ``Caution()``
+CAUTION_FOR_DRUG: dict[str, Caution] = {"phenylephrine": Caution(start_margin=2.0, T_s=300.0)}
 
 
 @dataclass(frozen=True)
@@ -79,6 +111,8 @@ class DesignEnvelope:
         (lo, hi) sensitivity of the design's patients (mmHg per µg/kg/min).
     concentration_ug_ml
         The syringe the design names (µg/ml).
+    drug
+        The drug the design is for (lower case, ``phenylephrine``).
     """
 
     box: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
@@ -86,6 +120,7 @@ class DesignEnvelope:
     rise_per_s: float
     population: tuple[float, float]
     concentration_ug_ml: float
+    drug: str = "phenylephrine"
 
 
 def envelope_of(controller: Any) -> DesignEnvelope:
@@ -119,12 +154,14 @@ def envelope_of(controller: Any) -> DesignEnvelope:
     fall = float(find("K_RATE_FALL_PER_S") or find("RATE_BOUNDS")[0])
     rise = float(find("K_RATE_UP_PER_S") or fall)
     pop = tuple(float(v) for v in find("POPULATION_K_UG_KG_MIN"))
+    binding = binding_of(controller)
     return DesignEnvelope(
         box,  # type: ignore[arg-type]
         fall,
         rise,
         pop,  # type: ignore[arg-type]
-        binding_of(controller).concentration_ug_ml,
+        binding.concentration_ug_ml,
+        binding.name,
     )
 
 
@@ -171,8 +208,12 @@ class CautiousSchedule:
         Share of the certified ln K rates the source moves at, in (0, 1] (the module limits to the
         full rates; a fraction keeps its limiter idle).
     T_s, tau_s
-        The lag (s) and delay (s) to schedule on; default the box's geometric-mean T and its
-        longest τ (module docstring).
+        The lag (s) and delay (s) to schedule on; default the drug's T
+        (:data:`CAUTION_FOR_DRUG`, else the box's geometric mean) and the box's longest τ (module
+        docstring).
+    start_margin
+        K̂ starts at this multiple of the population's top, >= 1, clamped to the box; default the
+        drug's (:data:`CAUTION_FOR_DRUG`, else 1).
 
     The sample gate (:class:`pressor.runtime.estimation.gate.SampleGate`) keeps bad samples out of the
     evidence, but not a MAP that does not move: here no movement is the evidence (a frozen
@@ -191,6 +232,7 @@ class CautiousSchedule:
         rate_fraction: float = 0.9,
         T_s: float | None = None,
         tau_s: float | None = None,
+        start_margin: float | None = None,
     ) -> None:
         if not (math.isfinite(sample_period_s) and sample_period_s > 0.0):
             raise ValueError(f"sample_period_s={sample_period_s!r} must be finite and > 0")
@@ -200,11 +242,21 @@ class CautiousSchedule:
         if not 0.0 < rate_fraction <= 1.0:
             raise ValueError(f"rate_fraction={rate_fraction!r} must be in (0, 1]")
         self.envelope = env = envelope
+        caution = CAUTION_FOR_DRUG.get(env.drug, Caution())
+        margin = caution.start_margin if start_margin is None else float(start_margin)
+        if not (math.isfinite(margin) and margin >= 1.0):
+            raise ValueError(f"start_margin={start_margin!r} must be finite and >= 1")
         self.dose = dose or DoseScale(env.concentration_ug_ml, REFERENCE_WEIGHT_KG)
         (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = env.box
-        self.k_top = min(max(self.dose.k_ml_h(env.population[1]), k_lo), k_hi)
+        top = self.dose.k_ml_h(env.population[1])
+        self.k_top = min(max(margin * top, k_lo), k_hi)
         self.k_floor = min(max(self.dose.k_ml_h(env.population[0]), k_lo), self.k_top)
+        T_s = caution.T_s if T_s is None else T_s
         self.T_s = math.sqrt(t_lo * t_hi) if T_s is None else float(T_s)
+        if not t_lo <= self.T_s <= t_hi:
+            raise ValueError(
+                f"T_s={self.T_s!r} s must lie in the design's T box [{t_lo}, {t_hi}] s"
+            )
         self.tau_s = d_hi if tau_s is None else float(tau_s)
         ts = float(sample_period_s)
         self._down = math.exp(-rate_fraction * env.fall_per_s * ts)

@@ -41,36 +41,63 @@ def _loop(K: float, T: float, tau: float, seconds: float, dose: DoseScale | None
     return us, ys, ks
 
 
-def test_the_start_is_the_population_top_in_ml_h_of_the_syringe_and_patient():
+def test_the_start_is_twice_the_population_top_in_ml_h_of_the_syringe_and_patient():
     ctl = load_controller("lpv:cautious", TS)
     env = envelope_of(ctl)
     assert env.population == (0.42, 420.0) and env.concentration_ug_ml == 100.0
+    assert env.drug == "phenylephrine"
     ref = CautiousSchedule(env, TS)
-    # 420 mmHg per ug/kg/min at 100 ug/ml and 70 kg: 420 * 100 / (60 * 70) = 10 mmHg/(ml/h)
+    # 420 mmHg per ug/kg/min at 100 ug/ml and 70 kg: 420 * 100 / (60 * 70) = 10 mmHg/(ml/h),
+    # times phenylephrine's start margin 2
     assert ref.dose == DoseScale(100.0, REFERENCE_WEIGHT_KG)
-    assert ref.k_top == pytest.approx(10.0) and ref.K == ref.k_top
+    assert ref.k_top == pytest.approx(20.0) and ref.K == ref.k_top
+    # at 30 kg twice the top (46.7) is beyond the box: the box's top, 25 mmHg/(ml/h)
     light = CautiousSchedule(env, TS, DoseScale(100.0, 30.0))
-    assert light.k_top == pytest.approx(420.0 * 100.0 / (60.0 * 30.0))
-    # T and tau: the box's geometric-mean T and longest tau
-    assert ref.T_s == pytest.approx(200.0) and ref.tau_s == pytest.approx(45.0)
+    assert light.k_top == pytest.approx(25.0)
+    # T: phenylephrine's 300 s; tau: the box's longest
+    assert ref.T_s == pytest.approx(300.0) and ref.tau_s == pytest.approx(45.0)
+    plain = CautiousSchedule(env, TS, start_margin=1.0, T_s=200.0)
+    assert plain.k_top == pytest.approx(10.0) and plain.T_s == 200.0
+
+
+def test_norepinephrine_starts_at_its_population_top_on_the_geometric_mean_t():
+    ctl = load_controller("lpv:norepinephrine-cautious", TS)
+    env = envelope_of(ctl)
+    assert env.drug == "norepinephrine"
+    sched = CautiousSchedule(env, TS)
+    (_, _), (t_lo, t_hi), _ = env.box
+    assert sched.k_top == pytest.approx(sched.dose.k_ml_h(env.population[1]))
+    assert sched.T_s == pytest.approx(math.sqrt(t_lo * t_hi))
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "needle"),
+    [({"start_margin": 0.5}, "start_margin"), ({"T_s": 50.0}, "T box"), ({"T_s": 900.0}, "T box")],
+)
+def test_settings_outside_their_range_are_refused_naming_them(kwargs, needle):
+    env = envelope_of(load_controller("lpv:cautious", TS))
+    with pytest.raises(ValueError, match=needle):
+        CautiousSchedule(env, TS, **kwargs)
 
 
 def test_first_commands_on_the_most_sensitive_patient_stay_below_the_hand_computed_bound():
-    # K_top = 10 mmHg/(ml/h). The feedforward's opening push is T_lag dr / (lambda K_top) =
-    # 100 * 20 / (10 * 10) = 20 ml/h and the feedback starts from 0, so no command of the first
-    # 10 s (the box's shortest delay: nothing can be known before) exceeds 20 ml/h, and the dose
-    # of the first 60 s stays below what holds the step on the box's fastest patient with that K
-    # (T 100 s) for that long plus its opening push: dr/K_top * 60 s + T_lag dr/K_top.
-    for T, tau in ((100.0, 10.0), (200.0, 27.5), (400.0, 45.0)):
-        us, ys, _ = _loop(10.0, T, tau, 60.0)
-        assert max(us[:100]) <= 20.0 + 1e-9
-        assert sum(us) * TS <= STEP / 10.0 * 60.0 + 100.0 * STEP / 10.0
-    # on the box's fastest patient with that K, MAP stays within 10 % of the step above the
-    # target (the figure), and K is never lowered below this patient's by much
-    for T, tau in ((100.0, 10.0), (100.0, 45.0), (200.0, 27.5)):
-        us, ys, ks = _loop(10.0, T, tau, 1200.0)
-        assert max(ys) <= 1.10 * STEP, (T, tau, max(ys))
-        assert min(ks) >= 10.0 / 1.25
+    # K starts at 2 x 10 = 20 mmHg/(ml/h). The feedforward's opening push is T_lag dr /
+    # (lambda K) = 100 * 20 / (10 * 20) = 10 ml/h and the feedback starts from 0, so no command
+    # of the first 10 s (the box's shortest delay: nothing can be known before) exceeds 10 ml/h,
+    # and the dose of the first 60 s stays below what holds the step on the box's fastest patient
+    # with K 20 (T 100 s) for that long plus its opening push: dr/K * 60 s + T_lag dr/K.
+    for K in (10.0, 20.0):  # the population's 10x top, and twice it (the start)
+        for T, tau in ((100.0, 10.0), (200.0, 27.5), (400.0, 45.0)):
+            us, ys, _ = _loop(K, T, tau, 60.0)
+            assert max(us[:100]) <= 10.0 + 1e-9
+            assert sum(us) * TS <= STEP / 20.0 * 60.0 + 100.0 * STEP / 20.0
+    # on the box's fastest patients at the top and at twice the top, MAP stays within 10 % of
+    # the step above the target (the figure), and K is never lowered far below theirs
+    for K in (10.0, 20.0):
+        for T, tau in ((100.0, 10.0), (100.0, 45.0), (200.0, 27.5)):
+            us, ys, ks = _loop(K, T, tau, 1200.0)
+            assert max(ys) <= 1.10 * STEP, (K, T, tau, max(ys))
+            assert min(ks) >= K / 1.25
 
 
 def test_a_less_sensitive_patient_lowers_k_at_the_certified_rate_and_reaches_the_target():

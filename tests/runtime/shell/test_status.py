@@ -52,7 +52,8 @@ def test_lines_come_whole_at_the_interval_and_not_before():
 
 
 def test_a_real_time_sil_prints_status_lines_unless_quiet(tmp_path):
-    argv = ["sil", "--controller", "pi", "--realtime", "--duration", "3", "--status-every", "1"]
+    # 6 s at a line a second: a loaded machine that starts late and catches up still prints one
+    argv = ["sil", "--controller", "pi", "--realtime", "--duration", "6", "--status-every", "1"]
     proc = pressor(*argv, "--rrd", str(tmp_path / "a.rrd"), cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("pressor sil  0:0")]
