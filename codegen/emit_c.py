@@ -17,7 +17,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from pressor.codegen.c_syntax import PU, P, c_double
+from pressor.codegen.c_syntax import (
+    PU,
+    P,
+    c_double,
+    c_double_array,
+    c_double_commented,
+    exact_note,
+)
 from pressor.codegen.emit_c_step import step_fixed, step_float
 from pressor.codegen.emit_spec import EmitSpec, corner_offsets, derived_constants, nonzero_entries
 from pressor.codegen.fixed_point import FixedPointPlan
@@ -35,6 +42,28 @@ def _table(name: str, ctype: str, values: np.ndarray, entries, fmt) -> str:
         + ",\n".join(rows)
         + "\n};\n"
     )
+
+
+def _float_table(name: str, spec: EmitSpec, values: np.ndarray, entries) -> str:
+    """The double table, one coefficient a line (decimal, exact hex in a comment), each node's
+    block headed by its rho."""
+    flat = values.reshape(-1, *values.shape[3:])
+    grid = np.stack(np.meshgrid(*spec.nodes, indexing="ij"), axis=-1).reshape(-1, 3)
+    blocks = []
+    for n, node in enumerate(flat):
+        k, t, tau = (float(x) for x in grid[n])
+        body = c_double_array((node[i, j] for i, j in entries), indent="        ")
+        blocks.append(f"    /* node {n}: K {k!r}, T {t!r}, tau {tau!r} */\n    {{\n{body}\n    }}")
+    return (
+        f"static const double {name}[{len(flat)}][{len(entries)}] = {{\n"
+        + ",\n".join(blocks)
+        + "\n};\n"
+    )
+
+
+def _array(ctype: str, name: str, values) -> str:
+    vals = list(values)
+    return f"static const {ctype} {name}[{len(vals)}] = {{\n{c_double_array(vals)}\n}};"
 
 
 def _int_lit(x: int) -> str:
@@ -81,12 +110,15 @@ def emit_c(
     h.append(f"#define {PU}N_K {nk}")
     h.append(f"#define {PU}N_Z {nz}")
     h.append(f"#define {PU}NBUF {c['NBUF']}  /* ceil(tau_max / Ts) + 1 */")
-    h.append(f"#define {PU}SAMPLE_PERIOD_S {c_double(spec.sample_period_s)}")
-    h.append(f"#define {PU}MAX_RATE_ML_H {c_double(spec.max_rate_ml_h)}")
+    h.append(f"#define {PU}SAMPLE_PERIOD_S {c_double_commented(spec.sample_period_s)}")
+    h.append(f"#define {PU}MAX_RATE_ML_H {c_double_commented(spec.max_rate_ml_h)}")
     h.append(f'#define {PU}DRUG "{spec.drug.name}"')
+    conc = spec.drug.concentration_ug_ml
     h.append(
-        f"#define {PU}DRUG_CONCENTRATION_UG_ML {c_double(spec.drug.concentration_ug_ml)}"
-        "  /* ug/ml: the syringe whose ml/h the gains count */"
+        f"#define {PU}DRUG_CONCENTRATION_UG_ML {c_double(conc)}"
+        "  /* ug/ml: the syringe whose ml/h the gains count"
+        + (f"; {exact_note(conc)}" if exact_note(conc) else "")
+        + " */"
     )
     h.append(f'#define {PU}ARTIFACT_SHA256 "{spec.artifact_sha256}"')
     h.append(f"#define {PU}FIXED_POINT {0 if float_mode else 1}\n")
@@ -126,7 +158,7 @@ def emit_c(
             continue
         v = c[k]
         if isinstance(v, float):
-            src.append(f"#define {PU}{k} {c_double(v)}")
+            src.append(f"#define {PU}{k} {c_double_commented(v)}")
         else:
             src.append(f"#define {PU}{k} {_int_lit(v)}")
     src.append(f"#define {PU}QMAX INT32_C(2147483647)")
@@ -137,12 +169,10 @@ def emit_c(
     src.append(f"static const uint8_t {P}col[{PU}NENT] = {{{cols_idx}}};")
     src.append(f"static const int32_t {P}corner[8] = {{{', '.join(str(o) for o in offs)}}};")
     for i in range(3):
-        nodes = ", ".join(c_double(x) for x in spec.nodes[i])
-        invw = ", ".join(c_double(x) for x in spec.inv_widths(i))
-        src.append(f"static const double {P}nodes{i}[{spec.counts[i]}] = {{{nodes}}};")
-        src.append(f"static const double {P}invw{i}[{spec.counts[i] - 1}] = {{{invw}}};")
+        src.append(_array("double", f"{P}nodes{i}", spec.nodes[i]))
+        src.append(_array("double", f"{P}invw{i}", spec.inv_widths(i)))
     if float_mode:
-        src.append(_table(f"{P}tab", "double", plan.scaled_tables, entries, c_double))
+        src.append(_float_table(f"{P}tab", spec, plan.scaled_tables, entries))
     else:
         ctype = "int16_t" if plan.coef_bits <= 15 else "int32_t"
         src.append(_table(f"{P}tab", ctype, plan.q_tables, entries, lambda x: str(int(x))))

@@ -35,6 +35,7 @@ integrating modes, so only the coefficients and weights are 16-bit.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,6 +70,7 @@ def signal_peaks(
     max_rate_ml_h: float,
     step_mmhg: float = 40.0,
     duration_s: float = 3600.0,
+    report: Callable[[str, int, int], None] | None = None,
 ) -> Matrix:
     """Peak |z_i| (physical units) over frozen closed-loop runs at the box corners and centre.
 
@@ -78,6 +80,7 @@ def signal_peaks(
     command is pinned at a limit and its increment pushes further into it). The patient is the
     first-order-plus-delay model sampled exactly
     (:func:`pressor.synthesis.verification.discrete_step.sampled_fopdt`).
+    ``report(what, t, duration_s)`` is called every simulated minute (whole seconds).
     """
     nk_, nt_, na_ = tables.shape[:3]
     idx = [(i, j, k) for i in (0, nk_ - 1) for j in (0, nt_ - 1) for k in (0, na_ - 1)]
@@ -105,6 +108,7 @@ def signal_peaks(
     dmap = np.zeros(b)
     peaks = np.zeros(nz)
     ar = np.arange(b)
+    per_minute = max(1, int(round(60.0 / ts)))
     for k in range(steps):
         r = step_mmhg if k < steps // 2 else 0.0
         e = np.clip(r - dmap, -E_LIM_MMHG, E_LIM_MMHG)
@@ -124,6 +128,8 @@ def signal_peaks(
         cbuf[h] = z[:, nk]
         dmap = a * dmap + b_new * cbuf[(h - w) % nbuf, ar] + b_old * cbuf[(h - w - 1) % nbuf, ar]
         np.maximum(peaks, np.max(np.abs(z), axis=0), out=peaks)
+        if report is not None and (k + 1) % per_minute == 0:
+            report("scaling runs, seconds simulated", int(round((k + 1) * ts)), int(duration_s))
     return peaks
 
 
@@ -178,8 +184,11 @@ def make_plan(
     max_rate_ml_h: float,
     fmt: str = "q31",
     headroom: float = 4.0,
+    report: Callable[[str, int, int], None] | None = None,
 ) -> FixedPointPlan:
     """Choose the state scaling and Q-formats and quantise ``tables`` (see the module docstring).
+
+    ``report`` receives the progress of the scaling simulation (:func:`signal_peaks`).
 
     Raises
     ------
@@ -192,7 +201,7 @@ def make_plan(
     box = np.asarray(box, float)
     nz = tables.shape[3]
     nk = nz - 2
-    peaks = signal_peaks(tables, box, sample_period_s, max_rate_ml_h)
+    peaks = signal_peaks(tables, box, sample_period_s, max_rate_ml_h, report=report)
     peaks[nk] = max(peaks[nk], max_rate_ml_h)  # u spans the whole pump range by construction
     scale = np.array([_pow2_ceil(headroom * p) for p in peaks])
     col_scale = np.concatenate([scale, scale[:nk], [E_LIM_MMHG]])

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from pressor.codegen.discretise import ContinuousController
 from pressor.codegen.fixed_point import FixedPointPlan, make_plan
-from pressor.codegen.tables import TabulationProof, choose_grid
+from pressor.codegen.tables import Report, TabulationProof, choose_grid
 from pressor.contracts.drug import DEFAULT_BINDING, DrugBinding
 from pressor.plumbing.files import write_atomic
 from pressor.synthesis.artifact import default_artifact_path
@@ -214,12 +214,17 @@ def load_design(path: str | Path) -> LoadedDesign:
     )
 
 
-def tabulate(design: LoadedDesign, sample_period_s: float = SAMPLE_PERIOD_S) -> TabulationProof:
+def tabulate(
+    design: LoadedDesign, sample_period_s: float = SAMPLE_PERIOD_S, report: Report | None = None
+) -> TabulationProof:
     """Stage 2: discretise every node and choose/prove the tabulation grid.
 
     The search starts from ``TABULATION_START_COUNTS`` (3 geometric K nodes, the box corners in T
     and tau), not from the synthesis grid: adaptive bisection adds nodes only where they are needed.
+    ``report`` receives ``(what, done, total)`` after every node and checked point
+    (:func:`pressor.codegen.tables.choose_grid`).
     """
+    extra = {} if report is None else {"report": report}
     return choose_grid(
         design.controller_fn,
         design.box,
@@ -228,6 +233,7 @@ def tabulate(design: LoadedDesign, sample_period_s: float = SAMPLE_PERIOD_S) -> 
         design.lambda_,
         sample_period_s,
         rel_tol=OFFGRID_REL_TOL,
+        **extra,
     )
 
 
@@ -236,9 +242,13 @@ def quantise(
     proof: TabulationProof,
     fmt: str,
     sample_period_s: float = SAMPLE_PERIOD_S,
+    report: Report | None = None,
 ) -> FixedPointPlan:
-    """Stage 3: state scaling, Q-formats, quantised tables."""
-    return make_plan(proof.tables, design.box, sample_period_s, design.max_rate_ml_h, fmt)
+    """Stage 3: state scaling, Q-formats, quantised tables (``report``: the scaling simulation's
+    progress, :func:`pressor.codegen.fixed_point.signal_peaks`)."""
+    return make_plan(
+        proof.tables, design.box, sample_period_s, design.max_rate_ml_h, fmt, report=report
+    )
 
 
 def content_hash(artifact_sha256: str, target: str, fmt: str, sample_period_s: float) -> str:
@@ -315,6 +325,17 @@ def output_names(target: str) -> list[str]:
     return [f"{MODULE_NAME}.py"] if target == "python" else [f"{MODULE_NAME}.h", f"{MODULE_NAME}.c"]
 
 
+#: Stages :func:`generate` runs (load, tabulate, quantise, emit), as numbered in its progress.
+N_STAGES = 4
+
+
+def _counts(update: Callable[[str], None] | None, stage: str) -> Report | None:
+    """A stage's ``(what, done, total)`` reports as ``update`` lines, or None for no reports."""
+    if update is None:
+        return None
+    return lambda what, done, total: update(f"{stage}: {what} {done}/{total}")
+
+
 def generate(
     artifact: str | Path,
     target: str,
@@ -323,14 +344,20 @@ def generate(
     sample_period_s: float = SAMPLE_PERIOD_S,
     c_float: bool = False,
     progress: Callable[[str], None] | None = None,
+    update: Callable[[str], None] | None = None,
 ) -> tuple[list[Path], bool]:
     """Run every stage and write the files; returns (paths, skipped).
 
-    ``skipped`` is True when every output already records the same content hash.
+    ``skipped`` is True when every output already records the same content hash. ``progress``
+    receives one line per stage (``stage 2/4 tabulate: ...``) and its outcome; ``update`` the
+    counts inside the long stages (``stage 2/4 tabulate: round 3, grid 9x5x2: edge midpoints
+    120/300``), after every unit of work, i.e. up to thousands of times a second: the receiver
+    chooses what to show and when. Neither changes what is written.
     """
     say = progress or (lambda _msg: None)
     out = Path(out_dir)
-    design = load_design(artifact)
+    design = load_design(artifact)  # before any progress: bad input gets its one line alone
+    say(f"stage 1/{N_STAGES} load: {design.display_path} (sha256 {design.sha256[:12]})")
     chash = content_hash(
         design.sha256, target + ("-float" if c_float else ""), fmt, sample_period_s
     )
@@ -338,12 +365,14 @@ def generate(
     if all(recorded_hash(p) == chash for p in paths):
         say(f"up to date (content hash {chash[:12]}); nothing written")
         return paths, True
-    say("stage tabulate: discretising nodes and proving the tabulation grid")
-    proof = tabulate(design, sample_period_s)
+    say(f"stage 2/{N_STAGES} tabulate: discretising nodes and proving the tabulation grid")
+    proof = tabulate(design, sample_period_s, _counts(update, f"stage 2/{N_STAGES} tabulate"))
     say(f"  grid {proof.grid.counts}, max interpolation error {np.max(proof.check.rel_error):.4f}")
-    say("stage quantise: scaling and Q-formats")
-    plan = quantise(design, proof, fmt, sample_period_s)
-    say("stage emit")
+    say(f"stage 3/{N_STAGES} quantise: scaling and Q-formats")
+    plan = quantise(
+        design, proof, fmt, sample_period_s, _counts(update, f"stage 3/{N_STAGES} quantise")
+    )
+    say(f"stage 4/{N_STAGES} emit")
     gen = emit(design, proof, plan, target, sample_period_s, c_float)
     out.mkdir(parents=True, exist_ok=True)
     for name, text in gen.files.items():

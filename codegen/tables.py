@@ -50,6 +50,13 @@ __all__ = [
 
 Matrix = NDArray[np.float64]
 ControllerFn = Callable[[NDArray[np.float64]], ContinuousController]
+#: Progress inside a long computation: (what, done, total). Called once per unit of work (a node, a
+#: checked point), so thousands of times a second: the receiver decides what to show and when.
+Report = Callable[[str, int, int], None]
+
+
+def _silent(_what: str, _done: int, _total: int) -> None:
+    return None
 
 
 @dataclass(frozen=True)
@@ -214,10 +221,15 @@ def check_grid(
     omega: float,
     lambda_: float,
     sample_period_s: float,
+    report: Report = _silent,
+    what: str = "checked points",
 ) -> GridCheck:
-    """Frozen-loop stability and interpolation error of ``tables`` at ``points``."""
+    """Frozen-loop stability and interpolation error of ``tables`` at ``points``.
+
+    ``report(what, done, len(points))`` is called after each point.
+    """
     unstable, exact_unstable, errors = [], [], []
-    for rho in points:
+    for done, rho in enumerate(points, 1):
         approx = interpolate(tables, grid, rho)
         exact = discretise_node(controller_fn(rho), omega, lambda_, sample_period_s)
         unstable.append(unstable_root_count(frozen_loop_matrices(approx, rho, sample_period_s)))
@@ -227,6 +239,7 @@ def check_grid(
             else 0
         )
         errors.append(row_relative_error(approx, exact))
+        report(what, done, len(points))
     return GridCheck(
         points=np.asarray(points, float),
         unstable=np.asarray(unstable, np.int64),
@@ -275,15 +288,28 @@ class _NodeCache:
             self.memo[key] = m
         return m
 
-    def tables(self, grid: TabulationGrid) -> Matrix:
-        mats = [self(rho) for rho in grid.nodes()]
+    def tables(self, grid: TabulationGrid, report: Report = _silent, what: str = "nodes") -> Matrix:
+        nodes = grid.nodes()
+        mats = []
+        for done, rho in enumerate(nodes, 1):
+            mats.append(self(rho))
+            report(what, done, len(nodes))
         return np.asarray(mats).reshape(*grid.counts, *mats[0].shape)
 
 
-def _edge_errors(exact: _NodeCache, grid: TabulationGrid, tables: Matrix) -> list[Matrix]:
+def _edge_errors(
+    exact: _NodeCache,
+    grid: TabulationGrid,
+    tables: Matrix,
+    report: Report = _silent,
+    what: str = "edge midpoints",
+) -> list[Matrix]:
     """Per axis, per interval: the largest interpolation error at the interval's midpoint along
     every grid line of that axis (all combinations of the other axes' nodes)."""
     axes = grid.axes()
+    counts = grid.counts
+    total = sum((counts[a] - 1) * counts[(a + 1) % 3] * counts[(a + 2) % 3] for a in range(3))
+    done = 0
     out = []
     for axis in range(3):
         o1, o2 = (axis + 1) % 3, (axis + 2) % 3
@@ -296,6 +322,8 @@ def _edge_errors(exact: _NodeCache, grid: TabulationGrid, tables: Matrix) -> lis
                     rho[axis], rho[o1], rho[o2] = mval, p, q
                     approx = interpolate(tables, grid, rho)
                     errs[j] = max(errs[j], row_relative_error(approx, exact(rho)))
+                    done += 1
+                    report(what, done, total)
         out.append(errs)
     return out
 
@@ -313,6 +341,7 @@ def choose_grid(
     seed: int = 0,
     max_nodes: int = 4000,
     edge_margin: float = 0.7,
+    report: Report = _silent,
 ) -> TabulationProof:
     """Adaptively bisect a non-uniform grid until the stability and error checks pass.
 
@@ -336,6 +365,10 @@ def choose_grid(
         Row-wise relative interpolation error allowed at every checked point.
     n_random
         Seeded random interior points checked in addition to all cell midpoints.
+    report
+        Progress, ``(what, done, total)`` after every node and checked point; ``what`` names the
+        refinement round, its grid (K x T x tau nodes) and the step (nodes discretised, edge
+        midpoints, cell checks). The result does not depend on it.
 
     Raises
     ------
@@ -358,8 +391,9 @@ def choose_grid(
         return nxt
 
     while True:
-        tables = exact.tables(grid)
-        edge = _edge_errors(exact, grid, tables)
+        head = f"round {len(history) + 1}, grid {'x'.join(str(c) for c in grid.counts)}"
+        tables = exact.tables(grid, report, f"{head}: nodes")
+        edge = _edge_errors(exact, grid, tables, report, f"{head}: edge midpoints")
         worst = max(float(np.max(e)) for e in edge)
         if worst > edge_margin * rel_tol:
             history.append((grid.counts, worst, -1))
@@ -371,7 +405,17 @@ def choose_grid(
             grid = grow(nxt)
             continue
         points = np.vstack([grid.cell_midpoints(), random_points])
-        check = check_grid(controller_fn, grid, tables, points, omega, lambda_, sample_period_s)
+        check = check_grid(
+            controller_fn,
+            grid,
+            tables,
+            points,
+            omega,
+            lambda_,
+            sample_period_s,
+            report,
+            f"{head}: cell checks",
+        )
         failing = (check.rel_error > rel_tol) | ((check.unstable > 0) & (check.exact_unstable == 0))
         history.append(
             (grid.counts, float(np.max(check.rel_error)), int(np.sum(check.unstable > 0)))

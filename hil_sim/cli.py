@@ -38,8 +38,10 @@ TRIAL_DRUG_HELP = (
     " patient model's); recorded with every patient (default: that drug)"
 )
 TRIAL_CONCENTRATION_HELP = (
-    "syringe concentration (ug/ml): must be the one whose ml/h the design counts (a baseline:"
-    " the patient model's); the doses in ug/kg/min are converted with it (default: that one)"
+    "syringe concentration (ug/ml): must be the one whose ml/h the design counts (a baseline,"
+    " pi or smith: the patient model's or another of the drug library's syringes of its drug,"
+    " the patients then responding to each ml/h in proportion); the doses in ug/kg/min are"
+    " converted with it (default: that one)"
 )
 TRIAL_WEIGHT_HELP = (
     "the patients' weight (kg, {rng}): the records' and the table's doses in ug/kg/min are per"
@@ -271,9 +273,9 @@ def _trial(argv: Sequence[str]) -> int:
     from pressor.hil_sim.patients.patient_model import (
         PatientModelError,
         check_model_for_scenario,
-        check_syringe,
     )
     from pressor.hil_sim.patients.sensitivity import with_sensitivity
+    from pressor.hil_sim.patients.syringe import check_syringe, patients_on_syringe
     from pressor.hil_sim.scenarios.scenario import ScenarioError, load_scenario
     from pressor.hil_sim.trials.paired import compare_controllers, format_comparison
     from pressor.hil_sim.trials.report import write_report
@@ -306,6 +308,7 @@ def _trial(argv: Sequence[str]) -> int:
             f"field '--controller' = {args.controller!r}: name each controller once, comma-separated"
         )
     drugs = {}
+    models: dict[str, str] = {}  # the patients on the run's syringe (a baseline's may differ)
     schedules: dict[str, str] = {}
     for spec in specs:
         try:
@@ -313,6 +316,7 @@ def _trial(argv: Sequence[str]) -> int:
             drugs[spec] = check_syringe(
                 controller, spec, args.patient_model, args.drug, args.concentration_ug_ml
             )
+            models[spec] = patients_on_syringe(patient_model, drugs[spec])
         except (ControllerSpecError, PatientModelError) as exc:
             raise UsageError(str(exc)) from None
         schedules[spec] = args.schedule or default_schedule(controller)
@@ -341,7 +345,7 @@ def _trial(argv: Sequence[str]) -> int:
                 progress=_progress_bar,
                 scheduler=args.scheduler,
                 schedule=schedules[spec],
-                patient_model=patient_model,
+                patient_model=models[spec],
                 drug=drugs[spec],
                 weight_kg=args.weight_kg,
             )

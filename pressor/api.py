@@ -55,10 +55,10 @@ from pressor.hil_sim.patients.patient_model import (
     DEFAULT_PATIENT_MODEL,
     PATIENT_MODELS,
     check_model_for_scenario,
-    check_syringe,
     default_design,
 )
 from pressor.hil_sim.patients.sensitivity import with_sensitivity
+from pressor.hil_sim.patients.syringe import check_syringe, patients_on_syringe
 from pressor.hil_sim.scenarios.scenario import Scenario, load_scenario
 from pressor.hil_sim.trials.paired import compare_controllers
 from pressor.hil_sim.trials.trial import (
@@ -407,10 +407,11 @@ def _checked(
     schedule: str | None,
     patient_model: str,
     clinical: _Clinical = _Clinical(),
-) -> tuple[str, Scenario, float, str, DrugBinding]:
-    """(spec, scenario, period s, schedule, the run's drug and syringe) after the checks
+) -> tuple[str, Scenario, float, str, DrugBinding, str]:
+    """(spec, scenario, period s, schedule, the run's drug and syringe, the patient model on that
+    syringe: :func:`pressor.hil_sim.patients.syringe.patients_on_syringe`) after the checks
     ``pressor trial`` makes before it runs (a design meets only its drug:
-    :func:`pressor.hil_sim.patients.patient_model.check_syringe`), the defaults resolved as
+    :func:`pressor.hil_sim.patients.syringe.check_syringe`), the defaults resolved as
     ``pressor trial`` resolves them (the patient model's drug's design and that design's
     schedule: :mod:`pressor.runtime.inputs.defaults`); errors name the API's arguments
     (``controller``), not the command line's (``--controller``)."""
@@ -440,7 +441,8 @@ def _checked(
             clinical.concentration_ug_ml,
             fields=("controller", "patient_model", "drug", "concentration_ug_ml"),
         )
-    return spec, sc, period_s, schedule or default_schedule(loaded), drug
+        patients = patients_on_syringe(patient_model, drug, "concentration_ug_ml")
+    return spec, sc, period_s, schedule or default_schedule(loaded), drug, patients
 
 
 def _with_sensitivity(patient_model: str, sensitivity: float) -> str:
@@ -516,7 +518,7 @@ def simulate(
     check_int_range("patient_seed", patient_seed, 0, 2**63 - 1)
     patient_model = _with_sensitivity(patient_model, sensitivity)
     clinical = _Clinical(target_mmhg, drug, concentration_ug_ml, weight_kg)
-    spec, sc, period_s, schedule, binding = _checked(
+    spec, sc, period_s, schedule, binding, patient_model = _checked(
         controller,
         controller_args,
         scenario,
@@ -596,7 +598,7 @@ def trial(
         check_int_range(name, value, lo, hi)
     patient_model = _with_sensitivity(patient_model, sensitivity)
     clinical = _Clinical(target_mmhg, drug, concentration_ug_ml, weight_kg)
-    spec, sc, period_s, schedule, binding = _checked(
+    spec, sc, period_s, schedule, binding, patient_model = _checked(
         controller,
         controller_args,
         scenario,

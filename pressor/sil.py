@@ -193,11 +193,11 @@ def sil_config(argv: Sequence[str]) -> SilConfig:
     from pressor.contracts.drug import binding_of, drug_agnostic
     from pressor.hil_sim.patients.patient_model import (
         PatientModelError,
-        check_drug,
         check_model_for_scenario,
         default_design,
         model_drug,
     )
+    from pressor.hil_sim.patients.syringe import check_drug
     from pressor.hil_sim.scenarios.scenario import ScenarioError, is_scenario_path, load_scenario
     from pressor.hil_sim.trials.trial import scenario_events
     from pressor.runtime.inputs.config import load_controller

@@ -34,7 +34,7 @@ import functools
 import importlib
 import math
 from collections.abc import Mapping
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import ClassVar, Protocol, runtime_checkable
 
 from pressor.contracts.drug import DrugBinding
 
@@ -317,96 +317,3 @@ def default_design(spec: str) -> str:
 
     binding = model_drug(spec)
     return default_controller(None if binding is None else binding.name)
-
-
-def check_drug(
-    controller: Any,
-    controller_spec: str,
-    patient_model: str,
-    *,
-    controller_field: str = "--controller",
-    model_field: str = "--patient-model",
-) -> DrugBinding:
-    """The drug and syringe a run of ``controller`` on ``patient_model``'s patients uses: a design
-    meets only its drug (:func:`pressor.contracts.drug.binding_of`); a drug-agnostic controller
-    (:func:`pressor.contracts.drug.drug_agnostic`: the PI and Smith baselines) takes the model's.
-
-    Parameters
-    ----------
-    controller
-        The loaded controller.
-    controller_spec, patient_model
-        What the caller named them (for the message).
-    controller_field, model_field
-        The caller's names of the two (``--controller`` on the command line, ``controller`` in
-        :mod:`pressor.api`).
-
-    Raises
-    ------
-    PatientModelError
-        One line naming both drugs, when the design's drug is not the model's.
-    """
-    from pressor.contracts.drug import DEFAULT_BINDING, binding_of, drug_agnostic
-
-    theirs = model_drug(patient_model)
-    if drug_agnostic(controller):
-        return DEFAULT_BINDING if theirs is None else theirs
-    ours = binding_of(controller)
-    if theirs is not None and theirs.name != ours.name:
-        raise PatientModelError(
-            f"{controller_field} {controller_spec}: a {ours.name} design ({ours.describe()})"
-            f" meets only {ours.name} patients, and {model_field} {patient_model} is a"
-            f" {theirs.name} patient ({theirs.describe()}); choose a {theirs.name} design"
-            " ('pressor designs' lists them) or a drug-agnostic baseline (pi, smith)"
-        )
-    return ours
-
-
-def check_syringe(
-    controller: Any,
-    controller_spec: str,
-    patient_model: str,
-    drug: str | None = None,
-    concentration_ug_ml: float | None = None,
-    *,
-    fields: tuple[str, str, str, str] = (
-        "--controller",
-        "--patient-model",
-        "--drug",
-        "--concentration-ug-ml",
-    ),
-) -> DrugBinding:
-    """:func:`check_drug`, then the clinician's ``drug`` and ``concentration_ug_ml`` (µg/ml; each
-    ``None`` when not given) checked against it: a simulated run's ml/h count the design's syringe
-    (a drug-agnostic controller: the patient model's), so another drug or syringe is refused
-    naming both, as ``pressor run`` refuses one that is not the design's.
-
-    Parameters
-    ----------
-    fields
-        The caller's names of the controller, the patient model, the drug and the concentration
-        (the command line's options by default; :mod:`pressor.api` passes its arguments' names).
-
-    Raises
-    ------
-    PatientModelError
-        One line naming the value given and the run's drug or syringe.
-    """
-    from pressor.contracts.drug import drug_agnostic
-
-    c_field, m_field, d_field, k_field = fields
-    binding = check_drug(
-        controller, controller_spec, patient_model, controller_field=c_field, model_field=m_field
-    )
-    whose = (
-        f"{m_field} {patient_model}'s patients count ml/h of"
-        if drug_agnostic(controller)
-        else f"the loaded design ({c_field} {controller_spec}) is for"
-    )
-    if drug is not None and drug != binding.name:
-        raise PatientModelError(f"{d_field} {drug}: {whose} {binding.describe()}")
-    if concentration_ug_ml is not None and not math.isclose(
-        concentration_ug_ml, binding.concentration_ug_ml, rel_tol=1e-6
-    ):
-        raise PatientModelError(f"{k_field} {concentration_ug_ml:g}: {whose} {binding.describe()}")
-    return binding

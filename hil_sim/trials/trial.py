@@ -411,7 +411,7 @@ def run_cohort(
 
     ``options`` are :func:`run_trial`'s (``jobs``, ``sample_period_s``, ``progress``,
     ``scheduler``, ``schedule``, ``patient_model``). ``drug`` (the run's drug and syringe,
-    :func:`pressor.hil_sim.patients.patient_model.check_drug`) and ``weight_kg`` (kg; ``None``: the
+    :func:`pressor.hil_sim.patients.syringe.check_syringe`) and ``weight_kg`` (kg; ``None``: the
     reference adult) give every record its ``infusion`` (:func:`infusion_record`) and the summary
     its own (:func:`infusion_summary`). Returns the records, the summary (:func:`summarize`) and,
     when ``traced``, the trajectories of :func:`run_trial_traced`.

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  dfb7195a5376dbc896d9e984a0745bc1850ab07d9e37f55972f0d7a1f4e0a314
-Content hash:     008cea3989e5adddc72267ec7d79c6d19a4918d91658d1ea5a9caefecf112859
+Content hash:     59cc33f7e8d9c12b4a85d138686a891d0d5727b0a222224d8cfb9ad761dd4750
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -53,9 +53,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '28842f77415c46ec558e072478c90ff15b191c3de69d0b7d930c9d6772afc810'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'a4b23e6408f8fb73c29166f446187bf45b3b1474f453af3a4b4c95bd1dfc3ec2'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'dfb7195a5376dbc896d9e984a0745bc1850ab07d9e37f55972f0d7a1f4e0a314'
-CONTENT_HASH = '008cea3989e5adddc72267ec7d79c6d19a4918d91658d1ea5a9caefecf112859'
+CONTENT_HASH = '59cc33f7e8d9c12b4a85d138686a891d0d5727b0a222224d8cfb9ad761dd4750'
 TABLES_SHA256 = 'ee6c66965a0be6e07132b41278679c4be1511a020ef076743511fde55cbfe5f4'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

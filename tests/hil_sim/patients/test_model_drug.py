@@ -11,9 +11,9 @@ from pressor.hil_sim.patients.patient_model import (
     PATIENT_MODEL_DRUGS,
     PATIENT_MODELS,
     PatientModelError,
-    check_drug,
     model_drug,
 )
+from pressor.hil_sim.patients.syringe import check_drug
 from pressor.runtime.inputs.controller_loader import load_controller
 
 

@@ -147,3 +147,59 @@ def test_the_report_gives_the_infusion_in_ug_kg_min_beside_ml_h(tmp_path, short_
     ):
         assert f"<th>{head}</th>" in page
     assert "<td>phenylephrine</td><td>100</td><td>60</td>" in page
+
+
+def _records(out) -> list[dict]:
+    return json.loads((out / "patients.json").read_text())
+
+
+@pytest.mark.parametrize("baseline", ["pi", "smith"])
+def test_a_baseline_runs_on_another_library_syringe_of_the_patients_drug_and_names_it(
+    baseline, tmp_path, short_scenario, capsys
+):
+    common = ["--controller", baseline, "--patient-model", "norepinephrine", "--patients", "2"]
+    common += ["--scenario", str(short_scenario)]
+    usual, strong = tmp_path / "16", tmp_path / "32"
+    assert cli_main("trial", [*common, "--out", str(usual)]) == 0
+    argv = [*common, "--drug", "norepinephrine", "--concentration-ug-ml", "32"]
+    assert cli_main("trial", [*argv, "--out", str(strong)]) == 0
+    assert "norepinephrine 32 µg/ml" in capsys.readouterr().out
+    summary = json.loads((strong / "summary.json").read_text())
+    assert (summary["infusion"]["drug"], summary["infusion"]["concentration_ug_ml"]) == (
+        "norepinephrine",
+        32.0,
+    )
+    for at16, at32 in zip(_records(usual), _records(strong), strict=True):
+        assert at32["patient_seed"] == at16["patient_seed"]
+        # every ml/h of a 32 ug/ml syringe carries twice the drug of the model's 16 ug/ml one
+        assert at32["coefficients"]["sensitivity_factor"] == 2.0
+        assert "sensitivity_factor" not in at16["coefficients"]
+        inf = at32["infusion"]
+        assert inf["concentration_ug_ml"] == 32.0
+        assert inf["peak_dose_ug_kg_min"] == pytest.approx(inf["peak_rate_ml_h"] * 32 / (60 * 70))
+        # the same patients lifted by the same fixed-gain law: fewer ml of the stronger syringe
+        assert at32["drug_total_ml"] < at16["drug_total_ml"]
+
+
+def test_a_baseline_on_a_syringe_the_library_does_not_list_is_refused_naming_the_library(
+    tmp_path,
+):
+    proc = _trial("--controller", "pi", "--concentration-ug-ml", "50", "--out", str(tmp_path))
+    assert proc.returncode == 2
+    (line,) = proc.stderr.strip().splitlines()
+    assert line.startswith("pressor trial: --concentration-ug-ml 50: ")
+    assert "drug library only (phenylephrine: 100 ug/ml)" in line
+
+
+def test_the_api_trial_runs_a_baseline_on_another_library_syringe(short_scenario):
+    result = api.trial(
+        "pi",
+        short_scenario,
+        n_patients=1,
+        patient_model="norepinephrine",
+        concentration_ug_ml=64.0,
+    )
+    (record,) = result.records
+    assert record["infusion"]["concentration_ug_ml"] == 64.0
+    assert record["coefficients"]["sensitivity_factor"] == 4.0
+    assert result.summary["infusion"]["concentration_ug_ml"] == 64.0
