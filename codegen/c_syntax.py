@@ -4,9 +4,11 @@ Floating constants are written in decimal, the shortest digits that round-trip t
 double (Python's ``repr``), so ``120.0`` reads as 120.0 and not ``0x1.e000000000000p+6``. A C
 compiler that rounds decimal constants correctly (gcc and clang do; C99 6.4.4.2 allows the
 neighbouring value as well) reads back the very double Python wrote, which is what keeps the C step
-bit-exact with the Python reference (the codegen tests check it on the compiled library). Where the
-decimal is not the binary value itself (``0.1``), the exact hexadecimal value follows in a comment,
-so a reader can check the bits without trusting the conversion.
+bit-exact with the Python reference (the codegen tests check it on the compiled library). Where a
+named constant's decimal is not the binary value itself (``0.1``), the exact hexadecimal value
+follows in a comment, so a reader can check the bits without trusting the conversion; the tables'
+coefficients (tens of thousands) go without, several to a line, their bits checked by the tests
+against the Python module's instead.
 """
 
 from __future__ import annotations
@@ -49,16 +51,17 @@ def c_double_commented(x: float) -> str:
     return c_double(x) + (f"  /* {note} */" if note else "")
 
 
+#: table coefficients written on one line (a row of a node's block stays readable at 100 columns)
+PER_LINE = 4
+
+
 def c_double_array(values: Iterable[float], indent: str = "    ") -> str:
-    """The initialiser body of a double array: one element per line with its exact note.
+    """The initialiser body of a double array: :data:`PER_LINE` elements a line, decimal only
+    (module docstring: the tables' bits are checked by the tests, not noted).
 
     Returns the lines between the braces (each ending in a comma but the last), joined by
     newlines, for ``{\\n<body>\\n}``.
     """
-    vals = [float(v) for v in values]
-    lines = []
-    for i, v in enumerate(vals):
-        note = exact_note(v)
-        comma = "," if i < len(vals) - 1 else ""
-        lines.append(f"{indent}{c_double(v)}{comma}" + (f"  /* {note} */" if note else ""))
-    return "\n".join(lines)
+    lits = [c_double(v) for v in values]
+    rows = [", ".join(lits[i : i + PER_LINE]) for i in range(0, len(lits), PER_LINE)]
+    return ",\n".join(indent + row for row in rows)

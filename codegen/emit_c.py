@@ -45,7 +45,7 @@ def _table(name: str, ctype: str, values: np.ndarray, entries, fmt) -> str:
 
 
 def _float_table(name: str, spec: EmitSpec, values: np.ndarray, entries) -> str:
-    """The double table, one coefficient a line (decimal, exact hex in a comment), each node's
+    """The double table, a few coefficients a line (shortest round-trip decimals), each node's
     block headed by its rho."""
     flat = values.reshape(-1, *values.shape[3:])
     grid = np.stack(np.meshgrid(*spec.nodes, indexing="ij"), axis=-1).reshape(-1, 3)

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/cautious_design.npz --target python --fixed-point q31
 Artifact sha256:  ffdad7e8e41e42a120268d2cfd15b60cf1aa349fb424a4a4ab6ec7a8f32c4aff
-Content hash:     fc1069edbcb74ea196dfe87d3b033ddc72090a9c1c2712db35aebcd365ccc843
+Content hash:     d87ce365a234177ff8ef42529f10a7f377d847e47e2084b1cb9a83c7dfe13119
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -60,9 +60,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'd86c33695e66461e46374b3e50cb9e3b861845761f8d4b365fa691ab24973fbe'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '007df56bd622ed7d92fbefd0d7e0f0a5efc557f9365d6b8f0991ab89072f5691'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'ffdad7e8e41e42a120268d2cfd15b60cf1aa349fb424a4a4ab6ec7a8f32c4aff'
-CONTENT_HASH = 'fc1069edbcb74ea196dfe87d3b033ddc72090a9c1c2712db35aebcd365ccc843'
+CONTENT_HASH = 'd87ce365a234177ff8ef42529f10a7f377d847e47e2084b1cb9a83c7dfe13119'
 TABLES_SHA256 = 'aebeb36d49ddb20e4d4e434212c86083c797c54743f297d57d670a366155edce'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/cautious_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31
 Artifact sha256:  dfb7195a5376dbc896d9e984a0745bc1850ab07d9e37f55972f0d7a1f4e0a314
-Content hash:     59cc33f7e8d9c12b4a85d138686a891d0d5727b0a222224d8cfb9ad761dd4750
+Content hash:     17aac34302c2ba0d3d86bf70af2e177db026bd018dd2618a556c3c1ff5782e2f
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -53,9 +53,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'a4b23e6408f8fb73c29166f446187bf45b3b1474f453af3a4b4c95bd1dfc3ec2'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'e285abcaa7602e5c18b0d6d4fe47fd2f41aceafd99b049fde2681151d6181a1f'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'dfb7195a5376dbc896d9e984a0745bc1850ab07d9e37f55972f0d7a1f4e0a314'
-CONTENT_HASH = '59cc33f7e8d9c12b4a85d138686a891d0d5727b0a222224d8cfb9ad761dd4750'
+CONTENT_HASH = '17aac34302c2ba0d3d86bf70af2e177db026bd018dd2618a556c3c1ff5782e2f'
 TABLES_SHA256 = 'ee6c66965a0be6e07132b41278679c4be1511a020ef076743511fde55cbfe5f4'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/default_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31
 Artifact sha256:  114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd
-Content hash:     da1d0816f47198503b1d49da95ab823ee0192cf4fa903fad0c42619281bc2a14
+Content hash:     48a647045db13c1552a395be757932681b0521d1d488f6a17d74b9a65ef69618
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -53,9 +53,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '6a0592e06e75dda6790ba4a0517a89920aaab67d95afdbb3c13758b6cabbe2d9'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'd7ced6cac23a223c2a05a6816a58cb1a4307617a233a2fc63b7f6f9710dbb612'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = '114b9a2ef34cf10ec477688b25544963b2d0e92b6f0fddf6f688dc0ea63b22fd'
-CONTENT_HASH = 'da1d0816f47198503b1d49da95ab823ee0192cf4fa903fad0c42619281bc2a14'
+CONTENT_HASH = '48a647045db13c1552a395be757932681b0521d1d488f6a17d74b9a65ef69618'
 TABLES_SHA256 = 'ad5eee3133c7d03af7fc4f784df9263d6d8aa8518a0e3114329602a2980c051d'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/norepinephrine_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/norepinephrine_cautious_design.npz --target python --fixed-point q31
 Artifact sha256:  c8d1e9059e08a434d8dab1f38ed1da22d8e72b74ae784fc774a4b8c26b69048c
-Content hash:     40ce1f3904304efe9898e0c3841c3a449f38ea8ed4237881a4f1ce471d0a68c2
+Content hash:     58d1395c039b3ab5010f25b10ef65e294ba0f9d82e53a87e0f945bc6f885b9e0
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -60,9 +60,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = 'bdaee97be8b080913f9723c257c5d2e55b03e8ae2946af31a43e17f841882098'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = '4d7c7991296fa59f563e36812afa37bf461e031abd725c06b43fe87ba4bd948e'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'c8d1e9059e08a434d8dab1f38ed1da22d8e72b74ae784fc774a4b8c26b69048c'
-CONTENT_HASH = '40ce1f3904304efe9898e0c3841c3a449f38ea8ed4237881a4f1ce471d0a68c2'
+CONTENT_HASH = '58d1395c039b3ab5010f25b10ef65e294ba0f9d82e53a87e0f945bc6f885b9e0'
 TABLES_SHA256 = '3d1a1331356203255044f650010b743670f8d41aebcc801ce535d517d700d1bf'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/norepinephrine_cautious_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1

@@ -2,7 +2,7 @@
 
 Generated with:   pressor codegen synthesis/data/wide_delay_design.npz --target python --fixed-point q31
 Artifact sha256:  ad2d3ee0d3c878a86986c0e35ad944b61bae23f60ccd354fb99cbe0863882f7f
-Content hash:     06f5276130516c3b16341edf8d116e52179cbf7a6134c5aad6bb833b62f3c87c
+Content hash:     be81271ddd15b47e048081ed17417d8dc60452aad7fa55fe43b42d5df15dc2f4
 
 Standard library only (no import). ``Controller().step(map_mmhg, target_mmhg, K, T, tau)`` returns
 the infusion command in ml/h for this tick, in [0, MAX_RATE_ML_H]; ``Controller(fixed_point=True)``
@@ -53,9 +53,9 @@ Error budgets (asserted by tests/codegen/):
     OFFGRID_REL_BOUND = 0.005: row-wise relative error of the interpolated increment matrix vs the exact one at every cell midpoint and seeded interior point (frozen loops there proven stable)
 """
 
-MODULE_SHA256 = '8004cefaa568cac3216454775106ec5079658ed114ee17a99d9c4416bfa641db'  # sha256 of this file with this value blanked (tamper check)
+MODULE_SHA256 = 'e467e97bd804eef7c1dd76684b4e4fe5db9d32ff05f85bc911a491bcb85c6703'  # sha256 of this file with this value blanked (tamper check)
 ARTIFACT_SHA256 = 'ad2d3ee0d3c878a86986c0e35ad944b61bae23f60ccd354fb99cbe0863882f7f'
-CONTENT_HASH = '06f5276130516c3b16341edf8d116e52179cbf7a6134c5aad6bb833b62f3c87c'
+CONTENT_HASH = 'be81271ddd15b47e048081ed17417d8dc60452aad7fa55fe43b42d5df15dc2f4'
 TABLES_SHA256 = 'f3c30f718d27be8028c1d76cf6e67d235a0013fd4e967765f976832a2c426561'
 GENERATION_COMMAND = 'pressor codegen synthesis/data/wide_delay_design.npz --target python --fixed-point q31'
 SAMPLE_PERIOD_S = 0.1
