@@ -200,6 +200,9 @@ def test_the_sweep_reports_every_column_counts_non_responders_and_repeats_itself
     assert any("32 (switched)" in line for line in rows)
     assert any("(non-responders)" in line for line in rows)
     assert "throughput:" in err and "per CPU minute" in err
+    # per model too, naming what ran without its compiled twin (the PI has none)
+    assert "\n  paper: " in err and "\n  norepinephrine: " in err
+    assert "without compiled twin: controller (" in err
     # the same arguments give the same bytes with two workers, and a rerun reuses every cohort
     again, _ = _sweep(tmp_path / "b", short_scenario, 2, capsys)
     assert again == out
