@@ -109,10 +109,10 @@ SAMPLE_PERIOD_S = 0.1
 Task = tuple[Scenario, str, int, float, str, str, DoseLimits]
 
 
-def _run_one(task: Task) -> tuple[dict[str, Any], float, tuple[str, ...]]:
+def _run_one(task: Task) -> tuple[dict[str, Any], float, tuple[tuple[str, str], ...]]:
     """One patient's record, with ``held_s`` (s the supervisor spent in HOLD or FAILSAFE, where
     the controller does not act), the CPU time (s) its worker spent on it, and the parts that ran
-    without their compiled twin (``"part (why)"``; :mod:`pressor.hil_sim.native`)."""
+    without their compiled twin (``(part, why)``; :mod:`pressor.hil_sim.native`)."""
     t0 = time.process_time()
     record, traj = _simulate_patient(*task)
     held = np.count_nonzero((traj.state == State.HOLD) | (traj.state == State.FAILSAFE))
@@ -123,7 +123,7 @@ def _run_one(task: Task) -> tuple[dict[str, Any], float, tuple[str, ...]]:
         ("controller", native_controller.last_reason),
         ("dose guard", native_dose_guard.last_reason),
     )
-    return record, cpu, tuple(f"{part} ({why})" for part, why in reasons if why)
+    return record, cpu, tuple((part, why) for part, why in reasons if why)
 
 
 def run_dir(out: Path, model: str, level: float, controller: str, syringe: Syringe) -> Path:

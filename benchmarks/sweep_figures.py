@@ -229,20 +229,22 @@ class Throughput:
         self.wall_s = 0.0
         #: (model, controller) -> [patient-hours, worker CPU s]
         self.by_run: dict[tuple[str, str], list[float]] = {}
-        #: model -> the parts its runs ran without a compiled twin ("part (why)")
-        self.plain: dict[str, set[str]] = {}
+        #: model -> part -> why its runs ran that part without a compiled twin
+        self.plain: dict[str, dict[str, set[str]]] = {}
 
     def add(
-        self, wall_s: float, runs: list[tuple[str, str, float, float, tuple[str, ...]]]
+        self, wall_s: float, runs: list[tuple[str, str, float, float, tuple[tuple[str, str], ...]]]
     ) -> None:
         """Count one batch: its wall time (s) and per run (model, controller, patient-hours,
-        CPU s, the parts without their compiled twin)."""
+        CPU s, the (part, why) it ran without a compiled twin)."""
         self.wall_s += wall_s
         for model, controller, hours, cpu, plain in runs:
             acc = self.by_run.setdefault((model, controller), [0.0, 0.0])
             acc[0] += hours
             acc[1] += cpu
-            self.plain.setdefault(model, set()).update(plain)
+            parts = self.plain.setdefault(model, {})
+            for part, why in plain:
+                parts.setdefault(part, set()).add(why)
 
     def report(self, jobs: int) -> str:
         """The totals, then patient-hours per CPU minute per model (with the parts that ran
@@ -262,9 +264,10 @@ class Throughput:
             acc[0] += h
             acc[1] += c
         for model, (h, c) in models.items():
-            plain = sorted(self.plain.get(model, ()))
+            plain = self.plain.get(model, {})
             twins = (
-                "without compiled twin: " + "; ".join(plain)
+                "without compiled twin: "
+                + "; ".join(f"{part} ({', '.join(sorted(plain[part]))})" for part in sorted(plain))
                 if plain
                 else "compiled twins: patient, controller, dose guard"
             )
