@@ -49,7 +49,8 @@ syringe's and the switched together: the README's results table), and the full t
 group apart; the JSON (``--json``, and ``OUT/sweep.json`` with ``--out``) holds every
 figure. Both are deterministic: the same arguments give the same bytes whatever ``--jobs``. The
 throughput (patient-hours per wall minute, and per CPU minute of the workers: per busy core, in
-total and per model and controller) goes to stderr with the progress.
+total, per model and per model and controller, with the parts that ran without their compiled
+twin, :mod:`pressor.hil_sim.native`) goes to stderr with the progress.
 
 With ``--out DIR`` each (model, level, controller, syringe) cohort writes
 ``DIR/MODEL/xF/CONTROLLER/SYRINGE/`` (``patients.json``, ``patients.csv``, ``summary.json``,
@@ -78,6 +79,9 @@ from benchmarks.sweep_plan import (
     reach_plan,
     syringes,
 )
+from pressor.hil_sim.native import controller as native_controller
+from pressor.hil_sim.native import dose_guard as native_dose_guard
+from pressor.hil_sim.native import patient as native_patient
 from pressor.hil_sim.patients.cohort import cohort_seeds
 from pressor.hil_sim.patients.patient_model import PatientModelError
 from pressor.hil_sim.patients.sensitivity import check_factor
@@ -105,14 +109,21 @@ SAMPLE_PERIOD_S = 0.1
 Task = tuple[Scenario, str, int, float, str, str, DoseLimits]
 
 
-def _run_one(task: Task) -> tuple[dict[str, Any], float]:
+def _run_one(task: Task) -> tuple[dict[str, Any], float, tuple[tuple[str, str], ...]]:
     """One patient's record, with ``held_s`` (s the supervisor spent in HOLD or FAILSAFE, where
-    the controller does not act), and the CPU time (s) its worker spent on it."""
+    the controller does not act), the CPU time (s) its worker spent on it, and the parts that ran
+    without their compiled twin (``(part, why)``; :mod:`pressor.hil_sim.native`)."""
     t0 = time.process_time()
     record, traj = _simulate_patient(*task)
     held = np.count_nonzero((traj.state == State.HOLD) | (traj.state == State.FAILSAFE))
     record["held_s"] = float(held * SAMPLE_PERIOD_S)
-    return record, time.process_time() - t0
+    cpu = time.process_time() - t0
+    reasons = (
+        ("patient", native_patient.last_reason),
+        ("controller", native_controller.last_reason),
+        ("dose guard", native_dose_guard.last_reason),
+    )
+    return record, cpu, tuple((part, why) for part, why in reasons if why)
 
 
 def run_dir(out: Path, model: str, level: float, controller: str, syringe: Syringe) -> Path:
@@ -235,11 +246,17 @@ def _run_pending(
     wall = time.perf_counter() - t0
     hours = scenario.duration_s / 3600.0
     owners = [(job["model"], job["controller"]) for job in jobs for _ in job["seeds"]]
-    meter.add(wall, [(m, c, hours, cpu) for (m, c), (_, cpu) in zip(owners, results, strict=True)])
+    meter.add(
+        wall,
+        [
+            (m, c, hours, cpu, plain)
+            for (m, c), (_, cpu, plain) in zip(owners, results, strict=True)
+        ],
+    )
     print(f"{label}: {wall:.1f} s wall", file=sys.stderr, flush=True)
     start = 0
     for job in jobs:
-        records = [r for r, _ in results[start : start + len(job["seeds"])]]
+        records = [r for r, _, _ in results[start : start + len(job["seeds"])]]
         start += len(job["seeds"])
         job["records"] = records
         if job["dir"] is not None:

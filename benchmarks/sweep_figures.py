@@ -229,18 +229,26 @@ class Throughput:
         self.wall_s = 0.0
         #: (model, controller) -> [patient-hours, worker CPU s]
         self.by_run: dict[tuple[str, str], list[float]] = {}
+        #: model -> part -> why its runs ran that part without a compiled twin
+        self.plain: dict[str, dict[str, set[str]]] = {}
 
-    def add(self, wall_s: float, runs: list[tuple[str, str, float, float]]) -> None:
+    def add(
+        self, wall_s: float, runs: list[tuple[str, str, float, float, tuple[tuple[str, str], ...]]]
+    ) -> None:
         """Count one batch: its wall time (s) and per run (model, controller, patient-hours,
-        CPU s)."""
+        CPU s, the (part, why) it ran without a compiled twin)."""
         self.wall_s += wall_s
-        for model, controller, hours, cpu in runs:
+        for model, controller, hours, cpu, plain in runs:
             acc = self.by_run.setdefault((model, controller), [0.0, 0.0])
             acc[0] += hours
             acc[1] += cpu
+            parts = self.plain.setdefault(model, {})
+            for part, why in plain:
+                parts.setdefault(part, set()).add(why)
 
     def report(self, jobs: int) -> str:
-        """The totals, then patient-hours per CPU minute for each model and controller."""
+        """The totals, then patient-hours per CPU minute per model (with the parts that ran
+        without their compiled twin) and per model and controller."""
         hours = sum(h for h, _ in self.by_run.values())
         cpu = sum(c for _, c in self.by_run.values())
         if self.wall_s <= 0.0 or cpu <= 0.0:
@@ -250,6 +258,20 @@ class Throughput:
             f" {hours / (self.wall_s / 60.0):.1f} patient-hours per wall minute with {jobs}"
             f" job(s), {hours / (cpu / 60.0):.1f} per CPU minute of the workers (per busy core)"
         ]
+        models: dict[str, list[float]] = {}
+        for (model, _), (h, c) in self.by_run.items():
+            acc = models.setdefault(model, [0.0, 0.0])
+            acc[0] += h
+            acc[1] += c
+        for model, (h, c) in models.items():
+            plain = self.plain.get(model, {})
+            twins = (
+                "without compiled twin: "
+                + "; ".join(f"{part} ({', '.join(sorted(plain[part]))})" for part in sorted(plain))
+                if plain
+                else "compiled twins: patient, controller, dose guard"
+            )
+            lines.append(f"  {model}: {h / (c / 60.0):.1f} per CPU minute ({twins})")
         for (model, controller), (h, c) in self.by_run.items():
             lines.append(f"  {model} {controller}: {h / (c / 60.0):.1f} per CPU minute")
         return "\n".join(lines)

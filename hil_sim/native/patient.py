@@ -5,7 +5,9 @@ operation for operation; :class:`NativePatient` is the same patient (its paramet
 reachability; its MAP, K, T, τ read from the C state), stepped by one ctypes call (≈ 1 µs instead
 of ≈ 4 µs of Python). :func:`native_patient` returns the patient unchanged where there is no twin
 (``PRESSOR_NATIVE=off``, no C compiler, a frozen patient, another patient model, one already
-stepped, an internal step so short that the delay buffer would not fit); a patient of the
+stepped, an internal step so short that the delay buffer would not fit). The drug models
+(``pkpd``, ``phenylephrine-2c``, ``norepinephrine``) get their twins from
+:mod:`pressor.hil_sim.native.drug_patient`; a patient of the
 responsiveness sweep (:class:`~pressor.hil_sim.patients.sensitivity.SensitivityScaled`) gets the twin inside
 its wrapper.
 """
@@ -17,6 +19,7 @@ import functools
 import operator
 from pathlib import Path
 
+from pressor.hil_sim.native.drug_patient import drug_twin, has_twin
 from pressor.hil_sim.patients import patient as pp
 from pressor.hil_sim.patients.patient import Patient, PatientParams
 from pressor.hil_sim.patients.sensitivity import SensitivityScaled
@@ -112,8 +115,14 @@ def native_patient(patient: object) -> object:
     if isinstance(patient, SensitivityScaled):  # the sweep's wrapper: the twin goes inside it
         patient.inner = native_patient(patient.inner)  # type: ignore[assignment]
         return patient
+    if has_twin(patient):  # pkpd, phenylephrine-2c, norepinephrine: drug_patients.c
+        twin, last_reason = drug_twin(patient)
+        return twin
     if type(patient) is not Patient or patient.frozen:
-        last_reason = "only the paper's nonlinear patient has a compiled twin"
+        last_reason = (
+            "only the paper's nonlinear patient and the pkpd, phenylephrine-2c and"
+            " norepinephrine models have a compiled twin"
+        )
         return patient
     if patient._buffer.n or patient._started:
         last_reason = "the patient has already been stepped"

@@ -51,6 +51,7 @@ from pressor.contracts.metrics import (
 )
 from pressor.hil_sim.episode import Trajectory, simulate
 from pressor.hil_sim.native.controller import native_twin
+from pressor.hil_sim.native.dose_guard import native_dose_guard
 from pressor.hil_sim.native.estimator import native_schedule
 from pressor.hil_sim.native.patient import native_patient
 from pressor.hil_sim.patients.cohort import cohort_seeds
@@ -182,6 +183,7 @@ def _simulate_patient(
         noise = scenario.sensor.noise_std_mmhg
         cfg = supervisor_config_for(controller, noise, dose_limits=dose_limits)
         supervisor = Supervisor(cfg)
+        supervisor.dose_guard = native_dose_guard(supervisor.dose_guard)
         max_rate = min(max_rate, dose_limits.hard_max_ml_h)
     try:
         source = native_schedule(make_schedule(schedule, sample_period_s, controller))

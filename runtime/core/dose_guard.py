@@ -214,6 +214,22 @@ class DoseGuard:
         cap = min(cap, (room_ml + left_ml) / self.taper_s)
         return cap * _HOUR_S
 
+    def _hour(self, now_s: float) -> tuple[float, float]:
+        """Charge the time since the previous call; the volume (ml) in the hour ending at
+        ``now_s`` and the rate (ml/h) the hourly maximum allows now.
+
+        The one step of :meth:`limit` that walks the hour's segments (the simulator's compiled
+        twin, :mod:`pressor.hil_sim.native.dose_guard`, replaces it).
+        """
+        self._charge(now_s)
+        used = self._window_ml(now_s)
+        room = max(self.limits.max_ml_per_hour - used, 0.0)
+        # this tick's volume fits the room plus what leaves the hour during the tick (exact: the
+        # window one period on never holds more than the maximum), and the taper
+        tick_ml = room + self._leaving_by(now_s, self.period_s)
+        hour_cap = min(tick_ml / (self.period_s / _HOUR_S), self._taper_cap(now_s, room))
+        return used, hour_cap * (1.0 - 1e-12)
+
     def limit(
         self,
         command_ml_h: float,
@@ -238,16 +254,9 @@ class DoseGuard:
         """
         if now_s is None:
             now_s = 0.0 if self._last_s is None else self._last_s + self.period_s
-        self._charge(now_s)
+        used, hour_cap = self._hour(now_s)
         lim = self.limits
         faults = 0
-        used = self._window_ml(now_s)
-        room = max(lim.max_ml_per_hour - used, 0.0)
-        # this tick's volume fits the room plus what leaves the hour during the tick (exact: the
-        # window one period on never holds more than the maximum), and the taper
-        tick_ml = room + self._leaving_by(now_s, self.period_s)
-        hour_cap = min(tick_ml / (self.period_s / _HOUR_S), self._taper_cap(now_s, room))
-        hour_cap *= 1.0 - 1e-12
         asked = command = command_ml_h
         limit = ""
         if command > hour_cap:

@@ -19,6 +19,7 @@ from benchmarks.sweep_figures import (
     row_figures,
 )
 from benchmarks.sweep_plan import reach_plan, syringes
+from benchmarks.sweep_profile import main as profile_main
 from pressor.hil_sim.patients.cohort import cohort_seeds
 from pressor.hil_sim.scenarios.scenario import load_scenario
 from pressor.runtime.inputs.drug_library import DrugEntry, load_library
@@ -200,6 +201,9 @@ def test_the_sweep_reports_every_column_counts_non_responders_and_repeats_itself
     assert any("32 (switched)" in line for line in rows)
     assert any("(non-responders)" in line for line in rows)
     assert "throughput:" in err and "per CPU minute" in err
+    # per model too, naming what ran without its compiled twin (the PI has none)
+    assert "\n  paper: " in err and "\n  norepinephrine: " in err
+    assert "without compiled twin: controller (" in err
     # the same arguments give the same bytes with two workers, and a rerun reuses every cohort
     again, _ = _sweep(tmp_path / "b", short_scenario, 2, capsys)
     assert again == out
@@ -223,3 +227,16 @@ def test_the_sweep_refuses_an_unknown_model(capsys):
         main(["--models", "paper,nonesuch"])
     assert exc.value.code == 2
     assert "nonesuch" in capsys.readouterr().err
+
+
+def test_the_profile_splits_a_sweep_tick_into_parts_that_add_up(short_scenario: Path, capsys):
+    argv = ["--model", "norepinephrine", "--level", "0.5", "--patients", "1"]
+    assert profile_main([*argv, "--scenario", str(short_scenario)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "CPU s per patient-hour" in lines[0] and "lpv:norepinephrine-cautious" in lines[0]
+    shares = {line[:48].strip(): float(line[48:].rstrip(" %")) for line in lines[1:]}
+    assert {"supervisor (input checks, flatline, states)", "dose guard (hourly limit)"} <= set(
+        shares
+    )
+    assert sum(shares.values()) == pytest.approx(100.0, abs=0.5)
+    assert shares["supervisor (input checks, flatline, states)"] > 5.0

@@ -11,7 +11,7 @@ import pytest
 from pressor.hil_sim.native import patient as npt
 from pressor.hil_sim.native.patient import NativePatient, native_patient
 from pressor.hil_sim.patients.patient import FrozenParams, Patient
-from pressor.hil_sim.patients.phenylephrine import Phenylephrine2C
+from pressor.hil_sim.patients.pkpd import IndependentPatient, draw_patient
 from pressor.plumbing import native_build as nb
 
 pytestmark = pytest.mark.skipif(nb.compiler() is None, reason="no C compiler")
@@ -55,7 +55,7 @@ def test_twin_keeps_the_patients_parameters_and_derived_figures():
 def test_patients_without_a_twin_come_back_unchanged_with_the_reason(monkeypatch):
     frozen = Patient(FrozenParams(0.5, 150.0, 40.0, 70.0), 0.1)
     assert native_patient(frozen) is frozen and "nonlinear" in npt.last_reason
-    other = Phenylephrine2C.from_seed(3, 0.1)
+    other = IndependentPatient(draw_patient(3, 1), 0.1, 100.0)  # a model no twin mirrors
     assert native_patient(other) is other and "nonlinear" in npt.last_reason
     stepped = Patient.from_seed(3, 0.1)
     stepped.step(10.0)
