@@ -305,3 +305,44 @@ def test_a_recording_to_a_viewer_only_needs_no_file(tmp_path):
         assert received == {k: float(k) for k in range(40)}
     finally:
         end(viewer.pid)
+
+
+def test_pressor_run_view_without_rrd_streams_the_run_and_its_dose_to_the_viewer(
+    bridged_ports, tmp_path
+):
+    device_port, runtime_port = bridged_ports
+    port = free_port_pair()
+    env = no_display()
+    device = subprocess.Popen(
+        [sys.executable, "-m", "pressor", "device", "--port", device_port, "--duration", "10"]
+        + ["--no-signing"],
+        cwd=tmp_path,
+        env=env,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "pressor", "run", "--port", runtime_port, "--no-signing"]
+            + ["--view", "--view-port", str(port), "--controller", "pi"],
+            cwd=tmp_path,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+    finally:
+        assert device.wait(timeout=30) == 0
+    match = ANNOUNCE.search(proc.stderr)
+    assert match is not None, proc.stderr
+    pid = int(match.group(2))
+    try:
+        assert proc.returncode == 0, proc.stderr
+        assert not list(tmp_path.glob("*.rrd"))  # no --rrd: the viewer holds the only copy
+        got = client_capture(port, tmp_path / "client.rrd", "/dose/command_ug_min")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            received = rrd_columns(got)
+    finally:
+        end(pid)
+    assert sorted(received["/patient/map_mmhg"]) == list(range(100))
+    assert sorted(received["/dose/command_ug_min"]) == list(range(100))  # added at the end
