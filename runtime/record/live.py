@@ -16,9 +16,11 @@ stream whose viewer never answers would otherwise wait for good.
 
 from __future__ import annotations
 
+import socket
 import threading
 import uuid
 from typing import Any
+from urllib.parse import urlsplit
 
 import rerun as rr
 
@@ -57,7 +59,11 @@ class LiveStream:
         self._connecting.start()
 
     def _connect(self, rec: rr.RecordingStream, url: str, blueprint: Any) -> None:
+        where = urlsplit(url)
         try:
+            # rerun waits 5 s on a port nobody listens on (a viewer closed since it was started),
+            # then 5 s more to give up at the end of the run: a plain TCP probe says it at once
+            socket.create_connection((where.hostname, where.port), timeout=1.0).close()
             rec.connect_grpc(url, default_blueprint=blueprint)
         except (RuntimeError, OSError, ValueError) as exc:
             self._drop(exc)
@@ -78,9 +84,12 @@ class LiveStream:
         self._flush(_CHECK_S)
 
     def close(self) -> None:
-        """Send what is left and disconnect (at most about 2 × :data:`CLOSE_FLUSH_S` s when the
-        viewer does not answer)."""
+        """Send what is left and disconnect: at most about 2 × :data:`CLOSE_FLUSH_S` s, for a
+        viewer still connecting when the run ends; a viewer that went away costs nothing."""
         self._connecting.join(CLOSE_FLUSH_S)
+        if self._connecting.is_alive():  # nothing answers: give up on it without waiting more
+            self._drop(TimeoutError(f"no viewer answered in {CLOSE_FLUSH_S:g} s"))
+            return
         self._flush(CLOSE_FLUSH_S)
         rec, self._rec = self._rec, None
         if rec is not None:

@@ -205,6 +205,19 @@ def test_a_viewer_closed_mid_recording_stops_its_copy_only(tmp_path):
     assert took < 2.0  # nothing waits for the viewer that went away
 
 
+def test_a_viewer_gone_before_the_recording_connects_costs_nothing(tmp_path):
+    port = free_port_pair()  # nobody listens: the viewer was closed since it was started
+    started = time.monotonic()
+    rec = Recorder(tmp_path / "r.rrd", run_label="gone", chunk_ticks=16, live=grpc_url(port))
+    for k in range(50):
+        rec.record(k, k * 0.1, [float(k)] * len(CHANNELS))
+    rec.close()
+    # rerun alone waits 5 s to connect to nobody, and 5 s more to give up when disconnected
+    assert time.monotonic() - started < 3.0
+    assert rec.error is None and rec.viewer_lost is not None
+    assert sorted(rrd_columns(tmp_path / "r.rrd")["/patient/map_mmhg"]) == list(range(50))
+
+
 @pytest.mark.slow
 def test_closing_the_viewer_mid_run_leaves_the_realtime_run_and_its_recording_whole(tmp_path):
     port = free_port_pair()
@@ -346,3 +359,29 @@ def test_pressor_run_view_without_rrd_streams_the_run_and_its_dose_to_the_viewer
         end(pid)
     assert sorted(received["/patient/map_mmhg"]) == list(range(100))
     assert sorted(received["/dose/command_ug_min"]) == list(range(100))  # added at the end
+
+
+def test_with_a_display_the_native_viewer_is_started_and_a_dead_one_leaves_the_run_going(
+    tmp_path,
+):
+    """``DISPLAY`` names a display nobody serves: the native viewer is the one started (its
+    command line accepted by the real binary), it dies opening its window, and the run goes on."""
+    port = free_port_pair()
+    proc = subprocess.run(
+        [sys.executable, "-m", "pressor", "sil", "--view", "--view-port", str(port)]
+        + ["--duration", "10", "--rrd", "run.rrd", "--no-signing"],
+        cwd=tmp_path,
+        env={**no_display(), "DISPLAY": ":97"},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    line = next(ln for ln in proc.stderr.splitlines() if "--view" in ln or "live view" in ln)
+    match = re.search(r"live view: rerun viewer on port (\d+) \(pid (\d+)\)", line)
+    if match is not None:  # it listened before it died
+        end(int(match.group(2)))
+        assert int(match.group(1)) == port
+    else:  # it died before it listened
+        assert line.startswith("pressor sil: --view: no viewer, the run goes on without it"), line
+    assert sorted(rrd_columns(tmp_path / "run.rrd")["/patient/map_mmhg"]) == list(range(100))
