@@ -96,11 +96,15 @@ def screenshot(
     wait_s: float,
 ) -> None:
     """Serve ``rrd`` with rerun's web viewer and save what a browser shows as the PNG ``out``."""
+    from pressor.runtime.shell.viewer import rerun_executable
+
     http_port, grpc_port = free_port(), free_port()
     server = subprocess.Popen(
         [
-            "rerun",
+            rerun_executable(),  # the installed rerun-sdk's viewer, on PATH or not
             "--serve-web",
+            "--bind",
+            "127.0.0.1",
             "--web-viewer-port",
             str(http_port),
             "--port",
@@ -109,7 +113,7 @@ def screenshot(
         ],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
-        start_new_session=True,  # `rerun` is a launcher: its viewer server is a child process
+        start_new_session=True,  # a `rerun` launcher on PATH runs the viewer as its child
     )
     try:
         wait_for_port(http_port, 30.0)

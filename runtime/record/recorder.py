@@ -69,12 +69,8 @@ MIN_FREE_BYTES = 1 << 20
 _NO_RHO = (math.nan, math.nan, math.nan)
 
 
-__all__ = [
-    "CHANNELS",
-    "CHANNEL_INDEX",
-    "MIN_FREE_BYTES",
-    "Recorder",
-]  # the channels: their old home
+# the channels are re-exported from their old home
+__all__ = ["CHANNELS", "CHANNEL_INDEX", "MIN_FREE_BYTES", "Recorder"]
 
 
 class Recorder:
@@ -114,8 +110,10 @@ class Recorder:
         self._file: rr.RecordingStream | None = None
         self._target: AtomicFile | None = None
         self.path = None if path is None else self._open_file(Path(path), rid, blueprint)
-        # with a viewer, two streams: its failure must not read as the file's (live.py)
-        live_stream = None if live is None else LiveStream(live, rid, blueprint)
+        # with a viewer, two streams: its failure must not read as the file's (live.py); the
+        # viewer's has an id of its own, so that a run repeated into a viewer still showing the
+        # first one (reused by --view) opens beside it rather than adding ticks to it
+        live_stream = None if live is None else LiveStream(live, uuid.uuid4(), blueprint)
         self._rec: Any = self._file if live_stream is None else Tee(self._file, live_stream)
         self._rec.send_recording_name(run_label)
         self._log_styles()
