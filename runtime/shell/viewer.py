@@ -178,7 +178,24 @@ def start_viewer(
                 )
                 raise ViewerError(f"rerun viewer on port {port} {state}: {why}")
             time.sleep(0.05)
+        if kind == WEB and not _serves_rerun_page(port + 1):
+            # the page's port answered, but not with rerun's page: another program holds it
+            # (rerun exits, but perhaps only after its gRPC port came up)
+            proc.terminate()
+            proc.wait()
+            raise ViewerError(f"port {port + 1} (the web page's) is taken by another program")
     return Viewer(kind, port, proc.pid)
+
+
+def _serves_rerun_page(port: int, timeout_s: float = 5.0) -> bool:
+    """Whether http://127.0.0.1:``port``/ answers with rerun's web viewer page."""
+    import urllib.request
+
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=timeout_s) as reply:
+            return b"rerun" in reply.read(4096).lower()
+    except OSError:
+        return False
 
 
 def open_view(port: int, prog: str, environ: Mapping[str, str] | None = None) -> str | None:
