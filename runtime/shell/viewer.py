@@ -191,8 +191,9 @@ def _serves_rerun_page(port: int, timeout_s: float = 5.0) -> bool:
     """Whether http://127.0.0.1:``port``/ answers with rerun's web viewer page."""
     import urllib.request
 
+    direct = urllib.request.build_opener(urllib.request.ProxyHandler({}))  # never via http_proxy
     try:
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=timeout_s) as reply:
+        with direct.open(f"http://127.0.0.1:{port}/", timeout=timeout_s) as reply:
             return b"rerun" in reply.read(4096).lower()
     except OSError:
         return False
