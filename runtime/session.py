@@ -110,6 +110,11 @@ def run_runtime(
     period_s = config.period_s
     controller = load_controller(config.controller, period_s)
     clinician = _clinician_for(config, controller)
+    live = None
+    if config.view:  # before the handshake: the device waits for it, not the loop
+        from pressor.runtime.shell.viewer import open_view
+
+        live = open_view(config.view_port, _prog(config))
     tlog = TlogWriter(config.tlog) if config.tlog is not None else None
     ok = False
     # only the oracle schedules on the device's SCHEDULING_PARAMS: otherwise a device may send
@@ -131,7 +136,7 @@ def run_runtime(
             raise
         identity = _run_identity(identity, config, peer)
         sup = _build_supervisor(config, controller, clinician, peer)
-        recorder = _open_recorder(config, identity, clinician, peer)
+        recorder = _open_recorder(config, identity, clinician, peer, live)
         unstarted = recorder if isinstance(recorder, Unwritten) else None
         if unstarted is not None:
             recorder = None
@@ -270,13 +275,23 @@ def _build_supervisor(
     )
 
 
+def _prog(config: RunConfig) -> str:
+    """The command running: ``pressor run`` (with the clinician's input) or ``pressor sil``."""
+    return "pressor run" if config.clinician is not None else "pressor sil"
+
+
 def _open_recorder(
-    config: RunConfig, identity: dict[str, Any], clinician: ClinicianInput, peer: Hello
+    config: RunConfig,
+    identity: dict[str, Any],
+    clinician: ClinicianInput,
+    peer: Hello,
+    live: str | None = None,
 ) -> Recorder | Unwritten | None:
-    """The rerun recorder of ``config.rrd`` (labelled with controller, scenario, seed, rate and
-    mode), or ``None`` without one, or an :class:`pressor.runtime.shell.boundary.Unwritten` naming why
-    it could not start (the loop raises ``RECORD_ERROR`` on it and goes on)."""
-    if config.rrd is None:
+    """The rerun recorder of ``config.rrd`` and, with ``live`` (a viewer's URL), of the live view
+    (labelled with controller, scenario, seed, rate and mode), or ``None`` without either, or an
+    :class:`pressor.runtime.shell.boundary.Unwritten` naming why it could not start (the loop
+    raises ``RECORD_ERROR`` on it and goes on)."""
+    if config.rrd is None and live is None:
         return None
     from pressor.runtime.record.recorder import Recorder
 
@@ -285,7 +300,9 @@ def _open_recorder(
         f"|{config.mode}"
     )
     try:
-        return Recorder(config.rrd, run_label=label, dose_view=clinician.dose_limits is not None)
+        return Recorder(
+            config.rrd, run_label=label, dose_view=clinician.dose_limits is not None, live=live
+        )
     except OSError as exc:  # no room to start it: the run goes on unrecorded (RECORD_ERROR)
         return Unwritten(f"{config.rrd}: not started: {exc.strerror or exc}")
 
@@ -341,7 +358,7 @@ def _run_loop(
         "schedule": make_schedule(
             config.schedule, config.period_s, controller, _dose(config, clinician)
         ),
-        "prog": "pressor run" if config.clinician is not None else "pressor sil",
+        "prog": _prog(config),
         "ack_input": clinician.target_stdin or clinician.target_file is not None,
     }
     # the runtime's own target, in place of the device's (pressor.runtime.inputs.target_source)

@@ -31,6 +31,7 @@ from pressor.runtime.inputs.run_options import (
     add_run_options,
     positive,
 )
+from pressor.runtime.shell.viewer import DEFAULT_VIEW_PORT
 
 __all__ = [  # the options are run_options'; importers of the shared names find them here too
     "CONTROLLER_DEFAULT_HELP",
@@ -99,6 +100,9 @@ class RunConfig:
         ``pressor sil`` with a drug-agnostic baseline (PI, Smith): the drug and syringe the
         simulated device announces (the patient model's), which the runtime end binds it to;
         None: the loaded design's (:func:`pressor.contracts.drug.binding_of`).
+    view, view_port
+        ``--view``: stream the run to a rerun viewer listening on 127.0.0.1:``view_port``
+        (:mod:`pressor.runtime.shell.viewer`).
     clinician_stdin
         ``pressor sil --clinician-stdin``: the clinician's ``ack``, ``stop``, ``manual RATE`` and
         ``resume`` on stdin, the target staying the device's (``pressor run`` has them on its
@@ -127,6 +131,8 @@ class RunConfig:
     status_every_s: float | None = None
     clinician_stdin: bool = False
     syringe: DrugBinding | None = None
+    view: bool = False
+    view_port: int = DEFAULT_VIEW_PORT
 
     @property
     def period_s(self) -> float:
@@ -236,6 +242,8 @@ def run_config(
         sample_age_limit_s=args.sample_age_limit_s,
         on_stop=args.on_stop,
         status_every_s=None if args.quiet else args.status_every,
+        view=args.view,
+        view_port=args.view_port,
     )
 
 

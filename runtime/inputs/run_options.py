@@ -12,11 +12,12 @@ import argparse
 from collections.abc import Callable
 from pathlib import Path
 
-from pressor.contracts.checks import check_range
+from pressor.contracts.checks import check_int_range, check_range
 from pressor.runtime.core.supervisor_config import DEFAULT_SAMPLE_AGE_LIMIT_S
 from pressor.runtime.estimation.sources import SOURCES
 from pressor.runtime.shell.cpu_latency import MAX_LATENCY_US
 from pressor.runtime.shell.status import DEFAULT_STATUS_EVERY_S
+from pressor.runtime.shell.viewer import DEFAULT_VIEW_PORT, VIEW_PORT_MAX, VIEW_PORT_MIN
 
 #: what ``--schedule`` means, for the help of every command that takes it
 SCHEDULE_HELP = (
@@ -62,6 +63,17 @@ def positive(name: str, high: float) -> Callable[[str], float]:
         return check_range(name, value, 0.0, high, lo_open=True, error=argparse.ArgumentTypeError)
 
     return parse
+
+
+def _view_port(text: str) -> int:
+    """An argparse type: ``--view-port``, an integer in [VIEW_PORT_MIN, VIEW_PORT_MAX]."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--view-port {text!r}: not an integer") from None
+    return check_int_range(
+        "--view-port", value, VIEW_PORT_MIN, VIEW_PORT_MAX, error=argparse.ArgumentTypeError
+    )
 
 
 def _cpu_latency(text: str) -> int | None:
@@ -118,6 +130,23 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         type=Path,
         help="rerun recording to write (FILE.rrd; default: pressor sil writes"
         " pressor_sil_CONTROLLER_SCENARIO_seedN.rrd, pressor run none)",
+    )
+    p.add_argument(
+        "--view",
+        action="store_true",
+        help="show the run live in rerun's viewer, with the recording's layout (docs/VIEWER.md):"
+        " the native viewer where there is a display (DISPLAY or WAYLAND_DISPLAY set), else the"
+        " web viewer served on 127.0.0.1 (the URL to open is printed on stderr); the recording"
+        " (--rrd) is written as well. The viewer stays after the run (a web one until its printed"
+        " pid is killed); closing it leaves the run going; one already on --view-port is reused",
+    )
+    p.add_argument(
+        "--view-port",
+        type=_view_port,
+        default=DEFAULT_VIEW_PORT,
+        metavar="PORT",
+        help=f"--view: the viewer's gRPC port on 127.0.0.1, [{VIEW_PORT_MIN}, {VIEW_PORT_MAX}]"
+        " (the web viewer's page on PORT+1)",
     )
     p.add_argument("--tlog", type=Path, help="MAVLink telemetry log of every frame (FILE.tlog)")
     p.add_argument("--summary", type=Path, help="write the metric summary as JSON (FILE.json)")

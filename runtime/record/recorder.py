@@ -13,6 +13,10 @@ Reproducibility: the wall-clock ``log_time`` and ``log_tick`` timelines are disa
 properties (which carry the wall-clock start time) are not sent, and the recording id is derived from
 the run's label, so two runs with the same seed log the same values on the same timelines.
 
+With ``live`` (``--view``) the same recording also streams to a viewer as the run goes
+(:mod:`pressor.runtime.record.live`; without a file for a ``pressor run --view`` without ``--rrd``):
+a viewer that goes away stops its copy only.
+
 The file is written to a hidden temporary name next to the target and renamed on :meth:`close`,
 whether the run succeeded or failed (:meth:`abort` keeps it too): the record of a run that went
 wrong is kept. Buffered rows go to rerun at least once a second of wall time. A writer failure
@@ -57,50 +61,16 @@ from pressor.runtime.record.blueprint import (
     TRANSITION_MARKERS,
     default_blueprint,
 )
+from pressor.runtime.record.channels import CHANNEL_INDEX, CHANNELS, record_schedule
+from pressor.runtime.record.live import LiveStream, Tee, new_stream
 
-#: (entity path, legend label) — the column order of :meth:`Recorder.record`.
-CHANNELS: tuple[tuple[str, str], ...] = (
-    ("/patient/map_mmhg", "MAP measured (mmHg)"),
-    ("/controller/target_mmhg", "target (mmHg)"),
-    ("/controller/command_ml_h", "controller command (ml/h)"),
-    ("/pump/command_ml_h", "command sent (ml/h)"),
-    ("/pump/rate_ml_h", "delivered rate (ml/h)"),
-    ("/pump/volume_ml", "volume delivered (ml)"),
-    ("/schedule/K", "K (mmHg/(ml/h))"),
-    ("/schedule/T_s", "T (s)"),
-    ("/schedule/tau_s", "tau (s)"),
-    ("/controller/rho/K", "K as the controller used it (mmHg/(ml/h))"),
-    ("/controller/rho/T_s", "T as the controller used it (s)"),
-    ("/controller/rho/tau_s", "tau as the controller used it (s)"),
-    ("/loop/exec_us", "execution time (us)"),
-    ("/loop/lateness_us", "release lateness (us)"),
-    (
-        "/safety/state",
-        "supervisor state (0 STARTUP 1 AUTO 2 HOLD 3 FAILSAFE 4 RECOVERING 5 STOPPED 6 MANUAL)",
-    ),
-    ("/safety/faults", "fault bits"),
-    ("/safety/alarm", "alarm (0/1)"),
-    ("/link/bad_frames", "bad frames (count)"),
-    ("/schedule/estimated/K", "K scheduled on (mmHg/(ml/h))"),
-    ("/schedule/estimated/T_s", "T scheduled on (s)"),
-    ("/schedule/estimated/tau_s", "tau scheduled on (s)"),
-    ("/schedule/estimated/K_lo", "K 90 % band low (mmHg/(ml/h))"),
-    ("/schedule/estimated/K_hi", "K 90 % band high (mmHg/(ml/h))"),
-    ("/schedule/estimated/T_lo_s", "T 90 % band low (s)"),
-    ("/schedule/estimated/T_hi_s", "T 90 % band high (s)"),
-    ("/schedule/estimated/tau_lo_s", "tau 90 % interval low (s)"),
-    ("/schedule/estimated/tau_hi_s", "tau 90 % interval high (s)"),
-)
 #: free space (bytes) the recording needs on its disk to start
 MIN_FREE_BYTES = 1 << 20
-#: standard normal quantile of a two-sided 90 % band (K and T bands from their standard deviations)
-_Z90 = 1.6449
-CHANNEL_INDEX: dict[str, int] = {path: i for i, (path, _) in enumerate(CHANNELS)}
 _NO_RHO = (math.nan, math.nan, math.nan)
-_BAND_CHANNELS = tuple(
-    f"/schedule/estimated/{name}"
-    for name in ("K_lo", "K_hi", "T_lo_s", "T_hi_s", "tau_lo_s", "tau_hi_s")
-)
+
+
+# the channels are re-exported from their old home
+__all__ = ["CHANNELS", "CHANNEL_INDEX", "MIN_FREE_BYTES", "Recorder"]
 
 
 class Recorder:
@@ -109,7 +79,8 @@ class Recorder:
     Parameters
     ----------
     path
-        Target ``.rrd`` file; its directory must exist. Written only on :meth:`close`.
+        Target ``.rrd`` file; its directory must exist. Written only on :meth:`close`. ``None``:
+        no file (then ``live`` is required).
     run_label
         Text identifying the run (controller, scenario, seed, ...): the recording id is derived
         from it (UUID v5) so identical runs get identical ids.
@@ -118,41 +89,34 @@ class Recorder:
     dose_view
         Open the viewer with the dose plot (``pressor run``:
         :func:`pressor.runtime.inputs.dosing.log_dose_series` adds its series).
+    live
+        A viewer's gRPC URL (:func:`pressor.runtime.shell.viewer.start_viewer`) to stream the
+        recording to as well, with the same layout; ``None``: the file only.
     """
 
     def __init__(
-        self, path: str | Path, run_label: str, chunk_ticks: int = 4096, dose_view: bool = False
+        self,
+        path: str | Path | None,
+        run_label: str,
+        chunk_ticks: int = 4096,
+        dose_view: bool = False,
+        live: str | None = None,
     ) -> None:
         check_int_range("chunk_ticks", chunk_ticks, 16, 1_000_000)
-        self.path = Path(path)
-        if not self.path.parent.is_dir():
-            raise FileNotFoundError(f"{self.path}: directory {self.path.parent} does not exist")
-        st = os.statvfs(self.path.parent)
-        if st.f_bavail * st.f_frsize < MIN_FREE_BYTES:
-            # rerun's save() can block for good on a disk that fills while it writes its header
-            raise OSError(
-                errno.ENOSPC,
-                f"{st.f_bavail * st.f_frsize >> 10} KiB free on its disk, the recording needs"
-                f" {MIN_FREE_BYTES >> 10} KiB to start",
-            )
-        self._target = AtomicFile(self.path)
+        if path is None and live is None:
+            raise ValueError("a recording needs a file, a viewer or both")
         rid = uuid.uuid5(uuid.NAMESPACE_URL, f"pressor:{run_label}")
-        self._rec = rr.RecordingStream("pressor", recording_id=rid, send_properties=False)
-        self._rec.set_log_time_enabled(False)
-        self._rec.set_log_tick_enabled(False)
-        self._rec.save(str(self._target.tmp), default_blueprint=default_blueprint(dose_view))
+        blueprint = default_blueprint(dose_view)
+        self._file: rr.RecordingStream | None = None
+        self._target: AtomicFile | None = None
+        self.path = None if path is None else self._open_file(Path(path), rid, blueprint)
+        # with a viewer, two streams: its failure must not read as the file's (live.py); the
+        # viewer's has an id of its own, so that a run repeated into a viewer still showing the
+        # first one (reused by --view) opens beside it rather than adding ticks to it
+        live_stream = None if live is None else LiveStream(live, uuid.uuid4(), blueprint)
+        self._rec: Any = self._file if live_stream is None else Tee(self._file, live_stream)
         self._rec.send_recording_name(run_label)
-        for entity, label in CHANNELS:
-            self._rec.log(
-                entity, rr.SeriesLines(names=label, colors=SERIES_COLORS.get(entity)), static=True
-            )
-        for entity, label in (
-            (DISTURBANCE_MARKERS, "disturbance starts"),
-            (FAULT_MARKERS, "fault starts"),
-            (TRANSITION_MARKERS, "supervisor transition"),
-        ):
-            style = rr.SeriesPoints(names=label, colors=SERIES_COLORS[entity], marker_sizes=6.0)
-            self._rec.log(entity, style, static=True)
+        self._log_styles()
         self._box: tuple[tuple[float, float], ...] | None = None
         self._rho_of: Any = None
         self._markers: list[tuple[float, str, str]] = []
@@ -172,6 +136,44 @@ class Recorder:
         self._stop = threading.Event()
         self._watch = threading.Thread(target=self._watch_sink, name="rrd sink", daemon=True)
         self._watch.start()
+
+    def _open_file(self, path: Path, rid: uuid.UUID, blueprint: Any) -> Path:
+        """Start the file's stream (:attr:`_file`) on a temporary name next to ``path``; return
+        ``path``."""
+        if not path.parent.is_dir():
+            raise FileNotFoundError(f"{path}: directory {path.parent} does not exist")
+        st = os.statvfs(path.parent)
+        if st.f_bavail * st.f_frsize < MIN_FREE_BYTES:
+            # rerun's save() can block for good on a disk that fills while it writes its header
+            raise OSError(
+                errno.ENOSPC,
+                f"{st.f_bavail * st.f_frsize >> 10} KiB free on its disk, the recording needs"
+                f" {MIN_FREE_BYTES >> 10} KiB to start",
+            )
+        self._target = AtomicFile(path)
+        self._file = new_stream(rid)
+        self._file.save(str(self._target.tmp), default_blueprint=blueprint)
+        return path
+
+    def _log_styles(self) -> None:
+        """Each channel's and marker's static series style: its legend label and colour."""
+        for entity, label in CHANNELS:
+            self._rec.log(
+                entity, rr.SeriesLines(names=label, colors=SERIES_COLORS.get(entity)), static=True
+            )
+        for entity, label in (
+            (DISTURBANCE_MARKERS, "disturbance starts"),
+            (FAULT_MARKERS, "fault starts"),
+            (TRANSITION_MARKERS, "supervisor transition"),
+        ):
+            style = rr.SeriesPoints(names=label, colors=SERIES_COLORS[entity], marker_sizes=6.0)
+            self._rec.log(entity, style, static=True)
+
+    @property
+    def viewer_lost(self) -> str | None:
+        """Why the live view stopped receiving (its viewer closed), else ``None`` (also without
+        one); the file goes on regardless."""
+        return self._rec.live.lost if isinstance(self._rec, Tee) else None
 
     def use_controller(self, controller: Controller) -> None:
         """Record what ``controller`` declares: its design box (``/schedule/box/*``) and the K, T, τ
@@ -268,29 +270,8 @@ class Recorder:
         row[ix["/safety/faults"]] = float(out.faults)
         row[ix["/safety/alarm"]] = 1.0 if out.alarm else 0.0
         row[ix["/link/bad_frames"]] = float(bad_frames)
-        self._record_schedule(rec, row)
+        record_schedule(rec, row)
         self.record(inp.tick, inp.sim_time_s, row)
-
-    @staticmethod
-    def _record_schedule(rec: TickRecord, row: list[float]) -> None:
-        """``/schedule/estimated/*``: the K, T, τ the controller was scheduled on when the source
-        is not the oracle (``/schedule/K`` ... stay the device's values, its truth when it sends
-        one), with the estimator's 90 % bands (NaN for the nominal source and the oracle)."""
-        ix = CHANNEL_INDEX
-        sched = rec.schedule
-        nan = math.nan
-        own = sched.source != "oracle"
-        row[ix["/schedule/estimated/K"]] = sched.K if own else nan
-        row[ix["/schedule/estimated/T_s"]] = sched.T_s if own else nan
-        row[ix["/schedule/estimated/tau_s"]] = sched.tau_s if own else nan
-        est = sched.estimate
-        if est is None:
-            band = (nan,) * 6
-        else:
-            dk, dt = _Z90 * est.K_std, _Z90 * est.T_std_s
-            band = (est.K - dk, est.K + dk, est.T_s - dt, est.T_s + dt, est.tau_lo_s, est.tau_hi_s)
-        for name, value in zip(_BAND_CHANNELS, band, strict=True):
-            row[ix[name]] = value
 
     def event(
         self, tick: int, sim_time_s: float, text: str, warn: bool = True, state: int | None = None
@@ -411,8 +392,8 @@ class Recorder:
             columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64)),
         )
 
-    def close(self) -> Path:
-        """Flush, finish the file and move it to ``path``; return ``path``. A recording that
+    def close(self) -> Path | None:
+        """Flush, finish the file and move it to ``path``; return ``path`` (``None``: no file). A recording that
         failed (:attr:`error`) is moved into place too, holding what was written before."""
         if self._closed:
             return self.path
@@ -427,7 +408,8 @@ class Recorder:
         except (RuntimeError, OSError) as exc:
             self._fail(exc)
         self._rec.disconnect()
-        self._target.commit()
+        if self._target is not None:
+            self._target.commit()
         return self.path
 
     def abort(self) -> None:

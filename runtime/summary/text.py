@@ -11,7 +11,6 @@ they read is :func:`pressor.runtime.summary.build_summary`'s.
 from __future__ import annotations
 
 import math
-import os
 import sys
 from collections.abc import Mapping
 from typing import Any
@@ -22,14 +21,14 @@ from pressor.contracts.drug import REFERENCE_WEIGHT_KG
 from pressor.contracts.metrics.labels import LABELS, format_number, format_value, null_reason
 from pressor.runtime.core.fault_words import describe_detections
 from pressor.runtime.inputs.clinician import describe_target
+from pressor.runtime.shell.viewer import has_display
 
 
 def replay_command(rrd: Any, environ: Mapping[str, str] | None = None) -> str:
     """The command that replays ``rrd`` on this machine: the native viewer where there is a
     display (``DISPLAY`` or ``WAYLAND_DISPLAY`` set), else the web viewer on localhost (the
     native one fails without a display; docs/VIEWER.md)."""
-    env = os.environ if environ is None else environ
-    if env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"):
+    if has_display(environ):
         return f"rerun {rrd}"
     return f"rerun --web-viewer --bind 127.0.0.1 {rrd}  (no display here: open the printed URL)"
 

@@ -104,11 +104,9 @@ def test_the_recording_shows_the_delivered_dose_per_kg_beside_the_infusion(tmp_p
         assert per_kg[k] == pytest.approx(rate[k] * 100.0 / (60.0 * 50.0), rel=1e-6)
         assert cols["/dose/delivered_ug_min"][k] == pytest.approx(rate[k] * 100.0 / 60.0, rel=1e-6)
     v = views(blueprint_rows(tmp_path / "r.rrd"))
-    assert v["Dose delivered (ug/min, ug/kg/min)"]["contents"] == [
-        "/dose/delivered_ug_min",
-        "/dose/delivered_ug_kg_min",
-    ]
-    assert "Infusion (ml/h)" in v
+    # per kg only: the µg/min, ~70 times larger, flattened it to the bottom of a shared axis
+    assert v["Dose delivered (ug/kg/min)"]["contents"] == ["/dose/delivered_ug_kg_min"]
+    assert any(name.startswith("Infusion (ml/h)") for name in v)
 
 
 def test_a_baseline_runs_on_the_simulated_patients_drug_and_says_so(tmp_path):

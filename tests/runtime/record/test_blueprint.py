@@ -59,7 +59,8 @@ def blueprint_rows(path: Path) -> dict[str, dict[str, Any]]:
 
 
 def views(rows: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """View name -> {"kind", "contents", "ranges", "axis_range", "legend_corner"}."""
+    """View name -> {"kind", "contents", "ranges", "axis_range", "legend_corner",
+    "legend_visible", "y_range"}."""
     out = {}
     for path, row in rows.items():
         if "ViewBlueprint:display_name" not in row:
@@ -67,6 +68,8 @@ def views(rows: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
         parts = {p.rsplit("/", 1)[1]: r for p, r in rows.items() if p.startswith(path + "/")}
         ranges = parts.get("VisibleTimeRanges", {}).get("VisibleTimeRanges:ranges")
         legend = parts.get("PlotLegend", {}).get("PlotLegend:corner")
+        visible = parts.get("PlotLegend", {}).get("PlotLegend:visible")
+        y_range = parts.get("ScalarAxis", {}).get("ScalarAxis:range")
         axis_range = parts.get("TimeAxis", {}).get("TimeAxis:view_range")
         out[row["ViewBlueprint:display_name"].as_py()[0]] = {
             "kind": row["ViewBlueprint:class_identifier"].as_py()[0],
@@ -74,6 +77,8 @@ def views(rows: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
             "ranges": ranges,
             "axis_range": axis_range,
             "legend_corner": None if legend is None else legend.as_py()[0],
+            "legend_visible": None if visible is None else visible.as_py()[0],
+            "y_range": None if y_range is None else y_range.as_py()[0],
         }
     return out
 
@@ -89,7 +94,13 @@ def test_viewer_opens_on_the_sim_time_timeline(run):
     assert panel["TimePanelBlueprint:timeline"].as_py() == [TIMELINE]
 
 
-def test_every_plot_shows_the_whole_run_with_its_legend_in_a_corner(run):
+def view_named(v: dict[str, dict[str, Any]], prefix: str) -> dict[str, Any]:
+    """The one view whose name starts with ``prefix`` (titles end with their colour keys)."""
+    (name,) = [n for n in v if n.startswith(prefix)]
+    return v[name]
+
+
+def test_every_plot_shows_the_whole_run(run):
     plots = {n: v for n, v in views(blueprint_rows(run)).items() if v["kind"] == "TimeSeries"}
     assert len(plots) == 9  # the dose delivered beside the infusion (issue 40)
     for name, view in plots.items():
@@ -101,7 +112,45 @@ def test_every_plot_shows_the_whole_run_with_its_legend_in_a_corner(run):
         axis = view["axis_range"].values
         assert boundary_kinds(axis.field("start")) == ["Infinite"], name
         assert boundary_kinds(axis.field("end")) == ["Infinite"], name
-        assert view["legend_corner"] == 2, name  # Corner2D.RightTop: not over the traces' start
+
+
+#: Corner2D codes as stored: LeftTop 1, RightTop 2, LeftBottom 3, RightBottom 4
+RIGHT_TOP, RIGHT_BOTTOM = 2, 4
+
+
+def test_legends_only_where_they_clear_the_traces_elsewhere_colours_in_the_title(run):
+    v = views(blueprint_rows(run))
+    plots = {n: p for n, p in v.items() if p["kind"] == "TimeSeries"}
+    # the MAP sits at the target, the top of its axis, once risen; the dose near the top of its
+    assert view_named(v, "MAP vs target")["legend_corner"] == RIGHT_BOTTOM
+    assert view_named(v, "Dose delivered")["legend_corner"] == RIGHT_BOTTOM
+    assert view_named(v, "Safety state")["legend_corner"] == RIGHT_TOP
+    shown = {n for n, p in plots.items() if p["legend_visible"]}
+    assert len(shown) == 3
+    for name in set(plots) - shown:  # K, T, tau covered half their panel with 7 entries
+        assert plots[name]["legend_visible"] is False, name
+        assert plots[name]["legend_corner"] is None, name
+        if len(plots[name]["contents"]) > 1:  # the title names the series' colours
+            words = {w.strip(",") for w in name.split(":", 1)[1].split()}
+            assert len(words & {"blue", "orange", "brown", "green", "grey"}) >= 2, name
+    for var in ("K", "T", "tau"):
+        title = next(n for n in plots if n.startswith(f"{var} ("))
+        assert title.endswith("device blue, used orange, estimate green, box grey"), title
+
+
+def test_infusion_row_is_as_tall_as_the_maps_and_safety_axis_spans_every_state(run):
+    rows = blueprint_rows(run)
+    shares = [
+        r["ContainerBlueprint:row_shares"].as_py()
+        for r in rows.values()
+        if "ContainerBlueprint:row_shares" in r
+    ]
+    assert shares == [[3.0, 3.0, 2.0, 2.0]]  # was [3, 2, 2, 2]: one y tick on the infusion
+    v = views(rows)
+    assert view_named(v, "Safety state")["y_range"] == [-0.5, 6.5]  # 0 STARTUP ... 6 MANUAL
+    for name, view in v.items():
+        if not name.startswith("Safety state") and view["kind"] == "TimeSeries":
+            assert view["y_range"] is None, name  # the others fit the whole run
 
 
 def test_views_hold_map_infusion_volume_schedule_box_timing_and_safety(run):
@@ -113,17 +162,17 @@ def test_views_hold_map_infusion_volume_schedule_box_timing_and_safety(run):
         DISTURBANCE_MARKERS,
         FAULT_MARKERS,
     ]
-    assert v["Infusion (ml/h)"]["contents"] == [
+    assert view_named(v, "Infusion (ml/h)")["contents"] == [
         "/controller/command_ml_h",
         "/pump/command_ml_h",
         "/pump/rate_ml_h",
     ]
     assert v["Volume infused (ml)"]["contents"] == ["/pump/volume_ml"]
-    k = v["K (mmHg/(ml/h))"]["contents"]
+    k = view_named(v, "K (mmHg/(ml/h))")["contents"]
     assert k[:2] == ["/schedule/K", "/controller/rho/K"] and "/schedule/estimated/K" in k
     assert set(BOX_ENTITIES[0]) <= set(k)
-    assert set(BOX_ENTITIES[2]) <= set(v["tau (s)"]["contents"])
-    assert v["Loop timing (us)"]["contents"] == ["/loop/exec_us", "/loop/lateness_us"]
+    assert set(BOX_ENTITIES[2]) <= set(view_named(v, "tau (s)")["contents"])
+    assert view_named(v, "Loop timing (us)")["contents"] == ["/loop/exec_us", "/loop/lateness_us"]
     assert "/safety/state" in v[next(n for n in v if n.startswith("Safety state"))]["contents"]
     assert v["Safety and run events"]["kind"] == "TextLog"
 
