@@ -11,7 +11,9 @@ any plugin controller, the supervisor's own state logic and its [0, max_rate_ml_
 4. raises ``DOSE_SHORTFALL`` once a cut has held for ``shortfall_after_s`` (10 min) of run time
    while MAP stayed below the target by more than ``shortfall_mmhg`` (5 mmHg): the patient cannot
    be brought to target within the library's limits, and the clinician must be told which limit
-   and by how much (:attr:`DoseGuard.reason`).
+   and by how much (:attr:`DoseGuard.reason`). The pump's maximum counts as such a limit when it
+   is the lower one (a dilute syringe, a small pump): a command held there is as short of the
+   target as one a dose limit cut.
 
 All raise the alarm and are counted as detections; none changes the supervisor's state (the
 command is cut, the loop keeps running). The limits are the library's dose limits converted to
@@ -236,6 +238,7 @@ class DoseGuard:
         now_s: float | None = None,
         short_mmhg: float = math.nan,
         chosen: bool = False,
+        pump_max_ml_h: float = math.inf,
     ) -> tuple[float, int]:
         """The command (ml/h) cut to the limits, and the fault bits raised; charges the time since
         the previous call.
@@ -251,6 +254,9 @@ class DoseGuard:
         chosen
             The clinician chose this rate (MANUAL): above the soft maximum it is only flagged, as
             with ``confirm_above_soft``; the hard and hourly maxima cut it as any command.
+        pump_max_ml_h
+            The pump's maximum (ml/h), the supervisor's clamp: a command there that no dose limit
+            cut counts towards ``DOSE_SHORTFALL`` as a cut one does (module docstring).
         """
         if now_s is None:
             now_s = 0.0 if self._last_s is None else self._last_s + self.period_s
@@ -275,15 +281,19 @@ class DoseGuard:
                 command = lim.soft_max_ml_h
                 limit = f"the soft maximum {lim.soft_max_ml_h:g} ml/h (not confirmed above)"
         self._last_s, self._last_ml_h = now_s, command
-        faults |= self._shortfall(now_s, limit, short_mmhg)
+        ceiling = ""
+        if not limit and command >= pump_max_ml_h:
+            ceiling = f"the pump's maximum {pump_max_ml_h:g} ml/h"
+        faults |= self._shortfall(now_s, limit or ceiling, short_mmhg)
         self.reason = (
             f"dose cut to {command:.2f} ml/h (asked {asked:.2f}) by {limit}" if limit else ""
         )
         if faults & DOSE_SHORTFALL:
-            self.reason += (
+            within = "the pump's maximum" if ceiling else "the drug library's limits"
+            self.reason = (self.reason or f"dose held at {ceiling}") + (
                 f"; MAP {short_mmhg:.1f} mmHg below the target for"
                 f" {now_s - self._short_since_s:.0f} s: the patient cannot be brought to target"
-                " within the drug library's limits"
+                f" within {within}"
             )
         return command, faults
 

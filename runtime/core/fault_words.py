@@ -35,7 +35,9 @@ MEANINGS: dict[str, str] = {
     "DOSE_HARD_LIMIT": "the command was cut to the drug library's hard dose maximum",
     "DOSE_SOFT_LIMIT": "the command reached the drug library's soft dose maximum",
     "DOSE_HOUR_LIMIT": "the command was cut to what the drug library allows in an hour",
-    "DOSE_SHORTFALL": "a dose limit kept MAP more than 5 mmHg below the target for 10 min",
+    "DOSE_SHORTFALL": (
+        "a dose limit or the pump's maximum kept MAP more than 5 mmHg below the target for 10 min"
+    ),
     "CONTROLLER_FAULT": "the controller raised an error or returned something that is not a number",
     "SAMPLE_TIME": "a MAP sample's time was inconsistent with its tick",
     "RECORD_ERROR": "a record file (.tlog, .rrd) could not be written further",

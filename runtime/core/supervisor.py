@@ -307,7 +307,7 @@ class Supervisor:
         command = _clamp(command, high)
         if self.dose_guard is not None:  # the last word: the drug library's dose limits
             command, dose_faults = self.dose_guard.limit(
-                command, self._now_s, self._short_mmhg, chosen=state == State.MANUAL
+                command, self._now_s, self._short_mmhg, state == State.MANUAL, high
             )
             self.faults |= dose_faults
         self.command_ml_h = command

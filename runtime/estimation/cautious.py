@@ -12,8 +12,9 @@ source makes them safe by construction and lets the MAP's response buy speed:
   so the first commands are what the most sensitive patient of the range needs, and no more: on
   that patient they land on the target; on any other they fall short.
 * **Lower K only on evidence.** Let ``s_slow(t)`` be the response of a unit-gain patient with the
-  box's slowest lag and longest delay (T_hi, τ_hi) to the rate the pump delivered, and ``Δy`` the
-  MAP's change since the first sample. Any first-order patient of the box with sensitivity K has
+  box's slowest lag and longest delay (T_hi, τ_hi; behind them the drug's effect site, if it
+  names one) to the rate the pump delivered, and ``Δy`` the MAP's change since the first
+  sample. Any first-order patient of the box with sensitivity K has
   risen at least ``K s_slow`` by now (for a rate that has not been cut: the start), so when
   ``Δy < K̂ s_slow − m`` the patient is less sensitive than K̂, at most
   ``K_up = (Δy + m)/s_slow``; K̂ falls toward K_up. No response after the longest delay is such
@@ -47,15 +48,26 @@ the geometric-mean T, same cohort); the feedforward's opening push is T/λ times
 infusion and is kept small by the design's fixed reference lag (``[reference] lag_s``), not by
 this source.
 
-Why phenylephrine's margin and T (:data:`CAUTION_FOR_DRUG`, chosen on cohort seed 3, judged on
-seed 2026: docs/notes/cautious-start.md). The PK/PD phenylephrine patients (plasma, then an effect
-site, then a sigmoid Emax) answer later than any first-order patient of the box and are locally
-steeper near the target than on average: on the geometric-mean T (200 s) the Smith law's first
-push overshot them (p90 16 % at 1×), and at 10× their local sensitivity near the target exceeds
-the population's top by up to a quarter (max 36 %). Scheduling on T 300 s (a weaker integral, a
-slower predictor) took the 0.5×–1× overshoot p90 to 1–4 %; starting at twice the top took the
-10× max to 12 %, for about a minute more to the target. Norepinephrine keeps the defaults: its
-patients did not overshoot (max 0.4 %), and the same settings cost them 10 minutes.
+Why phenylephrine's margin, T and effect lag (:data:`CAUTION_FOR_DRUG`, chosen on cohort seed 3,
+20 patients per level; judged on seed 2026: docs/notes/cautious-start.md). The PK/PD phenylephrine
+patients (a line delay, then plasma, then an effect site, then a sigmoid Emax) answer later than
+any first-order patient of the box and are less sensitive at low doses than near the target: at a
+Hill exponent of 1.6 the first doses read 0.12 mmHg/(ml/h) on a patient whose gain near the target
+is 0.78. Read against a first-order slowest patient, their first minutes lowered K̂ below their gain
+near the target and the step overshot (p90 20 % at 1x, max 39 % at 10x). Three changes, each
+measured on that cohort:
+
+* the slowest patient of the evidence has an effect site behind its lag (``effect_lag_s`` 60 s,
+  the middle of the 30-90 s the PK/PD literature gives phenylephrine), so K̂ falls as fast as that
+  patient would have answered (p90 3 % at 1x, 9 % at 10x);
+* the law is scheduled on T 300 s (a weaker integral, a slower predictor: it took the 0.5x-1x
+  p90 from 16 % to 4 % on a 10-patient cohort);
+* K̂ starts at twice the population's top: near the target the 10x PK/PD patients are up to a
+  quarter steeper than the top (the 10x max: 31 % from the top, 13 % from twice it).
+
+Together they cost the typical patient about 4 minutes to the target (paper model, 1x: 7.6 to
+11.6 min). Norepinephrine keeps the defaults: its patients did not overshoot (max 0.4 %), and the
+same settings cost them 4-10 minutes more of a time to target already over 10.
 
 What is not covered. The evidence assumes the drug's effect rises with the dose (a vasopressor) and
 that the baseline does not fall while it is read: a haemorrhage lowers Δy and reads as a less
@@ -87,14 +99,19 @@ class Caution:
         K̂ starts at this multiple of the population's top (1, >= 1; clamped to the box).
     T_s
         The lag the law is scheduled on (s), inside the box; None: the box's geometric-mean T.
+    effect_lag_s
+        An effect site's lag (s, > 0) behind the evidence's slowest patient; None: none.
     """
 
     start_margin: float = 1.0
     T_s: float | None = None
+    effect_lag_s: float | None = None
 
 
 #: the drug's caution (lower-case drug name -> :class:`Caution`); other drugs take ``Caution()``
-CAUTION_FOR_DRUG: dict[str, Caution] = {"phenylephrine": Caution(start_margin=2.0, T_s=300.0)}
+CAUTION_FOR_DRUG: dict[str, Caution] = {
+    "phenylephrine": Caution(start_margin=2.0, T_s=300.0, effect_lag_s=60.0)
+}
 
 
 @dataclass(frozen=True)
@@ -167,17 +184,22 @@ def envelope_of(controller: Any) -> DesignEnvelope:
 
 class _UnitLag:
     """A unit-gain first-order lag with a delay, driven by the delivered rate's history (exact
-    discretisation for a rate held over each tick; the delay read with linear interpolation)."""
+    discretisation for a rate held over each tick; the delay read with linear interpolation),
+    and optionally a second lag behind it (an effect site; its input held over the tick)."""
 
-    __slots__ = ("a", "b", "k", "f", "y")
+    __slots__ = ("a", "b", "k", "f", "y", "a2", "y2")
 
-    def __init__(self, T_s: float, tau_s: float, sample_period_s: float) -> None:
+    def __init__(
+        self, T_s: float, tau_s: float, sample_period_s: float, lag2_s: float | None = None
+    ) -> None:
         self.a = math.exp(-sample_period_s / T_s)
         self.b = 1.0 - self.a
         d = tau_s / sample_period_s  # the delay in ticks: whole ticks k and the fraction f
         self.k = int(d)
         self.f = d - self.k
         self.y = 0.0
+        self.a2 = None if lag2_s is None else math.exp(-sample_period_s / lag2_s)
+        self.y2 = 0.0
 
     def step(self, hist: list[float], head: int) -> float:
         n = len(hist)
@@ -185,7 +207,11 @@ class _UnitLag:
         j = (i - 1) % n
         u = hist[i] + (hist[j] - hist[i]) * self.f
         self.y = self.a * self.y + self.b * u
-        return self.y
+        a2 = self.a2
+        if a2 is None:
+            return self.y
+        self.y2 = a2 * self.y2 + (1.0 - a2) * self.y
+        return self.y2
 
 
 class CautiousSchedule:
@@ -264,7 +290,11 @@ class CautiousSchedule:
         self._m, self._rel = float(margin_mmhg), float(margin_rel)
         self._hist = [0.0] * (int(math.ceil(d_hi / ts)) + 3)
         self._head = 0
-        self._slow = _UnitLag(t_hi, d_hi, ts)
+        lag2 = caution.effect_lag_s
+        if lag2 is not None and not (math.isfinite(lag2) and lag2 > 0.0):
+            raise ValueError(f"effect_lag_s={lag2!r} must be finite and > 0 (s)")
+        self.effect_lag_s = lag2
+        self._slow = _UnitLag(t_hi, d_hi, ts, lag2)
         self._fast = _UnitLag(t_lo, d_lo, ts)
         self._gate = SampleGate(ts, flatline_s=1e9)  # no flatline rule (class docstring)
         self._anchor: float | None = None

@@ -290,6 +290,26 @@ def test_a_cut_that_keeps_the_patient_below_target_for_10_min_is_a_named_shortfa
     assert "hard maximum 60 ml/h" in guard.reason and "12.0 mmHg below the target" in guard.reason
 
 
+def test_the_pump_maximum_below_every_dose_limit_is_a_named_shortfall_too():
+    # a dilute syringe: the library allows 500 ml/h, the pump gives 120; a patient 10 mmHg short
+    # at the pump's maximum for 10 min is told so as a dose limit's shortfall would be
+    sup = _supervisor(DoseLimits(500.0, 500.0, 1e6, 16.0))
+    high = sup.config.max_rate_ml_h
+    faults = []
+    for k in range(int(600.0 / TS) + 2):
+        sup.assess(_good(k * TS))
+        faults.append(sup.finalize(2.0 * high).faults)
+    assert not faults[0] & DOSE_SHORTFALL and faults[-1] & DOSE_SHORTFALL
+    assert f"held at the pump's maximum {high:g} ml/h" in sup.dose_guard.reason
+    assert "10.0 mmHg below the target" in sup.dose_guard.reason
+    assert "within the pump's maximum" in sup.dose_guard.reason
+    # below the pump's maximum nothing holds the dose: no shortfall however long MAP is short
+    sup = _supervisor(DoseLimits(500.0, 500.0, 1e6, 16.0))
+    for k in range(int(700.0 / TS)):
+        sup.assess(_good(k * TS))
+        assert not sup.finalize(0.5 * high).faults & DOSE_SHORTFALL
+
+
 def test_dose_summary_reports_the_unit_limits_and_peak():
     c = bind_syringe(ClinicianInput(weight_kg=80.0), DEFAULT_BINDING, "lpv", None)
     d = dose_summary([0.0, 30.0, 120.0, math.nan], TS, c, {"DOSE_SOFT_LIMIT": 2, "MAP_NAN": 1})
