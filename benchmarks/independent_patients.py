@@ -4,14 +4,15 @@ Each seeded patient of :mod:`pressor.hil_sim.patients.pkpd` (the ``pkpd`` patien
 pharmacokinetics, an effect compartment, a sigmoid Emax on MAP, a transport delay, tachyphylaxis,
 a haemorrhage-like drop at 20 min and a fluid-bolus-like rise at 40 min) is played by the device
 of ``tests/support/protocol_device.py`` (written from docs/PROTOCOL.md alone) on a pty, signed, in
-lockstep, against a real ``pressor run --controller SPEC`` with its default estimated schedule (a
-real monitor sends no K, T, tau), or with ``--device-fit`` on the K, T, tau the device sends: each
+lockstep, against a real ``pressor run --controller SPEC`` on its default schedule (a real monitor
+sends no K, T, tau: the cautious start for ``lpv:cautious``, the default design; PI and Smith
+schedule on nothing), or with ``--device-fit`` on the K, T, tau the device sends: each
 patient's least-squares FOPDT of its 10 min open-loop step (docs/notes/estimation.md, "The frontier,
 revisited"). The device announces phenylephrine at 100 µg/ml, the runtime's
 defaults. Of :mod:`pressor.hil_sim` only the patient model's module is used (its world, device and paper
 model are not)::
 
-    python -m benchmarks.independent_patients                  # 10 patients x lpv, pi, smith
+    python -m benchmarks.independent_patients                  # 10 patients x lpv:cautious, pi, smith
     python -m benchmarks.independent_patients --controller pi \\
         --controller new=out/lpv_map_controller.py --patients 3
 
@@ -57,7 +58,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_PERIOD_S = 0.1  # 1 / pressor run's default --rate (s)
 PUMP_MAX_ML_H = 120.0  # the controllers' default maximum rate (ml/h)
 CONCENTRATION_UG_ML = 100.0  # phenylephrine syringe, the runtime's default --concentration-ug-ml
-DEFAULT_CONTROLLERS = ("lpv", "pi", "smith")
+DEFAULT_CONTROLLERS = ("lpv:cautious", "pi", "smith")
 
 
 @dataclass(frozen=True)
@@ -89,10 +90,10 @@ def launch(
     cfg: DeviceConfig,
     patient: IndependentPatient,
     controller: str,
-    schedule: str = "estimated",
+    schedule: str | None = None,
 ) -> list[float]:
-    """Run ``pressor run --controller controller --schedule schedule`` on a fresh pty against
-    ``patient``.
+    """Run ``pressor run --controller controller [--schedule schedule]`` on a fresh pty against
+    ``patient`` (``schedule`` None: pressor run's default).
 
     Returns the true MAP (mmHg) at every tick; raises RuntimeError when the run did not finish
     cleanly (its stderr's tail in the message).
@@ -102,7 +103,8 @@ def launch(
     master, slave = os.openpty()
     tty.setraw(slave)
     argv = [sys.executable, "-m", "pressor", "run", "--port", os.ttyname(slave)]
-    argv += ["--signing-key", str(key_file), "--controller", controller, "--schedule", schedule]
+    argv += ["--signing-key", str(key_file), "--controller", controller]
+    argv += [] if schedule is None else ["--schedule", schedule]
     err = workdir / "run.err"
     with (workdir / "run.out").open("w") as fout, err.open("w") as ferr:
         proc = subprocess.Popen(
@@ -167,7 +169,7 @@ def run_patient(
         name="independent",
     )
     with tempfile.TemporaryDirectory(prefix="indep-run-") as tmp:
-        schedule = "oracle" if setup.device_fit else "estimated"
+        schedule = "oracle" if setup.device_fit else None
         true_map = launch(dialect, Path(tmp), cfg, patient, controller, schedule)
     t_s = [k * SAMPLE_PERIOD_S for k in range(n_ticks)]
     need = patient.steady_state_rate_ml_h(setup.target_mmhg + params.hemorrhage_mmhg, PUMP_MAX_ML_H)
@@ -297,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="the device sends each patient's least-squares FOPDT of its 10 min open-loop step as"
         " SCHEDULING_PARAMS and pressor run schedules on it (--schedule oracle) (default: off,"
-        " the estimated schedule)",
+        " pressor run's default schedule)",
     )
     args = p.parse_args(argv)
     setup = Setup(args.duration_s, args.target_mmhg, args.noise_mmhg, args.device_fit)
@@ -308,7 +310,11 @@ def main(argv: list[str] | None = None) -> int:
         f"target {setup.target_mmhg:g} mmHg, monitor noise {setup.noise_mmhg:g} mmHg, "
         f"phenylephrine {CONCENTRATION_UG_ML:g} ug/ml, pump max {PUMP_MAX_ML_H:g} ml/h; "
         f"haemorrhage at {HEMORRHAGE_AT_S:g} s, bolus at {BOLUS_AT_S:g} s; schedule "
-        + ("the device's step-response fit (oracle)" if setup.device_fit else "estimated")
+        + (
+            "the device's step-response fit (oracle)"
+            if setup.device_fit
+            else "pressor run's default"
+        )
     )
     print(
         "  patient  baseline mmHg  delay s  hem mmHg  bolus mmHg  steady ml/h at target, after hem"

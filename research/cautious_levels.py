@@ -5,6 +5,8 @@ Usage::
     python -m research.cautious_levels --controller lpv:cautious --schedule cautious --patients 20 --seed 3
     python -m research.cautious_levels --controller lpv:norepinephrine-cautious --schedule cautious \\
         --patient-model norepinephrine --levels 0.5,1,2
+    python -m research.cautious_levels --controller lpv:cautious --patient-model pkpd --levels 1,10 \\
+        --caution 'phenylephrine:{"start_margin": 2, "T_s": 300, "effect_lag_s": null}'
 
 Every patient of the cohort ``(--seed, --patients)`` runs ``--scenario`` (default
 ``paper-disturbance``) at each sensitivity level (:mod:`pressor.hil_sim.patients.sensitivity`) under the
@@ -36,6 +38,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution
 
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
 
@@ -159,7 +163,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--patient-model", default="paper")
     p.add_argument("--jobs", type=int, default=1)
     p.add_argument("--cache", type=Path, default=None, help="directory caching the baseline runs")
+    p.add_argument(
+        "--caution",
+        action="append",
+        default=[],
+        metavar="DRUG:JSON",
+        help="replace a drug's caution for this run (workers forked from here see it), e.g."
+        """ 'phenylephrine:{"start_margin": 1, "T_s": 200, "effect_lag_s": null}'"""
+        " (runtime/estimation/cautious.py, Caution; default: the shipped CAUTION_FOR_DRUG)",
+    )
     a = p.parse_args(argv)
+    for spec in a.caution:
+        drug, _, fields = spec.partition(":")
+        CAUTION_FOR_DRUG[drug] = Caution(**json.loads(fields))
     levels = [float(x) for x in a.levels.split(",")]
     print(
         f"controller {a.controller} ({a.schedule}) vs {a.baseline}; {a.scenario}, "
