@@ -118,8 +118,11 @@ def test_drug_patients_without_a_twin_come_back_unchanged_with_the_reason(monkey
     ("spec", "model"),
     [
         ("lpv:cautious", "pkpd@sensitivity=0.2"),
-        ("lpv:cautious", "phenylephrine-2c@sensitivity=0.5"),
-        ("lpv:norepinephrine-cautious", "norepinephrine@sensitivity=0.2"),
+        # an hour each: the other two models' twins are checked step for step above
+        pytest.param("lpv:cautious", "phenylephrine-2c@sensitivity=0.5", marks=pytest.mark.slow),
+        pytest.param(
+            "lpv:norepinephrine-cautious", "norepinephrine@sensitivity=0.2", marks=pytest.mark.slow
+        ),
     ],
 )
 def test_trial_under_dose_limits_gives_the_same_record_with_and_without_the_twins(
