@@ -23,17 +23,10 @@ from pressor.runtime.ending import (  # run_guarded, start_run: re-exported, the
     write_failed_summary,
     write_summary,
 )
-from pressor.runtime.inputs.clinician import (
-    TARGET_MAX_MMHG,
-    TARGET_MIN_MMHG,
-    ClinicianInput,
-    check_device_hello,
-    check_link_hello,
-)
+from pressor.runtime.handshake import handshake
+from pressor.runtime.inputs.clinician import TARGET_MAX_MMHG, TARGET_MIN_MMHG, ClinicianInput
 from pressor.runtime.inputs.config import RunConfig, load_controller
-from pressor.runtime.inputs.controller_loader import controller_name
 from pressor.runtime.shell.boundary import Unwritten
-from pressor.runtime.shell.interrupt import Interrupted, stop_requested
 from pressor.runtime.shell.placement import Pinned
 
 if TYPE_CHECKING:  # the stages' types; at run time each stage imports what it needs, when it runs
@@ -62,7 +55,7 @@ def run_runtime(
 ) -> tuple[dict[str, Any], Any]:
     """Handshake, build controller/supervisor/recorder, run the loop; return (summary, result).
 
-    The stages, in order: :func:`_handshake`, :func:`_build_supervisor`, :func:`_open_recorder`,
+    The stages, in order: :func:`pressor.runtime.handshake.handshake`, :func:`_build_supervisor`, :func:`_open_recorder`,
     :func:`_run_loop`, :func:`_close_recording`, :func:`pressor.runtime.ending.summarize`.
 
     Parameters
@@ -129,7 +122,7 @@ def run_runtime(
     recorder = None
     try:
         try:
-            peer = _handshake(ep, config, controller, clinician, peer_alive, handshake_timeout_s,
+            peer = handshake(ep, config, controller, clinician, peer_alive, handshake_timeout_s,
                               on_connected)  # fmt: skip
         except Exception as exc:  # refused, a link error: the record says so, then the error
             write_failed_summary(config, identity, exc)
@@ -178,66 +171,6 @@ def _clinician_for(config: RunConfig, controller: Controller) -> ClinicianInput:
 
     design = config.syringe or binding_of(controller)
     return ClinicianInput(drug=design.name, concentration_ug_ml=design.concentration_ug_ml)
-
-
-def _handshake(
-    ep: RuntimeSession,
-    config: RunConfig,
-    controller: Controller,
-    clinician: ClinicianInput,
-    peer_alive: Callable[[], bool] | None,
-    handshake_timeout_s: float,
-    on_connected: Callable[[], object] | None,
-) -> Hello:
-    """Send the runtime's hello until the device answers, call ``on_connected``, check the
-    device's hello against the run (link mode and rate, pump, syringe); return it.
-
-    Short attempts, so that a device process that died (``peer_alive`` false) or a stop request
-    ends the wait at once; a signing mismatch or a refused hello is raised at once, any other link
-    error once ``handshake_timeout_s`` wall seconds have passed. A mismatch is sent to the device
-    (so it is told why) before :class:`link.HelloRefused` is raised.
-    """
-    from pressor.link import (
-        LINK_LOCKSTEP,
-        LINK_REALTIME,
-        Hello,
-        HelloRefused,
-        LinkError,
-        SigningMismatch,
-    )
-
-    mode = LINK_REALTIME if config.realtime else LINK_LOCKSTEP
-    hello = Hello(
-        controller_name(config.controller)[:32],
-        sample_period_s=config.period_s,
-        link_mode=mode,
-        drug=clinician.drug,
-        concentration_ug_ml=clinician.concentration_ug_ml,
-        pump_max_ml_h=controller.max_rate_ml_h,
-    )
-    waited = 0.0
-    while True:  # short attempts, so a device process that died is noticed at once
-        if (stop := stop_requested()) is not None:
-            raise Interrupted(stop, "before the device connected")
-        try:
-            peer = ep.handshake(hello, timeout_s=0.25)
-            break
-        except (SigningMismatch, HelloRefused):  # a refused device was told why
-            raise
-        except LinkError:
-            waited += 0.25
-            if (peer_alive is not None and not peer_alive()) or waited >= handshake_timeout_s:
-                raise
-    if on_connected is not None:
-        on_connected()
-    try:
-        check_link_hello(peer, config.period_s, config.rate_hz, mode)
-        check_device_hello(peer, controller.max_rate_ml_h, clinician)
-    except HelloRefused as exc:  # the device is told why before the link closes
-        ep.refuse(exc)
-        raise
-    ep.lock_terms()  # a later hello may not change what was checked here
-    return peer
 
 
 def _run_identity(identity: dict[str, Any], config: RunConfig, peer: Hello) -> dict[str, Any]:

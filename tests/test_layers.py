@@ -91,7 +91,10 @@ RUNTIME_ALLOWED: dict[str, frozenset[str]] = {
     "inputs": frozenset({"core", "estimation", "shell"}),
     "summary": frozenset({"core", "inputs", "shell"}),
     "ending": frozenset({"core", "inputs", "shell", "summary"}),
-    "session": frozenset({"core", "ending", "estimation", "inputs", "record", "shell", "summary"}),
+    "handshake": frozenset({"inputs", "shell"}),
+    "session": frozenset(
+        {"core", "ending", "estimation", "handshake", "inputs", "record", "shell", "summary"}
+    ),
     "cli": frozenset({"core", "inputs", "session", "summary"}),
 }
 
