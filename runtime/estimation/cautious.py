@@ -58,8 +58,9 @@ near the target and the step overshot (p90 20 % at 1x, max 39 % at 10x). Three c
 measured on that cohort:
 
 * the slowest patient of the evidence has an effect site behind its lag (``effect_lag_s`` 60 s,
-  the middle of the 30-90 s the PK/PD literature gives phenylephrine), so K̂ falls as fast as that
-  patient would have answered (p90 3 % at 1x, 9 % at 10x);
+  the middle of the 30-90 s effect-site lag the ``pkpd`` patient model draws: a plausible range,
+  not a fitted one), so K̂ falls as fast as that patient would have answered (p90 3 % at 1x, 9 %
+  at 10x);
 * the law is scheduled on T 300 s (a weaker integral, a slower predictor: it took the 0.5x-1x
   p90 from 16 % to 4 % on a 10-patient cohort);
 * K̂ starts at twice the population's top: near the target the 10x PK/PD patients are up to a
