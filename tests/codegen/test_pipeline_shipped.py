@@ -192,6 +192,7 @@ def test_shipped_time_varying_loop_at_rate_bounds_stays_bounded_and_settles(ship
     assert max(tail) - min(tail) < 30.0
 
 
+@pytest.mark.slow  # 39 s; the bit-exact C/Python tests stay in the fast suite
 def test_shipped_float_module_tracks_continuous_reference_on_replayed_closed_loop_inputs(shipped):
     """Float module vs the synthesis package's exact continuous-time controller (RK4, fine delay
     history), on inputs recorded from a closed loop with a delayed patient: target steps, sensor

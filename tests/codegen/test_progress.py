@@ -41,6 +41,7 @@ def codegen_run(tmp_path_factory):
     return run, out
 
 
+@pytest.mark.slow  # a real 15 s codegen; the two below check the progress itself
 def test_tabulate_stage_reports_its_counts_line_by_line_on_stderr(codegen_run):
     run, _ = codegen_run
     assert run.returncode == 0, run.stderr
@@ -61,6 +62,7 @@ def test_tabulate_stage_reports_its_counts_line_by_line_on_stderr(codegen_run):
     ]
 
 
+@pytest.mark.slow  # the same real codegen run
 def test_progress_leaves_stdout_and_the_written_files_as_without_it(codegen_run):
     run, out = codegen_run
     assert run.stdout.splitlines() == [f"wrote {out / p.name}" for p in COMMITTED_C]

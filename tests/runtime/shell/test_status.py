@@ -51,6 +51,7 @@ def test_lines_come_whole_at_the_interval_and_not_before():
         StatusLine("pressor run", 0.1, interval_s=0.0)
 
 
+@pytest.mark.slow  # two 6 s real-time runs; the line's unit tests stay fast
 def test_a_real_time_sil_prints_status_lines_unless_quiet(tmp_path):
     # 6 s at a line a second: a loaded machine that starts late and catches up still prints one
     argv = ["sil", "--controller", "pi", "--realtime", "--duration", "6", "--status-every", "1"]
