@@ -170,6 +170,16 @@ def _fill_drug(d: _Drug, patient: Any) -> None:
     d.delta_map_mmhg, d.map_mmhg, d.K = patient.delta_map_mmhg, patient.map_mmhg, patient.K
 
 
+def _fill_drug_patient(c: Any, patient: Any) -> None:
+    """What every DrugPatient twin's struct takes alike: the syringe, the kinetics' discrete
+    matrices, the drug state and the delay line."""
+    c.conc_ug_ml = patient.conc_ug_ml
+    c.a[:] = [v for row in patient._ad for v in row]
+    c.b[:] = list(patient._bd)
+    _fill_drug(c.d, patient)
+    _fill_delay(c.buf, patient)
+
+
 def _checked(step: Callable[[float], int], c: Any) -> Callable[[float], None]:
     def run(rate_ml_h: float) -> None:
         if step(rate_ml_h):
@@ -200,14 +210,10 @@ class NativePhenylephrine2C(Phenylephrine2C):
         _adopt(self, patient, (*_DRUG_STATE, "a1_ug", "a2_ug", "ce_ng_ml"))
         self._tau_s = patient.tau_s
         c = self._c = _Phenylephrine()
-        c.conc_ug_ml = patient.conc_ug_ml
-        c.a[:] = [v for row in patient._ad for v in row]
-        c.b[:] = list(patient._bd)
+        _fill_drug_patient(c, patient)
         c.emax_mmhg, c.ec50_ng_ml = patient.params.emax_mmhg, patient.params.ec50_ng_ml
         c.fast_dc_ng_ml = patient._fast_dc_ng_ml
         c.a1_ug, c.a2_ug, c.ce_ng_ml = patient.a1_ug, patient.a2_ug, patient.ce_ng_ml
-        _fill_drug(c.d, patient)
-        _fill_delay(c.buf, patient)
         self.step = _checked(functools.partial(lib.dp_phenylephrine_step, ctypes.addressof(c)), c)
 
 
@@ -231,16 +237,12 @@ class NativeNorepinephrine1C(Norepinephrine1C):
         _adopt(self, patient, state)
         self._tau_s = patient.tau_s
         c = self._c = _Norepinephrine()
-        c.conc_ug_ml = patient.conc_ug_ml
-        c.a[:] = [v for row in patient._ad for v in row]
-        c.b[:] = list(patient._bd)
+        _fill_drug_patient(c, patient)
         c.endogenous_ug_min = patient.params.endogenous_ug_min
         c.emax_mmhg, c.ec50_ng_ml = patient._emax_mmhg, patient._ec50_ng_ml
         c.hill, c.h_endo, c.dc_ng_ml = patient._hill, patient._h_endo, patient._dc_ng_ml
         c.plasma_ng_ml, c.ce_ng_ml = patient.plasma_ng_ml, patient.ce_ng_ml
         c.hill_now = patient.hill_mmhg(patient.ce_ng_ml)  # what K uses before the first step
-        _fill_drug(c.d, patient)
-        _fill_delay(c.buf, patient)
         self.step = _checked(functools.partial(lib.dp_norepinephrine_step, ctypes.addressof(c)), c)
 
 

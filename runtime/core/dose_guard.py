@@ -281,25 +281,24 @@ class DoseGuard:
                 command = lim.soft_max_ml_h
                 limit = f"the soft maximum {lim.soft_max_ml_h:g} ml/h (not confirmed above)"
         self._last_s, self._last_ml_h = now_s, command
-        ceiling = ""
-        if not limit and command >= pump_max_ml_h:
-            ceiling = f"the pump's maximum {pump_max_ml_h:g} ml/h"
-        faults |= self._shortfall(now_s, limit or ceiling, short_mmhg)
+        at_pump_max = not limit and command >= pump_max_ml_h  # the pump holds it, no limit cut
+        faults |= self._shortfall(now_s, bool(limit) or at_pump_max, short_mmhg)
         self.reason = (
             f"dose cut to {command:.2f} ml/h (asked {asked:.2f}) by {limit}" if limit else ""
         )
         if faults & DOSE_SHORTFALL:
-            within = "the pump's maximum" if ceiling else "the drug library's limits"
-            self.reason = (self.reason or f"dose held at {ceiling}") + (
+            within = "the pump's maximum" if at_pump_max else "the drug library's limits"
+            held = f"dose held at the pump's maximum {pump_max_ml_h:g} ml/h"
+            self.reason = (self.reason or held) + (
                 f"; MAP {short_mmhg:.1f} mmHg below the target for"
                 f" {now_s - self._short_since_s:.0f} s: the patient cannot be brought to target"
                 f" within {within}"
             )
         return command, faults
 
-    def _shortfall(self, now_s: float, limit: str, short_mmhg: float) -> int:
+    def _shortfall(self, now_s: float, held: bool, short_mmhg: float) -> int:
         """``DOSE_SHORTFALL`` once a cut has held with MAP short of the target long enough."""
-        if not (limit and short_mmhg > self.shortfall_mmhg):  # False for NaN
+        if not (held and short_mmhg > self.shortfall_mmhg):  # False for NaN
             self._short_since_s = None
             return 0
         if self._short_since_s is None:
