@@ -148,7 +148,8 @@ def run_patient(
     """One patient under one controller through ``pressor run``: the metrics of the run.
 
     Returns ``iae_mmhg_s``, ``step_iae_mmhg_s``, ``step_overshoot_pct``, ``disturbances``,
-    ``stable`` (run_metrics of docs/METRICS.md, judged on the true MAP, events at
+    ``stable`` (run_metrics of docs/METRICS.md, judged on the true MAP with the bands of a noisy
+    monitor when ``setup.noise_mmhg`` > 0, as a trial judges a noisy scenario; events at
     :data:`HEMORRHAGE_AT_S` and :data:`BOLUS_AT_S` when inside the run), ``reachable`` and
     ``final_map_mmhg``.
     """
@@ -181,6 +182,7 @@ def run_patient(
         PUMP_MAX_ML_H,
         step_time_s=0.0,
         step_mmhg=setup.target_mmhg - true_map[0],
+        noisy=setup.noise_mmhg > 0.0,  # the device's monitor adds noise: the 5 mmHg bands
         reachable=need is not None,
         events=[("hemorrhage", HEMORRHAGE_AT_S), ("bolus", BOLUS_AT_S)],
     )

@@ -17,8 +17,9 @@ its drug (:data:`MODEL_DRUG`); ``lpv`` in ``--controllers`` is that drug's shipp
 cautious`` its design on a log-K scale, the runtime's default: :data:`pressor.runtime.inputs.defaults.DESIGN_FOR_DRUG`), the others run as named
 (the PI and the Smith predictor have no drug: their gains are in ml/h of phenylephrine's 100 µg/ml
 syringe, and ``pressor run`` refuses a norepinephrine device for them, docs/DRUGS.md; here, in
-process, they run unretuned). All controllers use one scheduling source (``--schedule``, default
-``estimated``, the runtime's own; the PI ignores it).
+process, they run unretuned). Each controller runs on the scheduling source ``pressor run`` gives
+it (``--schedule default``: ``cautious`` for the LPV, ``estimated`` for the Smith predictor; the PI
+ignores it), or on the one ``--schedule`` names for all.
 
 **Syringe and dose limits.** A clinician picks them before knowing the patient's sensitivity, so
 every level uses the drug library's (``runtime/inputs/drug_library.toml``) standard syringe (its
@@ -97,7 +98,8 @@ from pressor.plumbing.parallel import run_ordered
 from pressor.runtime.core.dose_guard import DoseLimits
 from pressor.runtime.core.supervisor_config import State
 from pressor.runtime.estimation.sources import SOURCES
-from pressor.runtime.inputs.defaults import DESIGN_FOR_DRUG
+from pressor.runtime.inputs.controller_loader import load_controller
+from pressor.runtime.inputs.defaults import DESIGN_FOR_DRUG, default_schedule
 from pressor.runtime.inputs.drug_library import load_library
 
 #: sensitivity levels (× the model's; dimensionless)
@@ -132,11 +134,23 @@ def run_dir(out: Path, model: str, level: float, controller: str, syringe: Syrin
     return out / name / f"x{level:g}" / controller_dir_name(controller) / syringe.dir_name
 
 
+#: ``--schedule`` value: every controller on the source ``pressor run`` gives it
+DEFAULT = "default"
+
+
+def schedule_of(schedule: str, controller: str) -> str:
+    """The scheduling source ``controller`` (a spec) runs on: ``schedule``, or for :data:`DEFAULT`
+    the runtime's default for it (:func:`pressor.runtime.inputs.defaults.default_schedule`)."""
+    if schedule != DEFAULT:
+        return schedule
+    return default_schedule(load_controller(controller, SAMPLE_PERIOD_S))
+
+
 def _identity(args: argparse.Namespace, scenario: Scenario, job: dict[str, Any]) -> dict[str, Any]:
     """What a written cohort must match to be reused (``run.json``)."""
     return {
         "scenario": scenario.name,
-        "schedule": args.schedule,
+        "schedule": job["schedule"],
         "model": job["model"],
         "level": job["level"],
         "controller": job["controller"],
@@ -164,8 +178,9 @@ def run_level(
     standard, stronger = syringes(load_library()[drug], scenario.pump.max_rate_ml_h)
     seeds = cohort_seeds(args.seed, args.patients)
     plan = reach_plan(scenario, model, level, seeds, standard, stronger)
-    lpv = (DESIGN_FOR_DRUG if args.schedule == "cautious" else DRUG_LPV)[drug]
+    lpv = (DESIGN_FOR_DRUG if args.schedule in ("cautious", DEFAULT) else DRUG_LPV)[drug]
     controllers = [lpv if c == "lpv" else c for c in args.controllers]
+    schedules = {c: schedule_of(args.schedule, c) for c in controllers}
     jobs: list[dict[str, Any]] = []
     for controller in controllers:
         for syringe, group_seeds in (
@@ -176,7 +191,7 @@ def run_level(
                 continue
             spec = syringe.patient_model(model, level)
             job = {"model": model, "level": level, "controller": controller, "syringe": syringe}
-            job |= {"spec": spec, "seeds": group_seeds}
+            job |= {"spec": spec, "seeds": group_seeds, "schedule": schedules[controller]}
             job["identity"] = _identity(args, scenario, job)
             job["dir"] = run_dir(args.out, model, level, controller, syringe) if args.out else None
             job["records"] = _reuse(job["dir"], job["identity"]) if job["dir"] else None
@@ -230,7 +245,7 @@ def _run_pending(
     for job in jobs:
         limits = job["syringe"].limits
         tasks += [
-            (scenario, job["controller"], s, SAMPLE_PERIOD_S, args.schedule, job["spec"], limits)
+            (scenario, job["controller"], s, SAMPLE_PERIOD_S, job["schedule"], job["spec"], limits)
             for s in job["seeds"]
         ]
     label = f"{jobs[0]['model']} x{jobs[0]['level']:g}"
@@ -261,7 +276,7 @@ def _run_pending(
         job["records"] = records
         if job["dir"] is not None:
             summary = summarize(
-                records, scenario, job["controller"], args.seed, args.schedule, job["spec"]
+                records, scenario, job["controller"], args.seed, job["schedule"], job["spec"]
             )
             write_outputs(job["dir"], records, summary)
             write_atomic(job["dir"] / "run.json", json.dumps(job["identity"], indent=1) + "\n")
@@ -317,7 +332,13 @@ def parser() -> argparse.ArgumentParser:
         help="controller specs, comma-separated; lpv = the model's drug's design"
         " (default %(default)s)",
     )
-    p.add_argument("--schedule", choices=SOURCES, default="estimated", help="(default %(default)s)")
+    p.add_argument(
+        "--schedule",
+        choices=(DEFAULT, *SOURCES),
+        default=DEFAULT,
+        help="scheduling source of every controller; default: each on pressor run's default"
+        " (cautious for the LPV, estimated for the others)",
+    )
     p.add_argument("--jobs", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None, help="Dask scheduler address (default: local)")
     p.add_argument(
@@ -347,7 +368,13 @@ def main(argv: list[str] | None = None) -> int:
     }
     print(
         f"sensitivity sweep: scenario {scenario.name}, cohort seed {args.seed}, {args.patients}"
-        f" patients per level, schedule {args.schedule}, metrics on the true MAP",
+        f" patients per level, schedule {args.schedule}"
+        + (
+            " (pressor run's: cautious for the LPV, estimated for the others)"
+            if args.schedule == DEFAULT
+            else ""
+        )
+        + ", metrics on the true MAP",
         flush=True,
     )
     meter = Throughput()
