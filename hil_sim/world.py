@@ -192,7 +192,9 @@ class World:
         tick = self.tick
         t = tick * self.sample_period_s  # sim_time_s
         p = self.patient
-        self._true_map = true_map = p.map_mmhg + self._disturbance_at(tick)
+        table = self._disturbance_ticks  # _disturbance_at(tick), without a call a tick
+        disturbance = table[tick] if tick < len(table) else self.disturbance(t)
+        self._true_map = true_map = p.map_mmhg + disturbance
         reading, quality = self.sensor.read(t, true_map)
         K, T_s, tau_s, valid = p.K, p.T_s, p.tau_s, True
         if self._sched_faults:
@@ -230,12 +232,18 @@ class World:
         if self._pump_faults:
             occ, empty, _, factor = self.faults.pump_state(self.tick)
             pump.inject(occ, empty, factor)
-        total = 0.0
-        for _ in range(self._n_sub):
+        n_sub = self._n_sub
+        if n_sub == 1:  # the usual: one internal step a tick, without the loop
             mean = pump.advance(h)
             patient.step(mean)
-            total += mean
-        self.last_mean_rate_ml_h = total / self._n_sub
+            total = 0.0 + mean  # as the loop sums it (0.0 + -0.0 is 0.0)
+        else:
+            total = 0.0
+            for _ in range(n_sub):
+                mean = pump.advance(h)
+                patient.step(mean)
+                total += mean
+        self.last_mean_rate_ml_h = total / n_sub
         self.tick += 1
         delivered, volume = pump.delivered_ml_h, pump.volume_ml
         try:
