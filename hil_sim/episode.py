@@ -127,7 +127,8 @@ def simulate(
     for k in range(n):
         obs = observe()
         rec = step(obs, obs.sim_time_s, status, CLEAN_LINK)
-        apply_command(rec.command_ml_h)
+        out = rec.supervisor
+        apply_command(out.command_ml_h)  # rec.command_ml_h, without the property's call
         m[k] = obs.map_mmhg
         tr[k] = world.true_map_mmhg()
         tg[k] = obs.target_mmhg
@@ -139,8 +140,8 @@ def simulate(
         st[k] = sched.T_s
         sd[k] = sched.tau_s
         quality[k] = obs.quality
-        state[k] = rec.supervisor.state
-        faults[k] = rec.supervisor.faults
+        state[k] = out.state
+        faults[k] = out.faults
         status = advance()
         cm[k] = world.last_command_ml_h
         rt[k] = world.last_mean_rate_ml_h

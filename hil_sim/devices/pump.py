@@ -35,6 +35,9 @@ from pressor.contracts.faults import PUMP_ALARM_OUT_OF_RANGE as ALARM_OUT_OF_RAN
 from pressor.contracts.faults import PUMP_ALARM_RESERVOIR_EMPTY as ALARM_RESERVOIR_EMPTY
 from pressor.contracts.faults import PUMP_ALARM_WATCHDOG as ALARM_WATCHDOG
 
+#: ``math.isfinite`` without the module attribute lookup (a command a tick)
+_isfinite = math.isfinite
+
 
 @dataclass(frozen=True)
 class PumpConfig:
@@ -120,7 +123,7 @@ class Pump:
         """
         cfg = self.config
         self.alarms &= ~(ALARM_INVALID_COMMAND | ALARM_OUT_OF_RANGE)
-        if not math.isfinite(rate_ml_h):
+        if not _isfinite(rate_ml_h):
             self.alarms |= ALARM_INVALID_COMMAND
             return math.nan
         rate = min(max(rate_ml_h, 0.0), cfg.max_rate_ml_h)

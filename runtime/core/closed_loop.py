@@ -103,6 +103,8 @@ def _controller_failed(controller: Controller, tick: int, now_s: float, cause: s
 
 #: builds a named tuple from a tuple of its fields without the named tuple's Python-level __new__
 _new_tuple = tuple.__new__
+#: ``math.nan`` and ``math.inf`` without the module attribute lookups (the per-tick path)
+_NAN, _INF = math.nan, math.inf
 
 #: a link that delivers every tick on time and loses nothing (the in-process trial)
 CLEAN_LINK = LinkHealth(sample_age_s=0.0, link_silence_s=0.0, link_errors=0)
@@ -204,9 +206,9 @@ class ClosedLoopCore:
             if pump.tick == inp.tick:
                 delivered, alarms = pump.delivered_ml_h, pump.alarms
             else:
-                delivered, alarms = math.nan, 0
+                delivered, alarms = _NAN, 0
         else:
-            delivered, alarms = math.nan, 0
+            delivered, alarms = _NAN, 0
         age_s = self.sample_age_s(inp.quality, now_s, link.sample_age_s)
         # tuple.__new__ rather than ScheduleInput(...): the per-tick path, and a named tuple's
         # own __new__ is a Python-level call (~0.2 µs a tick; fields in declaration order)
@@ -214,7 +216,7 @@ class ClosedLoopCore:
             _new_tuple(
                 ScheduleInput,
                 (
-                    inp.map_mmhg if age_s <= self._age_limit_s else math.nan,
+                    inp.map_mmhg if age_s <= self._age_limit_s else _NAN,
                     inp.quality & ~QUALITY_HELD,
                     self._latest_delivered_ml_h,
                     inp.K,
@@ -226,24 +228,27 @@ class ClosedLoopCore:
         )
         K, T_s, tau_s = sched.K, sched.T_s, sched.tau_s
         sup = self.supervisor
-        run = sup.assess(  # positional: this is the per-tick path (fields in declaration order)
-            SupervisorInput(
-                now_s,
-                inp.map_mmhg,
-                inp.quality,
-                K,
-                T_s,
-                tau_s,
-                sched.valid,
-                age_s,
-                link.link_silence_s,
-                inp.target_mmhg,
-                link.link_errors,
-                delivered,
-                alarms,
-                self._estimated,
-                sched.healthy,
-                link.boundary_faults,
+        run = sup.assess(  # tuple.__new__ again (fields in declaration order, every one given)
+            _new_tuple(
+                SupervisorInput,
+                (
+                    now_s,
+                    inp.map_mmhg,
+                    inp.quality,
+                    K,
+                    T_s,
+                    tau_s,
+                    sched.valid,
+                    age_s,
+                    link.link_silence_s,
+                    inp.target_mmhg,
+                    link.link_errors,
+                    delivered,
+                    alarms,
+                    self._estimated,
+                    sched.healthy,
+                    link.boundary_faults,
+                ),
             )
         )
         raw = None
@@ -259,9 +264,10 @@ class ClosedLoopCore:
                 out = sup.finalize(None, failed=True)
                 return TickRecord(inp, math.nan, delivered, out, sched, error)
         out = sup.finalize(raw)
+        # the record of a tick without an error built with tuple.__new__ too (its default given)
         if raw is None:
-            return TickRecord(inp, math.nan, delivered, out, sched)
-        if not self._stop_on_error and not -math.inf < raw < math.inf:  # nan fails it too
+            return _new_tuple(TickRecord, (inp, _NAN, delivered, out, sched, None))
+        if not self._stop_on_error and not -_INF < raw < _INF:  # nan fails it too
             error = _controller_failed(self.controller, inp.tick, now_s, f"returned {raw!r}")
             return TickRecord(inp, raw, delivered, out, sched, error)
-        return TickRecord(inp, raw, delivered, out, sched)
+        return _new_tuple(TickRecord, (inp, raw, delivered, out, sched, None))

@@ -123,25 +123,31 @@ class FlatlineRules:
             if grain < self.quantum_mmhg:
                 self.quantum_mmhg = grain
                 self._need = stuck_samples(self.noise_mmhg, grain, self.eps_mmhg)
-        if abs(map_mmhg - self._anchor) > self.eps_mmhg or self._anchor != self._anchor:
+        anchor = self._anchor
+        if abs(map_mmhg - anchor) > self.eps_mmhg or anchor != anchor:
             self._anchor = map_mmhg
             self._anchor_s = now_s
-            self._run = 1
+            self._run = run = 1
         else:
-            self._run += 1
-        stuck = self._run >= self._need and now_s - self._anchor_s >= self.min_s - 1e-9
+            self._run = run = self._run + 1
+        min_s = self.min_s - 1e-9  # the same bound, computed once a sample (runs every tick)
+        stuck = run >= self._need and now_s - self._anchor_s >= min_s
         if prev != prev:
             return stuck
         step = abs(map_mmhg - prev)
+        step2 = step * step
         steps = self._steps
-        steps.append((now_s, step * step))
-        self._sum += step * step
-        while len(steps) > self.window and now_s - steps[1][0] >= self.min_s - 1e-9:
-            self._sum -= steps.popleft()[1]
+        steps.append((now_s, step2))
+        total = self._sum + step2
+        window = self.window
+        while len(steps) > window and now_s - steps[1][0] >= min_s:
+            total -= steps.popleft()[1]
+        self._sum = total
+        n = len(steps)
         damped = (
-            len(steps) >= self.window
-            and now_s - steps[0][0] >= self.min_s - 1e-9
+            n >= window
+            and now_s - steps[0][0] >= min_s
             and self.noise_mmhg >= self.quantum_mmhg
-            and self._sum < self._collapse * len(steps)
+            and total < self._collapse * n
         )
         return stuck or damped

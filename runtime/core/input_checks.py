@@ -28,6 +28,9 @@ _SCHED_RATE, _SENSOR_QUALITY = int(Fault.SCHED_RATE), int(Fault.SENSOR_QUALITY)
 #: slack (s) on time comparisons so that k·Ts sums reach a bound that is a whole number of ticks
 _EPS_S = 1e-9
 
+#: ``math.isfinite`` without the module attribute lookup (the per-tick path)
+_isfinite = math.isfinite
+
 
 class InputChecks:
     """The input checks of one run and the history they keep (see the module docstring).
@@ -53,6 +56,19 @@ class InputChecks:
             else None
         )
         self._flat_fault = 0  # the flatline verdict of the last new sample, held between them
+        # the scheduling checks' configuration, unpacked once (sched() runs every tick): whether
+        # any is on, the box as (K lo, K hi, T lo, T hi, tau lo, tau hi), and the rate bounds
+        # times their tolerance ((tol * b) * dt below is the same product as tol * b * dt)
+        self._sched_on = bool(cfg.sched_required or cfg.sched_box or cfg.sched_rate_bounds)
+        box = cfg.sched_box
+        self._sched_box: tuple[float, ...] | None = (
+            None if box is None else tuple(v for pair in box for v in pair)
+        )
+        bounds = cfg.sched_rate_bounds
+        tol = cfg.sched_rate_tolerance
+        self._sched_rate: tuple[float, ...] | None = (
+            None if bounds is None else tuple(tol * b for b in bounds)
+        )
         self._prev_sched: tuple[float, float, float] | None = None
         self._prev_sched_s = 0.0
         self._mismatch_since_s: float | None = None
@@ -68,7 +84,7 @@ class InputChecks:
         faults = 0
         if quality & cfg.quality_mask:
             faults |= _SENSOR_QUALITY
-        if not math.isfinite(map_mmhg):
+        if not _isfinite(map_mmhg):
             return faults | _MAP_NAN
         if not cfg.map_min_mmhg <= map_mmhg <= cfg.map_max_mmhg:
             return faults | _MAP_RANGE
@@ -83,30 +99,29 @@ class InputChecks:
 
     def sched(self, now_s: float, K: float, T_s: float, tau_s: float, valid: bool) -> int:
         """``SCHED_INVALID``, ``SCHED_OUT_OF_BOX`` and ``SCHED_RATE``."""
-        # written out for the three parameters: this runs every tick of every trial patient
-        cfg = self.config
-        if not (cfg.sched_required or cfg.sched_box or cfg.sched_rate_bounds):
+        # written out for the three parameters: this runs every tick of every trial patient (the
+        # box and the rate bounds were unpacked once, in __init__)
+        if not self._sched_on:
             return 0
-        isfinite = math.isfinite
-        if not (valid and isfinite(K) and isfinite(T_s) and isfinite(tau_s)):
+        if not (valid and _isfinite(K) and _isfinite(T_s) and _isfinite(tau_s)):
             self._prev_sched = None
             return _SCHED_INVALID
         faults = 0
-        box = cfg.sched_box
+        box = self._sched_box
         if box is not None:
-            (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
+            k_lo, k_hi, t_lo, t_hi, d_lo, d_hi = box
             if not (k_lo <= K <= k_hi and t_lo <= T_s <= t_hi and d_lo <= tau_s <= d_hi):
                 faults |= _SCHED_OUT_OF_BOX
         prev = self._prev_sched
-        if cfg.sched_rate_bounds is not None and prev is not None:
+        rate = self._sched_rate
+        if rate is not None and prev is not None:
             dt = now_s - self._prev_sched_s
             if dt > 0.0:
-                tol = cfg.sched_rate_tolerance
-                b_k, b_t, b_d = cfg.sched_rate_bounds
+                r_k, r_t, r_d = rate  # tolerance x bound, per parameter
                 if (
-                    abs(K - prev[0]) > tol * b_k * dt
-                    or abs(T_s - prev[1]) > tol * b_t * dt
-                    or abs(tau_s - prev[2]) > tol * b_d * dt
+                    abs(K - prev[0]) > r_k * dt
+                    or abs(T_s - prev[1]) > r_t * dt
+                    or abs(tau_s - prev[2]) > r_d * dt
                 ):
                     faults |= _SCHED_RATE
         if prev is None or now_s > self._prev_sched_s:
@@ -118,10 +133,10 @@ class InputChecks:
         """``ESTIMATOR_FALLBACK`` and ``ESTIMATE_OUT_OF_BOX`` (the box held for estimate_box_s)."""
         cfg = self.config
         faults = 0 if inp.estimate_healthy else _ESTIMATOR_FALLBACK
-        box = cfg.sched_box
+        box = self._sched_box
         if box is None:
             return faults
-        (k_lo, k_hi), (t_lo, t_hi), (d_lo, d_hi) = box
+        k_lo, k_hi, t_lo, t_hi, d_lo, d_hi = box
         if k_lo <= inp.K <= k_hi and t_lo <= inp.T_s <= t_hi and d_lo <= inp.tau_s <= d_hi:
             self._out_of_box_since_s = None
             return faults

@@ -100,6 +100,20 @@ _CONTROLLER_FAULT, _LINK_ERRORS = int(Fault.CONTROLLER_FAULT), int(Fault.LINK_ER
 _LINK_LOSS, _STALE_SAMPLE = int(Fault.LINK_LOSS), int(Fault.STALE_SAMPLE)
 _TARGET_INVALID = int(Fault.TARGET_INVALID)
 
+#: the states as module constants: ``State.AUTO`` is an attribute lookup on the enum's class
+#: (~60 ns under its metaclass), several of them a tick; a member compares by identity in ``in``
+_STARTUP, _AUTO, _HOLD, _FAILSAFE = State.STARTUP, State.AUTO, State.HOLD, State.FAILSAFE
+_RECOVERING, _STOPPED, _MANUAL = State.RECOVERING, State.STOPPED, State.MANUAL
+#: the states in which the controller is stepped, and those that raise the alarm
+_CONTROLLED = (_AUTO, _RECOVERING)
+_ALARMED = (_HOLD, _FAILSAFE)
+
+#: builds the output's named tuple from a tuple of its fields without the named tuple's
+#: Python-level ``__new__`` (the per-tick path, ~0.25 µs; fields in declaration order)
+_new_tuple = tuple.__new__
+#: ``math.isfinite`` without the module attribute lookup (the per-tick path)
+_isfinite = math.isfinite
+
 #: slack (s) on time comparisons so that k·Ts sums reach a bound that is a whole number of ticks
 _EPS_S = 1e-9
 
@@ -219,30 +233,27 @@ class Supervisor:
             self._good_since_s = None
             if self._fault_since_s is None:
                 self._fault_since_s = now_s
-            if state in (State.AUTO, State.RECOVERING):
-                state = State.FAILSAFE if faults & _LINK_LOSS else State.HOLD
-            elif state == State.HOLD and (
+            if state in _CONTROLLED:
+                state = _FAILSAFE if faults & _LINK_LOSS else _HOLD
+            elif state == _HOLD and (
                 faults & _LINK_LOSS or now_s - self._fault_since_s >= cfg.hold_max_s - _EPS_S
             ):
-                state = State.FAILSAFE
+                state = _FAILSAFE
         else:
             self._fault_since_s = None
             if self._good_since_s is None:
                 self._good_since_s = now_s
-            if state == State.STARTUP:
-                state = State.AUTO
-            elif (
-                state in (State.HOLD, State.FAILSAFE)
-                and now_s - self._good_since_s >= cfg.recover_after_s - _EPS_S
-            ):
-                state = State.RECOVERING
+            if state == _STARTUP:
+                state = _AUTO
+            elif state in _ALARMED and now_s - self._good_since_s >= cfg.recover_after_s - _EPS_S:
+                state = _RECOVERING
         self.last_ack = None
         if self._ack_requested:
             self._ack_requested = False
             latched = self._latched
             self.last_ack = judge_ack(state, faults & self._holding_faults & ~latched, latched)
             if self.last_ack.accepted:
-                state = State.RECOVERING
+                state = _RECOVERING
                 self._latched = 0
                 self.faults = faults & ~latched
         self.last_command = None
@@ -251,10 +262,10 @@ class Supervisor:
             self._clinician = None
             self.last_command = judge_command(kind, state, faults & self._holding_faults, rate)
             state = self.last_command.state
-            if state == State.MANUAL:
+            if state == _MANUAL:
                 self._manual_ml_h = rate
         self.state = state
-        self._run_controller = state in (State.AUTO, State.RECOVERING)
+        self._run_controller = state in _CONTROLLED
         return self._run_controller
 
     def finalize(self, raw_command_ml_h: float | None, failed: bool = False) -> SupervisorOutput:
@@ -270,44 +281,44 @@ class Supervisor:
         state = self.state
         if self._run_controller:
             raw = math.nan if raw_command_ml_h is None or failed else raw_command_ml_h
-            if not math.isfinite(raw):
+            if not _isfinite(raw):
                 bit = _CONTROLLER_FAULT if failed else _COMMAND_INVALID
                 self.faults |= bit
                 if self._latch:
                     self._latched |= bit  # a plain int: it joins every tick's faults
                 self._good_since_s = None
                 self._fault_since_s = self._now_s
-                state = State.HOLD
+                state = _HOLD
                 command = previous
             else:
                 if not 0.0 <= raw <= high:
                     self.faults |= _COMMAND_CLAMPED
                 target = _clamp(raw, high)
-                if state == State.AUTO:
+                if state == _AUTO:
                     command = target
                 else:  # RECOVERING: bumpless slew towards the controller
                     step = cfg.reentry_step_ml_h
                     delta = target - previous
                     if abs(delta) <= step:
                         command = target
-                        state = State.AUTO
+                        state = _AUTO
                     else:
                         command = previous + (step if delta > 0.0 else -step)
-        elif state == State.FAILSAFE:
+        elif state == _FAILSAFE:
             goal = previous if cfg.safe_rate_ml_h is None else cfg.safe_rate_ml_h
             step = cfg.failsafe_ramp_ml_h_per_s * cfg.sample_period_s
             delta = goal - previous
             command = goal if abs(delta) <= step else previous + (step if delta > 0.0 else -step)
-        elif state == State.STARTUP or state == State.STOPPED:
+        elif state == _STARTUP or state == _STOPPED:
             command = 0.0
-        elif state == State.MANUAL:
+        elif state == _MANUAL:
             command = self._manual_ml_h
         else:  # HOLD
             command = previous
         command = _clamp(command, high)
         if self.dose_guard is not None:  # the last word: the drug library's dose limits
             command, dose_faults = self.dose_guard.limit(
-                command, self._now_s, self._short_mmhg, state == State.MANUAL, high
+                command, self._now_s, self._short_mmhg, state == _MANUAL, high
             )
             self.faults |= dose_faults
         self.command_ml_h = command
@@ -320,7 +331,8 @@ class Supervisor:
             for name in fault_names(rising):
                 self.detections[name] = self.detections.get(name, 0) + 1
         self._prev_faults = faults
-        alarm = state == State.HOLD or state == State.FAILSAFE or bool(faults & ALARM_FAULTS)
-        return SupervisorOutput(
-            self._run_controller, state, faults, rising, transition, command, alarm
+        alarm = state in _ALARMED or bool(faults & ALARM_FAULTS)
+        return _new_tuple(
+            SupervisorOutput,
+            (self._run_controller, state, faults, rising, transition, command, alarm),
         )

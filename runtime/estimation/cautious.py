@@ -214,13 +214,14 @@ class _UnitLag:
         n = len(hist)
         i = (head - 1 - self.k) % n
         j = (i - 1) % n
-        u = hist[i] + (hist[j] - hist[i]) * self.f
-        self.y = self.a * self.y + self.b * u
+        u_i = hist[i]
+        u = u_i + (hist[j] - u_i) * self.f
+        self.y = y = self.a * self.y + self.b * u
         a2 = self.a2
         if a2 is None:
-            return self.y
-        self.y2 = a2 * self.y2 + (1.0 - a2) * self.y
-        return self.y2
+            return y
+        self.y2 = y2 = a2 * self.y2 + (1.0 - a2) * y
+        return y2
 
 
 class CautiousSchedule:
@@ -315,10 +316,11 @@ class CautiousSchedule:
         """Feed one tick (the delivered rate, the MAP sample) and schedule on K̂."""
         u = inputs.delivered_ml_h
         hist = self._hist
-        hist[self._head] = u if u == u and u >= 0.0 else 0.0
-        self._head = (self._head + 1) % len(hist)
-        s_slow = self._slow.step(hist, self._head)
-        s_fast = self._fast.step(hist, self._head)
+        head = self._head
+        hist[head] = u if u == u and u >= 0.0 else 0.0
+        self._head = head = (head + 1) % len(hist)
+        s_slow = self._slow.step(hist, head)
+        s_fast = self._fast.step(hist, head)
         y = inputs.map_mmhg
         if not self._gate.accept(y, inputs.quality):
             return self._schedule

@@ -27,6 +27,9 @@ import math
 
 REASONS = ("ok", "nonfinite", "quality", "range", "spike", "flatline")
 
+#: ``math.isfinite`` without the module attribute lookup (a sample a tick)
+_isfinite = math.isfinite
+
 
 class SampleGate:
     """Accept or reject MAP samples, one per tick.
@@ -92,7 +95,7 @@ class SampleGate:
         """Whether ``map_mmhg`` (mmHg) with monitor ``quality`` bits may enter the estimator."""
         self._since += 1
         reason = "ok"
-        if not math.isfinite(map_mmhg):
+        if not _isfinite(map_mmhg):
             reason = "nonfinite"
             self._run = 0
         else:

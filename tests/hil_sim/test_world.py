@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -11,7 +12,7 @@ from pressor.baselines.pi import PIController
 from pressor.contracts.metrics import step_metrics
 from pressor.hil_sim.episode import simulate
 from pressor.hil_sim.scenarios.scenario import load_scenario
-from pressor.hil_sim.world import World, f32
+from pressor.hil_sim.world import World, _pump_status, _tick_inputs, f32
 from pressor.link import PumpStatus, TickInputs
 
 
@@ -75,6 +76,20 @@ def test_world_emits_float32_values_and_pinned_types():
     assert status.tick == 1 and world.observe().tick == 1
     assert status.delivered_ml_h == f32(status.delivered_ml_h)
     assert status.volume_ml == pytest.approx(10.123456789 * 0.1 / 3600.0, rel=1e-6)
+
+
+def test_fast_builders_give_the_constructors_objects():
+    # the world builds its TickInputs and PumpStatus through the slots' descriptors: every field
+    # set (an unset slot would raise in ==), the same type, immutable as the constructor's
+    values = (7, 0.7, 71.5, 2, 80.0, 0.5, 150.0, 40.0, True, 7, 7)
+    obs = _tick_inputs(*values)
+    assert type(obs) is TickInputs and obs == TickInputs(*values)
+    assert dataclasses.astuple(obs) == values
+    status = _pump_status(8, 12.5, 0.25, 4)
+    assert type(status) is PumpStatus and status == PumpStatus(8, 12.5, 0.25, 4)
+    assert dataclasses.astuple(status) == (8, 12.5, 0.25, 4)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        obs.map_mmhg = 0.0  # type: ignore[misc]
 
 
 def test_target_steps_from_baseline_at_step_time():
