@@ -62,6 +62,7 @@ to run it again).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 import time
@@ -138,6 +139,7 @@ def run_dir(out: Path, model: str, level: float, controller: str, syringe: Syrin
 DEFAULT = "default"
 
 
+@functools.cache  # one load per spec, not one per model and level
 def schedule_of(schedule: str, controller: str) -> str:
     """The scheduling source ``controller`` (a spec) runs on: ``schedule``, or for :data:`DEFAULT`
     the runtime's default for it (:func:`pressor.runtime.inputs.defaults.default_schedule`)."""

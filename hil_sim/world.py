@@ -298,18 +298,12 @@ class World:
         if self._pump_faults:
             occ, empty, _, factor = self.faults.pump_state(self.tick)
             pump.inject(occ, empty, factor)
-        n_sub = self._n_sub
-        if n_sub == 1:  # the usual: one internal step a tick, without the loop
+        total = 0.0
+        for _ in range(self._n_sub):
             mean = pump.advance(h)
             patient.step(mean)
-            total = 0.0 + mean  # as the loop sums it (0.0 + -0.0 is 0.0)
-        else:
-            total = 0.0
-            for _ in range(n_sub):
-                mean = pump.advance(h)
-                patient.step(mean)
-                total += mean
-        self.last_mean_rate_ml_h = total / n_sub
+            total += mean
+        self.last_mean_rate_ml_h = total / self._n_sub
         self.tick += 1
         delivered, volume = pump.delivered_ml_h, pump.volume_ml
         try:

@@ -176,13 +176,7 @@ class Sensor:
             self._held = (frozen, quality)
             return self._held
         if cfg.noise_std_mmhg > 0.0:
-            # _next_noise() inlined while the block lasts (a call a tick saved)
-            i = self._noise_i
-            if i < len(self._noise):
-                self._noise_i = i + 1
-                value += self._noise[i]
-            else:
-                value += self._next_noise()
+            value += self._next_noise()
         if cfg.quantum_mmhg > 0.0:
             value = round(value / cfg.quantum_mmhg) * cfg.quantum_mmhg
         self._held = (value, quality)

@@ -197,7 +197,7 @@ class _UnitLag:
     discretisation for a rate held over each tick; the delay read with linear interpolation),
     and optionally a second lag behind it (an effect site; its input held over the tick)."""
 
-    __slots__ = ("a", "b", "k", "f", "y", "a2", "y2")
+    __slots__ = ("a", "b", "k", "f", "y", "a2", "b2", "y2")
 
     def __init__(
         self, T_s: float, tau_s: float, sample_period_s: float, lag2_s: float | None = None
@@ -209,6 +209,7 @@ class _UnitLag:
         self.f = d - self.k
         self.y = 0.0
         self.a2 = None if lag2_s is None else math.exp(-sample_period_s / lag2_s)
+        self.b2 = 0.0 if self.a2 is None else 1.0 - self.a2
         self.y2 = 0.0
 
     def step(self, hist: list[float], head: int) -> float:
@@ -221,7 +222,7 @@ class _UnitLag:
         a2 = self.a2
         if a2 is None:
             return y
-        self.y2 = y2 = a2 * self.y2 + (1.0 - a2) * y
+        self.y2 = y2 = a2 * self.y2 + self.b2 * y
         return y2
 
 

@@ -100,6 +100,22 @@ def client_capture(port: int, out: Path, expect_entity: str, timeout_s: float = 
     return out
 
 
+def sil_view(
+    cwd: Path, port: int, duration_s: int, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess:
+    """A finished ``pressor sil --view`` run of ``duration_s`` s recording ``run.rrd`` in ``cwd``
+    (default environment: no display)."""
+    return subprocess.run(
+        [sys.executable, "-m", "pressor", "sil", "--view", "--view-port", str(port)]
+        + ["--duration", str(duration_s), "--rrd", "run.rrd", "--no-signing"],
+        cwd=cwd,
+        env=no_display() if env is None else env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
 def same(a: dict[int, float], b: dict[int, float]) -> bool:
     """Equal series, NaN (no value at that tick) equal to NaN."""
     return a.keys() == b.keys() and all(a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]) for k in a)
@@ -136,15 +152,7 @@ def viewed_sil(tmp_path_factory) -> Iterator[tuple[Path, int, int, subprocess.Co
     pid, the finished process); the viewer is ended after the module's tests."""
     d = tmp_path_factory.mktemp("view")
     port = free_port_pair()
-    proc = subprocess.run(
-        [sys.executable, "-m", "pressor", "sil", "--view", "--view-port", str(port)]
-        + ["--duration", "20", "--rrd", "run.rrd", "--no-signing"],
-        cwd=d,
-        env=no_display(),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    proc = sil_view(d, port, 20)
     match = ANNOUNCE.search(proc.stderr)
     assert match is not None, proc.stderr
     pid = int(match.group(2))
@@ -257,15 +265,7 @@ def test_a_viewer_that_cannot_start_is_said_in_one_line_and_the_run_goes_on(tmp_
     with socket.socket() as taken:  # the web page's port is in use: rerun cannot serve it
         taken.bind(("127.0.0.1", port + 1))
         taken.listen()
-        proc = subprocess.run(
-            [sys.executable, "-m", "pressor", "sil", "--view", "--view-port", str(port)]
-            + ["--duration", "10", "--rrd", "run.rrd", "--no-signing"],
-            cwd=tmp_path,
-            env=no_display(),
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
+        proc = sil_view(tmp_path, port, 10)
     assert proc.returncode == 0, proc.stderr
     (line,) = [ln for ln in proc.stderr.splitlines() if "--view" in ln]
     assert line.startswith("pressor sil: --view: no viewer, the run goes on without it: ")
@@ -367,15 +367,7 @@ def test_with_a_display_the_native_viewer_is_started_and_a_dead_one_leaves_the_r
     """``DISPLAY`` names a display nobody serves: the native viewer is the one started (its
     command line accepted by the real binary), it dies opening its window, and the run goes on."""
     port = free_port_pair()
-    proc = subprocess.run(
-        [sys.executable, "-m", "pressor", "sil", "--view", "--view-port", str(port)]
-        + ["--duration", "10", "--rrd", "run.rrd", "--no-signing"],
-        cwd=tmp_path,
-        env={**no_display(), "DISPLAY": ":97"},
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    proc = sil_view(tmp_path, port, 10, env={**no_display(), "DISPLAY": ":97"})
     assert proc.returncode == 0, proc.stderr
     line = next(ln for ln in proc.stderr.splitlines() if "--view" in ln or "live view" in ln)
     match = re.search(r"live view: rerun viewer on port (\d+) \(pid (\d+)\)", line)
