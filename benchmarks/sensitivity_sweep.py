@@ -94,6 +94,7 @@ from pressor.hil_sim.trials.trial import (
     summarize,
     write_outputs,
 )
+from pressor.plumbing import native_call
 from pressor.plumbing.files import write_atomic
 from pressor.plumbing.parallel import run_ordered
 from pressor.runtime.core.dose_guard import DoseLimits
@@ -125,6 +126,7 @@ def _run_one(task: Task) -> tuple[dict[str, Any], float, tuple[tuple[str, str], 
         ("patient", native_patient.last_reason),
         ("controller", native_controller.last_reason),
         ("dose guard", native_dose_guard.last_reason),
+        ("twin callers", native_call.reason()),  # else each twin is called through ctypes
     )
     return record, cpu, tuple((part, why) for part, why in reasons if why)
 

@@ -21,11 +21,15 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import importlib.util
 import os
 import shutil
 import subprocess
+import sys
+import sysconfig
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 
 from pressor.plumbing.files import AtomicFile
 
@@ -96,11 +100,13 @@ def _version_line(cc: str) -> str:
     return out.splitlines()[0] if out else ""
 
 
-def shared_library(source: Path, name: str) -> Build:
+def shared_library(source: Path, name: str, python_extension: bool = False) -> Build:
     """The shared library compiled from the C file ``source`` (and its header ``source.h``, if any).
 
     ``name`` (letters, digits, ``_``) prefixes the cached file. Compiles once per source and header
-    text, flags and compiler; later calls return the cached library.
+    text, flags and compiler; later calls return the cached library. A ``python_extension`` is
+    compiled against this interpreter's headers (``Python.h``) and named with its extension suffix;
+    the interpreter's version is then part of the cache key.
 
     Returns
     -------
@@ -113,19 +119,27 @@ def shared_library(source: Path, name: str) -> Build:
     cc = compiler()
     if cc is None:
         return Build(None, "no C compiler (cc, gcc or clang) on PATH")
+    flags, suffix, python = FLAGS, ".so", ""
+    if python_extension:
+        include = sysconfig.get_paths()["include"]
+        if not (Path(include) / "Python.h").is_file():
+            return Build(None, f"no Python.h in {include} (the interpreter's development headers)")
+        flags = (*FLAGS, f"-I{include}")
+        suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
+        python = sys.version
     header = Path(source).with_suffix(".h")  # a twin's own header is part of what it compiles
     parts = [Path(source).read_bytes(), header.read_bytes() if header.is_file() else b""]
     key = hashlib.sha256(
-        b"\0".join((*parts, " ".join(FLAGS).encode(), _version_line(cc).encode()))
+        b"\0".join((*parts, " ".join(flags).encode(), _version_line(cc).encode(), python.encode()))
     ).hexdigest()[:20]
-    target = cache_dir() / f"{name}-{key}.so"
+    target = cache_dir() / f"{name}-{key}{suffix}"
     if target.is_file():
         return Build(target, "cached")
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         with AtomicFile(target) as out:
             proc = subprocess.run(
-                [cc, *FLAGS, "-o", str(out.tmp), str(source)],
+                [cc, *flags, "-o", str(out.tmp), str(source)],
                 capture_output=True,
                 text=True,
                 timeout=300,
@@ -161,6 +175,26 @@ def load_library(source: Path, name: str) -> ctypes.CDLL | str:
             return f"cannot load {build.path}: {exc}"
     build.path.unlink(missing_ok=True)
     return load_library(source, name)  # compiles afresh, so this recursion ends
+
+
+def load_extension(source: Path, module: str) -> ModuleType | str:
+    """The Python extension module ``module`` compiled from ``source`` (:func:`shared_library` with
+    ``python_extension``), imported, or the reason (a ``str``) why there is none."""
+    build = shared_library(source, module, python_extension=True)
+    if build.path is None:
+        return build.reason
+    spec = importlib.util.spec_from_file_location(module, build.path)
+    try:
+        if spec is None or spec.loader is None:
+            raise ImportError(f"not an extension module: {build.path}")
+        ext = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(ext)
+    except ImportError as exc:
+        if build.reason != "cached":  # just compiled: building again would not help
+            return f"cannot import {build.path}: {exc}"
+        build.path.unlink(missing_ok=True)  # damaged outside pressor, as in load_library
+        return load_extension(source, module)
+    return ext
 
 
 def load_twin(

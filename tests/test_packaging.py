@@ -28,6 +28,7 @@ RUN_TIME_DATA = (
     "pressor/runtime/inputs/drug_library.toml",
     "pressor/hil_sim/scenarios/paper-tracking.toml",
     "pressor/hil_sim/native/paper_patient.c",
+    "pressor/plumbing/native_call.c",
     "pressor/link/pressor.xml",
 )
 

@@ -21,6 +21,7 @@ import math
 from pathlib import Path
 
 from pressor.plumbing.native_build import NATIVE_ENV, load_twin, native_mode
+from pressor.plumbing.native_call import bind
 from pressor.runtime.core.dose_guard import DoseGuard
 
 SOURCE = Path(__file__).with_name("dose_guard.c")
@@ -59,7 +60,7 @@ def _library() -> ctypes.CDLL | str:
     if isinstance(lib, str):
         return lib
     lib.dg_hour.restype = _d
-    lib.dg_hour.argtypes = [ctypes.c_void_p, _d, _d, _d, ctypes.POINTER(_d)]
+    lib.dg_hour.argtypes = [ctypes.c_void_p, _d, _d, _d, ctypes.c_void_p]  # out: used (ml)
     return lib
 
 
@@ -102,8 +103,8 @@ class NativeDoseGuard(DoseGuard):
         c.leaving = ctypes.cast(self._rings[0], ctypes.POINTER(_Segment))
         c.recent = ctypes.cast(self._rings[1], ctypes.POINTER(_Segment))
         self._used = _d()
-        self._used_ptr = ctypes.pointer(self._used)
-        self._hour_c = functools.partial(self._lib.dg_hour, ctypes.addressof(c))
+        self._used_at = ctypes.addressof(self._used)
+        self._hour_c = bind(self._lib.dg_hour, c)
 
     @property
     def hour_volume_ml(self) -> float:
@@ -113,7 +114,7 @@ class NativeDoseGuard(DoseGuard):
     def _hour(self, now_s: float) -> tuple[float, float]:
         last = self._last_s
         cap = self._hour_c(
-            now_s, math.nan if last is None else last, self._last_ml_h, self._used_ptr
+            now_s, math.nan if last is None else last, self._last_ml_h, self._used_at
         )
         if self._c.error:
             what = ("more calls within an hour than its rings hold", "fsum's partials overflowed")

@@ -9,7 +9,7 @@
 for operation, and leaves after each step the MAP, ΔMAP and K the world reads every tick, evaluated
 as the Python properties evaluate them. Each twin class here is the Python model (its parameters,
 coefficients, steady states and reachability are the inherited methods) with its state read from
-the C and its step one ctypes call. :func:`pressor.hil_sim.native.patient.native_patient`
+the C and its step one call into the C (:mod:`pressor.plumbing.native_call`). :func:`pressor.hil_sim.native.patient.native_patient`
 dispatches here; :func:`drug_twin` gives the twin or the reason there is none.
 """
 
@@ -26,6 +26,7 @@ from pressor.hil_sim.patients.norepinephrine import Norepinephrine1C
 from pressor.hil_sim.patients.phenylephrine import Phenylephrine2C
 from pressor.hil_sim.patients.pkpd import PkpdPatient
 from pressor.plumbing.native_build import load_twin
+from pressor.plumbing.native_call import bind
 
 SOURCE = Path(__file__).with_name("drug_patients.c")
 MAX_RING = 8192
@@ -214,7 +215,7 @@ class NativePhenylephrine2C(Phenylephrine2C):
         c.emax_mmhg, c.ec50_ng_ml = patient.params.emax_mmhg, patient.params.ec50_ng_ml
         c.fast_dc_ng_ml = patient._fast_dc_ng_ml
         c.a1_ug, c.a2_ug, c.ce_ng_ml = patient.a1_ug, patient.a2_ug, patient.ce_ng_ml
-        self.step = _checked(functools.partial(lib.dp_phenylephrine_step, ctypes.addressof(c)), c)
+        self.step = _checked(bind(lib.dp_phenylephrine_step, c), c)
 
 
 class NativeNorepinephrine1C(Norepinephrine1C):
@@ -243,7 +244,7 @@ class NativeNorepinephrine1C(Norepinephrine1C):
         c.hill, c.h_endo, c.dc_ng_ml = patient._hill, patient._h_endo, patient._dc_ng_ml
         c.plasma_ng_ml, c.ce_ng_ml = patient.plasma_ng_ml, patient.ce_ng_ml
         c.hill_now = patient.hill_mmhg(patient.ce_ng_ml)  # what K uses before the first step
-        self.step = _checked(functools.partial(lib.dp_norepinephrine_step, ctypes.addressof(c)), c)
+        self.step = _checked(bind(lib.dp_norepinephrine_step, c), c)
 
 
 class NativePkpdPatient(PkpdPatient):
@@ -271,7 +272,7 @@ class NativePkpdPatient(PkpdPatient):
         for name in _PKPD_STATE:
             setattr(c, name, getattr(patient, name))
         c.pipe_len, c.pipe_head = len(patient.pipe), 0
-        self.step = functools.partial(lib.dp_pkpd_step, ctypes.addressof(c))
+        self.step = bind(lib.dp_pkpd_step, c)
 
 
 _TWINS: dict[type, type] = {

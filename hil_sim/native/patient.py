@@ -2,9 +2,9 @@
 
 ``paper_patient.c`` (beside this file) mirrors ``Patient.step`` and its variable delay buffer
 operation for operation; :class:`NativePatient` is the same patient (its parameters, coefficients,
-reachability; its MAP, K, T, τ read from the C state), stepped by one ctypes call (≈ 1 µs instead
-of ≈ 4 µs of Python). :func:`native_patient` returns the patient unchanged where there is no twin
-(``PRESSOR_NATIVE=off``, no C compiler, a frozen patient, another patient model, one already
+reachability; its MAP, K, T, τ read from the C state), stepped by one call into the C
+(:mod:`pressor.plumbing.native_call`) instead of ≈ 4 µs of Python. :func:`native_patient` returns
+the patient unchanged where there is no twin (``PRESSOR_NATIVE=off``, no C compiler, a frozen patient, another patient model, one already
 stepped, an internal step so short that the delay buffer would not fit). The drug models
 (``pkpd``, ``phenylephrine-2c``, ``norepinephrine``) get their twins from
 :mod:`pressor.hil_sim.native.drug_patient`; a patient of the
@@ -24,6 +24,7 @@ from pressor.hil_sim.patients import patient as pp
 from pressor.hil_sim.patients.patient import Patient, PatientParams
 from pressor.hil_sim.patients.sensitivity import SensitivityScaled
 from pressor.plumbing.native_build import NATIVE_ENV, load_twin, native_mode
+from pressor.plumbing.native_call import bind
 
 SOURCE = Path(__file__).with_name("paper_patient.c")
 MAX_RING = 8192
@@ -98,7 +99,7 @@ class NativePatient(Patient):
         c.size = patient._buffer.size
         c.time_s, c.delta_map_mmhg, c.infused_ml_h_s = patient.time_s, 0.0, 0.0
         c.K, c.T_s, c.tau_s = patient.K, patient.T_s, patient.tau_s
-        self._step = functools.partial(lib.pp_step, ctypes.addressof(c))
+        self._step = bind(lib.pp_step, c)
 
     def step(self, rate_ml_h: float) -> None:
         """Advance one internal step with the pump delivering ``rate_ml_h`` (mean over the step)."""
