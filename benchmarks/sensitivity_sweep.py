@@ -88,12 +88,8 @@ from pressor.hil_sim.patients.cohort import cohort_seeds
 from pressor.hil_sim.patients.patient_model import PatientModelError
 from pressor.hil_sim.patients.sensitivity import check_factor
 from pressor.hil_sim.scenarios.scenario import Scenario, load_scenario
-from pressor.hil_sim.trials.trial import (
-    _simulate_patient,
-    controller_dir_name,
-    summarize,
-    write_outputs,
-)
+from pressor.hil_sim.trials.outputs import summarize, write_outputs
+from pressor.hil_sim.trials.trial import _simulate_patient, controller_dir_name
 from pressor.plumbing import native_call
 from pressor.plumbing.files import write_atomic
 from pressor.plumbing.parallel import run_ordered

@@ -277,9 +277,10 @@ def _trial(argv: Sequence[str]) -> int:
     from pressor.hil_sim.patients.sensitivity import with_sensitivity
     from pressor.hil_sim.patients.syringe import check_syringe, patients_on_syringe
     from pressor.hil_sim.scenarios.scenario import ScenarioError, load_scenario
+    from pressor.hil_sim.trials.outputs import write_outputs
     from pressor.hil_sim.trials.paired import compare_controllers, format_comparison
     from pressor.hil_sim.trials.report import write_report
-    from pressor.hil_sim.trials.trial import controller_dir_name, run_cohort, write_outputs
+    from pressor.hil_sim.trials.trial import controller_dir_name, run_cohort
     from pressor.plumbing.files import write_atomic
     from pressor.plumbing.parallel import BackendError
     from pressor.runtime.core.closed_loop import ControllerError

@@ -60,15 +60,9 @@ from pressor.hil_sim.patients.patient_model import (
 from pressor.hil_sim.patients.sensitivity import with_sensitivity
 from pressor.hil_sim.patients.syringe import check_syringe, patients_on_syringe
 from pressor.hil_sim.scenarios.scenario import Scenario, load_scenario
+from pressor.hil_sim.trials.outputs import infusion_record, patients_csv, write_outputs
 from pressor.hil_sim.trials.paired import compare_controllers
-from pressor.hil_sim.trials.trial import (
-    _csv_text,
-    _simulate_patient,
-    controller_dir_name,
-    infusion_record,
-    run_cohort,
-    write_outputs,
-)
+from pressor.hil_sim.trials.trial import _simulate_patient, controller_dir_name, run_cohort
 from pressor.plumbing.files import write_atomic
 from pressor.plumbing.parallel import BackendError
 from pressor.runtime.core.closed_loop import ControllerError
@@ -208,7 +202,7 @@ class TrialResult:
         """
         pd = _pandas()
         if not trajectories:
-            text = _csv_text(self.records, self.summary["coefficient_units"])
+            text = patients_csv(self.records, self.summary["coefficient_units"])
             return pd.read_csv(io.StringIO(text))
         tr = self.trajectories
         if tr is None:

@@ -146,7 +146,7 @@ def infusion_section(records: Mapping[str, Sequence[Mapping[str, Any]]]) -> str:
     """The report's "Infusion" section: per controller the drug, syringe and weight (a reference
     weight said as such) and the median over every patient of the mean and peak infusion in ml/h
     and µg/kg/min; ``""`` when the records carry no ``infusion``."""
-    from pressor.hil_sim.trials.trial import infusion_summary
+    from pressor.hil_sim.trials.outputs import infusion_summary
 
     heads = (
         "controller",

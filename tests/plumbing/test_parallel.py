@@ -95,7 +95,8 @@ def test_a_worker_killed_mid_trial_costs_only_a_retry_not_the_records(tmp_path, 
 
         from pressor.contracts.drug import DEFAULT_BINDING
         from pressor.hil_sim.scenarios.scenario import load_scenario
-        from pressor.hil_sim.trials.trial import run_cohort, write_outputs
+        from pressor.hil_sim.trials.outputs import write_outputs
+        from pressor.hil_sim.trials.trial import run_cohort
 
         sc = load_scenario(str(scenario))
         records, summary, _ = run_cohort(  # as pressor trial runs it: pi on the paper's drug
