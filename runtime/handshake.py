@@ -11,9 +11,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from pressor.runtime.inputs.clinician import ClinicianInput, check_device_hello, check_link_hello
+from pressor.runtime.inputs.clinician import ClinicianInput
 from pressor.runtime.inputs.config import RunConfig
 from pressor.runtime.inputs.controller_loader import controller_name
+from pressor.runtime.inputs.hello_checks import check_device_hello, check_link_hello
 from pressor.runtime.shell.interrupt import Interrupted, stop_requested
 
 if TYPE_CHECKING:

@@ -373,13 +373,10 @@ def test_every_baseline_runs_on_every_library_drug(controller, drug, conc, weigh
     from types import SimpleNamespace
 
     from pressor.plumbing.usage import UsageParser
-    from pressor.runtime.inputs.clinician import (
-        add_clinician_options,
-        check_device_hello,
-        clinician_input,
-    )
+    from pressor.runtime.inputs.clinician import add_clinician_options, clinician_input
     from pressor.runtime.inputs.config import add_run_options, run_config
     from pressor.runtime.inputs.dosing import add_dosing_options
+    from pressor.runtime.inputs.hello_checks import check_device_hello
 
     p = UsageParser(prog="pressor run")
     add_run_options(p)
