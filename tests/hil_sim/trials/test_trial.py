@@ -151,7 +151,7 @@ def test_a_reused_out_loses_the_earlier_runs_comparison_and_report(
 
 
 def test_the_terminal_explains_each_unreachable_patient_in_words():
-    from pressor.hil_sim.cli import format_unreachable
+    from pressor.hil_sim.trials.table import format_unreachable
 
     records = [
         {"patient_seed": 7, "reachable": True},
