@@ -190,7 +190,7 @@ def _trial(argv: Sequence[str]) -> int:
     from pressor.hil_sim.trials.table import format_table, format_unreachable
     from pressor.hil_sim.trials.trial import controller_dir_name, run_cohort
     from pressor.plumbing.files import write_atomic
-    from pressor.plumbing.parallel import BackendError
+    from pressor.plumbing.parallel import BackendError, WorkerLost
     from pressor.runtime.core.closed_loop import ControllerError
     from pressor.runtime.inputs.controller_loader import ControllerSpecError, load_controller
     from pressor.runtime.inputs.controller_plugin import split_controller_list
@@ -258,7 +258,7 @@ def _trial(argv: Sequence[str]) -> int:
                 drug=drugs[spec],
                 weight_kg=args.weight_kg,
             )
-        except ControllerError as exc:  # a plugin that raised: one line, exit 1
+        except (ControllerError, WorkerLost) as exc:  # a plugin that raised, a worker lost: exit 1
             print(f"pressor trial: {exc}", file=sys.stderr)
             return 1
         except (ValueError, BackendError) as exc:  # e.g. a rate the patient step does not divide

@@ -13,9 +13,10 @@ task that raised is retried ``DASK_RETRIES`` times before the run fails.
 
 from __future__ import annotations
 
-import contextlib
 import multiprocessing
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -31,6 +32,10 @@ DASK_RETRIES = 2
 
 class BackendError(RuntimeError):
     """The requested backend cannot be used (message names the address and the remedy)."""
+
+
+class WorkerLost(RuntimeError):
+    """A local worker process ended without returning (message says how much was left)."""
 
 
 def run_ordered(
@@ -60,6 +65,8 @@ def run_ordered(
     ------
     BackendError
         The Dask scheduler cannot be reached, or ``distributed`` is not installed.
+    WorkerLost
+        A local worker process ended abruptly (its task's own exceptions are re-raised as such).
     """
     if scheduler is not None:
         return _run_dask(fn, tasks, scheduler, progress)
@@ -70,13 +77,28 @@ def _run_local(
     fn: Callable[[T], R], tasks: Sequence[T], jobs: int, progress: Progress | None
 ) -> list[R]:
     results: list[R] = []
-    pool = multiprocessing.get_context("fork").Pool(processes=jobs) if jobs > 1 else None
-    with pool or contextlib.nullcontext():
-        records = pool.imap(fn, tasks, chunksize=1) if pool else map(fn, tasks)
-        for rec in records:
+    # An executor, not a multiprocessing.Pool: a Pool whose worker dies (killed, out of memory, a
+    # crash in compiled code) waits for its result forever; the executor says the pool broke.
+    # Forked workers see what this process loaded and set (a plugin, a research override).
+    pool = (
+        ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("fork"))
+        if jobs > 1
+        else None
+    )
+    try:
+        for rec in pool.map(fn, tasks) if pool else map(fn, tasks):
             results.append(rec)
             if progress:
                 progress(len(results), len(tasks))
+    except BrokenProcessPool:
+        raise WorkerLost(
+            f"a worker process ended abruptly with {len(tasks) - len(results)} of {len(tasks)}"
+            " tasks unfinished (killed, out of memory, or a crash in compiled code); run with"
+            " one job to see the task that ends it"
+        ) from None
+    finally:
+        if pool is not None:  # a task that raised: the queued ones are not started
+            pool.shutdown(wait=True, cancel_futures=True)
     return results
 
 
