@@ -9,8 +9,9 @@
 for operation, and leaves after each step the MAP, ΔMAP and K the world reads every tick, evaluated
 as the Python properties evaluate them. Each twin class here is the Python model (its parameters,
 coefficients, steady states and reachability are the inherited methods) with its state read from
-the C and its step one call into the C (:mod:`pressor.plumbing.native_call`). :func:`pressor.hil_sim.native.patient.native_patient`
-dispatches here; :func:`drug_twin` gives the twin or the reason there is none.
+the C and its step one call into the C (:mod:`pressor.plumbing.native_call`).
+:func:`pressor.hil_sim.native.patient.native_patient` dispatches here; :func:`drug_twin` gives the
+twin or the reason there is none.
 """
 
 from __future__ import annotations

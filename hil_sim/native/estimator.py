@@ -4,9 +4,10 @@
 noise, the delay bank's filters, the selection and the restarts) operation for operation; this
 module fills its settings from a freshly built :class:`~pressor.runtime.estimation.estimator.
 DelayBankEstimator` and builds the same :class:`~pressor.runtime.core.estimate.Estimate` reports from what
-the C leaves in its state. One tick costs one call into the C (:mod:`pressor.plumbing.native_call`) instead of ≈ 6 µs of
-Python on average. :func:`native_estimator` returns the estimator unchanged where there is no compiled twin
-(``PRESSOR_NATIVE=off``, no C compiler, a customised gate or estimator class, one already used).
+the C leaves in its state. One tick costs one call into the C (:mod:`pressor.plumbing.native_call`)
+instead of ≈ 6 µs of Python on average. :func:`native_estimator` returns the estimator unchanged
+where there is no compiled twin (``PRESSOR_NATIVE=off``, no C compiler, a customised gate or
+estimator class, one already used).
 """
 
 from __future__ import annotations

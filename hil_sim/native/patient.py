@@ -4,8 +4,9 @@
 operation for operation; :class:`NativePatient` is the same patient (its parameters, coefficients,
 reachability; its MAP, K, T, τ read from the C state), stepped by one call into the C
 (:mod:`pressor.plumbing.native_call`) instead of ≈ 4 µs of Python. :func:`native_patient` returns
-the patient unchanged where there is no twin (``PRESSOR_NATIVE=off``, no C compiler, a frozen patient, another patient model, one already
-stepped, an internal step so short that the delay buffer would not fit). The drug models
+the patient unchanged where there is no twin (``PRESSOR_NATIVE=off``, no C compiler, a frozen
+patient, another patient model, one already stepped, an internal step so short that the delay
+buffer would not fit). The drug models
 (``pkpd``, ``phenylephrine-2c``, ``norepinephrine``) get their twins from
 :mod:`pressor.hil_sim.native.drug_patient`; a patient of the
 responsiveness sweep (:class:`~pressor.hil_sim.patients.sensitivity.SensitivityScaled`) gets the twin inside
