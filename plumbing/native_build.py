@@ -27,11 +27,15 @@ import shutil
 import subprocess
 import sys
 import sysconfig
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
+from typing import TypeVar
 
 from pressor.plumbing.files import AtomicFile
+
+T = TypeVar("T")
 
 #: the compiler flags; a change here is a new cache key
 FLAGS = (
@@ -165,36 +169,40 @@ def load_library(source: Path, name: str) -> ctypes.CDLL | str:
     A cached library that does not load (damaged outside pressor: pressor itself only ever moves
     complete files into the cache) is removed and built again once.
     """
-    build = shared_library(source, name)
-    if build.path is None:
-        return build.reason
-    try:
-        return ctypes.CDLL(str(build.path))
-    except OSError as exc:
-        if build.reason != "cached":  # just compiled: building again would not help
-            return f"cannot load {build.path}: {exc}"
-    build.path.unlink(missing_ok=True)
-    return load_library(source, name)  # compiles afresh, so this recursion ends
+    return _load_built(source, name, False, lambda path: ctypes.CDLL(str(path)))
 
 
 def load_extension(source: Path, module: str) -> ModuleType | str:
     """The Python extension module ``module`` compiled from ``source`` (:func:`shared_library` with
-    ``python_extension``), imported, or the reason (a ``str``) why there is none."""
-    build = shared_library(source, module, python_extension=True)
-    if build.path is None:
-        return build.reason
-    spec = importlib.util.spec_from_file_location(module, build.path)
-    try:
+    ``python_extension``), imported, or the reason (a ``str``) why there is none; a damaged cached
+    one is built again, as in :func:`load_library`."""
+
+    def load(path: Path) -> ModuleType:
+        spec = importlib.util.spec_from_file_location(module, path)
         if spec is None or spec.loader is None:
-            raise ImportError(f"not an extension module: {build.path}")
+            raise ImportError(f"not an extension module: {path}")
         ext = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(ext)
-    except ImportError as exc:
+        return ext
+
+    return _load_built(source, module, True, load)
+
+
+def _load_built(
+    source: Path, name: str, python_extension: bool, load: Callable[[Path], T]
+) -> T | str:
+    """``load`` of :func:`shared_library`'s file, or why not; a cached file that ``load`` refuses
+    (``OSError``, ``ImportError``) is removed and built again once."""
+    build = shared_library(source, name, python_extension)
+    if build.path is None:
+        return build.reason
+    try:
+        return load(build.path)
+    except (OSError, ImportError) as exc:
         if build.reason != "cached":  # just compiled: building again would not help
-            return f"cannot import {build.path}: {exc}"
-        build.path.unlink(missing_ok=True)  # damaged outside pressor, as in load_library
-        return load_extension(source, module)
-    return ext
+            return f"cannot load {build.path}: {exc}"
+    build.path.unlink(missing_ok=True)
+    return _load_built(source, name, python_extension, load)  # compiles afresh: this ends
 
 
 def load_twin(

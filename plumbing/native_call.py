@@ -59,8 +59,8 @@ def bind(fn: Any, state: ctypes.Structure, fast: bool = True) -> Callable[..., A
     holds no reference to ``state``: the caller keeps it alive.
     """
     address = ctypes.addressof(state)
-    ext = callers() if fast else "not asked"
+    ext = callers() if fast else None
     name = SIGNATURES.get((fn.restype, tuple(fn.argtypes or ())))
-    if isinstance(ext, str) or name is None:
+    if not isinstance(ext, ModuleType) or name is None:
         return functools.partial(fn, address)
     return functools.partial(getattr(ext, name), ctypes.cast(fn, ctypes.c_void_p).value, address)
