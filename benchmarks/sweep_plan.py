@@ -4,8 +4,9 @@ Each patient model is played with its drug (:data:`MODEL_DRUG`) and that drug's 
 library: the standard syringe (the library's first concentration), the stronger one a clinician
 switches to when the standard cannot reach the target (:func:`syringes`), and the limits the
 supervisor enforces at each. :func:`reach_plan` sorts a level's patients before anything runs:
-those the standard syringe brings to the target, those only the stronger one does, and the
-non-responders no syringe of the library brings there within the dose limits it can hold for an hour.
+those the standard syringe holds at the target, those only the stronger one does, and the
+non-responders no syringe of the library holds there for the hour within the dose limits (a
+simulated hour at the best rate those limits allow, :mod:`pressor.hil_sim.reach`).
 
 A patient model counts ml/h of one syringe (:data:`MODEL_CONCENTRATION_UG_ML`); a syringe c times
 stronger is the same patient at c times the sensitivity
@@ -23,6 +24,7 @@ from typing import Any
 from pressor.contracts.controller import DESIGN_CONCENTRATION_UG_ML
 from pressor.hil_sim.patients.norepinephrine import CONCENTRATION_UG_ML as NOREPINEPHRINE_UG_ML
 from pressor.hil_sim.patients.sensitivity import with_sensitivity
+from pressor.hil_sim.reach import hold_shortfall_mmhg, holds
 from pressor.hil_sim.scenarios.scenario import Scenario
 from pressor.hil_sim.world import World
 from pressor.runtime.core.dose_guard import DoseLimits
@@ -152,10 +154,11 @@ def reach_plan(
     Returns
     -------
     dict
-        ``standard`` (seeds the standard syringe brings within the metrics' band of the target),
-        ``switched`` (seeds only the stronger one does), ``non_responders`` (the rest) and
-        ``shortfall_mmhg`` (per non-responder: the largest ΔMAP the scenario asks minus the largest
-        steady ΔMAP the best syringe gives within its limits, mmHg).
+        ``standard`` (seeds the standard syringe holds within the metrics' band of the target for
+        the rest of the hour once there, :func:`pressor.hil_sim.reach.holds`), ``switched`` (seeds
+        only the stronger one does), ``non_responders`` (the rest) and ``shortfall_mmhg`` (per
+        non-responder: how far the best syringe's capacity falls short of the scenario's ask at
+        worst, mmHg, :func:`pressor.hil_sim.reach.hold_shortfall_mmhg`).
     """
     spec = standard.patient_model(model, level)
     plan: dict[str, list[Any]] = {
@@ -163,7 +166,7 @@ def reach_plan(
     }  # fmt: skip
     for seed in seeds:
         world = World(scenario, seed, SAMPLE_PERIOD_S, patient_model=spec)
-        if world.reachable(standard.max_rate_ml_h):
+        if holds(world, standard.max_rate_ml_h):
             plan["standard"].append(seed)
             continue
         # the stronger syringe's ml/h in the standard's: the same patient fed c/c_std times more
@@ -175,10 +178,10 @@ def reach_plan(
                 * stronger.concentration_ug_ml
                 / standard.concentration_ug_ml,
             )
-        if stronger is not None and world.reachable(best):
+        if stronger is not None and holds(world, best):
             plan["switched"].append(seed)
         else:
             plan["non_responders"].append(seed)
-            short = world.required_delta_mmhg() - world.patient.max_delta_map_mmhg(best)
+            short = hold_shortfall_mmhg(world, best)
             plan["shortfall_mmhg"].append(float(short) if math.isfinite(short) else math.inf)
     return plan

@@ -180,15 +180,11 @@ class World:
             )
         self.sample_period_s = float(sample_period_s)
         self.patient_seed = int(patient_seed)
-        model = check_model_for_scenario(patient_model, sc.name, sc.frozen is not None)
+        self._model = check_model_for_scenario(patient_model, sc.name, sc.frozen is not None)
         self.patient_model = patient_model
         self._h = sample_period_s / n_sub
         self._n_sub = n_sub
-        self.patient: PatientModel = (
-            Patient(sc.frozen, self._h)
-            if sc.frozen is not None
-            else model.from_seed(self.patient_seed, self._h)
-        )
+        self.patient: PatientModel = self.fresh_patient(self._h)
         params = getattr(self.patient, "params", None)
         #: the paper model's coefficients (None for another model: see ``patient.coefficients()``)
         self.params = params if isinstance(params, (PatientParams, FrozenParams)) else None
@@ -312,6 +308,14 @@ class World:
             delivered32, volume32 = f32(delivered), f32(volume)
         return _pump_status(self.tick, delivered32, volume32, pump.alarms)
 
+    def fresh_patient(self, step_s: float) -> PatientModel:
+        """A new copy of this world's patient, at rest, stepped every ``step_s`` s (the world's own
+        is the one at ``sample_period_s`` over its internal steps)."""
+        sc = self.scenario
+        if sc.frozen is not None:
+            return Patient(sc.frozen, step_s)
+        return self._model.from_seed(self.patient_seed, step_s)
+
     def truth(self) -> dict[str, float | int]:
         """Ground truth now, for recording only (never for control)."""
         p = self.patient
@@ -344,12 +348,11 @@ class World:
         """Whether the pump's maximum rate (or ``max_rate_ml_h``, ml/h: a lower dose limit) can
         bring MAP within the metrics' band of the target at this patient's sensitivity
         (:func:`pressor.contracts.metrics.reachable_band_mmhg`: the scenario's settling band, or the
-        clinical band without a target step)."""
-        from pressor.contracts.metrics import reachable_band_mmhg
+        clinical band without a target step), on the steady state of that rate. Whether the rate
+        also holds it there for the scenario's hour: :func:`pressor.hil_sim.reach.holds`."""
+        from pressor.hil_sim.reach import band_mmhg
 
         sc = self.scenario
-        step = self.step_mmhg
-        band = reachable_band_mmhg(step if step != 0.0 else None, sc.noisy)
         top = sc.pump.max_rate_ml_h if max_rate_ml_h is None else max_rate_ml_h
         achievable = self.patient.max_delta_map_mmhg(top)
-        return self.required_delta_mmhg() - band <= achievable
+        return self.required_delta_mmhg() - band_mmhg(self) <= achievable

@@ -1,0 +1,116 @@
+"""What a dose limit can hold: the patient's best MAP over the scenario against what the target asks.
+
+:meth:`pressor.hil_sim.world.World.reachable` compares the largest rise the target asks with the
+*steady state* of the largest rate. That is what the paper's first-order patients reach within
+minutes, but not what an hour gives a patient whose response keeps drifting: a peripheral
+compartment that fills for hours (the PK/PD phenylephrine models: the plasma level at a constant
+rate reaches about half its steady state in minutes and creeps up over hours) or tolerance that
+builds with exposure (the ``pkpd`` model's tachyphylaxis). Counted on the steady state, such a
+patient is "reachable" at a rate the hour never lets them settle at, reaches the target and falls
+out of it again at the limit: measured on the sweep's ``pkpd`` 0.5x patients, 84 of the 102 the
+steady state counted as reachable had their dose cut by the hourly limit, and their time in
+the band after the first entry was 54 % (docs/notes/cautious-start.md, "Who the library's
+limits can hold").
+
+This module asks the question by simulation instead: a fresh copy of the patient, infused from
+the first second at the constant rate that holds the largest steady rise the limit allows
+(:func:`best_rate_ml_h`; the limit itself for a model whose effect rises with the rate), gives the
+largest rise the limit can hold at each moment, :func:`capacity_mmhg`. For linear kinetics and an
+effect that rises with the level, no rate history under the limit raises the level above that
+run's. The patient is held when that capacity, once it first reaches the target's ask (within
+the band), stays there for the rest of the scenario (:func:`hold_shortfall_mmhg`). The run uses
+:data:`CAPACITY_STEP_S` steps, a hundredth of the models' fastest lag, so a 1 h scenario costs a
+few milliseconds per patient.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from pressor.hil_sim.patients.patient_model import PatientModel
+    from pressor.hil_sim.world import World
+
+__all__ = [
+    "CAPACITY_STEP_S",
+    "band_mmhg",
+    "best_rate_ml_h",
+    "capacity_mmhg",
+    "hold_shortfall_mmhg",
+    "holds",
+    "need_mmhg",
+]
+
+#: step (s) of the capacity run: the models' lags are tens of seconds or more (docs/PATIENTS.md)
+CAPACITY_STEP_S = 1.0
+#: bisection steps of :func:`best_rate_ml_h` (the rate to 2^-40 of the limit)
+_BISECTIONS = 40
+
+
+def best_rate_ml_h(patient: PatientModel, max_rate_ml_h: float) -> float:
+    """The smallest rate (ml/h) in [0, ``max_rate_ml_h``] whose steady state is the largest the
+    limit allows: ``max_rate_ml_h`` for an effect that rises with the rate; below it for the
+    paper model, whose gain falls with the rate (k0·i·e^(−k1·i) peaks at i = 1/k1).
+
+    :meth:`~pressor.hil_sim.patients.patient_model.PatientModel.max_delta_map_mmhg` is the largest
+    steady rise over [0, r], so it rises with r and the bisection finds where it stops rising.
+    """
+    best = patient.max_delta_map_mmhg(max_rate_ml_h)
+    lo, hi = 0.0, float(max_rate_ml_h)
+    if patient.max_delta_map_mmhg(hi * (1.0 - 1e-9)) < best:
+        return hi
+    for _ in range(_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if patient.max_delta_map_mmhg(mid) < best else (lo, mid)
+    return hi
+
+
+def band_mmhg(world: World) -> float:
+    """The band (mmHg) around the target a held patient stays in: the metrics' settling band of the
+    scenario's step, or the clinical band without one (as :meth:`World.reachable` judges)."""
+    from pressor.contracts.metrics import reachable_band_mmhg
+
+    step = world.step_mmhg
+    return reachable_band_mmhg(step if step != 0.0 else None, world.scenario.noisy)
+
+
+def need_mmhg(world: World, t_s: np.ndarray) -> np.ndarray:
+    """The rise (mmHg) the target asks of the drug at each time ``t_s`` (s): target minus baseline
+    minus the scenario's disturbance."""
+    return np.array([world.target_at(t) - world.baseline_mmhg - world.disturbance(t) for t in t_s])
+
+
+def capacity_mmhg(world: World, rate_ml_h: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(t_s, rise_mmhg)``: the drug's MAP rise at each second of ``world``'s scenario on a fresh
+    copy of its patient infused at ``rate_ml_h`` (ml/h) from t = 0 (no noise, no disturbance)."""
+    patient = world.fresh_patient(CAPACITY_STEP_S)
+    t = np.arange(0.0, world.scenario.duration_s + CAPACITY_STEP_S, CAPACITY_STEP_S)
+    rise = np.empty_like(t)
+    for i in range(t.size):
+        rise[i] = patient.delta_map_mmhg
+        patient.step(rate_ml_h)
+    return t, rise
+
+
+def hold_shortfall_mmhg(world: World, max_rate_ml_h: float) -> float:
+    """How far (mmHg) the best the limit can do falls short of the target's ask, at worst.
+
+    From the first moment the capacity (:func:`capacity_mmhg` at :func:`best_rate_ml_h`) comes
+    within the band of the ask (or, if it never does, from its peak) to the scenario's end: the
+    largest ask minus capacity. At most the band for a patient the limit holds (it is close to the
+    band then: the capacity enters it from outside), more for one it does not.
+    """
+    band = band_mmhg(world)
+    t, rise = capacity_mmhg(world, best_rate_ml_h(world.patient, max_rate_ml_h))
+    gap = need_mmhg(world, t) - rise
+    inside = gap <= band
+    start = int(np.argmax(inside)) if inside.any() else int(np.argmax(rise))
+    return float(gap[start:].max())
+
+
+def holds(world: World, max_rate_ml_h: float) -> bool:
+    """Whether ``max_rate_ml_h`` (ml/h) holds ``world``'s patient within the metrics' band of the
+    target for the rest of the scenario once it got there (:func:`hold_shortfall_mmhg`)."""
+    return hold_shortfall_mmhg(world, max_rate_ml_h) <= band_mmhg(world)
