@@ -49,7 +49,7 @@ _STEP_WINDOW = (
 
 #: metric name (docs/METRICS.md) -> how it is shown
 LABELS: dict[str, MetricLabel] = {
-    "overshoot_pct": MetricLabel("overshoot", "%", 1, _NO_STEP),
+    "overshoot_pct": MetricLabel("overshoot, whole run (disturbances too)", "%", 1, _NO_STEP),
     "rise_time_s": MetricLabel(
         "rise time (10 to 90 % of the step)", "s", 1, "90 % of the step was never reached"
     ),
