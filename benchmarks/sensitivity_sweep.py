@@ -55,14 +55,16 @@ twin, :mod:`pressor.hil_sim.native`) goes to stderr with the progress.
 
 With ``--out DIR`` each (model, level, controller, syringe) cohort writes
 ``DIR/MODEL/xF/CONTROLLER/SYRINGE/`` (``patients.json``, ``patients.csv``, ``summary.json``,
-``run.json``) and a run started again reuses those whose ``run.json`` matches (delete a directory
-to run it again).
+``run.json``) and a run started again reuses those whose ``run.json`` matches: the names, the
+seeds, the limits, and the LPV module's bytes and the drug's caution, so a redesign under the same
+name runs again (delete a directory to run it again anyway).
 """
 
 from __future__ import annotations
 
 import argparse
 import functools
+import hashlib
 import json
 import sys
 import time
@@ -95,8 +97,9 @@ from pressor.plumbing.files import write_atomic
 from pressor.plumbing.parallel import run_ordered
 from pressor.runtime.core.dose_guard import DoseLimits
 from pressor.runtime.core.supervisor_config import State
+from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution
 from pressor.runtime.estimation.sources import SOURCES
-from pressor.runtime.inputs.controller_loader import load_controller
+from pressor.runtime.inputs.controller_loader import load_controller, lpv_design_module
 from pressor.runtime.inputs.defaults import DESIGN_FOR_DRUG, default_schedule
 from pressor.runtime.inputs.drug_library import load_library
 
@@ -147,13 +150,20 @@ def schedule_of(schedule: str, controller: str) -> str:
 
 
 def _identity(args: argparse.Namespace, scenario: Scenario, job: dict[str, Any]) -> dict[str, Any]:
-    """What a written cohort must match to be reused (``run.json``)."""
+    """What a written cohort must match to be reused (``run.json``): besides the names, the LPV
+    module's bytes and the drug's caution, so a redesigned controller under the same name is run
+    again instead of read back."""
+    module = lpv_design_module(job["controller"])
     return {
         "scenario": scenario.name,
         "schedule": job["schedule"],
         "model": job["model"],
         "level": job["level"],
         "controller": job["controller"],
+        "controller_module_sha256": (
+            None if module is None else hashlib.sha256(module.read_bytes()).hexdigest()
+        ),
+        "caution": asdict(CAUTION_FOR_DRUG.get(MODEL_DRUG[job["model"]], Caution())),
         "patient_model": job["spec"],
         "dose_limits": asdict(job["syringe"].limits),
         "patient_seeds": job["seeds"],

@@ -233,6 +233,26 @@ def test_the_sweep_reports_every_column_counts_non_responders_and_repeats_itself
     assert reused == out and "runs" not in err and "nothing ran" in err
 
 
+def test_a_cohort_written_by_another_build_of_the_same_lpv_design_is_run_again(
+    tmp_path: Path, short_scenario: Path, capsys
+):
+    argv = ["--patients", "2", "--seed", "1", "--levels", "10", "--controllers", "lpv"]
+    argv += ["--models", "paper", "--scenario", str(short_scenario), "--out", str(tmp_path)]
+    assert main(argv) == 0
+    first = capsys.readouterr().out
+    (run_json,) = tmp_path.glob("paper/x10/*/*/run.json")
+    identity = json.loads(run_json.read_text())
+    assert len(identity["controller_module_sha256"]) == 64
+    assert main(argv) == 0
+    assert "nothing ran" in capsys.readouterr().err
+    # the same name, another module (a redesign): the cohort runs again, and gives today's figures
+    run_json.write_text(json.dumps(identity | {"controller_module_sha256": "0" * 64}))
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    assert "nothing ran" not in err and out == first
+    assert json.loads(run_json.read_text()) == identity
+
+
 def test_the_sweep_refuses_a_level_outside_the_range(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["--levels", "0.1,30"])
