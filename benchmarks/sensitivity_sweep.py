@@ -32,8 +32,11 @@ library's stronger syringe (:func:`syringes`) when that one can, as a clinician 
 it; the controllers are not told (the simulated patient counts ml/h of the standard syringe). A
 patient no syringe of the library can bring to the target within those limits
 is a **non-responder**: it runs with the standard syringe, is reported in its own row and counted
-with its shortfall, never dropped. *Reach the target* is the trial's ``reachable`` (docs/METRICS.md):
-the largest steady ΔMAP at the limit is within the metrics' band of what the scenario asks.
+with its shortfall, never dropped. *Bring to the target* means hold there for the hour
+(:func:`pressor.hil_sim.reach.holds`): a fresh copy of the patient infused from the first second at
+the best rate the limits allow stays within the metrics' band of what the scenario asks from the
+moment it gets there, which a patient whose kinetics or tolerance keep drifting for the hour may
+not, though the steady state of that rate would (the trial's ``reachable``, docs/METRICS.md).
 
 **Figures** (:mod:`benchmarks.sweep_figures`, docs/METRICS.md): every metric judges the *true* MAP,
 as ``pressor trial`` does (what the patient experiences; the monitor's noise is not the device's

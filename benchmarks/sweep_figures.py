@@ -84,8 +84,8 @@ def row_figures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 
 def shortfall_figures(shortfalls_mmhg: Sequence[float]) -> dict[str, float | None]:
-    """Median and largest shortfall (mmHg) of the non-responders: the required ΔMAP minus the
-    largest steady ΔMAP the hard dose limit allows."""
+    """Median and largest shortfall (mmHg) of the non-responders: how far the best the limits can
+    hold falls short of the scenario's ask (:func:`pressor.hil_sim.reach.hold_shortfall_mmhg`)."""
     if not shortfalls_mmhg:
         return {"median": None, "worst": None}
     return {
