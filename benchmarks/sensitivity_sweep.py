@@ -190,7 +190,7 @@ def run_level(
     drug = MODEL_DRUG[model]
     standard, stronger = syringes(load_library()[drug], scenario.pump.max_rate_ml_h)
     seeds = cohort_seeds(args.seed, args.patients)
-    plan = reach_plan(scenario, model, level, seeds, standard, stronger)
+    plan = reach_plan(scenario, model, level, seeds, standard, stronger, jobs=args.jobs)
     lpv = (DESIGN_FOR_DRUG if args.schedule in ("cautious", DEFAULT) else DRUG_LPV)[drug]
     controllers = [lpv if c == "lpv" else c for c in args.controllers]
     schedules = {c: schedule_of(args.schedule, c) for c in controllers}

@@ -24,9 +24,10 @@ from typing import Any
 from pressor.contracts.controller import DESIGN_CONCENTRATION_UG_ML
 from pressor.hil_sim.patients.norepinephrine import CONCENTRATION_UG_ML as NOREPINEPHRINE_UG_ML
 from pressor.hil_sim.patients.sensitivity import with_sensitivity
-from pressor.hil_sim.reach import hold_shortfall_mmhg, holds
+from pressor.hil_sim.reach import band_mmhg, hold_shortfall_mmhg
 from pressor.hil_sim.scenarios.scenario import Scenario
 from pressor.hil_sim.world import World
+from pressor.plumbing.parallel import run_ordered
 from pressor.runtime.core.dose_guard import DoseLimits
 from pressor.runtime.inputs.drug_library import DrugEntry
 
@@ -141,6 +142,23 @@ def syringes(entry: DrugEntry, pump_max_ml_h: float) -> tuple[Syringe, Syringe |
     return standard, stronger
 
 
+def sort_patient(task: tuple[Scenario, str, int, float, float | None]) -> tuple[str, float]:
+    """One patient's group and shortfall (mmHg; ``nan`` when held): ``task`` is (scenario, patient
+    model spec, seed, the standard syringe's sustained rate, the stronger one's in the standard's
+    ml/h or ``None``). A module-level function of one task, for :func:`reach_plan`'s workers."""
+    scenario, spec, seed, standard_ml_h, stronger_ml_h = task
+    world = World(scenario, seed, SAMPLE_PERIOD_S, patient_model=spec)
+    band = band_mmhg(world)
+    short = hold_shortfall_mmhg(world, standard_ml_h)
+    if short <= band:
+        return "standard", math.nan
+    if stronger_ml_h is not None:
+        short = hold_shortfall_mmhg(world, max(standard_ml_h, stronger_ml_h))
+        if short <= band:
+            return "switched", math.nan
+    return "non_responders", short if math.isfinite(short) else math.inf
+
+
 def reach_plan(
     scenario: Scenario,
     model: str,
@@ -148,8 +166,10 @@ def reach_plan(
     seeds: Sequence[int],
     standard: Syringe,
     stronger: Syringe | None,
+    jobs: int = 1,
 ) -> dict[str, list[Any]]:
-    """Sort a level's patients by the syringe that brings them to the target.
+    """Sort a level's patients by the syringe that holds them at the target, on ``jobs`` local
+    worker processes (:func:`sort_patient`; the same plan whatever ``jobs``).
 
     Returns
     -------
@@ -161,27 +181,20 @@ def reach_plan(
         worst, mmHg, :func:`pressor.hil_sim.reach.hold_shortfall_mmhg`).
     """
     spec = standard.patient_model(model, level)
+    # the stronger syringe's ml/h in the standard's: the same patient fed c/c_std times more
+    stronger_ml_h = (
+        None
+        if stronger is None
+        else stronger.max_rate_ml_h * stronger.concentration_ug_ml / standard.concentration_ug_ml
+    )
+    tasks = [(scenario, spec, seed, standard.max_rate_ml_h, stronger_ml_h) for seed in seeds]
     plan: dict[str, list[Any]] = {
         "standard": [], "switched": [], "non_responders": [], "shortfall_mmhg": [],
     }  # fmt: skip
-    for seed in seeds:
-        world = World(scenario, seed, SAMPLE_PERIOD_S, patient_model=spec)
-        if holds(world, standard.max_rate_ml_h):
-            plan["standard"].append(seed)
-            continue
-        # the stronger syringe's ml/h in the standard's: the same patient fed c/c_std times more
-        best = standard.max_rate_ml_h
-        if stronger is not None:
-            best = max(
-                best,
-                stronger.max_rate_ml_h
-                * stronger.concentration_ug_ml
-                / standard.concentration_ug_ml,
-            )
-        if stronger is not None and holds(world, best):
-            plan["switched"].append(seed)
-        else:
-            plan["non_responders"].append(seed)
-            short = hold_shortfall_mmhg(world, best)
-            plan["shortfall_mmhg"].append(float(short) if math.isfinite(short) else math.inf)
+    for seed, (group, short) in zip(
+        seeds, run_ordered(sort_patient, tasks, jobs=jobs), strict=True
+    ):
+        plan[group].append(seed)
+        if group == "non_responders":
+            plan["shortfall_mmhg"].append(short)
     return plan

@@ -164,6 +164,8 @@ def test_patients_are_sorted_by_the_syringe_that_holds_them_at_the_target(short_
     # a steady-state verdict would have put some of them a group higher: the 5 min do not settle
     steady = [s for s in seeds if 0.4 * FirstOrderPatient.from_seed(s, 1.0).K >= 25.0 / 120.0]
     assert set(steady) > set(expected["standard"])
+    # sorted on two worker processes, the plan is the same
+    assert reach_plan(scenario, model, 0.4, seeds, standard, stronger, jobs=2) == plan
 
 
 def _sweep(out: Path, scenario: Path, jobs: int, capsys) -> tuple[str, str]:
