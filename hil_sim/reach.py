@@ -19,8 +19,9 @@ largest rise the limit can hold at each moment, :func:`capacity_mmhg`. For linea
 effect that rises with the level, no rate history under the limit raises the level above that
 run's. The patient is held when that capacity, once it first reaches the target's ask (within
 the band), stays there for the rest of the scenario (:func:`hold_shortfall_mmhg`). The run uses
-:data:`CAPACITY_STEP_S` steps, a thirtieth or less of the shipped models' lags (the shortest: the
-``pkpd`` effect site's 30 s), so a 1 h scenario costs about 20 ms per patient.
+:data:`CAPACITY_STEP_S` steps, a tenth or less of the shipped models' lags (the shortest,
+norepinephrine's effect site at 10 s, that model integrates exactly over a held step), so a 1 h
+scenario costs about 20 ms per patient.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ __all__ = [
     "need_mmhg",
 ]
 
-#: step (s) of the capacity run: the models' lags are 30 s or more (docs/PATIENTS.md)
+#: step (s) of the capacity run: the shipped models' lags are 10 s or more (docs/PATIENTS.md)
 CAPACITY_STEP_S = 1.0
 #: bisection steps of :func:`best_rate_ml_h` (the rate to 2^-40 of the limit)
 _BISECTIONS = 40
