@@ -24,7 +24,7 @@ from typing import Any
 from pressor.contracts.controller import DESIGN_CONCENTRATION_UG_ML
 from pressor.hil_sim.patients.norepinephrine import CONCENTRATION_UG_ML as NOREPINEPHRINE_UG_ML
 from pressor.hil_sim.patients.sensitivity import with_sensitivity
-from pressor.hil_sim.reach import band_mmhg, hold_shortfall_mmhg
+from pressor.hil_sim.reach import hold_shortfall_mmhg
 from pressor.hil_sim.scenarios.scenario import Scenario
 from pressor.hil_sim.world import World
 from pressor.plumbing.parallel import run_ordered
@@ -148,7 +148,7 @@ def sort_patient(task: tuple[Scenario, str, int, float, float | None]) -> tuple[
     ml/h or ``None``). A module-level function of one task, for :func:`reach_plan`'s workers."""
     scenario, spec, seed, standard_ml_h, stronger_ml_h = task
     world = World(scenario, seed, SAMPLE_PERIOD_S, patient_model=spec)
-    band = band_mmhg(world)
+    band = world.band_mmhg()
     short = hold_shortfall_mmhg(world, standard_ml_h)
     if short <= band:
         return "standard", math.nan

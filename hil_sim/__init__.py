@@ -16,6 +16,7 @@ device process alone, :mod:`pressor.hil_sim.devices.device`). Where each part is
 - :mod:`pressor.hil_sim.scenarios`: the named scenario TOMLs, their loader, disturbances and faults;
 - :mod:`pressor.hil_sim.world`: the one simulated world, stepped tick by tick (patient + pump + monitor);
 - :mod:`pressor.hil_sim.episode`: one patient's run in process (world + the runtime's closed-loop core);
+- :mod:`pressor.hil_sim.reach`: what the dose limits can hold a patient at for the scenario's hour;
 - :mod:`pressor.hil_sim.trials`: cohort trials, paired comparisons, reports; :mod:`pressor.hil_sim.cli` their commands.
 
 May import ``contracts``, ``baselines``, ``link`` and ``runtime`` (its closed-loop core, so the

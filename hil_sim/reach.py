@@ -36,7 +36,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "CAPACITY_STEP_S",
-    "band_mmhg",
     "best_rate_ml_h",
     "capacity_mmhg",
     "hold_shortfall_mmhg",
@@ -68,15 +67,6 @@ def best_rate_ml_h(patient: PatientModel, max_rate_ml_h: float) -> float:
     return hi
 
 
-def band_mmhg(world: World) -> float:
-    """The band (mmHg) around the target a held patient stays in: the metrics' settling band of the
-    scenario's step, or the clinical band without one (as :meth:`World.reachable` judges)."""
-    from pressor.contracts.metrics import reachable_band_mmhg
-
-    step = world.step_mmhg
-    return reachable_band_mmhg(step if step != 0.0 else None, world.scenario.noisy)
-
-
 def need_mmhg(world: World, t_s: np.ndarray) -> np.ndarray:
     """The rise (mmHg) the target asks of the drug at each time ``t_s`` (s): target minus baseline
     minus the scenario's disturbance."""
@@ -103,7 +93,7 @@ def hold_shortfall_mmhg(world: World, max_rate_ml_h: float) -> float:
     largest ask minus capacity. At most the band for a patient the limit holds (it is close to the
     band then: the capacity enters it from outside), more for one it does not.
     """
-    band = band_mmhg(world)
+    band = world.band_mmhg()
     t, rise = capacity_mmhg(world, best_rate_ml_h(world.patient, max_rate_ml_h))
     gap = need_mmhg(world, t) - rise
     inside = gap <= band
@@ -114,4 +104,4 @@ def hold_shortfall_mmhg(world: World, max_rate_ml_h: float) -> float:
 def holds(world: World, max_rate_ml_h: float) -> bool:
     """Whether ``max_rate_ml_h`` (ml/h) holds ``world``'s patient within the metrics' band of the
     target for the rest of the scenario once it got there (:func:`hold_shortfall_mmhg`)."""
-    return hold_shortfall_mmhg(world, max_rate_ml_h) <= band_mmhg(world)
+    return hold_shortfall_mmhg(world, max_rate_ml_h) <= world.band_mmhg()

@@ -350,9 +350,16 @@ class World:
         (:func:`pressor.contracts.metrics.reachable_band_mmhg`: the scenario's settling band, or the
         clinical band without a target step), on the steady state of that rate. Whether the rate
         also holds it there for the scenario's hour: :func:`pressor.hil_sim.reach.holds`."""
-        from pressor.hil_sim.reach import band_mmhg
-
         sc = self.scenario
         top = sc.pump.max_rate_ml_h if max_rate_ml_h is None else max_rate_ml_h
         achievable = self.patient.max_delta_map_mmhg(top)
-        return self.required_delta_mmhg() - band_mmhg(self) <= achievable
+        return self.required_delta_mmhg() - self.band_mmhg() <= achievable
+
+    def band_mmhg(self) -> float:
+        """The band (mmHg) around the target a reached patient is within: the metrics' settling
+        band of the scenario's step, or the clinical band without one
+        (:func:`pressor.contracts.metrics.reachable_band_mmhg`)."""
+        from pressor.contracts.metrics import reachable_band_mmhg
+
+        step = self.step_mmhg
+        return reachable_band_mmhg(step if step != 0.0 else None, self.scenario.noisy)

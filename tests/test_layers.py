@@ -100,8 +100,9 @@ RUNTIME_ALLOWED: dict[str, frozenset[str]] = {
 
 #: part of hil_sim -> the parts of hil_sim it may import (besides itself): patients and the two devices
 #: (pump, monitor) at the bottom, scenarios on them, the world on all three, one patient's episode
-#: on the world, trials and the cli on top; the compiled twins (``native``) on the patients, used
-#: by trials. The device process is its own part of ``devices``
+#: and what the dose limits can hold (``reach``) on the world, trials and the cli on top; the
+#: compiled twins (``native``) on the patients, used by trials. The device process is its own part
+#: of ``devices``
 #: (``devices.device``, ``devices.device_options``): it runs the world, which runs the pump.
 HIL_SIM_ALLOWED: dict[str, frozenset[str]] = {
     "__init__": frozenset(),
@@ -110,6 +111,7 @@ HIL_SIM_ALLOWED: dict[str, frozenset[str]] = {
     "native": frozenset({"patients"}),
     "scenarios": frozenset({"patients", "devices"}),
     "world": frozenset({"patients", "devices", "scenarios"}),
+    "reach": frozenset({"patients", "world"}),
     "episode": frozenset({"world"}),
     "devices.device_options": frozenset({"patients", "scenarios", "world"}),
     "devices.device": frozenset({"devices.device_options", "patients", "scenarios"}),

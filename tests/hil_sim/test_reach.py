@@ -23,7 +23,7 @@ def test_capacity_of_a_frozen_first_order_patient_is_its_step_response() -> None
 
 def test_a_frozen_patient_is_held_only_within_the_band_of_its_steady_state() -> None:
     world = World("nominal-step", 0, 0.1)  # noise-free: band 2 % of the 20 mmHg step, 0.4 mmHg
-    assert reach.band_mmhg(world) == pytest.approx(0.4)
+    assert world.band_mmhg() == pytest.approx(0.4)
     short_of = 0.3  # mmHg: inside the band
     assert reach.holds(world, (20.0 - short_of) / 0.55)
     # 1 mmHg short at steady state, reached only asymptotically: 20 - 0.55 r (1 - e^(-1160/150))
@@ -47,7 +47,7 @@ def test_a_pkpd_patient_the_steady_state_reaches_but_the_hour_does_not_hold_is_n
     assert world.reachable(60.0)
     assert reach.best_rate_ml_h(world.patient, 60.0) == 60.0  # the Emax effect rises with the rate
     assert not reach.holds(world, 60.0)
-    assert reach.hold_shortfall_mmhg(world, 60.0) > reach.band_mmhg(world)
+    assert reach.hold_shortfall_mmhg(world, 60.0) > world.band_mmhg()
     # the same patient ten times as sensitive is held
     sensitive = World("paper-disturbance", PKPD_SEED, 0.1, patient_model="pkpd@sensitivity=10")
     assert reach.holds(sensitive, 60.0)
