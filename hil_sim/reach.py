@@ -40,7 +40,6 @@ __all__ = [
     "capacity_mmhg",
     "hold_shortfall_mmhg",
     "holds",
-    "need_mmhg",
 ]
 
 #: step (s) of the capacity run: the shipped models' lags are 10 s or more (docs/PATIENTS.md)
@@ -67,12 +66,6 @@ def best_rate_ml_h(patient: PatientModel, max_rate_ml_h: float) -> float:
     return hi
 
 
-def need_mmhg(world: World, t_s: np.ndarray) -> np.ndarray:
-    """The rise (mmHg) the target asks of the drug at each time ``t_s`` (s): target minus baseline
-    minus the scenario's disturbance."""
-    return np.array([world.target_at(t) - world.baseline_mmhg - world.disturbance(t) for t in t_s])
-
-
 def capacity_mmhg(world: World, rate_ml_h: float) -> tuple[np.ndarray, np.ndarray]:
     """``(t_s, rise_mmhg)``: the drug's MAP rise at each second of ``world``'s scenario on a fresh
     copy of its patient infused at ``rate_ml_h`` (ml/h) from t = 0 (no noise, no disturbance)."""
@@ -95,7 +88,7 @@ def hold_shortfall_mmhg(world: World, max_rate_ml_h: float) -> float:
     """
     band = world.band_mmhg()
     t, rise = capacity_mmhg(world, best_rate_ml_h(world.patient, max_rate_ml_h))
-    gap = need_mmhg(world, t) - rise
+    gap = world.need_mmhg(t) - rise
     inside = gap <= band
     start = int(np.argmax(inside)) if inside.any() else int(np.argmax(rise))
     return float(gap[start:].max())

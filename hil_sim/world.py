@@ -340,9 +340,13 @@ class World:
     def required_delta_mmhg(self) -> float:
         """Largest ΔMAP (mmHg) the target asks of the drug over the scenario (disturbances included)."""
         sc = self.scenario
-        t = np.arange(sc.step_time_s, sc.duration_s + 1.0, 1.0)
-        need = [self.target_at(x) - self.baseline_mmhg - self.disturbance(x) for x in t]
-        return float(max(need)) if need else 0.0
+        need = self.need_mmhg(np.arange(sc.step_time_s, sc.duration_s + 1.0, 1.0))
+        return float(need.max()) if need.size else 0.0
+
+    def need_mmhg(self, t_s: np.ndarray) -> np.ndarray:
+        """The rise (mmHg) the target asks of the drug at each time ``t_s`` (s): target minus
+        baseline minus the scenario's disturbance."""
+        return np.array([self.target_at(t) - self.baseline_mmhg - self.disturbance(t) for t in t_s])
 
     def reachable(self, max_rate_ml_h: float | None = None) -> bool:
         """Whether the pump's maximum rate (or ``max_rate_ml_h``, ml/h: a lower dose limit) can

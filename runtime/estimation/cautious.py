@@ -72,13 +72,13 @@ Together they cost the typical patient about 4 minutes to the target (paper mode
 Why norepinephrine's T. Its patients did not overshoot on the defaults (max 1.8 %, seed 3) but took
 12-15 min to the target at 0.5x-2x: the certified fall of ln K (then 0.01/s) alone took 8-9 min
 from the population's top to a typical patient, and a law scheduled on the box's geometric-mean T
-(335 s) then closes the rest slowly. Scheduled on T 250 s (a stronger integral) the 1x median fell from
-14.1 to 12.3 min at an overshoot p90 of 2.7 % (max 6.6 % over 0.5x-10x); 225 s and 200 s were
+(335 s) then closes the rest slowly. Scheduled on T 250 s (a stronger integral) the 1x median fell
+from 14.1 to 12.3 min at an overshoot p90 of 2.7 % (max 6.6 % over 0.5x-10x); 225 s and 200 s were
 faster still (11.8, 11.4 min) at p90 up to 6.5 % and 8.9 %, too near the 10 % bound to be judged
 on another cohort (seed 3, 10 patients per level). Judged on seed 2026, 100 patients per level:
 overshoot p90 <= 6.9 %, max 9.2 %, 1x median 12.1 min (docs/notes/cautious-start.md). Since this
-source holds T and τ fixed, the norepinephrine design certifies them at a twentieth of the usual rates
-and ln K's fall at 0.02/s instead of 0.01/s: about a minute sooner at 0.5x-1x on seed 3
+source holds T and τ fixed, the norepinephrine design certifies them at a twentieth of the usual
+rates and ln K's fall at 0.02/s instead of 0.01/s: about a minute sooner at 0.5x-1x on seed 3
 (docs/notes/cautious-start.md, "Norepinephrine's faster fall").
 
 What is not covered. The evidence assumes the drug's effect rises with the dose (a vasopressor) and
