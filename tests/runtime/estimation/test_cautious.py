@@ -89,9 +89,31 @@ def test_norepinephrine_starts_at_its_population_top_on_its_t_of_250_s_without_e
     assert sched.effect_lag_s is None
 
 
+def test_norepinephrine_reads_its_evidence_against_a_slowest_patient_of_550_s():
+    # no response to 2 ml/h for 300 s: K falls (at the certified rate, then along the bound) to
+    # what a slowest patient of 550 s, not the box's 750 s, is compatible with. Hand values: the
+    # unit response of e^(-55 s)/(T s + 1) to 2 ml/h at 300 s is s = 2(1 - e^(-245/T)), and with
+    # no response the bound settles where K s - m = 0, m = 1 + 0.1 K s: K = 1/(0.9 s)
+    env = envelope_of(load_controller("lpv:norepinephrine-cautious", TS))
+    sched = CautiousSchedule(env, TS)
+    box = CautiousSchedule(env, TS, evidence_T_s=env.box[1][1])
+    assert (sched.evidence_T_s, box.evidence_T_s) == (550.0, 750.0)
+    inp = ScheduleInput(60.0, 0, 2.0, math.nan, math.nan, math.nan, False)
+    for _ in range(int(round(300.0 / TS))):
+        k, k_box = sched.update(inp).K, box.update(inp).K
+    for T, got in ((550.0, k), (750.0, k_box)):
+        assert got == pytest.approx(1.0 / (0.9 * 2.0 * (1.0 - math.exp(-245.0 / T))), rel=0.01)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "needle"),
-    [({"start_margin": 0.5}, "start_margin"), ({"T_s": 50.0}, "T box"), ({"T_s": 900.0}, "T box")],
+    [
+        ({"start_margin": 0.5}, "start_margin"),
+        ({"T_s": 50.0}, "T box"),
+        ({"T_s": 900.0}, "T box"),
+        ({"evidence_T_s": 50.0}, "evidence_T_s=50.0 s must lie in the design's T box"),
+        ({"evidence_T_s": 900.0}, "evidence_T_s=900.0 s must lie in the design's T box"),
+    ],
 )
 def test_settings_outside_their_range_are_refused_naming_them(kwargs, needle):
     env = envelope_of(load_controller("lpv:cautious", TS))
