@@ -39,9 +39,28 @@ from typing import Any
 
 import numpy as np
 
-from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution
+from pressor.contracts.drug import DoseScale
+from pressor.runtime.estimation import cautious
+from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution, DesignEnvelope
 
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
+
+
+def use_cautious_source(cls: type[cautious.CautiousSchedule], **settings: Any) -> None:
+    """Make ``--schedule cautious`` build ``cls(envelope, sample_period_s, dose, **settings)`` in
+    this process and in the workers forked from it (the source is looked up in its module at
+    each run): how a research variant of the cautious source is measured with :func:`main`."""
+
+    class _Installed(cls):  # type: ignore[valid-type, misc]
+        def __init__(
+            self,
+            envelope: DesignEnvelope,
+            sample_period_s: float = 0.1,
+            dose: DoseScale | None = None,
+        ) -> None:
+            super().__init__(envelope, sample_period_s, dose, **settings)
+
+    cautious.CautiousSchedule = _Installed  # type: ignore[misc]
 
 
 def _first_entry_min(t_s: np.ndarray, mapv: np.ndarray, target: np.ndarray, t0: float) -> float:

@@ -32,11 +32,13 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Callable
 
 from pressor.contracts.drug import DoseScale
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
 from pressor.runtime.estimation import cautious
 from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
+from research import cautious_levels
 
 #: the longest delay (s) the source can read the rate history back by (the shipped models' are
 #: at most a few minutes)
@@ -108,48 +110,28 @@ class KnownLagSchedule(CautiousSchedule):
         return super().update(inputs)
 
 
-def install(effect_lag_s: float | None | str = "drug", lag_T_s: float | None = None) -> None:
-    """Make ``--schedule cautious`` build a :class:`KnownLagSchedule` in this process and in the
-    workers forked from it (``make_schedule`` imports the class from its module at each call)."""
+def _seconds_or(words: dict[str, object], flag: str) -> Callable[[str], object]:
+    """An argparse type: one of ``words`` (mapped to its value) or a positive number of s."""
 
-    class _Installed(KnownLagSchedule):
-        def __init__(
-            self,
-            envelope: DesignEnvelope,
-            sample_period_s: float = 0.1,
-            dose: DoseScale | None = None,
-        ) -> None:
-            super().__init__(envelope, sample_period_s, dose, effect_lag_s, lag_T_s)
+    def parse(text: str) -> object:
+        if text in words:
+            return words[text]
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0.0):
+            allowed = " or ".join(f"'{w}'" for w in words)
+            raise argparse.ArgumentTypeError(
+                f"{flag} {text!r}: allowed {allowed} or a lag in s (> 0)"
+            )
+        return value
 
-    cautious.CautiousSchedule = _Installed  # type: ignore[misc]
-
-
-def _lag(text: str) -> float | None:
-    if text == "device":
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"--lag {text!r}: allowed 'device' or a lag in s (> 0)")
-    return value
+    return parse
 
 
-def _effect_site(text: str) -> float | None | str:
-    if text == "keep":
-        return "drug"
-    if text == "none":
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(
-            f"--effect-site {text!r}: allowed 'none', 'keep' or a lag in s (> 0)"
-        )
-    return value
+_lag = _seconds_or({"device": None}, "--lag")
+_effect_site = _seconds_or({"none": None, "keep": "drug"}, "--effect-site")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -169,9 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         " patient's T in s",
     )
     a, rest = p.parse_known_args(argv)
-    install(a.effect_site, a.lag)
-    from research import cautious_levels
-
+    cautious_levels.use_cautious_source(KnownLagSchedule, effect_lag_s=a.effect_site, lag_T_s=a.lag)
     return cautious_levels.main(rest)
 
 

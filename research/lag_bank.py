@@ -28,6 +28,7 @@ from pressor.contracts.drug import DoseScale
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
 from pressor.runtime.estimation import cautious
 from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
+from research import cautious_levels
 
 
 @dataclass(frozen=True)
@@ -128,21 +129,6 @@ class LagBankSchedule(CautiousSchedule):
                 return
 
 
-def install(settings: BankSettings) -> None:
-    """Make ``--schedule cautious`` build a :class:`LagBankSchedule` here and in forked workers."""
-
-    class _Installed(LagBankSchedule):
-        def __init__(
-            self,
-            envelope: DesignEnvelope,
-            sample_period_s: float = 0.1,
-            dose: DoseScale | None = None,
-        ) -> None:
-            super().__init__(envelope, sample_period_s, dose, settings)
-
-    cautious.CautiousSchedule = _Installed  # type: ignore[misc]
-
-
 def main(argv: list[str] | None = None) -> int:
     """The bank's settings here, every other argument :mod:`research.cautious_levels`'s."""
     d = BankSettings()
@@ -156,9 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     a, rest = p.parse_known_args(argv)
     if a.lags < 2 or a.delays < 2:
         p.error(f"--lags {a.lags} and --delays {a.delays}: allowed 2 or more each")
-    install(BankSettings(a.lags, a.delays, a.rho, a.slack_mmhg, a.rise_mmhg, a.after_s))
-    from research import cautious_levels
-
+    settings = BankSettings(a.lags, a.delays, a.rho, a.slack_mmhg, a.rise_mmhg, a.after_s)
+    cautious_levels.use_cautious_source(LagBankSchedule, settings=settings)
     return cautious_levels.main(rest)
 
 

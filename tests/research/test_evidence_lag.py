@@ -8,22 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from pressor.contracts.drug import DoseScale
 from pressor.runtime.core.scheduling import ScheduleInput
-from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
+from pressor.runtime.estimation.cautious import CautiousSchedule
 from research.evidence_lag import KnownLagSchedule, _effect_site, _lag
+from tests.support.cautious_envelope import DOSE, ENVELOPE, TS
 
-TS = 0.1
-DOSE = DoseScale(100.0, 70.0)
-# a box of T 100-400 s and tau 10-45 s; the population's top is 10 mmHg/(ml/h) at this syringe
-ENVELOPE = DesignEnvelope(
-    box=((0.01, 50.0), (100.0, 400.0), (10.0, 45.0)),
-    fall_per_s=0.04,
-    rise_per_s=0.0015,
-    population=(DOSE.k_dose(0.05), DOSE.k_dose(10.0)),
-    concentration_ug_ml=100.0,
-    drug="a drug without a caution",
-)
 K, T, TAU, RATE = 0.5, 120.0, 15.0, 20.0  # the patient (mmHg/(ml/h), s, s) and its rate (ml/h)
 
 
@@ -73,5 +62,5 @@ def test_lag_and_effect_site_arguments_name_what_is_allowed():
     assert _effect_site("keep") == "drug"
     assert _effect_site("none") is None
     assert _effect_site("60") == 60.0
-    with pytest.raises(argparse.ArgumentTypeError, match="'none', 'keep' or a lag in s"):
+    with pytest.raises(argparse.ArgumentTypeError, match="'none' or 'keep' or a lag in s"):
         _effect_site("-1")

@@ -4,21 +4,10 @@ from __future__ import annotations
 
 import math
 
-from pressor.contracts.drug import DoseScale
 from pressor.runtime.core.scheduling import ScheduleInput
-from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
+from pressor.runtime.estimation.cautious import CautiousSchedule
 from research.lag_bank import BankSettings, LagBankSchedule
-
-TS = 0.1
-DOSE = DoseScale(100.0, 70.0)
-ENVELOPE = DesignEnvelope(
-    box=((0.01, 50.0), (100.0, 400.0), (10.0, 45.0)),
-    fall_per_s=0.04,
-    rise_per_s=0.0015,
-    population=(DOSE.k_dose(0.05), DOSE.k_dose(10.0)),
-    concentration_ug_ml=100.0,
-    drug="a drug without a caution",
-)
+from tests.support.cautious_envelope import DOSE, ENVELOPE, TS
 
 
 def _run(source: CautiousSchedule, T: float, tau: float, until_s: float) -> float:
