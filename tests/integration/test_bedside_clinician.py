@@ -98,7 +98,10 @@ def test_stop_from_the_target_file_holds_until_resume_in_the_file(tmp_path):
     assert said == [("stop", f"file {target}"), ("resume", f"file {target}")]
 
 
-@pytest.mark.parametrize(("on_stop", "mode"), [("zero", MODE_STOP), ("held", MODE_SAFE)])
+@pytest.mark.parametrize(
+    ("on_stop", "mode"),
+    [("zero", MODE_STOP), pytest.param("held", MODE_SAFE, marks=pytest.mark.slow)],
+)
 def test_sigterm_ends_on_the_command_on_stop_chooses(tmp_path, on_stop, mode):
     with probe_run(tmp_path, "--on-stop", on_stop) as r:
         p = r.probe

@@ -30,8 +30,16 @@ def _key(tmp_path, name: str, seed: int):
     ("device_args", "runtime_key", "needle"),
     [
         ((), "a", "the device's frames are unsigned"),
-        (("--signing-key", "b"), "a", "the device signs with another key"),
-        (("--signing-key", "a"), None, "the device signs its frames but this end has no key"),
+        # the other two wait the same 3 s on the same path: in the slow suite (README)
+        pytest.param(
+            ("--signing-key", "b"), "a", "the device signs with another key", marks=pytest.mark.slow
+        ),
+        pytest.param(
+            ("--signing-key", "a"),
+            None,
+            "the device signs its frames but this end has no key",
+            marks=pytest.mark.slow,
+        ),
     ],
 )
 def test_a_signing_mismatch_fails_the_handshake_at_once_naming_signing(
@@ -117,7 +125,13 @@ def test_key_files_sign_with_the_wall_clock_and_seeded_keys_with_the_run_clock(t
 
 
 @pytest.mark.parametrize(
-    ("device_key", "runtime_key"), [("b", "a"), (None, "a"), ("a", None)], ids=str
+    ("device_key", "runtime_key"),
+    [
+        ("b", "a"),
+        pytest.param(None, "a", marks=pytest.mark.slow),  # the same 3 s path: the slow suite
+        pytest.param("a", None, marks=pytest.mark.slow),
+    ],
+    ids=str,
 )
 def test_both_real_ends_name_a_signing_mismatch_within_3_s(tmp_path, device_key, runtime_key):
     """``pressor device`` and ``pressor run`` on bridged ttys, keyed differently: each exits with

@@ -124,6 +124,7 @@ def test_faults_lists_each_detected_kind_with_its_bound(tmp_path):
     assert "23 at noise 1 mmHg, quantum 1 mmHg" in proc.stdout  # the stuck rule's count
 
 
+@pytest.mark.slow  # test_sil_trajectory_equals_in_process_simulator is its fast sibling (the PI)
 def test_sil_with_shipped_lpv_over_30_min_equals_in_process_simulator(tmp_path):
     """The issue's done-when run: lpv, paper-tracking, patient seed 3, 1800 s, over a pty."""
     from pressor.hil_sim.episode import simulate
