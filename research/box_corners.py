@@ -23,14 +23,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
-from collections import deque
 from collections.abc import Mapping
 from pathlib import Path
 from typing import ClassVar
 
 from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale
+from pressor.hil_sim.patients.patient import FrozenParams, Patient
 from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution
 
 #: drug -> (generated module of its default design, syringe µg/ml)
@@ -54,9 +53,11 @@ def corner(drug: str) -> tuple[float, float, float]:
     return float(top), float(module.GRID_HI[1]), float(module.GRID_HI[2])
 
 
-class _FirstOrder:
-    """K·e^(−τs)/(Ts+1) (exact for a rate held over each step), MAP from :data:`BASELINE_MMHG`.
-    ``patient_seed`` = T in s × 1000 + K in % of the drug's top (1-999)."""
+class _FirstOrder(Patient):
+    """The project's frozen first-order patient (:class:`pressor.hil_sim.patients.patient.Patient`
+    on :class:`~pressor.hil_sim.patients.patient.FrozenParams`: K·e^(−τs)/(Ts+1), MAP from
+    :data:`BASELINE_MMHG`) as a patient model of a drug. ``patient_seed`` = T in s × 1000 + K in %
+    of the drug's top (1-999); 0 parts mean the box's longest T and the top."""
 
     DRUG: ClassVar[str]
     DRUG_CONCENTRATION_UG_ML: ClassVar[float]
@@ -64,51 +65,15 @@ class _FirstOrder:
         "K": "mmHg/(ml/h)",
         "T_s": "s",
         "tau_s": "s",
+        "baseline_mmhg": "mmHg",
     }
-    baseline_mmhg = BASELINE_MMHG
-
-    def __init__(self, K: float, T_s: float, tau_s: float, step_s: float) -> None:
-        self._K, self._T, self._tau = K, T_s, tau_s
-        self._a = math.exp(-step_s / T_s)
-        self._line = deque([0.0] * max(1, round(tau_s / step_s)))
-        self._y = 0.0
 
     @classmethod
     def from_seed(cls, patient_seed: int, step_s: float) -> _FirstOrder:
         top, t_hi, tau_hi = corner(cls.DRUG)
         T_s = patient_seed // 1000 or t_hi
         pct = patient_seed % 1000 or 100
-        return cls(top * pct / 100.0, float(T_s), tau_hi, step_s)
-
-    @property
-    def map_mmhg(self) -> float:
-        return BASELINE_MMHG + self._y
-
-    @property
-    def delta_map_mmhg(self) -> float:
-        return self._y
-
-    @property
-    def K(self) -> float:
-        return self._K
-
-    @property
-    def T_s(self) -> float:
-        return self._T
-
-    @property
-    def tau_s(self) -> float:
-        return self._tau
-
-    def step(self, rate_ml_h: float) -> None:
-        self._line.append(rate_ml_h)
-        self._y = self._a * self._y + (1.0 - self._a) * self._K * self._line.popleft()
-
-    def coefficients(self) -> dict[str, float]:
-        return {"K": self._K, "T_s": self._T, "tau_s": self._tau}
-
-    def max_delta_map_mmhg(self, max_rate_ml_h: float) -> float:
-        return self._K * max_rate_ml_h
+        return cls(FrozenParams(top * pct / 100.0, float(T_s), tau_hi, BASELINE_MMHG), step_s)
 
 
 class PhenylephrineCorner(_FirstOrder):

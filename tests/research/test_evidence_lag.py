@@ -8,23 +8,16 @@ import math
 import numpy as np
 import pytest
 
-from pressor.runtime.core.scheduling import ScheduleInput
 from pressor.runtime.estimation.cautious import CautiousSchedule
 from research.evidence_lag import KnownLagSchedule, _effect_site, _lag
-from tests.support.cautious_envelope import DOSE, ENVELOPE, TS
+from tests.support.cautious_envelope import DOSE, ENVELOPE, TS, k_hat_on_a_first_order_patient
 
 K, T, TAU, RATE = 0.5, 120.0, 15.0, 20.0  # the patient (mmHg/(ml/h), s, s) and its rate (ml/h)
 
 
 def _k_hat(source: CautiousSchedule, device: tuple[float, float], until_s: float) -> np.ndarray:
-    """K̂ at each tick of a first-order patient (closed form) infused at RATE from t = 0."""
-    out = []
-    for i in range(int(round(until_s / TS))):
-        t = i * TS
-        rise = K * RATE * (1.0 - math.exp(-(t - TAU) / T)) if t > TAU else 0.0
-        sched = source.update(ScheduleInput(50.0 + rise, 0, RATE, math.nan, *device, True))
-        out.append(sched.K)
-    return np.array(out)
+    """K̂ at each tick of the first-order patient above, infused at RATE from t = 0."""
+    return k_hat_on_a_first_order_patient(source, K, T, TAU, RATE, until_s, device)
 
 
 def test_the_patients_own_lag_brings_k_hat_near_its_gain_where_the_boxs_slowest_is_far_above():

@@ -2,23 +2,14 @@
 
 from __future__ import annotations
 
-import math
-
-from pressor.runtime.core.scheduling import ScheduleInput
 from pressor.runtime.estimation.cautious import CautiousSchedule
 from research.lag_bank import BankSettings, LagBankSchedule
-from tests.support.cautious_envelope import DOSE, ENVELOPE, TS
+from tests.support.cautious_envelope import DOSE, ENVELOPE, TS, k_hat_on_a_first_order_patient
 
 
 def _run(source: CautiousSchedule, T: float, tau: float, until_s: float) -> float:
     """K̂ after ``until_s`` s of a first-order patient (K 0.5, closed form) at 20 ml/h."""
-    k = math.nan
-    for i in range(int(round(until_s / TS))):
-        t = i * TS
-        rise = 0.5 * 20.0 * (1.0 - math.exp(-(t - tau) / T)) if t > tau else 0.0
-        nan = math.nan
-        k = source.update(ScheduleInput(50.0 + rise, 0, 20.0, nan, nan, nan, False)).K
-    return k
+    return float(k_hat_on_a_first_order_patient(source, 0.5, T, tau, 20.0, until_s)[-1])
 
 
 def test_a_fast_patient_drops_the_slow_lags_and_k_hat_falls_below_the_shipped_sources():
