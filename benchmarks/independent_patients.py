@@ -15,6 +15,20 @@ model are not)::
     python -m benchmarks.independent_patients                  # 10 patients x lpv:cautious, pi, smith
     python -m benchmarks.independent_patients --controller pi \\
         --controller new=out/lpv_map_controller.py --patients 3
+    python -m benchmarks.independent_patients --drug norepinephrine --patients 50 \\
+        --controller lpv:norepinephrine-cautious --controller pi
+
+``--drug norepinephrine`` plays the model's one-compartment variant (no peripheral compartment, no
+tolerance, a Hill effect, a wider spread: ``ONE_COMPARTMENT_RANGES`` of
+:mod:`pressor.hil_sim.patients.pkpd`) as a norepinephrine patient: the device announces
+norepinephrine at 16 µg/ml (4 mg in 250 ml), ``pressor run`` doses a 70 kg patient (``--drug
+norepinephrine --concentration-ug-ml 16 --weight-kg 70``), and the patient counts each µg of
+norepinephrine as 10 µg of phenylephrine, the published equivalence of the two (:data:`DRUGS`).
+The variant's kinetics lie within those published for norepinephrine (one compartment, clearance
+1.5-4 l/min, volume 4-12 l; Beloeil et al., Br J Anaesth 2005: 0.9-3 l/min, 8.8 l), and its EC50 of
+15-80 ng/ml of phenylephrine is 1.5-8 ng/ml of norepinephrine, within the range of Joachim et al.
+(Br J Clin Pharmacol 2024: 2.5 ng/ml ×/÷ 3). It is written apart from the norepinephrine design's
+own patient model (:mod:`pressor.hil_sim.patients.norepinephrine`).
 
 Per patient and controller it prints the IAE over the whole run (mmHg·s, on the true MAP), the
 start step's overshoot (% of the step, before the haemorrhage), each disturbance's peak deviation
@@ -42,6 +56,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+import numpy as np
+
 from pressor.contracts.metrics import run_metrics
 from pressor.hil_sim.patients.pkpd import (
     BOLUS_AT_S,
@@ -57,8 +73,66 @@ from tests.support.protocol_harness import wait_for_port_open, write_key
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_PERIOD_S = 0.1  # 1 / pressor run's default --rate (s)
 PUMP_MAX_ML_H = 120.0  # the controllers' default maximum rate (ml/h)
-CONCENTRATION_UG_ML = 100.0  # phenylephrine syringe, the runtime's default --concentration-ug-ml
-DEFAULT_CONTROLLERS = ("lpv:cautious", "pi", "smith")
+
+
+@dataclass(frozen=True)
+class Drug:
+    """The drug a benchmark's device announces, and how its patients count it.
+
+    Attributes
+    ----------
+    name
+        The drug the device announces and ``pressor run --drug`` loads.
+    concentration_ug_ml
+        The syringe (µg/ml), announced and passed as ``--concentration-ug-ml``.
+    phenylephrine_ug_per_ug
+        µg of phenylephrine the patient model counts for each µg of the drug (the model's
+        EC50 is in ng/ml of phenylephrine).
+    cohort
+        The :func:`pressor.hil_sim.patients.pkpd.draw_patient` model its patients are drawn from.
+    weight_kg
+        The patient's weight passed as ``--weight-kg`` (kg), or None (a drug dosed per minute).
+    controllers
+        The controllers run when no ``--controller`` is given.
+    """
+
+    name: str
+    concentration_ug_ml: float
+    phenylephrine_ug_per_ug: float
+    cohort: str
+    weight_kg: float | None
+    controllers: tuple[str, ...]
+
+    @property
+    def patient_concentration_ug_ml(self) -> float:
+        """The syringe in the patient model's µg of phenylephrine per ml."""
+        return self.concentration_ug_ml * self.phenylephrine_ug_per_ug
+
+    def run_flags(self) -> list[str]:
+        """``pressor run``'s flags for this drug (none for the runtime's default drug)."""
+        if self.name == "phenylephrine":
+            return []
+        flags = ["--drug", self.name, "--concentration-ug-ml", f"{self.concentration_ug_ml:g}"]
+        return flags + ([] if self.weight_kg is None else ["--weight-kg", f"{self.weight_kg:g}"])
+
+
+#: the drugs a benchmark plays. Phenylephrine: the two-compartment model at the runtime's default
+#: syringe. Norepinephrine: the one-compartment variant, each µg counted as 10 µg of phenylephrine
+#: (phenylephrine's factor in the norepinephrine-equivalent dose is 1/10: Goradia et al., J Crit
+#: Care 2021;61:233; Kotani et al., Crit Care 2023;27:29), 4 mg in 250 ml, 70 kg.
+DRUGS: dict[str, Drug] = {
+    "phenylephrine": Drug(
+        "phenylephrine", 100.0, 1.0, "two-compartment", None, ("lpv:cautious", "pi", "smith")
+    ),
+    "norepinephrine": Drug(
+        "norepinephrine",
+        16.0,
+        10.0,
+        "one-compartment",
+        70.0,
+        ("lpv:norepinephrine-cautious", "pi", "smith"),
+    ),
+}
 
 
 @dataclass(frozen=True)
@@ -72,6 +146,8 @@ class Setup:
     #: (:func:`research.step_fit.step_response_fit`) as SCHEDULING_PARAMS and ``pressor run``
     #: schedules on it (``--schedule oracle``): an identification made before the loop
     device_fit: bool = False
+    #: the drug the device announces and the patients are dosed with (:data:`DRUGS`)
+    drug: Drug = DRUGS["phenylephrine"]
 
 
 def controller_label(spec: str) -> tuple[str, str]:
@@ -91,9 +167,10 @@ def launch(
     patient: IndependentPatient,
     controller: str,
     schedule: str | None = None,
+    drug: Drug = DRUGS["phenylephrine"],
 ) -> list[float]:
-    """Run ``pressor run --controller controller [--schedule schedule]`` on a fresh pty against
-    ``patient`` (``schedule`` None: pressor run's default).
+    """Run ``pressor run --controller controller [--schedule schedule]`` with ``drug``'s flags on
+    a fresh pty against ``patient`` (``schedule`` None: pressor run's default).
 
     Returns the true MAP (mmHg) at every tick; raises RuntimeError when the run did not finish
     cleanly (its stderr's tail in the message).
@@ -105,6 +182,7 @@ def launch(
     argv = [sys.executable, "-m", "pressor", "run", "--port", os.ttyname(slave)]
     argv += ["--signing-key", str(key_file), "--controller", controller]
     argv += [] if schedule is None else ["--schedule", schedule]
+    argv += drug.run_flags()
     err = workdir / "run.err"
     with (workdir / "run.out").open("w") as fout, err.open("w") as ferr:
         proc = subprocess.Popen(
@@ -153,10 +231,11 @@ def run_patient(
     :data:`HEMORRHAGE_AT_S` and :data:`BOLUS_AT_S` when inside the run), ``reachable`` and
     ``final_map_mmhg``.
     """
-    patient = RecordingPatient(params, SAMPLE_PERIOD_S, CONCENTRATION_UG_ML)
+    conc = setup.drug.patient_concentration_ug_ml
+    patient = RecordingPatient(params, SAMPLE_PERIOD_S, conc)
     if setup.device_fit:  # what the device sends as K, T, tau
         patient.K, patient.T_s, patient.tau_s = step_response_fit(
-            params, setup.target_mmhg, SAMPLE_PERIOD_S, CONCENTRATION_UG_ML, PUMP_MAX_ML_H
+            params, setup.target_mmhg, SAMPLE_PERIOD_S, conc, PUMP_MAX_ML_H
         )
     n_ticks = round(setup.duration_s / SAMPLE_PERIOD_S)
     cfg = DeviceConfig(
@@ -164,14 +243,15 @@ def run_patient(
         target_mmhg=setup.target_mmhg,
         send_scheduling=setup.device_fit,
         pump_max_ml_h=PUMP_MAX_ML_H,
-        concentration_ug_ml=CONCENTRATION_UG_ML,
+        drug=setup.drug.name,
+        concentration_ug_ml=setup.drug.concentration_ug_ml,
         noise_mmhg=setup.noise_mmhg,
         seed=seed,
         name="independent",
     )
     with tempfile.TemporaryDirectory(prefix="indep-run-") as tmp:
         schedule = "oracle" if setup.device_fit else None
-        true_map = launch(dialect, Path(tmp), cfg, patient, controller, schedule)
+        true_map = launch(dialect, Path(tmp), cfg, patient, controller, schedule, setup.drug)
     t_s = [k * SAMPLE_PERIOD_S for k in range(n_ticks)]
     need = patient.steady_state_rate_ml_h(setup.target_mmhg + params.hemorrhage_mmhg, PUMP_MAX_ML_H)
     m = run_metrics(
@@ -186,8 +266,29 @@ def run_patient(
         reachable=need is not None,
         events=[("hemorrhage", HEMORRHAGE_AT_S), ("bolus", BOLUS_AT_S)],
     )
-    keep = ("iae_mmhg_s", "step_iae_mmhg_s", "step_overshoot_pct", "disturbances", "stable")
-    return {k: m[k] for k in keep} | {"reachable": need is not None, "final_map_mmhg": true_map[-1]}
+    keep = (
+        "iae_mmhg_s",
+        "step_iae_mmhg_s",
+        "step_overshoot_pct",
+        "disturbances",
+        "stable",
+        "time_to_band_s",
+        "time_in_band_pct",
+    )
+    return {k: m[k] for k in keep} | {
+        "reachable": need is not None,
+        "final_map_mmhg": true_map[-1],
+        "longest_above_10_s": longest_above_s(true_map, setup.target_mmhg + 10.0),
+    }
+
+
+def longest_above_s(map_mmhg: list[float], level_mmhg: float) -> float:
+    """The longest stretch (s) of consecutive ticks with MAP above ``level_mmhg`` (mmHg)."""
+    longest = run = 0
+    for y in map_mmhg:
+        run = run + 1 if y > level_mmhg else 0
+        longest = max(longest, run)
+    return longest * SAMPLE_PERIOD_S
 
 
 def _fmt(x: float | None, spec: str) -> str:
@@ -266,6 +367,35 @@ def summary_lines(results: dict[str, list[dict[str, Any]]], reference: str = "pi
     return lines
 
 
+def figure_lines(results: dict[str, list[dict[str, Any]]], duration_s: float) -> list[str]:
+    """Per controller, over its reachable patients, issue 41's figures: step overshoot (% of the
+    step) median / p90 / max, patients above target + 10 mmHg for longer than 30 s, time to ±5
+    mmHg (min; a patient that never gets there counts as ``duration_s``) median / p90, time in
+    ±5 mmHg after the first entry (%, median), and the stability rule's flags."""
+    lines = []
+    for name, records in results.items():
+        reach = [r for r in records if r["reachable"]]
+        if not reach:
+            lines.append(f"{name}: no reachable patient")
+            continue
+        over = [r["step_overshoot_pct"] or 0.0 for r in reach]
+        to_band = [
+            (duration_s if r["time_to_band_s"] is None else r["time_to_band_s"]) / 60.0
+            for r in reach
+        ]
+        in_band = [r["time_in_band_pct"] for r in reach if r["time_in_band_pct"] is not None]
+        above = sum(r["longest_above_10_s"] > 30.0 for r in reach)
+        lines.append(
+            f"{name}: {len(reach)} reachable; overshoot % median / p90 / max"
+            f" {np.median(over):.1f} / {np.percentile(over, 90):.1f} / {max(over):.1f};"
+            f" > 30 s above +10 mmHg {above}; to ±5 mmHg min median / p90"
+            f" {np.median(to_band):.1f} / {np.percentile(to_band, 90):.1f};"
+            f" in ±5 after entry % median {_fmt(_median(in_band), '.1f')};"
+            f" flagged unstable {sum(not r['stable'] for r in reach)}"
+        )
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         description=__doc__,
@@ -278,8 +408,17 @@ def main(argv: list[str] | None = None) -> int:
         action="append",
         metavar="[NAME=]SPEC",
         help="a pressor run --controller spec (lpv, pi, smith[:LAMBDA_S], or a generated .py), "
-        "repeatable; NAME labels it (default: a module's folder name) "
-        f"(default: {', '.join(DEFAULT_CONTROLLERS)})",
+        "repeatable; NAME labels it (default: a module's folder name) (default: "
+        + "; ".join(f"{d.name}: {', '.join(d.controllers)}" for d in DRUGS.values())
+        + ")",
+    )
+    p.add_argument(
+        "--drug",
+        choices=tuple(DRUGS),
+        default="phenylephrine",
+        help="the drug the device announces: phenylephrine (the two-compartment model, 100 ug/ml)"
+        " or norepinephrine (the one-compartment variant, 16 ug/ml, 70 kg; the module docstring)"
+        " (default: phenylephrine)",
     )
     p.add_argument(
         "--duration-s",
@@ -304,13 +443,15 @@ def main(argv: list[str] | None = None) -> int:
         " pressor run's default schedule)",
     )
     args = p.parse_args(argv)
-    setup = Setup(args.duration_s, args.target_mmhg, args.noise_mmhg, args.device_fit)
-    controllers = [controller_label(s) for s in args.controller or DEFAULT_CONTROLLERS]
-    cohort = [draw_patient(args.seed, i) for i in range(args.patients)]
+    drug = DRUGS[args.drug]
+    setup = Setup(args.duration_s, args.target_mmhg, args.noise_mmhg, args.device_fit, drug)
+    controllers = [controller_label(s) for s in args.controller or drug.controllers]
+    cohort = [draw_patient(args.seed, i, drug.cohort) for i in range(args.patients)]
     print(
         f"independent patients: {args.patients}, seed {args.seed}, {setup.duration_s:g} s each, "
         f"target {setup.target_mmhg:g} mmHg, monitor noise {setup.noise_mmhg:g} mmHg, "
-        f"phenylephrine {CONCENTRATION_UG_ML:g} ug/ml, pump max {PUMP_MAX_ML_H:g} ml/h; "
+        f"{drug.name} {drug.concentration_ug_ml:g} ug/ml ({drug.cohort} patients), "
+        f"pump max {PUMP_MAX_ML_H:g} ml/h; "
         f"haemorrhage at {HEMORRHAGE_AT_S:g} s, bolus at {BOLUS_AT_S:g} s; schedule "
         + (
             "the device's step-response fit (oracle)"
@@ -322,7 +463,7 @@ def main(argv: list[str] | None = None) -> int:
         "  patient  baseline mmHg  delay s  hem mmHg  bolus mmHg  steady ml/h at target, after hem"
     )
     for i, params in enumerate(cohort):
-        pt = IndependentPatient(params, SAMPLE_PERIOD_S, CONCENTRATION_UG_ML)
+        pt = IndependentPatient(params, SAMPLE_PERIOD_S, drug.patient_concentration_ug_ml)
         need = pt.steady_state_rate_ml_h(setup.target_mmhg, PUMP_MAX_ML_H)
         need_hem = pt.steady_state_rate_ml_h(
             setup.target_mmhg + params.hemorrhage_mmhg, PUMP_MAX_ML_H
@@ -353,6 +494,9 @@ def main(argv: list[str] | None = None) -> int:
         print_table(name, spec, results[name])
     print("\nsummary")
     for line in summary_lines(results):
+        print(f"  {line}")
+    print("\nfigures (reachable patients)")
+    for line in figure_lines(results, setup.duration_s):
         print(f"  {line}")
     return 0
 

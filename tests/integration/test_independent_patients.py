@@ -11,8 +11,11 @@ from types import ModuleType
 import pytest
 
 from benchmarks.independent_patients import (
+    DRUGS,
     Setup,
     controller_label,
+    figure_lines,
+    longest_above_s,
     main,
     run_patient,
     summary_lines,
@@ -109,6 +112,47 @@ def test_summary_counts_patients_below_the_pi_and_takes_median_ratios_per_segmen
         "median IAE ratio lpv/pi: 1.500 (step window 2.000, haemorrhage 1.500, bolus 1.000)",
     ]
     assert summary_lines({"lpv": results["lpv"]}) == ["no pi run: no IAE comparison"]
+
+
+def test_the_longest_stretch_above_a_level_counts_consecutive_ticks_only() -> None:
+    # 0.1 s ticks: stretches of 2, 3 and 1 ticks above 80 mmHg
+    assert longest_above_s([81, 82, 70, 81, 85, 90, 80, 81], 80.0) == pytest.approx(0.3)
+    assert longest_above_s([70.0, 80.0], 80.0) == 0.0
+
+
+def test_figures_count_reachable_patients_and_one_never_in_the_band_counts_the_run() -> None:
+    def rec(over: float, to_band_s: float | None, reachable: bool = True) -> dict[str, object]:
+        return {
+            "step_overshoot_pct": over,
+            "time_to_band_s": to_band_s,
+            "time_in_band_pct": None if to_band_s is None else 96.0,
+            "longest_above_10_s": 40.0 if over > 50 else 0.0,
+            "stable": True,
+            "reachable": reachable,
+        }
+
+    results = {"x": [rec(0.0, 60.0), rec(10.0, None), rec(80.0, 600.0, reachable=False)]}
+    # reachable: overshoot 0 and 10 % (median 5, p90 9), to the band 1 min and the run's 60 min
+    assert figure_lines(results, 3600.0) == [
+        "x: 2 reachable; overshoot % median / p90 / max 5.0 / 9.0 / 10.0; > 30 s above +10 mmHg 0;"
+        " to ±5 mmHg min median / p90 30.5 / 54.1; in ±5 after entry % median 96.0;"
+        " flagged unstable 0"
+    ]
+
+
+def test_norepinephrine_runs_pressor_run_on_its_syringe_and_weight_and_the_patient_counts_it(
+    dialect: ModuleType,
+) -> None:
+    ne = DRUGS["norepinephrine"]
+    assert ne.run_flags() == [
+        "--drug", "norepinephrine", "--concentration-ug-ml", "16", "--weight-kg", "70"
+    ]  # fmt: skip
+    # 16 ug/ml of norepinephrine is 160 ug/ml of phenylephrine to the patient model
+    assert ne.patient_concentration_ug_ml == pytest.approx(160.0)
+    params = replace(draw_patient(2026, 0, "one-compartment"), baseline_mmhg=60.0)
+    rec = run_patient(dialect, params, "pi", Setup(duration_s=900.0, drug=ne), seed=1)
+    assert rec["reachable"] and rec["disturbances"] == []
+    assert abs(rec["final_map_mmhg"] - 70.0) <= 5.0
 
 
 def test_controller_names_come_from_the_spec_or_the_module_folder() -> None:
