@@ -18,24 +18,11 @@ model are not)::
     python -m benchmarks.independent_patients --drug norepinephrine --patients 50 \\
         --controller lpv:norepinephrine-cautious --controller pi
 
-``--drug norepinephrine`` plays the model's one-compartment variant (no peripheral compartment, no
-tolerance, a Hill effect, a wider spread: ``ONE_COMPARTMENT_RANGES`` of
-:mod:`pressor.hil_sim.patients.pkpd`) as a norepinephrine patient: the device announces
-norepinephrine at 16 µg/ml (4 mg in 250 ml), ``pressor run`` doses a 70 kg patient (``--drug
-norepinephrine --concentration-ug-ml 16 --weight-kg 70``), and the patient counts each µg of
-norepinephrine as 10 µg of phenylephrine, the published equivalence of the two (:data:`DRUGS`).
-The variant's kinetics lie within those published for norepinephrine (one compartment, clearance
-1.5-4 l/min, volume 4-12 l; Beloeil et al., Br J Anaesth 2005: 0.9-3 l/min, 8.8 l), and its EC50 of
-15-80 ng/ml of phenylephrine is 1.5-8 ng/ml of norepinephrine, within the range of Joachim et al.
-(Br J Clin Pharmacol 2024: 2.5 ng/ml ×/÷ 3). It is written apart from the norepinephrine design's
-own patient model (:mod:`pressor.hil_sim.patients.norepinephrine`).
-
-Per patient and controller it prints the IAE over the whole run (mmHg·s, on the true MAP), the
-start step's overshoot (% of the step, before the haemorrhage), each disturbance's peak deviation
-(mmHg, signed) and recovery into ±5 mmHg (s), as docs/METRICS.md defines them; then per controller
-"IAE below PI's: k of N" and the median per-patient IAE ratio to the PI. Reachable: the patient's
-steady-state rate for the target after the haemorrhage is within the pump's maximum. The same
-seed prints the same bytes; progress and wall times go to stderr.
+``--drug norepinephrine`` plays the model's one-compartment variant as a norepinephrine patient
+(the patients of :class:`research.steep_patients.SteepNorepinephrine`, whose docstring gives the
+sources): the device announces norepinephrine at 16 µg/ml (4 mg in 250 ml), ``pressor run`` doses
+a 70 kg patient (``--drug norepinephrine --concentration-ug-ml 16 --weight-kg 70``), and the
+patient counts each µg of norepinephrine as 10 µg of phenylephrine.
 """
 
 from __future__ import annotations
@@ -66,6 +53,7 @@ from pressor.hil_sim.patients.pkpd import (
     PatientParams,
     draw_patient,
 )
+from research.steep_patients import NOREPINEPHRINE_UG_ML, PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG
 from research.step_fit import step_response_fit
 from tests.support.protocol_device import DeviceConfig, ProtocolDevice, build_dialect, read_key
 from tests.support.protocol_harness import wait_for_port_open, write_key
@@ -117,17 +105,16 @@ class Drug:
 
 
 #: the drugs a benchmark plays. Phenylephrine: the two-compartment model at the runtime's default
-#: syringe. Norepinephrine: the one-compartment variant, each µg counted as 10 µg of phenylephrine
-#: (phenylephrine's factor in the norepinephrine-equivalent dose is 1/10: Goradia et al., J Crit
-#: Care 2021;61:233; Kotani et al., Crit Care 2023;27:29), 4 mg in 250 ml, 70 kg.
+#: syringe. Norepinephrine: the one-compartment variant at 4 mg in 250 ml, 70 kg, each µg counted
+#: as :data:`~research.steep_patients.PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG` µg of phenylephrine.
 DRUGS: dict[str, Drug] = {
     "phenylephrine": Drug(
         "phenylephrine", 100.0, 1.0, "two-compartment", None, ("lpv:cautious", "pi", "smith")
     ),
     "norepinephrine": Drug(
         "norepinephrine",
-        16.0,
-        10.0,
+        NOREPINEPHRINE_UG_ML,
+        PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG,
         "one-compartment",
         70.0,
         ("lpv:norepinephrine-cautious", "pi", "smith"),

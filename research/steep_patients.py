@@ -1,0 +1,160 @@
+"""The cautious start on steep dose-response patients: a second norepinephrine model, two guards.
+
+The norepinephrine design was tuned and judged on its own patient model
+(:mod:`pressor.hil_sim.patients.norepinephrine`: Hill exponents 1.2-1.8, an endogenous level that
+starts the curve above zero). :class:`SteepNorepinephrine` is a second one, written apart from it:
+the ``pkpd`` model's one-compartment variant (:mod:`pressor.hil_sim.patients.pkpd`, ``draw_patient(...,
+"one-compartment")``: one compartment, an effect site, a Hill curve from zero with exponents
+1.0-2.5, delays of 10-60 s) dosed with norepinephrine at 16 µg/ml, each µg counted as
+:data:`PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG` µg of phenylephrine (the norepinephrine-equivalent
+dose counts phenylephrine at a tenth: Goradia et al., J Crit Care 2021;61:233; Kotani et al.,
+Crit Care 2023;27:29). Its kinetics lie within those published for norepinephrine (clearance
+1.5-4 l/min and volume 4-12 l; Beloeil et al., Br J Anaesth 2005: 0.9-3 l/min, 8.8 l), and its
+EC50 of 15-80 ng/ml of phenylephrine is 1.5-8 ng/ml of norepinephrine (Joachim et al., Br J Clin
+Pharmacol 2024: 2.5 ng/ml ×/÷ 3). ``benchmarks/independent_patients.py --drug norepinephrine``
+plays the same patients over the link.
+
+On a Hill curve that starts from zero the first doses answer far less than the gain near the
+target (a patient of exponent 2.5 reads 0.02 mmHg/(ml/h) at 2 ml/h and 1.9 at 19), so the
+evidence lowers K̂ below the gain the loop then meets. :class:`GuardedSchedule` adds two guards to
+the shipped source, to measure what each buys and costs (docs/notes/cautious-start.md, "Steep
+patients"):
+
+* ``convexity`` c: the evidence's bound is multiplied by c. A sigmoid Emax curve from zero has a
+  local gain of at most n times its average (dE/dC = n·E·(1 − E/Emax)/C ≤ n·E/C), so for Hill
+  exponents up to c K̂ stays at or above the patient's local gain wherever the evidence's bound
+  holds for its average;
+* ``hold_below_best``: K̂ does not fall while the MAP is below its best response so far (by more
+  than the margin): a haemorrhage, or the low half of an oscillation, is not read as a less
+  sensitive patient.
+
+Usage (the table of :mod:`research.cautious_levels`, on this source)::
+
+    python -m research.steep_patients --convexity 2 --hold-below-best \\
+        --controller lpv:norepinephrine-cautious \\
+        --patient-model research.steep_patients:SteepNorepinephrine \\
+        --levels 0.5,1,2,10 --patients 20 --seed 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from pressor.contracts.drug import DoseScale
+from pressor.hil_sim.patients.pkpd import (
+    IndependentPatient,
+    PatientParams,
+    PkpdPatient,
+    draw_patient,
+)
+from pressor.runtime.core.scheduling import Schedule, ScheduleInput
+from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
+from research import cautious_levels
+
+#: µg of phenylephrine one µg of norepinephrine counts as (module docstring: the sources)
+PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG = 10.0
+#: the norepinephrine syringe (µg/ml): 4 mg in 250 ml, the drug library's standard
+NOREPINEPHRINE_UG_ML = 16.0
+
+
+class SteepNorepinephrine(PkpdPatient):
+    """The ``pkpd`` one-compartment variant as a norepinephrine patient (module docstring): a
+    :class:`~pressor.hil_sim.patients.patient_model.PatientModel` plugin whose ml/h count a
+    16 µg/ml syringe of norepinephrine."""
+
+    DRUG = "norepinephrine"
+    DRUG_CONCENTRATION_UG_ML = NOREPINEPHRINE_UG_ML
+
+    def __init__(self, params: PatientParams, step_s: float) -> None:
+        if not 0.0 < step_s <= 1.0:
+            raise ValueError(f"steep norepinephrine patient step_s={step_s!r} outside (0, 1] s")
+        conc = NOREPINEPHRINE_UG_ML * PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG
+        IndependentPatient.__init__(self, params, step_s, conc, disturbances=False)
+        self._fast_dc_ng_ml = conc / (60.0 * params.cl_l_min)
+        self._t_app_s = 60.0 * params.v1_l / params.cl_l_min + params.effect_lag_s
+        self._tau_s = len(self.pipe) * step_s
+
+    @classmethod
+    def from_seed(cls, patient_seed: int, step_s: float) -> SteepNorepinephrine:
+        """Patient ``patient_seed % 1_000_000`` of the one-compartment cohort ``patient_seed //
+        1_000_000``."""
+        seed, index = divmod(int(patient_seed), 1_000_000)
+        return cls(draw_patient(seed, index, "one-compartment"), step_s)
+
+
+class _Scaled:
+    """The evidence's slowest patient with its answer divided by ``factor`` (the convexity)."""
+
+    def __init__(self, lag: object, factor: float) -> None:
+        self.lag, self.factor = lag, factor
+
+    def step(self, hist: list[float], head: int) -> float:
+        return self.lag.step(hist, head) / self.factor  # type: ignore[attr-defined]
+
+
+class GuardedSchedule(CautiousSchedule):
+    """:class:`~pressor.runtime.estimation.cautious.CautiousSchedule` with the guards of the
+    module docstring.
+
+    Parameters
+    ----------
+    envelope, sample_period_s, dose
+        As :class:`~pressor.runtime.estimation.cautious.CautiousSchedule`.
+    convexity
+        The factor (>= 1) on the evidence's bound; 1: none.
+    hold_below_best
+        Keep K̂ from falling while the MAP is below its best response by more than the margin.
+    """
+
+    def __init__(
+        self,
+        envelope: DesignEnvelope,
+        sample_period_s: float = 0.1,
+        dose: DoseScale | None = None,
+        convexity: float = 1.0,
+        hold_below_best: bool = False,
+    ) -> None:
+        super().__init__(envelope, sample_period_s, dose)
+        if not (math.isfinite(convexity) and convexity >= 1.0):
+            raise ValueError(f"convexity={convexity!r} must be finite and >= 1")
+        if convexity != 1.0:
+            self._slow = _Scaled(self._slow, float(convexity))  # type: ignore[assignment]
+        self._hold = bool(hold_below_best)
+        self._best = -math.inf
+
+    def update(self, inputs: ScheduleInput) -> Schedule:
+        """The shipped tick, then undo a fall of K̂ while the MAP is below its best response."""
+        before_k, before = self.K, self._schedule
+        out = super().update(inputs)
+        y = inputs.map_mmhg
+        if not self._hold or self._anchor is None or y != y or inputs.quality:
+            return out
+        dy = y - self._anchor
+        if dy < self._best - self._m and self.K < before_k:
+            self.K, self._schedule = before_k, before
+            return before
+        self._best = max(self._best, dy)
+        return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``--convexity`` and ``--hold-below-best`` here, every other argument
+    :mod:`research.cautious_levels`'s."""
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0], add_help=False)
+    p.add_argument("--convexity", type=float, default=1.0, help="factor on the bound (default 1)")
+    p.add_argument(
+        "--hold-below-best",
+        action="store_true",
+        help="K-hat does not fall while the MAP is below its best response (default: off)",
+    )
+    a, rest = p.parse_known_args(argv)
+    cautious_levels.use_cautious_source(
+        GuardedSchedule, convexity=a.convexity, hold_below_best=a.hold_below_best
+    )
+    return cautious_levels.main(rest)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,90 @@
+"""The steep norepinephrine patients and the guarded cautious source (research/steep_patients.py)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from pressor.hil_sim.patients.patient_model import load_patient_model, model_drug
+from pressor.hil_sim.patients.pkpd import PatientParams
+from pressor.runtime.core.scheduling import ScheduleInput
+from pressor.runtime.estimation.cautious import CautiousSchedule
+from research.steep_patients import GuardedSchedule, SteepNorepinephrine
+from tests.support.cautious_envelope import DOSE, ENVELOPE, TS, k_hat_on_a_first_order_patient
+
+#: one compartment (Q = 0), no tolerance: its steady state is a hand computation (the test)
+HAND = PatientParams(
+    baseline_mmhg=55.0,
+    delay_s=20.0,
+    cl_l_min=2.5,
+    v1_l=8.0,
+    q_l_min=0.0,
+    v2_l=150.0,
+    effect_lag_s=40.0,
+    emax_mmhg=50.0,
+    ec50_ng_ml=32.0,
+    hill=2.0,
+    tolerance_tau_s=1200.0,
+    tolerance_gain=0.0,
+    hemorrhage_mmhg=10.0,
+    hemorrhage_ramp_s=60.0,
+    bolus_mmhg=8.0,
+    bolus_rise_s=90.0,
+    bolus_decay_s=600.0,
+)
+
+
+def test_each_ug_of_norepinephrine_counts_as_ten_of_phenylephrine_at_the_steady_state():
+    # 15 ml/h of 16 ug/ml is 4 ug/min of norepinephrine, 40 of phenylephrine: 40/2.5 = 16 ng/ml;
+    # (16/32)^2 = 0.25, so the rise is 50 * 0.25 / 1.25 = 10 mmHg
+    patient = SteepNorepinephrine(HAND, 1.0)
+    for _ in range(3600):  # an hour: V/CL = 3.2 min and a 40 s effect site have settled
+        patient.step(15.0)
+    assert patient.delta_map_mmhg == pytest.approx(10.0, abs=1e-6)
+    assert patient.max_delta_map_mmhg(15.0) == pytest.approx(10.0, abs=1e-9)
+
+
+def test_the_steep_patients_load_as_a_norepinephrine_model_at_16_ug_ml():
+    spec = "research.steep_patients:SteepNorepinephrine"
+    assert load_patient_model(spec) is SteepNorepinephrine
+    binding = model_drug(spec)
+    assert binding is not None
+    assert (binding.name, binding.concentration_ug_ml) == ("norepinephrine", 16.0)
+
+
+def test_a_convexity_of_c_leaves_k_hat_c_times_where_no_response_leaves_it():
+    # no response to 2 ml/h: K-hat settles where the margin (1 mmHg + 0.1 of the prediction)
+    # hides the evidence's slowest patient (T 400 s, tau 45 s) after 3000 s: 1/(0.9 s) with
+    # s = 2 (1 - exp(-2955/400)); the convexity divides s by c
+    s = 2.0 * (1.0 - math.exp(-(3000.0 - 45.0) / 400.0))
+    for c in (1.0, 2.5):
+        source = GuardedSchedule(ENVELOPE, TS, DOSE, convexity=c)
+        k = k_hat_on_a_first_order_patient(source, 0.0, 100.0, 10.0, 2.0, 3000.0)
+        assert k[-1] == pytest.approx(c / (0.9 * s), rel=2e-3)
+
+
+def test_holding_below_the_best_response_keeps_k_hat_through_a_drop_the_shipped_source_reads():
+    # a patient of 1 mmHg/(ml/h), T 100 s, tau 10 s at 2 ml/h, then a 5 mmHg drop at 600 s
+    def feed(source: CautiousSchedule) -> tuple[float, float]:
+        at_drop = math.nan
+        for i in range(int(700.0 / TS)):
+            t = i * TS
+            y = 50.0 + 2.0 * (1.0 - math.exp(-(t - 10.0) / 100.0)) if t > 10.0 else 50.0
+            if t >= 600.0:
+                at_drop = source.K if math.isnan(at_drop) else at_drop
+                y -= 5.0
+            source.update(ScheduleInput(y, 0, 2.0, math.nan, math.nan, math.nan, False))
+        return at_drop, source.K
+
+    shipped_at_drop, shipped_after = feed(CautiousSchedule(ENVELOPE, TS, DOSE))
+    held_at_drop, held_after = feed(GuardedSchedule(ENVELOPE, TS, DOSE, hold_below_best=True))
+    assert held_at_drop == shipped_at_drop  # the same source until the MAP fell
+    assert held_after == held_at_drop
+    assert shipped_after < 0.5 * shipped_at_drop
+
+
+@pytest.mark.parametrize("convexity", [0.5, math.nan])
+def test_a_convexity_below_one_is_refused_naming_it(convexity):
+    with pytest.raises(ValueError, match="convexity=.* must be finite and >= 1"):
+        GuardedSchedule(ENVELOPE, TS, DOSE, convexity=convexity)
