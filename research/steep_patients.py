@@ -43,12 +43,7 @@ import math
 import sys
 
 from pressor.contracts.drug import DoseScale
-from pressor.hil_sim.patients.pkpd import (
-    IndependentPatient,
-    PatientParams,
-    PkpdPatient,
-    draw_patient,
-)
+from pressor.hil_sim.patients.pkpd import PkpdPatient
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
 from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
 from research import cautious_levels
@@ -66,22 +61,9 @@ class SteepNorepinephrine(PkpdPatient):
 
     DRUG = "norepinephrine"
     DRUG_CONCENTRATION_UG_ML = NOREPINEPHRINE_UG_ML
-
-    def __init__(self, params: PatientParams, step_s: float) -> None:
-        if not 0.0 < step_s <= 1.0:
-            raise ValueError(f"steep norepinephrine patient step_s={step_s!r} outside (0, 1] s")
-        conc = NOREPINEPHRINE_UG_ML * PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG
-        IndependentPatient.__init__(self, params, step_s, conc, disturbances=False)
-        self._fast_dc_ng_ml = conc / (60.0 * params.cl_l_min)
-        self._t_app_s = 60.0 * params.v1_l / params.cl_l_min + params.effect_lag_s
-        self._tau_s = len(self.pipe) * step_s
-
-    @classmethod
-    def from_seed(cls, patient_seed: int, step_s: float) -> SteepNorepinephrine:
-        """Patient ``patient_seed % 1_000_000`` of the one-compartment cohort ``patient_seed //
-        1_000_000``."""
-        seed, index = divmod(int(patient_seed), 1_000_000)
-        return cls(draw_patient(seed, index, "one-compartment"), step_s)
+    #: the patient model counts phenylephrine: 16 µg/ml of norepinephrine is 160 of it
+    SYRINGE_UG_ML = NOREPINEPHRINE_UG_ML * PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG
+    COHORT = "one-compartment"
 
 
 class _Scaled:

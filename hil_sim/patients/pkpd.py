@@ -292,10 +292,15 @@ class PkpdPatient(IndependentPatient):
         "tolerance_gain": "1",
     }
 
+    #: µg/ml of the model's drug (phenylephrine) each ml/h carries
+    SYRINGE_UG_ML: ClassVar[float] = DESIGN_CONCENTRATION_UG_ML
+    #: the :func:`draw_patient` model of :meth:`from_seed`
+    COHORT: ClassVar[str] = "two-compartment"
+
     def __init__(self, params: PatientParams, step_s: float) -> None:
         if not 0.0 < step_s <= 1.0:
             raise ValueError(f"pkpd patient step_s={step_s!r} outside (0, 1] s")
-        super().__init__(params, step_s, DESIGN_CONCENTRATION_UG_ML, disturbances=False)
+        super().__init__(params, step_s, self.SYRINGE_UG_ML, disturbances=False)
         p = params
         self._fast_dc_ng_ml = self.conc_ug_ml / (60.0 * (p.cl_l_min + p.q_l_min))
         self._t_app_s = 60.0 * p.v1_l / (p.cl_l_min + p.q_l_min) + p.effect_lag_s
@@ -304,9 +309,9 @@ class PkpdPatient(IndependentPatient):
     @classmethod
     def from_seed(cls, patient_seed: int, step_s: float) -> PkpdPatient:
         """Patient ``patient_seed % 1_000_000`` of the benchmark's cohort ``patient_seed //
-        1_000_000`` (:func:`draw_patient`)."""
+        1_000_000`` (:func:`draw_patient` of :attr:`COHORT`)."""
         seed, index = divmod(int(patient_seed), 1_000_000)
-        return cls(draw_patient(seed, index), step_s)
+        return cls(draw_patient(seed, index, cls.COHORT), step_s)
 
     @property
     def baseline_mmhg(self) -> float:
