@@ -12,7 +12,8 @@ Crit Care 2023;27:29). Its kinetics lie within those published for norepinephrin
 1.5-4 l/min and volume 4-12 l; Beloeil et al., Br J Anaesth 2005: 0.9-3 l/min, 8.8 l), and its
 EC50 of 15-80 ng/ml of phenylephrine is 1.5-8 ng/ml of norepinephrine (Joachim et al., Br J Clin
 Pharmacol 2024: 2.5 ng/ml ×/÷ 3). ``benchmarks/independent_patients.py --drug norepinephrine``
-plays the same patients over the link.
+plays the same patients over the link. :class:`SteepPhenylephrine` doses them with phenylephrine
+at 100 µg/ml, for the phenylephrine design.
 
 On a Hill curve that starts from zero the first doses answer far less than the gain near the
 target (a patient of exponent 2.5 reads 0.02 mmHg/(ml/h) at 2 ml/h and 1.9 at 19), so the
@@ -63,6 +64,15 @@ class SteepNorepinephrine(PkpdPatient):
     DRUG_CONCENTRATION_UG_ML = NOREPINEPHRINE_UG_ML
     #: the patient model counts phenylephrine: 16 µg/ml of norepinephrine is 160 of it
     SYRINGE_UG_ML = NOREPINEPHRINE_UG_ML * PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG
+    COHORT = "one-compartment"
+
+
+class SteepPhenylephrine(PkpdPatient):
+    """The same patients dosed with phenylephrine at the ``pkpd`` model's 100 µg/ml: the
+    phenylephrine design on steep curves."""
+
+    DRUG = "phenylephrine"
+    DRUG_CONCENTRATION_UG_ML = PkpdPatient.SYRINGE_UG_ML
     COHORT = "one-compartment"
 
 

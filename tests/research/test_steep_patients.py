@@ -45,12 +45,19 @@ def test_each_ug_of_norepinephrine_counts_as_ten_of_phenylephrine_at_the_steady_
     assert patient.max_delta_map_mmhg(15.0) == pytest.approx(10.0, abs=1e-9)
 
 
-def test_the_steep_patients_load_as_a_norepinephrine_model_at_16_ug_ml():
-    spec = "research.steep_patients:SteepNorepinephrine"
-    assert load_patient_model(spec) is SteepNorepinephrine
+@pytest.mark.parametrize(
+    ("name", "drug", "ug_ml"),
+    [
+        ("SteepNorepinephrine", "norepinephrine", 16.0),
+        ("SteepPhenylephrine", "phenylephrine", 100.0),
+    ],
+)
+def test_the_steep_patients_load_as_a_model_of_their_drug_and_syringe(name, drug, ug_ml):
+    spec = f"research.steep_patients:{name}"
+    assert load_patient_model(spec).COHORT == "one-compartment"  # type: ignore[attr-defined]
     binding = model_drug(spec)
     assert binding is not None
-    assert (binding.name, binding.concentration_ug_ml) == ("norepinephrine", 16.0)
+    assert (binding.name, binding.concentration_ug_ml) == (drug, ug_ml)
 
 
 def test_a_convexity_of_c_leaves_k_hat_c_times_where_no_response_leaves_it():
