@@ -103,7 +103,8 @@ far less than the gain near the target, K̂ falls toward the low-dose gain, and 
 near the target the loop then runs above its designed gain, which K̂'s slow certified rise does
 not undo. On a second norepinephrine model with Hill exponents up to 2.5, over the link: step
 overshoot p90 74 %, max 226 %, 15 of 50 runs flagged unstable (within exponents of 1.8: p90 9 %,
-max 23 %; docs/notes/cautious-start.md, "Norepinephrine over the link, on a second model").
+max 23 %; docs/notes/cautious-start.md, "Norepinephrine over the link, on a second model"). The
+phenylephrine default does the same on those patients dosed with phenylephrine ("Steep patients").
 """
 
 from __future__ import annotations
