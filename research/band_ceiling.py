@@ -6,8 +6,8 @@ Two replays of a run's patient on the rates its pump delivered, each from a dist
   steady rise is the largest the pump allows (:func:`pressor.hil_sim.reach.best_rate_ml_h`: the
   pump's maximum for an effect that rises with the dose). For linear kinetics and an effect that
   rises with the level no rate history from there gives a higher MAP (the counter-regulation of
-  the PK/PD models takes back at most 0.4 of a sustained effect over minutes, so it cannot undo
-  a lead), so its time below target - 5 mmHg until the bolus is a floor;
+  the PK/PD models takes back less than half of a sustained effect, over minutes, so it cannot
+  undo a lead), so its time below target - 5 mmHg until the bolus is a floor;
 * **the bolus, with the pump stopped**: a vasopressor can only stop, and the drug already given
   decays on its own, so no rate history from the bolus's start gives a lower MAP, and its time
   above target + 5 mmHg from there is a floor.
@@ -24,8 +24,8 @@ Usage::
 Printed per patient that entered the band before the bolus: whether the pump's maximum can hold
 it at the target for the hour (:func:`pressor.hil_sim.reach.holds`; one it cannot spends the
 haemorrhage below the band whatever the controller), the measured time in band after the first
-entry, the ceiling, and the two floors; then the medians over the patients the pump holds. Measured in
-docs/notes/cautious-start.md, "Time in the band: what the disturbances leave".
+entry, the ceiling, and the two floors; then the medians over the patients the pump holds.
+Measured in docs/notes/cautious-start.md, "Time in the band: what the disturbances leave".
 """
 
 from __future__ import annotations
