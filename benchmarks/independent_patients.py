@@ -23,6 +23,14 @@ model are not)::
 sources): the device announces norepinephrine at 16 µg/ml (4 mg in 250 ml), ``pressor run`` doses
 a 70 kg patient (``--drug norepinephrine --concentration-ug-ml 16 --weight-kg 70``), and the
 patient counts each µg of norepinephrine as 10 µg of phenylephrine.
+
+Per patient and controller it prints the IAE over the whole run (mmHg·s, on the true MAP), the
+start step's overshoot (% of the step, before the haemorrhage), each disturbance's peak deviation
+(mmHg, signed) and recovery into ±5 mmHg (s), as docs/METRICS.md defines them; then per controller
+"IAE below PI's: k of N" and the median per-patient IAE ratio to the PI, and issue 41's figures
+over the reachable patients (:func:`figure_lines`). Reachable: the patient's steady-state rate for
+the target after the haemorrhage is within the pump's maximum. The same seed prints the same
+bytes; progress and wall times go to stderr.
 """
 
 from __future__ import annotations
