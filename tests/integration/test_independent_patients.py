@@ -177,6 +177,7 @@ def test_pi_through_pressor_run_brings_an_independent_patient_to_target(
     assert rec["iae_mmhg_s"] > 15.0 * params.delay_s
 
 
+@pytest.mark.slow  # a non-default schedule's finding, two 10 min runs over the link
 def test_lpv_on_the_device_sent_step_fit_overshoots_far_less_than_on_its_own_estimate(
     dialect: ModuleType,
 ) -> None:
