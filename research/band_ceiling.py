@@ -113,21 +113,19 @@ def ceiling(
     after_entry = np.arange(t.size) >= first
     pumped = replayed(run, model, hemorrhage_s, best_rate_of(run, model))
     stopped = replayed(run, model, bolus_s, 0.0)
-    bleeding = (t >= hemorrhage_s - 1e-9) & (t < bolus_s - 1e-9)
-    below = (pumped - target < -CLINICAL_BAND_MMHG) & bleeding & after_entry
-    above = (stopped - target > CLINICAL_BAND_MMHG) & (t >= bolus_s - 1e-9)
+    before_bleeding, before_bolus = t < hemorrhage_s - 1e-9, t < bolus_s - 1e-9
+    below = (pumped - target < -CLINICAL_BAND_MMHG) & ~before_bleeding & before_bolus & after_entry
+    above = (stopped - target > CLINICAL_BAND_MMHG) & ~before_bolus
     dt = float(t[1] - t[0])
+    error = max(
+        np.max(np.abs(pumped - y)[before_bleeding]), np.max(np.abs(stopped - y)[before_bolus])
+    )
     return Ceiling(
         in_band_pct=float(run.record["time_in_band_pct"]),
         ceiling_pct=float(100.0 * (1.0 - np.count_nonzero(below | above) / (t.size - first))),
         below_floor_s=float(np.count_nonzero(below) * dt),
         above_floor_s=float(np.count_nonzero(above) * dt),
-        replay_error_mmhg=float(
-            max(
-                np.max(np.abs(pumped[t < hemorrhage_s - 1e-9] - y[t < hemorrhage_s - 1e-9])),
-                np.max(np.abs(stopped[t < bolus_s - 1e-9] - y[t < bolus_s - 1e-9])),
-            )
-        ),
+        replay_error_mmhg=float(error),
     )
 
 

@@ -22,7 +22,6 @@ top sensitivity.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -30,7 +29,7 @@ from typing import ClassVar
 
 from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale
 from pressor.hil_sim.patients.patient import FrozenParams, Patient
-from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution
+from research import cautious_levels
 
 #: drug -> (generated module of its default design, syringe µg/ml)
 DESIGNS: dict[str, tuple[str, float]] = {
@@ -117,8 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     a = p.parse_args(argv)
     if a.caution:
-        drug, _, fields = a.caution.partition(":")
-        CAUTION_FOR_DRUG[drug] = Caution(**json.loads(fields))
+        cautious_levels.replace_caution(a.caution)
     top, t_hi, tau_hi = corner(a.drug)
     lags = (
         [float(x) for x in a.lags.split(",")]

@@ -63,6 +63,13 @@ def use_cautious_source(cls: type[cautious.CautiousSchedule], **settings: Any) -
     cautious.CautiousSchedule = _Installed  # type: ignore[misc]
 
 
+def replace_caution(spec: str) -> None:
+    """Replace a drug's caution in this process and the workers forked from it: ``spec`` is
+    ``DRUG:JSON``, the JSON the fields of :class:`~pressor.runtime.estimation.cautious.Caution`."""
+    drug, _, fields = spec.partition(":")
+    CAUTION_FOR_DRUG[drug] = Caution(**json.loads(fields))
+
+
 def _first_entry_min(t_s: np.ndarray, mapv: np.ndarray, target: np.ndarray, t0: float) -> float:
     """Minutes from ``t0`` to the first sample within ±5 mmHg of the target (inf if none)."""
     ok = (t_s >= t0) & (np.abs(mapv - target) <= 5.0)
@@ -193,8 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     a = p.parse_args(argv)
     for spec in a.caution:
-        drug, _, fields = spec.partition(":")
-        CAUTION_FOR_DRUG[drug] = Caution(**json.loads(fields))
+        replace_caution(spec)
     levels = [float(x) for x in a.levels.split(",")]
     print(
         f"controller {a.controller} ({a.schedule}) vs {a.baseline}; {a.scenario}, "
