@@ -184,3 +184,24 @@ def test_a_larger_response_than_k_hat_predicts_raises_k_at_most_at_the_certified
     assert ks[-1] > 1.5
     ratios = [b / a for a, b in zip(ks[:-1], ks[1:], strict=True)]
     assert max(ratios) <= math.exp(env.rise_per_s * TS) + 1e-12
+
+
+def test_a_falling_map_after_the_rate_is_cut_does_not_lower_k_below_the_patient():
+    # the box's fastest patient (K 1 mmHg/(ml/h), T 100 s, tau 10 s) given 10 ml/h for 600 s,
+    # then nothing: its MAP falls back sooner than the slowest patient's would. Read against the
+    # slowest patient that fall is a less sensitive patient; after the cut it is no evidence, and
+    # K stays above the patient's 1 (the trough of an oscillation, docstring "Not after a cut")
+    ctl = load_controller("lpv:cautious", TS)
+    sched = CautiousSchedule(envelope_of(ctl), TS)
+    a = math.exp(-TS / 100.0)
+    rates = [10.0] * int(600 / TS) + [0.0] * int(1200 / TS)
+    pipe = [0.0] * int(10.0 / TS)
+    y, ks, inverted = 0.0, [], 0
+    for u in rates:
+        pipe.append(u)
+        y = a * y + (1.0 - a) * 1.0 * pipe.pop(0)
+        ks.append(sched.update(ScheduleInput(60.0 + y, 0, u, math.nan, math.nan, math.nan, 0)).K)
+        inverted += sched._fast.y < sched._slow.y2  # phenylephrine's slowest has an effect site
+    assert inverted > 1000  # the cut turned the ordering for minutes
+    assert ks[int(600 / TS)] > 1.0  # what the running rate left
+    assert min(ks) > 1.0
