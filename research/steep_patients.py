@@ -17,8 +17,8 @@ at 100 µg/ml, for the phenylephrine design.
 
 On a Hill curve that starts from zero the first doses answer far less than the gain near the
 target (a patient of exponent 2.5 reads 0.02 mmHg/(ml/h) at 2 ml/h and 1.9 at 19), so the
-evidence lowers K̂ below the gain the loop then meets. :class:`GuardedSchedule` adds two guards to
-the shipped source, to measure what each buys and costs (docs/notes/cautious-start.md, "Steep
+evidence lowers K̂ below the gain the loop then meets. :class:`GuardedSchedule` adds three guards
+to the shipped source, to measure what each buys and costs (docs/notes/cautious-start.md, "Steep
 patients"):
 
 * ``convexity`` c: the evidence's bound is multiplied by c. A sigmoid Emax curve from zero has a
@@ -27,10 +27,23 @@ patients"):
   holds for its average;
 * ``hold_below_best``: K̂ does not fall while the MAP is below its best response so far (by more
   than the margin): a haemorrhage, or the low half of an oscillation, is not read as a less
-  sensitive patient.
+  sensitive patient;
+* ``hill`` n, a dose ceiling ("start low and titrate up", by construction): on a Hill curve from
+  zero of exponent at most n, E(c)/c^n does not grow with c, and the effect site of a patient no
+  slower than the evidence's slowest holds at least s_slow, so a response Δy now bounds every
+  steady state above it, E(u) <= (Δy + m)(u/s_slow)^n (m the margin). The dose that could lift
+  the MAP by the step and an ``allowance`` is then u_c = s_slow ((1 + allowance) step/(Δy +
+  m))^(1/n), and K̂ is kept from falling below step/u_c, so the law's steady dose step/K̂ stays
+  under it. The step is the scenario's (``step_mmhg``, the sweep's 20 mmHg): the shipped source
+  is not given the target. ``ceiling_T_s`` reads the ceiling against a faster patient than the
+  evidence's slowest, to measure what that coverage costs.
 
 Usage (the table of :mod:`research.cautious_levels`, on this source)::
 
+    python -m research.steep_patients --hill 2.5 \\
+        --controller lpv:norepinephrine-cautious \\
+        --patient-model research.steep_patients:SteepNorepinephrine \\
+        --levels 0.5,1,2,10 --patients 20 --seed 3
     python -m research.steep_patients --convexity 2 --hold-below-best \\
         --controller lpv:norepinephrine-cautious \\
         --patient-model research.steep_patients:SteepNorepinephrine \\
@@ -46,7 +59,7 @@ import sys
 from pressor.contracts.drug import DoseScale
 from pressor.hil_sim.patients.pkpd import PkpdPatient
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
-from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
+from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope, _UnitLag
 from research import cautious_levels
 
 #: µg of phenylephrine one µg of norepinephrine counts as (module docstring: the sources)
@@ -98,6 +111,14 @@ class GuardedSchedule(CautiousSchedule):
         The factor (>= 1) on the evidence's bound; 1: none.
     hold_below_best
         Keep K̂ from falling while the MAP is below its best response by more than the margin.
+    hill
+        The dose ceiling's Hill exponent (>= 1); None: no ceiling.
+    step_mmhg
+        The target's rise over the first MAP the ceiling sizes its dose for (mmHg).
+    allowance
+        The rise above the step the ceiling allows, a fraction of the step (0.1: 10 %).
+    ceiling_T_s
+        The lag (s) of the patient the ceiling is read against; None: the evidence's slowest.
     """
 
     def __init__(
@@ -107,8 +128,23 @@ class GuardedSchedule(CautiousSchedule):
         dose: DoseScale | None = None,
         convexity: float = 1.0,
         hold_below_best: bool = False,
+        hill: float | None = None,
+        step_mmhg: float = 20.0,
+        allowance: float = 0.1,
+        ceiling_T_s: float | None = None,
     ) -> None:
         super().__init__(envelope, sample_period_s, dose)
+        if hill is not None and not (math.isfinite(hill) and hill >= 1.0):
+            raise ValueError(f"hill={hill!r} must be finite and >= 1")
+        self._hill = hill
+        self._dr = float(step_mmhg)
+        self._allowed = self._dr * (1.0 + allowance)
+        # the ceiling's patient: the evidence's slowest unless a lag is given
+        self._ceiling = (
+            None
+            if ceiling_T_s is None
+            else _UnitLag(ceiling_T_s, envelope.box[2][1], sample_period_s, self.effect_lag_s)
+        )
         if not (math.isfinite(convexity) and convexity >= 1.0):
             raise ValueError(f"convexity={convexity!r} must be finite and >= 1")
         if convexity != 1.0:
@@ -117,10 +153,16 @@ class GuardedSchedule(CautiousSchedule):
         self._best = -math.inf
 
     def update(self, inputs: ScheduleInput) -> Schedule:
-        """The shipped tick, then undo a fall of K̂ while the MAP is below its best response."""
+        """The shipped tick, then the dose ceiling, then undo a fall of K̂ while the MAP is below
+        its best response."""
         before_k, before = self.K, self._schedule
         out = super().update(inputs)
         y = inputs.map_mmhg
+        s_ceiling = (
+            self._ceiling.step(self._hist, self._head) if self._ceiling is not None else None
+        )
+        if self._hill is not None and self.K < before_k and y == y and not inputs.quality:
+            out = self._hold_to_the_ceiling(before_k, y, s_ceiling) or out
         if not self._hold or self._anchor is None or y != y or inputs.quality:
             return out
         dy = y - self._anchor
@@ -130,12 +172,45 @@ class GuardedSchedule(CautiousSchedule):
         self._best = max(self._best, dy)
         return out
 
+    def _hold_to_the_ceiling(self, before_k: float, y: float, s: float | None) -> Schedule | None:
+        """Keep K̂ at or above step / u_c, u_c the dose ceiling of the module docstring; the new
+        schedule if that held K̂ this tick, else None."""
+        if s is None:
+            slow = self._slow
+            s = slow.y2 if slow.a2 is not None else slow.y  # type: ignore[attr-defined]
+        if s <= 0.0:
+            return None
+        dy = max(y - self._anchor, 0.0)  # type: ignore[operator]
+        u_c = s * (self._allowed / (dy + self._m)) ** (1.0 / self._hill)  # type: ignore[operator]
+        floor = self._dr / u_c
+        if self.K >= floor:
+            return None
+        self.K = k = min(before_k, floor)
+        self._schedule = Schedule(k, self.T_s, self.tau_s, "cautious", True, True, False,
+                                  "evidence")  # fmt: skip
+        return self._schedule
+
 
 def main(argv: list[str] | None = None) -> int:
-    """``--convexity`` and ``--hold-below-best`` here, every other argument
-    :mod:`research.cautious_levels`'s."""
+    """The guards' options here (``--convexity``, ``--hill``, ``--allowance``, ``--ceiling-T``,
+    ``--hold-below-best``), every other argument :mod:`research.cautious_levels`'s."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0], add_help=False)
     p.add_argument("--convexity", type=float, default=1.0, help="factor on the bound (default 1)")
+    p.add_argument(
+        "--hill", type=float, default=None, help="the dose ceiling's Hill exponent (default: none)"
+    )
+    p.add_argument(
+        "--allowance",
+        type=float,
+        default=0.1,
+        help="the ceiling's allowed rise above the step, a fraction of it (default 0.1)",
+    )
+    p.add_argument(
+        "--ceiling-T",
+        type=float,
+        default=None,
+        help="lag (s) of the ceiling's patient (default: the evidence's slowest)",
+    )
     p.add_argument(
         "--hold-below-best",
         action="store_true",
@@ -143,7 +218,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     a, rest = p.parse_known_args(argv)
     cautious_levels.use_cautious_source(
-        GuardedSchedule, convexity=a.convexity, hold_below_best=a.hold_below_best
+        GuardedSchedule,
+        convexity=a.convexity,
+        hold_below_best=a.hold_below_best,
+        hill=a.hill,
+        allowance=a.allowance,
+        ceiling_T_s=a.ceiling_T,
     )
     return cautious_levels.main(rest)
 

@@ -91,7 +91,28 @@ def test_holding_below_the_best_response_keeps_k_hat_through_a_drop_the_shipped_
     assert shipped_after < 0.5 * shipped_at_drop
 
 
+def test_the_dose_ceiling_holds_k_hat_where_a_hill_curve_from_no_response_would_reach_the_step():
+    # no response to 2 ml/h for 3000 s: the evidence's slowest patient (T 400 s, tau 45 s) has
+    # answered s = 2 (1 - exp(-2955/400)); a Hill curve of exponent 2 that stays under the 1 mmHg
+    # margin there reaches 22 mmHg (the step and a tenth) at u_c = s (22/1)^(1/2), so K-hat stays
+    # at 20/u_c, 4.26/s, where the shipped source lets it fall to the margin's 1/(0.9 s)
+    s = 2.0 * (1.0 - math.exp(-(3000.0 - 45.0) / 400.0))
+    source = GuardedSchedule(ENVELOPE, TS, DOSE, hill=2.0)
+    k = k_hat_on_a_first_order_patient(source, 0.0, 100.0, 10.0, 2.0, 3000.0)
+    assert k[-1] == pytest.approx(20.0 / (s * math.sqrt(22.0)), rel=2e-3)
+    shipped = k_hat_on_a_first_order_patient(
+        CautiousSchedule(ENVELOPE, TS, DOSE), 0.0, 100.0, 10.0, 2.0, 3000.0
+    )
+    assert shipped[-1] == pytest.approx(1.0 / (0.9 * s), rel=2e-3)
+
+
 @pytest.mark.parametrize("convexity", [0.5, math.nan])
 def test_a_convexity_below_one_is_refused_naming_it(convexity):
     with pytest.raises(ValueError, match="convexity=.* must be finite and >= 1"):
         GuardedSchedule(ENVELOPE, TS, DOSE, convexity=convexity)
+
+
+@pytest.mark.parametrize("hill", [0.5, math.inf])
+def test_a_hill_exponent_below_one_is_refused_naming_it(hill):
+    with pytest.raises(ValueError, match="hill=.* must be finite and >= 1"):
+        GuardedSchedule(ENVELOPE, TS, DOSE, hill=hill)
