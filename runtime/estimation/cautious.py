@@ -31,8 +31,8 @@ source makes them safe by construction and lets the MAP's response buy speed:
   sensitive patient. So K̂ falls only while ``s_fast >= s_slow``. Measured
   (docs/notes/cautious-start.md, "Steep patients"): on steep patients in process it halved the
   runs flagged unstable (16 of 80 to 8) and left the design's patient models as they were; over
-  the link it changed none of the 15 of 50 that start after the haemorrhage, a fall the rule does
-  not read as a cut (the rate climbs).
+  the link it left the 15 of 50 flagged as they were (a haemorrhage lowers K̂ too, while the rate
+  climbs, where the rule does not act).
 * **At the certified rates.** K̂ falls at most at the design's certified fall of ln K and rises at
   most at its certified rise (``RATE_BOUNDS[0]`` / ``K_RATE_UP_PER_S`` of a log-K design, times
   ``rate_fraction``), inside its box; τ is fixed at the box's longest, T at the drug's
