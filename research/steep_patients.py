@@ -36,7 +36,7 @@ patients"):
   m))^(1/n), and K̂ is kept from falling below step/u_c, so the law's steady dose step/K̂ stays
   under it. The step is the scenario's (``step_mmhg``, the sweep's 20 mmHg): the shipped source
   is not given the target. ``ceiling_T_s`` reads the ceiling against a faster patient than the
-  evidence's slowest, to measure what that coverage costs.
+  evidence's slowest, and ``ceiling_margin`` with a smaller margin, to measure what each costs.
 
 Usage (the table of :mod:`research.cautious_levels`, on this source)::
 
@@ -119,6 +119,8 @@ class GuardedSchedule(CautiousSchedule):
         The rise above the step the ceiling allows, a fraction of the step (0.1: 10 %).
     ceiling_T_s
         The lag (s) of the patient the ceiling is read against; None: the evidence's slowest.
+    ceiling_margin
+        The margin m (mmHg, >= 0) in the ceiling; None: the evidence's ``margin_mmhg``.
     """
 
     def __init__(
@@ -132,8 +134,14 @@ class GuardedSchedule(CautiousSchedule):
         step_mmhg: float = 20.0,
         allowance: float = 0.1,
         ceiling_T_s: float | None = None,
+        ceiling_margin: float | None = None,
     ) -> None:
         super().__init__(envelope, sample_period_s, dose)
+        if ceiling_margin is not None and not (
+            math.isfinite(ceiling_margin) and ceiling_margin >= 0.0
+        ):
+            raise ValueError(f"ceiling_margin={ceiling_margin!r} mmHg must be finite and >= 0")
+        self._ceiling_m = ceiling_margin
         if hill is not None and not (math.isfinite(hill) and hill >= 1.0):
             raise ValueError(f"hill={hill!r} must be finite and >= 1")
         self._hill = hill
@@ -181,7 +189,8 @@ class GuardedSchedule(CautiousSchedule):
         if s <= 0.0:
             return None
         dy = max(y - self._anchor, 0.0)  # type: ignore[operator]
-        u_c = s * (self._allowed / (dy + self._m)) ** (1.0 / self._hill)  # type: ignore[operator]
+        m = self._m if self._ceiling_m is None else self._ceiling_m
+        u_c = s * (self._allowed / (dy + m)) ** (1.0 / self._hill)  # type: ignore[operator]
         floor = self._dr / u_c
         if self.K >= floor:
             return None
@@ -193,7 +202,8 @@ class GuardedSchedule(CautiousSchedule):
 
 def main(argv: list[str] | None = None) -> int:
     """The guards' options here (``--convexity``, ``--hill``, ``--allowance``, ``--ceiling-T``,
-    ``--hold-below-best``), every other argument :mod:`research.cautious_levels`'s."""
+    ``--ceiling-margin``, ``--hold-below-best``), every other argument
+    :mod:`research.cautious_levels`'s."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0], add_help=False)
     p.add_argument("--convexity", type=float, default=1.0, help="factor on the bound (default 1)")
     p.add_argument(
@@ -216,6 +226,12 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="K-hat does not fall while the MAP is below its best response (default: off)",
     )
+    p.add_argument(
+        "--ceiling-margin",
+        type=float,
+        default=None,
+        help="the ceiling's margin m (mmHg; default: the evidence's, 1)",
+    )
     a, rest = p.parse_known_args(argv)
     cautious_levels.use_cautious_source(
         GuardedSchedule,
@@ -224,6 +240,7 @@ def main(argv: list[str] | None = None) -> int:
         hill=a.hill,
         allowance=a.allowance,
         ceiling_T_s=a.ceiling_T,
+        ceiling_margin=a.ceiling_margin,
     )
     return cautious_levels.main(rest)
 

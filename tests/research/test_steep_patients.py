@@ -96,10 +96,14 @@ def test_the_dose_ceiling_holds_k_hat_where_a_hill_curve_from_no_response_would_
     # answered s = 2 (1 - exp(-2955/400)); a Hill curve of exponent 2 that stays under the 1 mmHg
     # margin there reaches 22 mmHg (the step and a tenth) at u_c = s (22/1)^(1/2), so K-hat stays
     # at 20/u_c, 4.26/s, where the shipped source lets it fall to the margin's 1/(0.9 s)
+    # (with a margin of 0.25 mmHg in the ceiling: u_c = s (22/0.25)^(1/2), a higher ceiling)
     s = 2.0 * (1.0 - math.exp(-(3000.0 - 45.0) / 400.0))
     source = GuardedSchedule(ENVELOPE, TS, DOSE, hill=2.0)
     k = k_hat_on_a_first_order_patient(source, 0.0, 100.0, 10.0, 2.0, 3000.0)
     assert k[-1] == pytest.approx(20.0 / (s * math.sqrt(22.0)), rel=2e-3)
+    quiet = GuardedSchedule(ENVELOPE, TS, DOSE, hill=2.0, ceiling_margin=0.25)
+    k = k_hat_on_a_first_order_patient(quiet, 0.0, 100.0, 10.0, 2.0, 3000.0)
+    assert k[-1] == pytest.approx(20.0 / (s * math.sqrt(22.0 / 0.25)), rel=2e-3)
     shipped = k_hat_on_a_first_order_patient(
         CautiousSchedule(ENVELOPE, TS, DOSE), 0.0, 100.0, 10.0, 2.0, 3000.0
     )
@@ -116,3 +120,8 @@ def test_a_convexity_below_one_is_refused_naming_it(convexity):
 def test_a_hill_exponent_below_one_is_refused_naming_it(hill):
     with pytest.raises(ValueError, match="hill=.* must be finite and >= 1"):
         GuardedSchedule(ENVELOPE, TS, DOSE, hill=hill)
+
+
+def test_a_negative_ceiling_margin_is_refused_naming_it():
+    with pytest.raises(ValueError, match="ceiling_margin=-1.0 mmHg must be finite and >= 0"):
+        GuardedSchedule(ENVELOPE, TS, DOSE, hill=2.0, ceiling_margin=-1.0)
