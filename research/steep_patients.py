@@ -95,6 +95,10 @@ class _Scaled:
     def __init__(self, lag: object, factor: float) -> None:
         self.lag, self.factor = lag, factor
 
+    @property
+    def response(self) -> float:
+        return self.lag.response / self.factor  # type: ignore[attr-defined]
+
     def step(self, hist: list[float], head: int) -> float:
         return self.lag.step(hist, head) / self.factor  # type: ignore[attr-defined]
 
@@ -137,14 +141,14 @@ class GuardedSchedule(CautiousSchedule):
         ceiling_margin: float | None = None,
     ) -> None:
         super().__init__(envelope, sample_period_s, dose)
+        if hill is not None and not (math.isfinite(hill) and hill >= 1.0):
+            raise ValueError(f"hill={hill!r} must be finite and >= 1")
         if ceiling_margin is not None and not (
             math.isfinite(ceiling_margin) and ceiling_margin >= 0.0
         ):
             raise ValueError(f"ceiling_margin={ceiling_margin!r} mmHg must be finite and >= 0")
-        self._ceiling_m = ceiling_margin
-        if hill is not None and not (math.isfinite(hill) and hill >= 1.0):
-            raise ValueError(f"hill={hill!r} must be finite and >= 1")
         self._hill = hill
+        self._ceiling_m = self._m if ceiling_margin is None else float(ceiling_margin)
         self._dr = float(step_mmhg)
         self._allowed = self._dr * (1.0 + allowance)
         # the ceiling's patient: the evidence's slowest unless a lag is given
@@ -184,13 +188,12 @@ class GuardedSchedule(CautiousSchedule):
         """Keep K̂ at or above step / u_c, u_c the dose ceiling of the module docstring; the new
         schedule if that held K̂ this tick, else None."""
         if s is None:
-            slow = self._slow
-            s = slow.y2 if slow.a2 is not None else slow.y  # type: ignore[attr-defined]
+            s = self._slow.response
         if s <= 0.0:
             return None
         dy = max(y - self._anchor, 0.0)  # type: ignore[operator]
-        m = self._m if self._ceiling_m is None else self._ceiling_m
-        u_c = s * (self._allowed / (dy + m)) ** (1.0 / self._hill)  # type: ignore[operator]
+        n = self._hill  # not None: the caller checked
+        u_c = s * (self._allowed / (dy + self._ceiling_m)) ** (1.0 / n)  # type: ignore[operator]
         floor = self._dr / u_c
         if self.K >= floor:
             return None

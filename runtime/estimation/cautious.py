@@ -251,6 +251,11 @@ class _UnitLag:
         self.b2 = 0.0 if self.a2 is None else 1.0 - self.a2
         self.y2 = 0.0
 
+    @property
+    def response(self) -> float:
+        """The answer of the last :meth:`step` (the effect site's, if there is one)."""
+        return self.y if self.a2 is None else self.y2
+
     def step(self, hist: list[float], head: int) -> float:
         n = len(hist)
         i = (head - 1 - self.k) % n

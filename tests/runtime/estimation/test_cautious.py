@@ -201,7 +201,7 @@ def test_a_falling_map_after_the_rate_is_cut_does_not_lower_k_below_the_patient(
         pipe.append(u)
         y = a * y + (1.0 - a) * 1.0 * pipe.pop(0)
         ks.append(sched.update(ScheduleInput(60.0 + y, 0, u, math.nan, math.nan, math.nan, 0)).K)
-        inverted += sched._fast.y < sched._slow.y2  # phenylephrine's slowest has an effect site
+        inverted += sched._fast.response < sched._slow.response
     assert inverted > 1000  # the cut turned the ordering for minutes
     assert ks[int(600 / TS)] > 1.0  # what the running rate left
     assert min(ks) > 1.0
