@@ -223,6 +223,7 @@ class ClosedLoopCore:
                     inp.T_s,
                     inp.tau_s,
                     inp.sched_valid,
+                    inp.target_mmhg,
                 ),
             )
         )

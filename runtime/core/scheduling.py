@@ -59,6 +59,9 @@ class ScheduleInput(NamedTuple):
         Delay the device sent (s); NaN when it sent none.
     device_valid
         The device flagged its scheduling parameters valid (False when it sent none).
+    target_mmhg
+        The clinician's target MAP this tick (mmHg); NaN when the caller does not give it (the
+        cautious source's dose ceiling and floor after the start then stay off).
     """
 
     map_mmhg: float
@@ -68,6 +71,7 @@ class ScheduleInput(NamedTuple):
     device_T_s: float
     device_tau_s: float
     device_valid: bool
+    target_mmhg: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)
