@@ -34,6 +34,41 @@ source makes them safe by construction and lets the MAP's response buy speed:
   the target and time in the band as they were (their median IAE 0.4-1.4 % higher); over
   the link it left the 15 of 50 flagged as they were (a haemorrhage lowers K̂ too, while the rate
   climbs, where the rule does not act).
+* **A dose ceiling** (norepinephrine's, :attr:`Caution.hill_ceiling`). The bound above reads a
+  first-order patient. On a Hill curve that starts from zero the first doses answer almost
+  nothing, the bound lowers K̂ to that low-dose gain, and the dose passes the curve's knee. For
+  Hill exponents up to n, E(c)/cⁿ does not grow with the concentration c, and the effect site of
+  a patient no slower than the evidence's slowest holds at least s_slow; so the response seen now
+  bounds every steady state above it: E(u) <= (Δy + m)(u/s_slow)ⁿ (m the evidence's
+  ``margin_mmhg``). The dose that could lift the MAP past the step (target − first MAP) and a tenth
+  of it (:data:`CEILING_ALLOWANCE`) is u_c = s_slow (1.1 step/(Δy + m))^(1/n), and a falling K̂
+  stops at step/u_c, where the law's steady dose step/K̂ reaches it. It never raises K̂, and it
+  needs the target (:attr:`~pressor.runtime.core.scheduling.ScheduleInput.target_mmhg`). Why it
+  acts through K̂ and not as a cap on the command: held on the command it starves every patient
+  (before any response it lets the dose grow only by 22^(1/n) times what the slowest patient has
+  absorbed, and near the target by almost nothing: the norepinephrine model's patients at
+  0.5x-1x did not reach the target in the hour; docs/notes/cautious-start.md, "Steep patients").
+  Through K̂ the law's transient passes it, which makes it a pace, not a wall; the law on T 300 s
+  (:data:`CAUTION_FOR_DRUG`, "Why norepinephrine's T") keeps the transient small. With the floor
+  below, the second model's steep patients over the link overshoot the step by p90 8 %, max 34 %
+  (226 % before), and the norepinephrine model's 1x patients take 14.9 minutes to the target (9.4
+  before; docs/notes/cautious-start.md, "Steep patients", "Measured"). n = 2.5 covers the second
+  model's steepest curves; the issue puts no hypertensive overshoot before time to the target.
+* **After the start** (norepinephrine's :attr:`Caution.settle_floor`). Once the MAP, having begun
+  more than :data:`SETTLE_BAND_MMHG` below the target, first comes within it, the start is over:
+  K̂ no longer falls below half its value then. The evidence's bound reads the MAP's change
+  since the first sample, so a disturbance that lowers the MAP afterwards (a haemorrhage, while the
+  law raises the rate) reads as a less sensitive patient; K̂ fell to a third of the patient's gain
+  near the target and the loop oscillated. Measured (cohort seed 3, 20 patients per level,
+  0.5x-10x, with the ceiling, the law on T 250 s): on the second norepinephrine model it took the runs flagged
+  unstable from 10 of 80 to 2 and the time in the band from 95.6-96.7 to 96.2-97.3 %; on the
+  norepinephrine model the time in the band from 94.0-95.3 to 95.3-96.7 %, overshoot and time to
+  the target unchanged, its median IAE against the PI's 6-18 % higher. Freezing K̂ at the entry (a
+  floor of 1) cost that model 16-19 points in the band (K̂ is then still above the patient's gain
+  and the law sluggish); a floor of a third left the 10 of 80 unstable
+  (docs/notes/cautious-start.md, "Steep patients").
+  Phenylephrine has none: on its models it lowered phenylephrine-2c's time in the band at 10x
+  (90.3 to 88.0 %) and raised the paper model's IAE against the PI's by 5-21 %.
 * **At the certified rates.** K̂ falls at most at the design's certified fall of ln K and rises at
   most at its certified rise (``RATE_BOUNDS[0]`` / ``K_RATE_UP_PER_S`` of a log-K design, times
   ``rate_fraction``), inside its box; τ is fixed at the box's longest, T at the drug's
@@ -89,7 +124,12 @@ on another cohort (seed 3, 10 patients per level). Judged on seed 2026, 100 pati
 overshoot p90 <= 6.9 %, max 9.2 %, 1x median 12.1 min (docs/notes/cautious-start.md). Since this
 source holds T and τ fixed, the norepinephrine design certifies them at a twentieth of the usual
 rates and ln K's fall at 0.02/s instead of 0.01/s: about a minute sooner at 0.5x-1x on seed 3
-(docs/notes/cautious-start.md, "Norepinephrine's faster fall").
+(docs/notes/cautious-start.md, "Norepinephrine's faster fall"). With the dose ceiling the law went
+back to T 300 s: the ceiling holds K̂ above the steep patients' low-dose gain, but the law's
+transient still passed it (on T 250 s the second model's step overshot by p90 16-18 %, max 24 %);
+on T 300 s p90 2-8 %, max 14 %, for 0.6-1.0 min more to the target and 1-3 points less in the band
+on the norepinephrine model (seed 3; 275 s: p90 to 12 %; docs/notes/cautious-start.md, "Steep
+patients").
 
 Why norepinephrine's evidence lag. Read against the box's slowest patient (T 750 s), K̂ stopped up
 to twice a typical patient's gain and the law closed the step on it (11-12 min at 0.5x-2x). The
@@ -104,20 +144,19 @@ that the baseline does not fall while it is read: a haemorrhage lowers Δy and r
 sensitive patient (K̂ falls, the loop gets bolder). Measured on the paper-disturbance scenario the
 loop stays inside ±5 mmHg through it; the certificate covers K̂ = K, not K̂ ≠ K. The construction
 bounds the first commands, not the closed loop's overshoot on every first-order patient of the
-box: on the norepinephrine box's slow lags (T >= 400 s) the law on T 250 s overshoots a step by
-10-25 % (on T 750 s: <= 9.5 %), though the norepinephrine model's patients stay under 10 %
-(docs/notes/cautious-start.md, "The box's slow corner"). Nor does it cover a dose-response curve
-much steeper than the design's patient models: on a Hill curve from zero the first doses answer
-far less than the gain near the target, K̂ falls toward the low-dose gain, and the step overshoots;
-near the target the loop then runs above its designed gain, which K̂'s slow certified rise does
-not undo. On a second norepinephrine model with Hill exponents up to 2.5, over the link: step
-overshoot p90 74 %, max 226 %, 15 of 50 runs flagged unstable (within exponents of 1.8: p90 9 %,
-max 23 %; docs/notes/cautious-start.md, "Norepinephrine over the link, on a second model"). The
-phenylephrine default does the same on those patients dosed with phenylephrine ("Steep patients").
-A dose ceiling that a Hill curve from no response could not carry past the step
-(``research/steep_patients.py``, ``--hill``) keeps the norepinephrine step's overshoot on that
-model under 24 % (in process), for 2-4.5 more minutes to the target on the typical patient, and
-does not ship (the same section).
+box: on the norepinephrine box's slow lags (T >= 400 s) the law on T 250 s, before the ceiling,
+overshot a step by 10-25 % (on T 750 s: <= 9.5 %), though the norepinephrine model's patients
+stayed under 10 % (docs/notes/cautious-start.md, "The box's slow corner"). Nor does it cover a dose-response curve
+much steeper than the design's patient models without norepinephrine's ceiling and floor: on a
+Hill curve from zero the first doses answer far less than the gain near the target, K̂ falls
+toward the low-dose gain, and the step overshoots; near the target the loop then runs above its
+designed gain, which K̂'s slow certified rise does not undo. On a second norepinephrine model with
+Hill exponents up to 2.5, over the link, the step overshot by p90 74 %, max 226 %, and 15 of 50
+runs were flagged unstable; with the ceiling, the floor and the law on T 300 s p90 8 %, max 34 %
+(within the design's delay box p90 3 %, max 23 %), 5 flagged, all after the haemorrhage
+(docs/notes/cautious-start.md, "Norepinephrine over the link, on a second model"). The phenylephrine default has neither and does the same on those
+patients dosed with phenylephrine ("Steep patients"; the ceiling there cost the paper and
+``pkpd`` models' 1x patients 2-4 minutes).
 """
 
 from __future__ import annotations
@@ -131,7 +170,15 @@ from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale, binding_of
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
 from pressor.runtime.estimation.gate import SampleGate
 
-__all__ = ["CAUTION_FOR_DRUG", "Caution", "CautiousSchedule", "DesignEnvelope", "envelope_of"]
+__all__ = [
+    "CAUTION_FOR_DRUG",
+    "CEILING_ALLOWANCE",
+    "SETTLE_BAND_MMHG",
+    "Caution",
+    "CautiousSchedule",
+    "DesignEnvelope",
+    "envelope_of",
+]
 
 
 @dataclass(frozen=True)
@@ -148,19 +195,33 @@ class Caution:
         An effect site's lag (s, > 0) behind the evidence's slowest patient; None: none.
     evidence_T_s
         The lag (s) of the evidence's slowest patient, inside the box; None: the box's longest T.
+    hill_ceiling
+        The dose ceiling's Hill exponent n (>= 1; module docstring, "A dose ceiling"); None: no
+        ceiling.
+    settle_floor
+        Once the MAP has first come within :data:`SETTLE_BAND_MMHG` of the target, K̂ no longer
+        falls below this fraction (0, 1] of its value then (module docstring, "After the start");
+        None: no such floor.
     """
 
     start_margin: float = 1.0
     T_s: float | None = None
     effect_lag_s: float | None = None
     evidence_T_s: float | None = None
+    hill_ceiling: float | None = None
+    settle_floor: float | None = None
 
 
 #: the drug's caution (lower-case drug name -> :class:`Caution`); other drugs take ``Caution()``
 CAUTION_FOR_DRUG: dict[str, Caution] = {
     "phenylephrine": Caution(start_margin=2.0, T_s=300.0, effect_lag_s=60.0),
-    "norepinephrine": Caution(T_s=250.0, evidence_T_s=550.0),
+    "norepinephrine": Caution(T_s=300.0, evidence_T_s=550.0, hill_ceiling=2.5, settle_floor=0.5),
 }
+#: the rise above the step (a fraction of it) the dose ceiling lets a Hill curve reach: the
+#: issue's overshoot bound (10 % of the step)
+CEILING_ALLOWANCE = 0.1
+#: the band around the target (mmHg) whose first entry ends the start (:attr:`Caution.settle_floor`)
+SETTLE_BAND_MMHG = 5.0
 
 
 @dataclass(frozen=True)
@@ -299,6 +360,14 @@ class CautiousSchedule:
     evidence_T_s
         The lag (s) of the evidence's slowest patient, inside the design's T box; default the
         drug's (:data:`CAUTION_FOR_DRUG`), else the box's longest.
+    hill_ceiling
+        The dose ceiling's Hill exponent n, >= 1 (module docstring, "A dose ceiling"); default
+        the drug's (:data:`CAUTION_FOR_DRUG`); 0 turns a drug's ceiling off. It acts only on the
+        ticks that give the target (:attr:`ScheduleInput.target_mmhg`).
+    settle_floor
+        K̂'s floor after the start, a fraction in (0, 1] of K̂ when the MAP first came within
+        :data:`SETTLE_BAND_MMHG` of the target (module docstring, "After the start"); default
+        the drug's (:data:`CAUTION_FOR_DRUG`); 0 turns it off. It needs the target too.
 
     The sample gate (:class:`pressor.runtime.estimation.gate.SampleGate`) keeps bad samples out of the
     evidence, but not a MAP that does not move: here no movement is the evidence (a frozen
@@ -319,6 +388,8 @@ class CautiousSchedule:
         tau_s: float | None = None,
         start_margin: float | None = None,
         evidence_T_s: float | None = None,
+        hill_ceiling: float | None = None,
+        settle_floor: float | None = None,
     ) -> None:
         if not (math.isfinite(sample_period_s) and sample_period_s > 0.0):
             raise ValueError(f"sample_period_s={sample_period_s!r} must be finite and > 0")
@@ -361,6 +432,17 @@ class CautiousSchedule:
         if lag2 is not None and not (math.isfinite(lag2) and lag2 > 0.0):
             raise ValueError(f"effect_lag_s={lag2!r} must be finite and > 0 (s)")
         self.effect_lag_s = lag2
+        n = caution.hill_ceiling if hill_ceiling is None else float(hill_ceiling)
+        if n is not None and n != 0.0 and not (math.isfinite(n) and n >= 1.0):
+            raise ValueError(f"hill_ceiling={hill_ceiling!r} must be finite and >= 1 (0: none)")
+        self.hill_ceiling = n or None
+        self._inv_n = 0.0 if n is None or n == 0.0 else 1.0 / n
+        f = caution.settle_floor if settle_floor is None else float(settle_floor)
+        if f is not None and f != 0.0 and not 0.0 < f <= 1.0:
+            raise ValueError(f"settle_floor={settle_floor!r} must be in (0, 1] (0: none)")
+        self.settle_floor = f or None
+        self._k_settled = 0.0  # K̂'s floor once the start has ended (0 before, or without one)
+        self._settling = self.settle_floor is not None  # the start has not ended yet
         self._slow = _UnitLag(self.evidence_T_s, d_hi, ts, lag2)
         self._fast = _UnitLag(t_lo, d_lo, ts)
         self._gate = SampleGate(ts, flatline_s=1e9)  # no flatline rule (class docstring)
@@ -391,6 +473,10 @@ class CautiousSchedule:
         if s_slow > 0.0 and dy < pred - m:  # less response than the slowest K̂ patient
             if s_fast >= s_slow:  # ... evidence only while the rate has not been cut (docstring)
                 k = max(k * self._down, (dy + m) / s_slow, self.k_floor)
+                if self._inv_n:
+                    k = self._under_the_ceiling(k, dy, s_slow, inputs.target_mmhg)
+                if k < self._k_settled:  # after the start (docstring)
+                    k = min(self.K, self._k_settled)
         else:
             pred_f = k * s_fast
             m_f = self._m + self._rel * pred_f
@@ -400,4 +486,20 @@ class CautiousSchedule:
             self.K = k
             self._schedule = Schedule(k, self.T_s, self.tau_s, "cautious", True, True, False,
                                       "evidence")  # fmt: skip
+        if self._settling:
+            target = inputs.target_mmhg
+            band = SETTLE_BAND_MMHG
+            if abs(y - target) <= band and self._anchor < target - band:  # type: ignore[operator]
+                self._settling = False  # the MAP has risen into the band: the start ends here
+                self._k_settled = self.settle_floor * k  # type: ignore[operator]
         return self._schedule
+
+    def _under_the_ceiling(self, k: float, dy: float, s_slow: float, target_mmhg: float) -> float:
+        """``k`` raised to step/u_c if it fell below it (no higher than K̂ was), u_c the dose
+        ceiling of the module docstring; ``k`` itself without a target above the first MAP."""
+        step = target_mmhg - self._anchor  # type: ignore[operator]
+        if not step > 0.0:  # no target (NaN), or none above the first MAP: nothing to bound
+            return k
+        rise = (1.0 + CEILING_ALLOWANCE) * step / ((dy if dy > 0.0 else 0.0) + self._m)
+        floor = step / (s_slow * rise**self._inv_n)
+        return k if k >= floor else min(self.K, floor)

@@ -78,14 +78,14 @@ def test_the_evidence_waits_for_an_effect_site_behind_the_slowest_patient():
     assert k_at(90.0, with_site) > 1.2 * k_at(90.0, without)
 
 
-def test_norepinephrine_starts_at_its_population_top_on_its_t_of_250_s_without_effect_site():
+def test_norepinephrine_starts_at_its_population_top_on_its_t_of_300_s_without_effect_site():
     ctl = load_controller("lpv:norepinephrine-cautious", TS)
     env = envelope_of(ctl)
     assert env.drug == "norepinephrine"
     sched = CautiousSchedule(env, TS)
     (_, _), (t_lo, t_hi), _ = env.box
     assert sched.k_top == pytest.approx(sched.dose.k_ml_h(env.population[1]))
-    assert t_lo < sched.T_s == 250.0 < math.sqrt(t_lo * t_hi)
+    assert t_lo < sched.T_s == 300.0 < math.sqrt(t_lo * t_hi)
     assert sched.effect_lag_s is None
 
 
@@ -105,9 +105,87 @@ def test_norepinephrine_reads_its_evidence_against_a_slowest_patient_of_550_s():
         assert got == pytest.approx(1.0 / (0.9 * 2.0 * (1.0 - math.exp(-245.0 / T))), rel=0.01)
 
 
+def _k_after_no_response(sched: CautiousSchedule, target_mmhg: float, seconds: float) -> float:
+    """K̂ after ``seconds`` of 2 ml/h and no response (MAP 60 mmHg), ``target_mmhg`` given."""
+    inp = ScheduleInput(60.0, 0, 2.0, math.nan, math.nan, math.nan, False, target_mmhg)
+    for _ in range(int(round(seconds / TS))):
+        k = sched.update(inp).K
+    return k
+
+
+def test_norepinephrine_s_dose_ceiling_stops_k_hat_where_a_hill_curve_of_2_5_could_pass_the_step():
+    # no response to 2 ml/h for 3000 s, target 80 from 60 mmHg (step 20): the evidence's slowest
+    # patient (550 s, tau 55 s) has answered s = 2 (1 - e^(-2945/550)). A Hill curve of exponent
+    # 2.5 from zero that stays under the 1 mmHg margin there reaches 22 mmHg (the step and a
+    # tenth) at u_c = s 22^(1/2.5), so K-hat stops at 20/u_c; without the ceiling it falls to
+    # where the margin hides the patient, K s - (1 + 0.1 K s) = 0: 1/(0.9 s)
+    env = envelope_of(load_controller("lpv:norepinephrine-cautious", TS))
+    s = 2.0 * (1.0 - math.exp(-2945.0 / 550.0))
+    ceiling = CautiousSchedule(env, TS)
+    assert ceiling.hill_ceiling == 2.5
+    assert _k_after_no_response(ceiling, 80.0, 3000.0) == pytest.approx(
+        20.0 / (s * 22.0**0.4), rel=2e-3
+    )
+    none = CautiousSchedule(env, TS, hill_ceiling=0.0)
+    assert none.hill_ceiling is None
+    assert _k_after_no_response(none, 80.0, 3000.0) == pytest.approx(1.0 / (0.9 * s), rel=2e-3)
+
+
+def _k_through_a_drop_after_the_band(sched: CautiousSchedule) -> tuple[float, float]:
+    """2 ml/h throughout, target 70 from 60 mmHg: no response for 300 s, the MAP in the band
+    (66 mmHg) for 10 s, then back at 60 mmHg (a haemorrhage's reading) for 3000 s. Returns
+    (K̂ at the first tick in the band, K̂ at the end)."""
+
+    def feed(map_mmhg: float, seconds: float) -> float:
+        inp = ScheduleInput(map_mmhg, 0, 2.0, math.nan, math.nan, math.nan, False, 70.0)
+        for _ in range(int(round(seconds / TS))):
+            k = sched.update(inp).K
+        return k
+
+    feed(60.0, 300.0)
+    at_entry = feed(66.0, TS)
+    feed(66.0, 10.0)
+    return at_entry, feed(60.0, 3000.0)
+
+
+def test_after_the_map_first_reaches_the_band_k_hat_falls_at_most_to_half_its_value_then():
+    # a drop after the start is read as a less sensitive patient: without the floor K-hat falls to
+    # where the margin hides the patient, 1/(0.9 s) with s = 2 (1 - e^(-(3310 - 55)/550)) (hand
+    # value); norepinephrine's floor keeps it at half its value when the MAP entered the band
+    env = envelope_of(load_controller("lpv:norepinephrine-cautious", TS))
+    floored = CautiousSchedule(env, TS, hill_ceiling=0.0)
+    assert floored.settle_floor == 0.5
+    entry, end = _k_through_a_drop_after_the_band(floored)
+    free_entry, free_end = _k_through_a_drop_after_the_band(
+        CautiousSchedule(env, TS, hill_ceiling=0.0, settle_floor=0.0)
+    )
+    assert entry == free_entry  # the same source until the start ended
+    s = 2.0 * (1.0 - math.exp(-(3310.0 - 55.0) / 550.0))
+    assert free_end == pytest.approx(1.0 / (0.9 * s), rel=2e-3)
+    assert end == pytest.approx(0.5 * entry, rel=1e-12) and end > 1.2 * free_end
+
+
+@pytest.mark.parametrize("target_mmhg", [math.nan, 60.0, 55.0])
+def test_the_dose_ceiling_and_the_floor_act_only_with_a_target_above_the_first_map(target_mmhg):
+    # a MAP that starts in the band (60 or 55 mmHg against 60) has no start to end: no floor
+    env = envelope_of(load_controller("lpv:norepinephrine-cautious", TS))
+    s = 2.0 * (1.0 - math.exp(-2945.0 / 550.0))
+    got = _k_after_no_response(CautiousSchedule(env, TS), target_mmhg, 3000.0)
+    assert got == pytest.approx(1.0 / (0.9 * s), rel=2e-3)
+
+
+def test_phenylephrine_has_no_dose_ceiling_and_no_floor_after_the_start():
+    sched = CautiousSchedule(envelope_of(load_controller("lpv:cautious", TS)), TS)
+    assert sched.hill_ceiling is None and sched.settle_floor is None
+
+
 @pytest.mark.parametrize(
     ("kwargs", "needle"),
     [
+        ({"hill_ceiling": 0.5}, "hill_ceiling=0.5 must be finite and >= 1"),
+        ({"hill_ceiling": math.inf}, "hill_ceiling=inf must be finite and >= 1"),
+        ({"settle_floor": 1.5}, r"settle_floor=1.5 must be in \(0, 1\]"),
+        ({"settle_floor": -0.5}, r"settle_floor=-0.5 must be in \(0, 1\]"),
         ({"start_margin": 0.5}, "start_margin"),
         ({"T_s": 50.0}, "T box"),
         ({"T_s": 900.0}, "T box"),
