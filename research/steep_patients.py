@@ -17,7 +17,7 @@ at 100 µg/ml, for the phenylephrine design.
 
 On a Hill curve that starts from zero the first doses answer far less than the gain near the
 target (a patient of exponent 2.5 reads 0.02 mmHg/(ml/h) at 2 ml/h and 1.9 at 19), so the
-evidence lowers K̂ below the gain the loop then meets. :class:`GuardedSchedule` adds three guards
+evidence lowers K̂ below the gain the loop then meets. :class:`GuardedSchedule` adds guards
 to the shipped source, to measure what each buys and costs (docs/notes/cautious-start.md, "Steep
 patients"):
 
@@ -34,9 +34,12 @@ patients"):
   steady state above it, E(u) <= (Δy + m)(u/s_slow)^n (m the margin). The dose that could lift
   the MAP by the step and an ``allowance`` is then u_c = s_slow ((1 + allowance) step/(Δy +
   m))^(1/n), and K̂ is kept from falling below step/u_c, so the law's steady dose step/K̂ stays
-  under it. The step is the scenario's (``step_mmhg``, the sweep's 20 mmHg): the shipped source
-  is not given the target. ``ceiling_T_s`` reads the ceiling against a faster patient than the
-  evidence's slowest, and ``ceiling_margin`` with a smaller margin, to measure what each costs.
+  under it. The step here is the scenario's (``step_mmhg``, the sweep's 20 mmHg). Norepinephrine's
+  default ships this ceiling at n = 2.5 (:attr:`~pressor.runtime.estimation.cautious.Caution.hill_ceiling`,
+  on the target it is given); given here, ``hill`` replaces it. ``ceiling_T_s`` reads the
+  ceiling against a faster patient than the evidence's slowest, ``ceiling_margin`` with a
+  smaller margin, and ``ceiling_on`` holds it as a cap on the generated law's command instead
+  of (or besides) through K̂ (:func:`install_dose_cap`), to measure what each costs.
 
 Usage (the table of :mod:`research.cautious_levels`, on this source)::
 
@@ -53,14 +56,78 @@ Usage (the table of :mod:`research.cautious_levels`, on this source)::
 from __future__ import annotations
 
 import argparse
+import inspect
 import math
 import sys
+import textwrap
 
 from pressor.contracts.drug import DoseScale
 from pressor.hil_sim.patients.pkpd import PkpdPatient
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
+from pressor.runtime.estimation import cautious
 from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope, _UnitLag
 from research import cautious_levels
+
+#: the generated modules (their ``LPV_DESIGNS`` names) :func:`install_dose_cap` gives a dose cap
+CAPPED_DESIGNS = ("cautious", "norepinephrine-cautious")
+#: the controller the last schedule source was built for (set by :func:`install_dose_cap`'s
+#: ``envelope_of``; a trial builds the controller, then its source, one patient at a time)
+_LAST_CONTROLLER: list[object] = []
+
+
+def _capped_step(step: object) -> object:
+    """The generated module's float step with its pump maximum read from ``self._dose_cap`` (ml/h)
+    in the feedforward's cap, the reference model's shortfall and the anti-windup's upper bound."""
+    src = textwrap.dedent(inspect.getsource(step))  # type: ignore[arg-type]
+    src = src.replace(
+        "cap = _PF_UMAX", "cap = _PF_UMAX if _PF_UMAX < self._dose_cap else self._dose_cap"
+    )
+    src = src.replace(
+        "cap = MAX_RATE_ML_H if need > MAX_RATE_ML_H else need",
+        "cap = self._dose_cap if need > self._dose_cap else need",
+    )
+    src = src.replace("sh = rr - kp * MAX_RATE_ML_H", "sh = rr - kp * self._dose_cap")
+    src = src.replace("uhi = _U_MAX_S - uffs", "uhi = self._dose_cap * _INV_U_SCALE - uffs")
+    if src.count("self._dose_cap") != 6:
+        raise RuntimeError("the generated module's float step changed shape: no dose cap fits it")
+    ns: dict[str, object] = {}
+    exec(compile(src, "<capped step>", "exec"), step.__globals__, ns)  # type: ignore[attr-defined]
+    return ns["_step_float"]
+
+
+def install_dose_cap() -> None:
+    """Give the generated log-K modules' float controllers a per-instance dose cap (``_dose_cap``,
+    ml/h, default the pump maximum), run them in Python rather than as their compiled twins, and
+    remember each controller a cautious source is built for, in this process and the workers
+    forked from it."""
+    from pressor.runtime.inputs.controller_loader import LPV_DESIGNS, load_generated_module
+
+    for name in CAPPED_DESIGNS:
+        mod = load_generated_module(LPV_DESIGNS[name])
+        ctl = mod.Controller
+        if "_dose_cap" not in vars(ctl):
+            ctl._dose_cap = mod.MAX_RATE_ML_H
+            ctl._step_float = _capped_step(ctl._step_float)
+    from pressor.hil_sim.trials import trial
+
+    if not hasattr(trial.native_twin, "__wrapped__"):  # the capped step runs in Python
+        twin = trial.native_twin
+
+        def native_twin(controller: object) -> object:
+            return controller if hasattr(controller, "_dose_cap") else twin(controller)
+
+        native_twin.__wrapped__ = twin  # type: ignore[attr-defined]
+        trial.native_twin = native_twin  # type: ignore[assignment]
+    shipped = cautious.envelope_of
+
+    def envelope_of(controller: object) -> DesignEnvelope:
+        _LAST_CONTROLLER[:] = [controller]
+        return shipped(controller)
+
+    if not hasattr(cautious.envelope_of, "__wrapped__"):
+        envelope_of.__wrapped__ = shipped  # type: ignore[attr-defined]
+        cautious.envelope_of = envelope_of  # type: ignore[assignment]
+
 
 #: µg of phenylephrine one µg of norepinephrine counts as (module docstring: the sources)
 PHENYLEPHRINE_UG_PER_NOREPINEPHRINE_UG = 10.0
@@ -125,6 +192,12 @@ class GuardedSchedule(CautiousSchedule):
         The lag (s) of the patient the ceiling is read against; None: the evidence's slowest.
     ceiling_margin
         The margin m (mmHg, >= 0) in the ceiling; None: the evidence's ``margin_mmhg``.
+    ceiling_on
+        Where the ceiling holds: ``k`` (K̂ kept at or above step/u_c), ``command`` (the
+        controller's dose cap, :func:`install_dose_cap`, held at ``cap_factor`` u_c, and no less
+        than the allowed rise on the population's top) or ``both``.
+    cap_factor
+        The dose cap's multiple (>= 1) of the ceiling u_c.
     """
 
     def __init__(
@@ -139,8 +212,21 @@ class GuardedSchedule(CautiousSchedule):
         allowance: float = 0.1,
         ceiling_T_s: float | None = None,
         ceiling_margin: float | None = None,
+        ceiling_on: str = "k",
+        cap_factor: float = 1.0,
     ) -> None:
-        super().__init__(envelope, sample_period_s, dose)
+        # this ceiling replaces the shipped one (CautiousSchedule's hill_ceiling) when it is given
+        super().__init__(envelope, sample_period_s, dose, hill_ceiling=0.0 if hill else None)
+        if ceiling_on not in ("k", "command", "both"):
+            raise ValueError(f"ceiling_on={ceiling_on!r} must be k, command or both")
+        if ceiling_on != "k" and hill is None:
+            raise ValueError(f"ceiling_on={ceiling_on!r} needs a ceiling (hill)")
+        self._on_k = ceiling_on != "command"
+        self._controller = _LAST_CONTROLLER[0] if ceiling_on != "k" else None
+        self._cap_floor = 0.0
+        if not (math.isfinite(cap_factor) and cap_factor >= 1.0):
+            raise ValueError(f"cap_factor={cap_factor!r} must be finite and >= 1")
+        self._cap_factor = float(cap_factor)
         if hill is not None and not (math.isfinite(hill) and hill >= 1.0):
             raise ValueError(f"hill={hill!r} must be finite and >= 1")
         if ceiling_margin is not None and not (
@@ -151,6 +237,9 @@ class GuardedSchedule(CautiousSchedule):
         self._ceiling_m = self._m if ceiling_margin is None else float(ceiling_margin)
         self._dr = float(step_mmhg)
         self._allowed = self._dr * (1.0 + allowance)
+        if self._controller is not None:
+            self._cap_floor = self._allowed / self.k_top
+            self._controller._dose_cap = self._cap_floor  # type: ignore[attr-defined]
         # the ceiling's patient: the evidence's slowest unless a lag is given
         self._ceiling = (
             None
@@ -173,8 +262,14 @@ class GuardedSchedule(CautiousSchedule):
         s_ceiling = (
             self._ceiling.step(self._hist, self._head) if self._ceiling is not None else None
         )
-        if self._hill is not None and self.K < before_k and y == y and not inputs.quality:
+        good = y == y and not inputs.quality and self._anchor is not None
+        if self._hill is not None and self._on_k and self.K < before_k and good:
             out = self._hold_to_the_ceiling(before_k, y, s_ceiling) or out
+        if self._controller is not None and good:
+            u_c = self._dose_ceiling(y, s_ceiling)
+            cap = self._cap_floor if u_c is None or u_c < self._cap_floor else u_c
+            cap *= self._cap_factor
+            self._controller._dose_cap = min(cap, self._controller.max_rate_ml_h)  # type: ignore[attr-defined]
         if not self._hold or self._anchor is None or y != y or inputs.quality:
             return out
         dy = y - self._anchor
@@ -184,16 +279,22 @@ class GuardedSchedule(CautiousSchedule):
         self._best = max(self._best, dy)
         return out
 
-    def _hold_to_the_ceiling(self, before_k: float, y: float, s: float | None) -> Schedule | None:
-        """Keep K̂ at or above step / u_c, u_c the dose ceiling of the module docstring; the new
-        schedule if that held K̂ this tick, else None."""
+    def _dose_ceiling(self, y: float, s: float | None) -> float | None:
+        """u_c (ml/h) of the module docstring for the MAP ``y`` (mmHg); None before any dose."""
         if s is None:
             s = self._slow.response
         if s <= 0.0:
             return None
         dy = max(y - self._anchor, 0.0)  # type: ignore[operator]
         n = self._hill  # not None: the caller checked
-        u_c = s * (self._allowed / (dy + self._ceiling_m)) ** (1.0 / n)  # type: ignore[operator]
+        return s * (self._allowed / (dy + self._ceiling_m)) ** (1.0 / n)  # type: ignore[operator]
+
+    def _hold_to_the_ceiling(self, before_k: float, y: float, s: float | None) -> Schedule | None:
+        """Keep K̂ at or above step / u_c, u_c the dose ceiling of the module docstring; the new
+        schedule if that held K̂ this tick, else None."""
+        u_c = self._dose_ceiling(y, s)
+        if u_c is None:
+            return None
         floor = self._dr / u_c
         if self.K >= floor:
             return None
@@ -235,7 +336,21 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="the ceiling's margin m (mmHg; default: the evidence's, 1)",
     )
+    p.add_argument(
+        "--ceiling-on",
+        choices=("k", "command", "both"),
+        default="k",
+        help="where the ceiling holds: K-hat, the controller's dose cap, or both (default k)",
+    )
+    p.add_argument(
+        "--cap-factor",
+        type=float,
+        default=1.0,
+        help="the dose cap's multiple of the ceiling, with --ceiling-on command/both (default 1)",
+    )
     a, rest = p.parse_known_args(argv)
+    if a.ceiling_on != "k":
+        install_dose_cap()
     cautious_levels.use_cautious_source(
         GuardedSchedule,
         convexity=a.convexity,
@@ -244,6 +359,8 @@ def main(argv: list[str] | None = None) -> int:
         allowance=a.allowance,
         ceiling_T_s=a.ceiling_T,
         ceiling_margin=a.ceiling_margin,
+        ceiling_on=a.ceiling_on,
+        cap_factor=a.cap_factor,
     )
     return cautious_levels.main(rest)
 

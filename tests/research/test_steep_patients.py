@@ -125,3 +125,44 @@ def test_a_hill_exponent_below_one_is_refused_naming_it(hill):
 def test_a_negative_ceiling_margin_is_refused_naming_it():
     with pytest.raises(ValueError, match="ceiling_margin=-1.0 mmHg must be finite and >= 0"):
         GuardedSchedule(ENVELOPE, TS, DOSE, hill=2.0, ceiling_margin=-1.0)
+
+
+@pytest.fixture
+def dose_cap(monkeypatch):
+    """:func:`research.steep_patients.install_dose_cap` for one test: the norepinephrine
+    module's controller class, the trial's compiled twin and ``envelope_of`` restored after it."""
+    from pressor.hil_sim.trials import trial
+    from pressor.runtime.estimation import cautious
+    from pressor.runtime.inputs.controller_loader import LPV_DESIGNS, load_generated_module
+    from research.steep_patients import CAPPED_DESIGNS, install_dose_cap
+
+    classes = [load_generated_module(LPV_DESIGNS[n]).Controller for n in CAPPED_DESIGNS]
+    for target, name in [(c, "_step_float") for c in classes] + [
+        (trial, "native_twin"),
+        (cautious, "envelope_of"),
+    ]:
+        monkeypatch.setattr(target, name, getattr(target, name))
+    norepinephrine = classes[CAPPED_DESIGNS.index("norepinephrine-cautious")]
+    shipped = norepinephrine._step_float
+    install_dose_cap()
+    yield norepinephrine, shipped
+    for c in classes:
+        del c._dose_cap
+
+
+def _commands(ctl, seconds: float = 600.0) -> list[float]:
+    """Commands (ml/h) of ``ctl`` on K 1 mmHg/(ml/h), T 250 s, τ 55 s towards a target 20 mmHg
+    above a MAP that never moves (the feedback winds up against whatever bounds the dose)."""
+    return [ctl.step(60.0, 80.0, 1.0, 250.0, 55.0) for _ in range(int(seconds / TS))]
+
+
+def test_the_research_dose_cap_bounds_every_command_and_changes_nothing_at_the_pump_maximum(
+    dose_cap,
+):
+    cls, shipped = dose_cap
+    free, same, capped = cls(), cls(), cls()
+    same_commands = _commands(same)
+    assert same_commands == [shipped(free, 60.0, 80.0, 1.0, 250.0, 55.0) for _ in same_commands]
+    assert max(same_commands) > 30.0  # the law asks for more than the cap below
+    capped._dose_cap = 7.5
+    assert max(_commands(capped)) == pytest.approx(7.5)
