@@ -41,7 +41,8 @@ import numpy as np
 
 from pressor.contracts.drug import DoseScale
 from pressor.runtime.estimation import cautious
-from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution, DesignEnvelope
+from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution
+from pressor.runtime.estimation.design_envelope import DesignEnvelope
 
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
 

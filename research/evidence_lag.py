@@ -37,7 +37,8 @@ from collections.abc import Callable
 from pressor.contracts.drug import DoseScale
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
 from pressor.runtime.estimation import cautious
-from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
+from pressor.runtime.estimation.cautious import CautiousSchedule
+from pressor.runtime.estimation.design_envelope import DesignEnvelope
 from research import cautious_levels
 
 #: the longest delay (s) the source can read the rate history back by (the shipped models' are

@@ -27,7 +27,8 @@ from dataclasses import dataclass
 from pressor.contracts.drug import DoseScale
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
 from pressor.runtime.estimation import cautious
-from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
+from pressor.runtime.estimation.cautious import CautiousSchedule
+from pressor.runtime.estimation.design_envelope import DesignEnvelope
 from research import cautious_levels
 
 

@@ -35,8 +35,10 @@ patients"):
   the MAP by the step and an ``allowance`` is then u_c = s_slow ((1 + allowance) step/(Δy +
   m))^(1/n), and K̂ is kept from falling below step/u_c, so the law's steady dose step/K̂ stays
   under it. The step here is the scenario's (``step_mmhg``, the sweep's 20 mmHg). Norepinephrine's
-  default ships this ceiling at n = 2.5 (:attr:`~pressor.runtime.estimation.cautious.Caution.hill_ceiling`,
-  on the target it is given); given here, ``hill`` replaces it. ``ceiling_T_s`` reads the
+  default ships this ceiling at n = 2.5
+  (:attr:`~pressor.runtime.estimation.cautious.Caution.hill_ceiling`, on the target it is given;
+  the same :func:`~pressor.runtime.estimation.cautious.dose_ceiling_ml_h`); given here, ``hill``
+  replaces it. ``ceiling_T_s`` reads the
   ceiling against a faster patient than the evidence's slowest, ``ceiling_margin`` with a
   smaller margin, and ``ceiling_on`` holds it as a cap on the generated law's command instead
   of (or besides) through K̂ (:func:`install_dose_cap`), to measure what each costs.
@@ -60,12 +62,14 @@ import inspect
 import math
 import sys
 import textwrap
+from typing import Any
 
 from pressor.contracts.drug import DoseScale
 from pressor.hil_sim.patients.pkpd import PkpdPatient
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
-from pressor.runtime.estimation import cautious
-from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope, _UnitLag
+from pressor.runtime.estimation import design_envelope
+from pressor.runtime.estimation.cautious import CautiousSchedule, _UnitLag, dose_ceiling_ml_h
+from pressor.runtime.estimation.design_envelope import DesignEnvelope
 from research import cautious_levels
 
 #: the generated modules (their ``LPV_DESIGNS`` names) :func:`install_dose_cap` gives a dose cap
@@ -118,15 +122,15 @@ def install_dose_cap() -> None:
 
         native_twin.__wrapped__ = twin  # type: ignore[attr-defined]
         trial.native_twin = native_twin  # type: ignore[assignment]
-    shipped = cautious.envelope_of
+    shipped = design_envelope.envelope_of
 
     def envelope_of(controller: object) -> DesignEnvelope:
         _LAST_CONTROLLER[:] = [controller]
         return shipped(controller)
 
-    if not hasattr(cautious.envelope_of, "__wrapped__"):
+    if not hasattr(design_envelope.envelope_of, "__wrapped__"):
         envelope_of.__wrapped__ = shipped  # type: ignore[attr-defined]
-        cautious.envelope_of = envelope_of  # type: ignore[assignment]
+        design_envelope.envelope_of = envelope_of  # type: ignore[assignment]
 
 
 #: µg of phenylephrine one µg of norepinephrine counts as (module docstring: the sources)
@@ -236,9 +240,9 @@ class GuardedSchedule(CautiousSchedule):
         self._hill = hill
         self._ceiling_m = self._m if ceiling_margin is None else float(ceiling_margin)
         self._dr = float(step_mmhg)
-        self._allowed = self._dr * (1.0 + allowance)
+        self._allowance = float(allowance)
         if self._controller is not None:
-            self._cap_floor = self._allowed / self.k_top
+            self._cap_floor = self._dr * (1.0 + allowance) / self.k_top
             self._controller._dose_cap = self._cap_floor  # type: ignore[attr-defined]
         # the ceiling's patient: the evidence's slowest unless a lag is given
         self._ceiling = (
@@ -268,8 +272,8 @@ class GuardedSchedule(CautiousSchedule):
         if self._controller is not None and good:
             u_c = self._dose_ceiling(y, s_ceiling)
             cap = self._cap_floor if u_c is None or u_c < self._cap_floor else u_c
-            cap *= self._cap_factor
-            self._controller._dose_cap = min(cap, self._controller.max_rate_ml_h)  # type: ignore[attr-defined]
+            ctl: Any = self._controller
+            ctl._dose_cap = min(cap * self._cap_factor, ctl.max_rate_ml_h)
         if not self._hold or self._anchor is None or y != y or inputs.quality:
             return out
         dy = y - self._anchor
@@ -285,9 +289,9 @@ class GuardedSchedule(CautiousSchedule):
             s = self._slow.response
         if s <= 0.0:
             return None
-        dy = max(y - self._anchor, 0.0)  # type: ignore[operator]
-        n = self._hill  # not None: the caller checked
-        return s * (self._allowed / (dy + self._ceiling_m)) ** (1.0 / n)  # type: ignore[operator]
+        dy = y - self._anchor  # type: ignore[operator]
+        inv_n = 1.0 / self._hill  # type: ignore[operator]  # not None: the caller checked
+        return dose_ceiling_ml_h(s, self._dr, dy, self._ceiling_m, inv_n, self._allowance)
 
     def _hold_to_the_ceiling(self, before_k: float, y: float, s: float | None) -> Schedule | None:
         """Keep K̂ at or above step / u_c, u_c the dose ceiling of the module docstring; the new

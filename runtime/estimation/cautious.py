@@ -2,7 +2,9 @@
 
 The premise (issue 41): the bedside knows the MAP, the delivered rate, the drug, the syringe, the
 weight and the target from the first second, nothing more, so the first doses are blind. This
-source makes them safe by construction and lets the MAP's response buy speed:
+source makes them safe by construction and lets the MAP's response buy speed. Every choice below
+was made on cohort seed 3 and judged on seed 2026; the figures, the variants tried and the
+frontier are in docs/notes/cautious-start.md (the section named in each item).
 
 * **Start at the top.** K̂ starts at the top of the design's patient population
   (``POPULATION_K_UG_KG_MIN``, mmHg per µg/kg/min, converted once to ml/h of the syringe and
@@ -16,158 +18,74 @@ source makes them safe by construction and lets the MAP's response buy speed:
   shorter ``evidence_T_s``; τ_hi; behind them the drug's effect site, if it names one) to the
   rate the pump delivered, and ``Δy`` the MAP's change since the first sample. Any first-order
   patient of the box with sensitivity K and a lag up to that one has risen at least
-  ``K s_slow`` by now (for a rate that has not been cut: the start), so when
-  ``Δy < K̂ s_slow − m`` the patient is less sensitive than K̂, at most
-  ``K_up = (Δy + m)/s_slow``; K̂ falls toward K_up. No response after the longest delay is such
-  evidence (Δy stays 0 while s_slow grows); a response is evidence too, of how far K̂ may fall.
-  The margin ``m = margin_mmhg + margin_rel K̂ s_slow`` covers the monitor's noise and a patient
-  slower than the box.
+  ``K s_slow`` by now, so when ``Δy < K̂ s_slow − m`` the patient is less sensitive than K̂, at
+  most ``K_up = (Δy + m)/s_slow``; K̂ falls toward K_up. No response after the longest delay is
+  such evidence. The margin ``m = margin_mmhg + margin_rel K̂ s_slow`` covers the monitor's noise
+  and a patient slower than the box. It needs no fit: an online fit from the first minute reads
+  K/T, not K and T apart, and landed up to 2x low ("The mechanism").
 * **Raise K on the contrary evidence.** When ``Δy > K̂ s_fast + m`` (s_fast: the fastest patient
   of the box, T_lo, τ_lo) the patient is more sensitive than K̂, at least ``(Δy − m)/s_fast``; K̂
   rises toward it (a higher K̂ is the cautious direction).
 * **Not after a cut.** The bound rests on an ordering: a patient faster than the slowest has
-  answered at least as much as it. That holds while the rate has not been cut; after a cut a
-  faster patient's response falls first, and the low half of an oscillation reads as a less
-  sensitive patient. So K̂ falls only while ``s_fast >= s_slow``. Measured
-  (docs/notes/cautious-start.md, "Steep patients"): on steep patients in process it halved the
-  runs flagged unstable (16 of 80 to 8) and left the design's patient models' overshoot, time to
-  the target and time in the band as they were (their median IAE 0.4-1.4 % higher); over
-  the link it left the 15 of 50 flagged as they were (a haemorrhage lowers K̂ too, while the rate
-  climbs, where the rule does not act).
-* **A dose ceiling** (norepinephrine's, :attr:`Caution.hill_ceiling`). The bound above reads a
-  first-order patient. On a Hill curve that starts from zero the first doses answer almost
-  nothing, the bound lowers K̂ to that low-dose gain, and the dose passes the curve's knee. For
-  Hill exponents up to n, E(c)/cⁿ does not grow with the concentration c, and the effect site of
-  a patient no slower than the evidence's slowest holds at least s_slow; so the response seen now
-  bounds every steady state above it: E(u) <= (Δy + m)(u/s_slow)ⁿ (m the evidence's
-  ``margin_mmhg``). The dose that could lift the MAP past the step (target − first MAP) and a tenth
-  of it (:data:`CEILING_ALLOWANCE`) is u_c = s_slow (1.1 step/(Δy + m))^(1/n), and a falling K̂
-  stops at step/u_c, where the law's steady dose step/K̂ reaches it. It never raises K̂, and it
-  needs the target (:attr:`~pressor.runtime.core.scheduling.ScheduleInput.target_mmhg`). Why it
-  acts through K̂ and not as a cap on the command: held on the command it starves every patient
-  (before any response it lets the dose grow only by 22^(1/n) times what the slowest patient has
-  absorbed, and near the target by almost nothing: the norepinephrine model's patients at
-  0.5x-1x did not reach the target in the hour; docs/notes/cautious-start.md, "Steep patients").
-  Through K̂ the law's transient passes it, which makes it a pace, not a wall; the law on T 300 s
-  (:data:`CAUTION_FOR_DRUG`, "Why norepinephrine's T") keeps the transient small. With the floor
-  below, the second model's steep patients over the link overshoot the step by p90 8 %, max 34 %
-  (226 % before), and the norepinephrine model's 1x patients take 14.9 minutes to the target (9.4
-  before; docs/notes/cautious-start.md, "Steep patients", "Measured"). n = 2.5 covers the second
-  model's steepest curves; the issue puts no hypertensive overshoot before time to the target.
-* **After the start** (norepinephrine's :attr:`Caution.settle_floor`). Once the MAP, having begun
-  more than :data:`SETTLE_BAND_MMHG` below the target, first comes within it, the start is over:
-  K̂ no longer falls below half its value then. The evidence's bound reads the MAP's change
-  since the first sample, so a disturbance that lowers the MAP afterwards (a haemorrhage, while the
-  law raises the rate) reads as a less sensitive patient; K̂ fell to a third of the patient's gain
-  near the target and the loop oscillated. Measured (cohort seed 3, 20 patients per level,
-  0.5x-10x, with the ceiling, the law on T 250 s): on the second norepinephrine model it took the runs flagged
-  unstable from 10 of 80 to 2 and the time in the band from 95.6-96.7 to 96.2-97.3 %; on the
-  norepinephrine model the time in the band from 94.0-95.3 to 95.3-96.7 %, overshoot and time to
-  the target unchanged, its median IAE against the PI's 6-18 % higher. Freezing K̂ at the entry (a
-  floor of 1) cost that model 16-19 points in the band (K̂ is then still above the patient's gain
-  and the law sluggish); a floor of a third left the 10 of 80 unstable
-  (docs/notes/cautious-start.md, "Steep patients").
-  Phenylephrine has none: on its models it lowered phenylephrine-2c's time in the band at 10x
-  (90.3 to 88.0 %) and raised the paper model's IAE against the PI's by 5-21 %.
+  answered at least as much as it, which holds while the rate has not been cut. After a cut the
+  low half of an oscillation would read as a less sensitive patient, so K̂ falls only while
+  ``s_fast >= s_slow`` ("Steep patients").
+* **A dose ceiling** (:attr:`Caution.hill_ceiling`, norepinephrine's). On a Hill curve that starts
+  from zero the first doses answer almost nothing, and the bound above would lower K̂ to that
+  low-dose gain. For Hill exponents up to n, E(c)/cⁿ does not grow with the concentration, and the
+  effect site of a patient no slower than the evidence's slowest holds at least s_slow, so
+  E(u) <= (Δy + m)(u/s_slow)ⁿ (m the evidence's ``margin_mmhg``). The dose that could lift the MAP
+  past the step (target − first MAP) and :data:`CEILING_ALLOWANCE` of it is u_c
+  (:func:`dose_ceiling_ml_h`), and a falling K̂ stops at step/u_c, where the law's steady dose
+  reaches it. It never raises
+  K̂ and needs the target (:attr:`~pressor.runtime.core.scheduling.ScheduleInput.target_mmhg`). It
+  acts through K̂, a pace the law's transient may pass, because held as a cap on the command it
+  starves every patient ("Steep patients").
+* **After the start** (:attr:`Caution.settle_floor`, norepinephrine's). Once the MAP, having begun
+  more than :data:`SETTLE_BAND_MMHG` below the target, first comes within it, K̂ no longer falls
+  below that fraction of its value then: a disturbance that lowers the MAP afterwards (a
+  haemorrhage, while the law raises the rate) would otherwise read as a less sensitive patient,
+  and the loop, scheduled too low, oscillates ("Steep patients").
 * **At the certified rates.** K̂ falls at most at the design's certified fall of ln K and rises at
   most at its certified rise (``RATE_BOUNDS[0]`` / ``K_RATE_UP_PER_S`` of a log-K design, times
   ``rate_fraction``), inside its box; τ is fixed at the box's longest, T at the drug's
-  (:data:`CAUTION_FOR_DRUG`; by default the box's geometric mean).
-  The design's certificate covers these rates (falls fast, rises slowly: a falling K is the
-  benign direction, :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`), and its module's
-  bumpless integral keeps the command continuous while K̂ moves
-  (:mod:`pressor.synthesis.families.smith.law`).
+  (:data:`CAUTION_FOR_DRUG`; by default the box's geometric mean). The design's certificate covers
+  these rates (falls fast, rises slowly: a falling K is the benign direction,
+  :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`), and its module's bumpless integral
+  keeps the command continuous while K̂ moves (:mod:`pressor.synthesis.families.smith.law`).
 
-Why this evidence and not the online fit (:class:`pressor.runtime.estimation.sources.EstimatedSchedule`):
-measured (docs/notes/cautious-start.md), a fit scheduled from the first minute reads K/T, not K
-and T apart, and lands up to 2x low (the step then overshot 55 %); a set of fits kept to those
-that explain the data (least squares over a bank of T and τ) was faster but let K̂ go below the
-patient at 10x (20 % overshoot). The bound above needs no fit: it is the largest sensitivity the
-evidence's slowest patient is compatible with, so it never crosses a first-order patient of the
-box with a lag up to that one from above while the rate rises. Its price is speed: K̂ approaches
-the patient as fast as that slowest patient would have answered.
+Why each drug's caution (:data:`CAUTION_FOR_DRUG`):
 
-Why this T and τ. The feedback's integral gain is g/(K T): scheduled on the box's low T it was too
-strong for the two-compartment phenylephrine patients (step overshoot p90 26 % against 5 % on
-the geometric-mean T, same cohort); the feedforward's opening push is T/λ times the steady
-infusion and is kept small by the design's fixed reference lag (``[reference] lag_s``), not by
-this source.
+* phenylephrine's PK/PD patients answer later than any first-order patient of the box and are
+  less sensitive at low doses than near the target, so its evidence waits for a 60 s effect site
+  behind the slowest patient, K̂ starts at twice the population's top, and the law runs on T 300 s
+  (a weaker integral): together about 4 minutes to the target at 1x, for the overshoot bound
+  ("Phenylephrine's evidence lag");
+* norepinephrine's evidence reads a slowest patient of 550 s instead of the box's 750 s (K̂ had
+  stopped up to twice a typical patient's gain: "Norepinephrine's evidence lag"); its design
+  certifies a faster fall of ln K ("Norepinephrine's faster fall"); its dose ceiling (n = 2.5, a
+  second model's steepest curves) and floor after the start (half) keep steep patients' steps
+  and haemorrhages safe, and its law went back from T 250 s to 300 s because the ceiling's
+  steep patients still overshot on the stronger integral. The issue ranks no hypertensive
+  overshoot before time to the target: this costs the typical patient 4-7 minutes ("Steep
+  patients", "Measured").
 
-Why phenylephrine's margin, T and effect lag (:data:`CAUTION_FOR_DRUG`, chosen on cohort seed 3,
-20 patients per level; judged on seed 2026: docs/notes/cautious-start.md). The PK/PD phenylephrine
-patients (a line delay, then plasma, then an effect site, then a sigmoid Emax) answer later than
-any first-order patient of the box and are less sensitive at low doses than near the target: at a
-Hill exponent of 1.6 the first doses read 0.12 mmHg/(ml/h) on a patient whose gain near the target
-is 0.78. Read against a first-order slowest patient, their first minutes lowered K̂ below their gain
-near the target and the step overshot (p90 20 % at 1x, max 39 % at 10x). Three changes, each
-measured on that cohort:
-
-* the slowest patient of the evidence has an effect site behind its lag (``effect_lag_s`` 60 s,
-  the middle of the 30-90 s effect-site lag the ``pkpd`` patient model draws: a plausible range,
-  not a fitted one), so K̂ falls as fast as that patient would have answered (p90 3 % at 1x, 9 %
-  at 10x);
-* the law is scheduled on T 300 s (a weaker integral, a slower predictor: it took the 0.5x-1x
-  p90 from 16 % to 4 % on a 10-patient cohort);
-* K̂ starts at twice the population's top: near the target the 10x PK/PD patients are up to a
-  quarter steeper than the top (the 10x max: 31 % from the top, 13 % from twice it).
-
-Together they cost the typical patient about 4 minutes to the target (paper model, 1x: 7.6 to
-11.6 min).
-
-Why norepinephrine's T. Its patients did not overshoot on the defaults (max 1.8 %, seed 3) but took
-12-15 min to the target at 0.5x-2x: the certified fall of ln K (then 0.01/s) alone took 8-9 min
-from the population's top to a typical patient, and a law scheduled on the box's geometric-mean T
-(335 s) then closes the rest slowly. Scheduled on T 250 s (a stronger integral) the 1x median fell
-from 14.1 to 12.3 min at an overshoot p90 of 2.7 % (max 6.6 % over 0.5x-10x); 225 s and 200 s were
-faster still (11.8, 11.4 min) at p90 up to 6.5 % and 8.9 %, too near the 10 % bound to be judged
-on another cohort (seed 3, 10 patients per level). Judged on seed 2026, 100 patients per level:
-overshoot p90 <= 6.9 %, max 9.2 %, 1x median 12.1 min (docs/notes/cautious-start.md). Since this
-source holds T and τ fixed, the norepinephrine design certifies them at a twentieth of the usual
-rates and ln K's fall at 0.02/s instead of 0.01/s: about a minute sooner at 0.5x-1x on seed 3
-(docs/notes/cautious-start.md, "Norepinephrine's faster fall"). With the dose ceiling the law went
-back to T 300 s: the ceiling holds K̂ above the steep patients' low-dose gain, but the law's
-transient still passed it (on T 250 s the second model's step overshot by p90 16-18 %, max 24 %);
-on T 300 s p90 2-8 %, max 14 %, for 0.6-1.0 min more to the target and 1-3 points less in the band
-on the norepinephrine model (seed 3; 275 s: p90 to 12 %; docs/notes/cautious-start.md, "Steep
-patients").
-
-Why norepinephrine's evidence lag. Read against the box's slowest patient (T 750 s), K̂ stopped up
-to twice a typical patient's gain and the law closed the step on it (11-12 min at 0.5x-2x). The
-evidence reads a slowest patient of 550 s instead (chosen on cohort seed 3 against 400 and 650 s,
-judged on seed 2026: docs/notes/cautious-start.md, "Norepinephrine's evidence lag"). Its price is
-the bound's coverage: for a first-order patient slower than 550 s (14 % of the population's
-apparent lags) the bound may cross its gain; on the box's first-order patients at 562-750 s that
-moved the step overshoot by -1.5 to +0.2 points, the overshoot there being the law's (below).
-
-What is not covered. The evidence assumes the drug's effect rises with the dose (a vasopressor) and
-that the baseline does not fall while it is read: a haemorrhage lowers Δy and reads as a less
-sensitive patient (K̂ falls, the loop gets bolder). Measured on the paper-disturbance scenario the
-loop stays inside ±5 mmHg through it; the certificate covers K̂ = K, not K̂ ≠ K. The construction
-bounds the first commands, not the closed loop's overshoot on every first-order patient of the
-box: on the norepinephrine box's slow lags (T >= 400 s) the law on T 250 s, before the ceiling,
-overshot a step by 10-25 % (on T 750 s: <= 9.5 %), though the norepinephrine model's patients
-stayed under 10 % (docs/notes/cautious-start.md, "The box's slow corner"). Nor does it cover a dose-response curve
-much steeper than the design's patient models without norepinephrine's ceiling and floor: on a
-Hill curve from zero the first doses answer far less than the gain near the target, K̂ falls
-toward the low-dose gain, and the step overshoots; near the target the loop then runs above its
-designed gain, which K̂'s slow certified rise does not undo. On a second norepinephrine model with
-Hill exponents up to 2.5, over the link, the step overshot by p90 74 %, max 226 %, and 15 of 50
-runs were flagged unstable; with the ceiling, the floor and the law on T 300 s p90 8 %, max 34 %
-(within the design's delay box p90 3 %, max 23 %), 5 flagged, all after the haemorrhage
-(docs/notes/cautious-start.md, "Norepinephrine over the link, on a second model"). The phenylephrine default has neither and does the same on those
-patients dosed with phenylephrine ("Steep patients"; the ceiling there cost the paper and
-``pkpd`` models' 1x patients 2-4 minutes).
+What is not covered. The evidence assumes the drug's effect rises with the dose (a vasopressor).
+The certificate covers K̂ = K, not K̂ ≠ K, and the construction bounds the first commands, not the
+closed loop's overshoot on every first-order patient of the box ("The box's slow corner").
+Phenylephrine has neither ceiling nor floor, and on dose-response curves from zero much steeper
+than its patient models its steps overshoot; norepinephrine's still do on patients whose delay is
+beyond its box ("Norepinephrine over the link, on a second model").
 """
 
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass
-from typing import Any
 
-from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale, binding_of
+from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
+from pressor.runtime.estimation.design_envelope import DesignEnvelope
 from pressor.runtime.estimation.gate import SampleGate
 
 __all__ = [
@@ -176,14 +94,13 @@ __all__ = [
     "SETTLE_BAND_MMHG",
     "Caution",
     "CautiousSchedule",
-    "DesignEnvelope",
-    "envelope_of",
+    "dose_ceiling_ml_h",
 ]
 
 
 @dataclass(frozen=True)
 class Caution:
-    """How cautiously a drug's patients are started (module docstring, "Why phenylephrine's").
+    """How cautiously a drug's patients are started (module docstring, "Why each drug's caution").
 
     Attributes
     ----------
@@ -224,72 +141,20 @@ CEILING_ALLOWANCE = 0.1
 SETTLE_BAND_MMHG = 5.0
 
 
-@dataclass(frozen=True)
-class DesignEnvelope:
-    """What a generated log-K module declares that the cautious source needs.
-
-    Attributes
-    ----------
-    box
-        ((K lo, hi) mmHg/(ml/h), (T lo, hi) s, (τ lo, hi) s) of the design.
-    fall_per_s, rise_per_s
-        The certified bounds on the fall and the rise of ln K (1/s).
-    population
-        (lo, hi) sensitivity of the design's patients (mmHg per µg/kg/min).
-    concentration_ug_ml
-        The syringe the design names (µg/ml).
-    drug
-        The drug the design is for (lower case, ``phenylephrine``).
-    """
-
-    box: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
-    fall_per_s: float
-    rise_per_s: float
-    population: tuple[float, float]
-    concentration_ug_ml: float
-    drug: str = "phenylephrine"
-
-
-def envelope_of(controller: Any) -> DesignEnvelope:
-    """The :class:`DesignEnvelope` a generated module declares (on the instance or its module).
-
-    Raises
-    ------
-    ValueError
-        A controller that is not a log-K design with a patient population (``K_RATE_RELATIVE``,
-        ``POPULATION_K_UG_KG_MIN``, ``GRID_LO``/``GRID_HI``, ``RATE_BOUNDS``), naming what is
-        missing.
-    """
-    module = sys.modules.get(type(controller).__module__)
-
-    def find(name: str) -> Any:
-        for src in (controller, module):
-            if src is not None and hasattr(src, name):
-                return getattr(src, name)
-        return None
-
-    names = ("GRID_LO", "GRID_HI", "RATE_BOUNDS", "K_RATE_RELATIVE", "POPULATION_K_UG_KG_MIN")
-    missing = [n for n in names if find(n) is None]
-    if missing or not find("K_RATE_RELATIVE"):
-        raise ValueError(
-            f"--schedule cautious needs a design on a log-K scale with a patient population"
-            f" ([rates] K_relative_per_s, [population]); the controller"
-            f" {type(controller).__qualname__!r} declares no {', '.join(missing or names[3:4])}"
-        )
-    lo, hi = find("GRID_LO"), find("GRID_HI")
-    box = tuple((float(a), float(b)) for a, b in zip(lo, hi, strict=True))
-    fall = float(find("K_RATE_FALL_PER_S") or find("RATE_BOUNDS")[0])
-    rise = float(find("K_RATE_UP_PER_S") or fall)
-    pop = tuple(float(v) for v in find("POPULATION_K_UG_KG_MIN"))
-    binding = binding_of(controller)
-    return DesignEnvelope(
-        box,  # type: ignore[arg-type]
-        fall,
-        rise,
-        pop,  # type: ignore[arg-type]
-        binding.concentration_ug_ml,
-        binding.name,
-    )
+def dose_ceiling_ml_h(
+    s_ml_h: float,
+    step_mmhg: float,
+    dy_mmhg: float,
+    margin_mmhg: float,
+    inv_n: float,
+    allowance: float = CEILING_ALLOWANCE,
+) -> float:
+    """u_c (ml/h): the steady dose past which a Hill curve from zero of exponent n = 1/``inv_n``
+    could lift the MAP beyond ``(1 + allowance) step_mmhg``, given that a patient that has
+    absorbed ``s_ml_h`` answered ``dy_mmhg`` (clipped at 0) within ``margin_mmhg`` (module
+    docstring, "A dose ceiling"): ``s (1.1 step/(Δy + m))^(1/n)``."""
+    rise = (1.0 + allowance) * step_mmhg / ((dy_mmhg if dy_mmhg > 0.0 else 0.0) + margin_mmhg)
+    return s_ml_h * rise**inv_n
 
 
 class _UnitLag:
@@ -337,7 +202,8 @@ class CautiousSchedule:
     Parameters
     ----------
     envelope
-        The design's box, certified ln K rates, population and syringe (:func:`envelope_of`).
+        The design's box, certified ln K rates, population and syringe
+        (:func:`pressor.runtime.estimation.design_envelope.envelope_of`).
     sample_period_s
         Tick period (s), > 0.
     dose
@@ -500,6 +366,5 @@ class CautiousSchedule:
         step = target_mmhg - self._anchor  # type: ignore[operator]
         if not step > 0.0:  # no target (NaN), or none above the first MAP: nothing to bound
             return k
-        rise = (1.0 + CEILING_ALLOWANCE) * step / ((dy if dy > 0.0 else 0.0) + self._m)
-        floor = step / (s_slow * rise**self._inv_n)
+        floor = step / dose_ceiling_ml_h(s_slow, step, dy, self._m, self._inv_n)
         return k if k >= floor else min(self.K, floor)

@@ -183,7 +183,8 @@ def make_schedule(
     """The scheduling source named ``source`` (one of :data:`SOURCES`) at ``sample_period_s`` (s).
 
     ``controller`` is the controller the source schedules: ``cautious`` reads its design (box,
-    certified ln K rates, patient population: :func:`pressor.runtime.estimation.cautious.envelope_of`;
+    certified ln K rates, patient population:
+    :func:`pressor.runtime.estimation.design_envelope.envelope_of`;
     required); ``estimated`` and ``validated`` take its box and rates when they are not the
     shipped phenylephrine design's (:func:`settings_for_box`: another drug's design schedules
     inside its own box, not phenylephrine's); ``dose`` the syringe and patient to convert the
@@ -216,7 +217,8 @@ def make_schedule(
             est, sample_period_s, start=settings.prior, box=box, rate_bounds=rates
         )
     if source == "cautious":
-        from pressor.runtime.estimation.cautious import CautiousSchedule, envelope_of
+        from pressor.runtime.estimation.cautious import CautiousSchedule
+        from pressor.runtime.estimation.design_envelope import envelope_of
 
         if controller is None:
             raise ValueError("--schedule cautious needs the controller it schedules (its design)")

@@ -132,14 +132,14 @@ def dose_cap(monkeypatch):
     """:func:`research.steep_patients.install_dose_cap` for one test: the norepinephrine
     module's controller class, the trial's compiled twin and ``envelope_of`` restored after it."""
     from pressor.hil_sim.trials import trial
-    from pressor.runtime.estimation import cautious
+    from pressor.runtime.estimation import design_envelope
     from pressor.runtime.inputs.controller_loader import LPV_DESIGNS, load_generated_module
     from research.steep_patients import CAPPED_DESIGNS, install_dose_cap
 
     classes = [load_generated_module(LPV_DESIGNS[n]).Controller for n in CAPPED_DESIGNS]
     for target, name in [(c, "_step_float") for c in classes] + [
         (trial, "native_twin"),
-        (cautious, "envelope_of"),
+        (design_envelope, "envelope_of"),
     ]:
         monkeypatch.setattr(target, name, getattr(target, name))
     norepinephrine = classes[CAPPED_DESIGNS.index("norepinephrine-cautious")]

@@ -14,7 +14,8 @@ import numpy as np
 
 from pressor.contracts.drug import DoseScale
 from pressor.runtime.core.scheduling import ScheduleInput
-from pressor.runtime.estimation.cautious import CautiousSchedule, DesignEnvelope
+from pressor.runtime.estimation.cautious import CautiousSchedule
+from pressor.runtime.estimation.design_envelope import DesignEnvelope
 
 TS = 0.1  # s
 DOSE = DoseScale(100.0, 70.0)

@@ -9,7 +9,8 @@ import pytest
 
 from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale
 from pressor.runtime.core.scheduling import ScheduleInput
-from pressor.runtime.estimation.cautious import CautiousSchedule, envelope_of
+from pressor.runtime.estimation.cautious import CautiousSchedule
+from pressor.runtime.estimation.design_envelope import envelope_of
 from pressor.runtime.estimation.sources import make_schedule
 from pressor.runtime.inputs.config import load_controller
 
