@@ -46,6 +46,13 @@ frontier are in docs/notes/cautious-start.md (the section named in each item).
   below that fraction of its value then: a disturbance that lowers the MAP afterwards (a
   haemorrhage, while the law raises the rate) would otherwise read as a less sensitive patient,
   and the loop, scheduled too low, oscillates ("Steep patients").
+* **A swing raises K** (:attr:`Caution.swing_raise`, both drugs'). After the start, a MAP that
+  leaves the band above the target after it last left it below has been driven past the target
+  by the loop: K̂ is below the patient's gain there (a steep dose-response curve's local gain is up
+  to n times its average, and a haemorrhage read as a less sensitive patient pulls K̂ down
+  further). Each such swing raises K̂'s floor to 1.5 times K̂, never above K̂ when the start
+  ended, and K̂ climbs to it at the certified rise: the loop gets gentler while it swings, and
+  the evidence may not take that back ("Steep patients").
 * **At the certified rates.** K̂ falls at most at the design's certified fall of ln K and rises at
   most at its certified rise (``RATE_BOUNDS[0]`` / ``K_RATE_UP_PER_S`` of a log-K design, times
   ``rate_fraction``), inside its box; τ is fixed at the box's longest, T at the drug's
@@ -119,6 +126,11 @@ class Caution:
         Once the MAP has first come within :data:`SETTLE_BAND_MMHG` of the target, K̂ no longer
         falls below this fraction (0, 1] of its value then (module docstring, "After the start");
         None: no such floor.
+    swing_raise
+        After the start, each swing of the MAP up through the band (it leaves the band above the
+        target after it last left it below) raises K̂'s floor to this multiple (> 1) of K̂ then,
+        never above K̂ when the start ended, and K̂ climbs to it at the certified rise (module
+        docstring, "A swing raises K"); None: no such rule.
     """
 
     start_margin: float = 1.0
@@ -127,12 +139,15 @@ class Caution:
     evidence_T_s: float | None = None
     hill_ceiling: float | None = None
     settle_floor: float | None = None
+    swing_raise: float | None = None
 
 
 #: the drug's caution (lower-case drug name -> :class:`Caution`); other drugs take ``Caution()``
 CAUTION_FOR_DRUG: dict[str, Caution] = {
-    "phenylephrine": Caution(start_margin=2.0, T_s=300.0, effect_lag_s=60.0),
-    "norepinephrine": Caution(T_s=300.0, evidence_T_s=550.0, hill_ceiling=2.5, settle_floor=0.5),
+    "phenylephrine": Caution(start_margin=2.0, T_s=300.0, effect_lag_s=60.0, swing_raise=1.5),
+    "norepinephrine": Caution(
+        T_s=300.0, evidence_T_s=550.0, hill_ceiling=2.5, settle_floor=0.5, swing_raise=1.5
+    ),
 }
 #: the rise above the step (a fraction of it) the dose ceiling lets a Hill curve reach: the
 #: issue's overshoot bound (10 % of the step)
@@ -234,6 +249,10 @@ class CautiousSchedule:
         K̂'s floor after the start, a fraction in (0, 1] of K̂ when the MAP first came within
         :data:`SETTLE_BAND_MMHG` of the target (module docstring, "After the start"); default
         the drug's (:data:`CAUTION_FOR_DRUG`); 0 turns it off. It needs the target too.
+    swing_raise
+        The factor (> 1) a swing through the band raises K̂'s floor to, over K̂ then (module
+        docstring, "A swing raises K"); default the drug's (:data:`CAUTION_FOR_DRUG`); 0 turns it
+        off. It needs the target too.
 
     The sample gate (:class:`pressor.runtime.estimation.gate.SampleGate`) keeps bad samples out of the
     evidence, but not a MAP that does not move: here no movement is the evidence (a frozen
@@ -256,6 +275,7 @@ class CautiousSchedule:
         evidence_T_s: float | None = None,
         hill_ceiling: float | None = None,
         settle_floor: float | None = None,
+        swing_raise: float | None = None,
     ) -> None:
         if not (math.isfinite(sample_period_s) and sample_period_s > 0.0):
             raise ValueError(f"sample_period_s={sample_period_s!r} must be finite and > 0")
@@ -307,8 +327,15 @@ class CautiousSchedule:
         if f is not None and f != 0.0 and not 0.0 < f <= 1.0:
             raise ValueError(f"settle_floor={settle_floor!r} must be in (0, 1] (0: none)")
         self.settle_floor = f or None
+        r = caution.swing_raise if swing_raise is None else float(swing_raise)
+        if r is not None and r != 0.0 and not (math.isfinite(r) and r > 1.0):
+            raise ValueError(f"swing_raise={swing_raise!r} must be finite and > 1 (0: none)")
+        self.swing_raise = r or None
         self._k_settled = 0.0  # K̂'s floor once the start has ended (0 before, or without one)
-        self._settling = self.settle_floor is not None  # the start has not ended yet
+        # the start has not ended yet (tracked only for a rule that acts after it)
+        self._settling = self.settle_floor is not None or self.swing_raise is not None
+        self._k_entry = 0.0  # K̂ when the start ended
+        self._side = 0  # the side of the band the MAP last left it on after the start (+1, -1)
         self._slow = _UnitLag(self.evidence_T_s, d_hi, ts, lag2)
         self._fast = _UnitLag(t_lo, d_lo, ts)
         self._gate = SampleGate(ts, flatline_s=1e9)  # no flatline rule (class docstring)
@@ -348,16 +375,26 @@ class CautiousSchedule:
             m_f = self._m + self._rel * pred_f
             if s_fast > 0.0 and dy > pred_f + m_f:  # more than the fastest K̂ patient could give
                 k = min(k * self._up, (dy - m_f) / s_fast, self.k_top)
+        if self.K < self._k_settled:  # a swing raised the floor: climb at the certified rise
+            k = max(k, min(self.K * self._up, self._k_settled))
         if k != self.K:
             self.K = k
             self._schedule = Schedule(k, self.T_s, self.tau_s, "cautious", True, True, False,
                                       "evidence")  # fmt: skip
+        target = inputs.target_mmhg
+        band = SETTLE_BAND_MMHG
         if self._settling:
-            target = inputs.target_mmhg
-            band = SETTLE_BAND_MMHG
-            if abs(y - target) <= band and self._anchor < target - band:  # type: ignore[operator]
+            if abs(y - target) <= band and self._anchor < target - band:
                 self._settling = False  # the MAP has risen into the band: the start ends here
-                self._k_settled = self.settle_floor * k  # type: ignore[operator]
+                self._k_settled = (self.settle_floor or 0.0) * k
+                self._k_entry = k
+        elif self.swing_raise is not None:
+            side = 1 if y > target + band else -1 if y < target - band else 0
+            if side and side != self._side:
+                if side > 0 and self._side < 0:  # out above after out below: a swing (docstring)
+                    raised = min(self.swing_raise * k, self._k_entry)
+                    self._k_settled = max(self._k_settled, raised)
+                self._side = side
         return self._schedule
 
     def _under_the_ceiling(self, k: float, dy: float, s_slow: float, target_mmhg: float) -> float:

@@ -166,6 +166,68 @@ def test_after_the_map_first_reaches_the_band_k_hat_falls_at_most_to_half_its_va
     assert end == pytest.approx(0.5 * entry, rel=1e-12) and end > 1.2 * free_end
 
 
+#: a swing up through the band and back, one tick each (mmHg; target 70, band ±5)
+_SWING = (68.0, 76.0, 68.0)
+
+
+def _k_through_swings(sched: CautiousSchedule, swings: int) -> tuple[float, list[float]]:
+    """2 ml/h throughout, target 70 from 60 mmHg: no response for 300 s, the MAP in the band
+    (66 mmHg) for 10 s, below it (60 mmHg) for 3000 s, then ``swings`` times a swing above it
+    (:data:`_SWING`: one tick each of 68, 76 and 68 mmHg, jumps the sample gate accepts) and
+    3000 s below it again. Returns (K̂ at the first tick in the band, K̂ at the end of each
+    stretch below the band)."""
+
+    def feed(map_mmhg: float, seconds: float) -> float:
+        inp = ScheduleInput(map_mmhg, 0, 2.0, math.nan, math.nan, math.nan, False, 70.0)
+        for _ in range(int(round(seconds / TS))):
+            k = sched.update(inp).K
+        return k
+
+    feed(60.0, 300.0)
+    at_entry = feed(66.0, TS)
+    feed(66.0, 10.0)
+    ends = [feed(60.0, 3000.0)]
+    for _ in range(swings):
+        for map_mmhg in _SWING:
+            feed(map_mmhg, TS)
+        ends.append(feed(60.0, 3000.0))
+    return at_entry, ends
+
+
+def test_a_swing_up_through_the_band_raises_k_hat_by_half_at_the_certified_rise_up_to_its_entry():
+    # after the start the drop holds K-hat at its floor, half its value at the entry (K_e). The
+    # MAP then leaves the band above (a swing): K-hat has risen one certified step on each tick
+    # at 68 and 76 mmHg (more response than K-hat predicts), and the floor becomes 1.5 times
+    # K-hat then, 0.75 K_e and those two steps; K-hat climbs to it at the certified rise and stays
+    # there, though the evidence below the band would lower it (going out below is no swing). A
+    # second swing would make it 1.125 K_e: capped at K_e
+    env = envelope_of(load_controller("lpv:norepinephrine-cautious", TS))
+    assert CautiousSchedule(env, TS).swing_raise == 1.5
+    up = math.exp(0.99 * env.rise_per_s * TS)
+    entry, ends = _k_through_swings(CautiousSchedule(env, TS, hill_ceiling=0.0), 2)
+    assert ends[0] == pytest.approx(0.5 * entry, rel=1e-12)
+    assert ends[1] == pytest.approx(0.75 * up**2 * entry, rel=1e-12)
+    assert ends[2] == pytest.approx(entry, rel=1e-12)
+    off_entry, off = _k_through_swings(
+        CautiousSchedule(env, TS, hill_ceiling=0.0, swing_raise=0), 2
+    )
+    assert off_entry == entry and off == pytest.approx([0.5 * entry] * 3, rel=1e-12)
+
+
+def test_after_a_swing_k_hat_climbs_no_faster_than_the_certified_rise():
+    env = envelope_of(load_controller("lpv:norepinephrine-cautious", TS))
+    sched = CautiousSchedule(env, TS, hill_ceiling=0.0)
+    entry, _ = _k_through_swings(sched, 0)
+    ks = [
+        sched.update(ScheduleInput(m, 0, 2.0, math.nan, math.nan, math.nan, False, 70.0)).K
+        for m in _SWING + (60.0,) * int(round(100.0 / TS))
+    ]
+    step = math.exp(0.99 * env.rise_per_s * TS)  # the certified rise, 1 % short, over a tick
+    assert ks[1] == pytest.approx(0.5 * entry * step**2, rel=1e-12)  # the swing's tick
+    assert ks[-1] == pytest.approx(ks[1] * step ** (len(ks) - 2), rel=1e-9)
+    assert ks[-1] < 0.75 * entry  # still climbing after 100 s (ln 1.5 takes about 270 s)
+
+
 @pytest.mark.parametrize("target_mmhg", [math.nan, 60.0, 55.0])
 def test_the_dose_ceiling_and_the_floor_act_only_with_a_target_above_the_first_map(target_mmhg):
     # a MAP that starts in the band (60 or 55 mmHg against 60) has no start to end: no floor
@@ -175,9 +237,10 @@ def test_the_dose_ceiling_and_the_floor_act_only_with_a_target_above_the_first_m
     assert got == pytest.approx(1.0 / (0.9 * s), rel=2e-3)
 
 
-def test_phenylephrine_has_no_dose_ceiling_and_no_floor_after_the_start():
+def test_phenylephrine_has_no_dose_ceiling_and_no_floor_after_the_start_but_a_swing_raises_k():
     sched = CautiousSchedule(envelope_of(load_controller("lpv:cautious", TS)), TS)
     assert sched.hill_ceiling is None and sched.settle_floor is None
+    assert sched.swing_raise == 1.5
 
 
 @pytest.mark.parametrize(
@@ -187,6 +250,8 @@ def test_phenylephrine_has_no_dose_ceiling_and_no_floor_after_the_start():
         ({"hill_ceiling": math.inf}, "hill_ceiling=inf must be finite and >= 1"),
         ({"settle_floor": 1.5}, r"settle_floor=1.5 must be in \(0, 1\]"),
         ({"settle_floor": -0.5}, r"settle_floor=-0.5 must be in \(0, 1\]"),
+        ({"swing_raise": 1.0}, "swing_raise=1.0 must be finite and > 1"),
+        ({"swing_raise": math.nan}, "swing_raise=nan must be finite and > 1"),
         ({"start_margin": 0.5}, "start_margin"),
         ({"T_s": 50.0}, "T box"),
         ({"T_s": 900.0}, "T box"),
