@@ -153,6 +153,7 @@ CAUTION_FOR_DRUG: dict[str, Caution] = {
 #: issue's overshoot bound (10 % of the step)
 CEILING_ALLOWANCE = 0.1
 #: the band around the target (mmHg) whose first entry ends the start (:attr:`Caution.settle_floor`)
+#: and that a swing crosses (:attr:`Caution.swing_raise`)
 SETTLE_BAND_MMHG = 5.0
 
 
@@ -250,7 +251,7 @@ class CautiousSchedule:
         :data:`SETTLE_BAND_MMHG` of the target (module docstring, "After the start"); default
         the drug's (:data:`CAUTION_FOR_DRUG`); 0 turns it off. It needs the target too.
     swing_raise
-        The factor (> 1) a swing through the band raises K̂'s floor to, over K̂ then (module
+        The factor (> 1) a swing up through the band raises K̂'s floor to, over K̂ then (module
         docstring, "A swing raises K"); default the drug's (:data:`CAUTION_FOR_DRUG`); 0 turns it
         off. It needs the target too.
 
