@@ -132,50 +132,16 @@ def test_norepinephrine_s_dose_ceiling_stops_k_hat_where_a_hill_curve_of_2_5_cou
     assert _k_after_no_response(none, 80.0, 3000.0) == pytest.approx(1.0 / (0.9 * s), rel=2e-3)
 
 
-def _k_through_a_drop_after_the_band(sched: CautiousSchedule) -> tuple[float, float]:
-    """2 ml/h throughout, target 70 from 60 mmHg: no response for 300 s, the MAP in the band
-    (66 mmHg) for 10 s, then back at 60 mmHg (a haemorrhage's reading) for 3000 s. Returns
-    (K̂ at the first tick in the band, K̂ at the end)."""
-
-    def feed(map_mmhg: float, seconds: float) -> float:
-        inp = ScheduleInput(map_mmhg, 0, 2.0, math.nan, math.nan, math.nan, False, 70.0)
-        for _ in range(int(round(seconds / TS))):
-            k = sched.update(inp).K
-        return k
-
-    feed(60.0, 300.0)
-    at_entry = feed(66.0, TS)
-    feed(66.0, 10.0)
-    return at_entry, feed(60.0, 3000.0)
-
-
-def test_after_the_map_first_reaches_the_band_k_hat_falls_at_most_to_half_its_value_then():
-    # a drop after the start is read as a less sensitive patient: without the floor K-hat falls to
-    # where the margin hides the patient, 1/(0.9 s) with s = 2 (1 - e^(-(3310 - 55)/550)) (hand
-    # value); norepinephrine's floor keeps it at half its value when the MAP entered the band
-    env = envelope_of(load_controller("lpv:norepinephrine-cautious", TS))
-    floored = CautiousSchedule(env, TS, hill_ceiling=0.0)
-    assert floored.settle_floor == 0.5
-    entry, end = _k_through_a_drop_after_the_band(floored)
-    free_entry, free_end = _k_through_a_drop_after_the_band(
-        CautiousSchedule(env, TS, hill_ceiling=0.0, settle_floor=0.0)
-    )
-    assert entry == free_entry  # the same source until the start ended
-    s = 2.0 * (1.0 - math.exp(-(3310.0 - 55.0) / 550.0))
-    assert free_end == pytest.approx(1.0 / (0.9 * s), rel=2e-3)
-    assert end == pytest.approx(0.5 * entry, rel=1e-12) and end > 1.2 * free_end
-
-
 #: a swing up through the band and back, one tick each (mmHg; target 70, band ±5)
 _SWING = (68.0, 76.0, 68.0)
 
 
 def _k_through_swings(sched: CautiousSchedule, swings: int) -> tuple[float, list[float]]:
     """2 ml/h throughout, target 70 from 60 mmHg: no response for 300 s, the MAP in the band
-    (66 mmHg) for 10 s, below it (60 mmHg) for 3000 s, then ``swings`` times a swing above it
-    (:data:`_SWING`: one tick each of 68, 76 and 68 mmHg, jumps the sample gate accepts) and
-    3000 s below it again. Returns (K̂ at the first tick in the band, K̂ at the end of each
-    stretch below the band)."""
+    (66 mmHg) for 10 s, below it (60 mmHg, a haemorrhage's reading) for 3000 s, then ``swings``
+    times a swing above it (:data:`_SWING`: one tick each of 68, 76 and 68 mmHg, jumps the sample
+    gate accepts) and 3000 s below it again. Returns (K̂ at the first tick in the band, K̂ at the
+    end of each stretch below the band)."""
 
     def feed(map_mmhg: float, seconds: float) -> float:
         inp = ScheduleInput(map_mmhg, 0, 2.0, math.nan, math.nan, math.nan, False, 70.0)
@@ -192,6 +158,23 @@ def _k_through_swings(sched: CautiousSchedule, swings: int) -> tuple[float, list
             feed(map_mmhg, TS)
         ends.append(feed(60.0, 3000.0))
     return at_entry, ends
+
+
+def test_after_the_map_first_reaches_the_band_k_hat_falls_at_most_to_half_its_value_then():
+    # a drop after the start is read as a less sensitive patient: without the floor K-hat falls to
+    # where the margin hides the patient, 1/(0.9 s) with s = 2 (1 - e^(-(3310 - 55)/550)) (hand
+    # value); norepinephrine's floor keeps it at half its value when the MAP entered the band
+    env = envelope_of(load_controller("lpv:norepinephrine-cautious", TS))
+    floored = CautiousSchedule(env, TS, hill_ceiling=0.0)
+    assert floored.settle_floor == 0.5
+    entry, (end,) = _k_through_swings(floored, 0)
+    free_entry, (free_end,) = _k_through_swings(
+        CautiousSchedule(env, TS, hill_ceiling=0.0, settle_floor=0.0), 0
+    )
+    assert entry == free_entry  # the same source until the start ended
+    s = 2.0 * (1.0 - math.exp(-(3310.0 - 55.0) / 550.0))
+    assert free_end == pytest.approx(1.0 / (0.9 * s), rel=2e-3)
+    assert end == pytest.approx(0.5 * entry, rel=1e-12) and end > 1.2 * free_end
 
 
 def test_a_swing_up_through_the_band_raises_k_hat_by_half_at_the_certified_rise_up_to_its_entry():
