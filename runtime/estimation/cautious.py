@@ -46,8 +46,9 @@ frontier are in docs/notes/cautious-start.md (the section named in each item).
   below that fraction of its value then: a disturbance that lowers the MAP afterwards (a
   haemorrhage, while the law raises the rate) would otherwise read as a less sensitive patient,
   and the loop, scheduled too low, oscillates ("Steep patients").
-* **A swing raises K** (:attr:`Caution.swing_raise`, both drugs'). After the start, a MAP that
-  leaves the band above the target after it last left it below has been driven past the target
+* **A swing raises K** (:attr:`Caution.swing_raise`, both drugs'). After the start, a MAP (read
+  through a :data:`SWING_FILTER_S` low-pass, so that a monitor's noise is no swing) that leaves
+  the band above the target after it last left it below has been driven past the target
   by the loop: K̂ is below the patient's gain there (a steep dose-response curve's local gain is up
   to n times its average, and a haemorrhage read as a less sensitive patient pulls K̂ down
   further). Each such swing raises K̂'s floor to 1.5 times K̂, never above K̂ when the start
@@ -99,6 +100,7 @@ __all__ = [
     "CAUTION_FOR_DRUG",
     "CEILING_ALLOWANCE",
     "SETTLE_BAND_MMHG",
+    "SWING_FILTER_S",
     "Caution",
     "CautiousSchedule",
     "dose_ceiling_ml_h",
@@ -127,8 +129,8 @@ class Caution:
         falls below this fraction (0, 1] of its value then (module docstring, "After the start");
         None: no such floor.
     swing_raise
-        After the start, each swing of the MAP up through the band (it leaves the band above the
-        target after it last left it below) raises K̂'s floor to this multiple (> 1) of K̂ then,
+        After the start, each swing of the MAP (low-passed, :data:`SWING_FILTER_S`) up through the
+        band (it leaves the band above the target after it last left it below) raises K̂'s floor to this multiple (> 1) of K̂ then,
         never above K̂ when the start ended, and K̂ climbs to it at the certified rise (module
         docstring, "A swing raises K"); None: no such rule.
     """
@@ -155,6 +157,10 @@ CEILING_ALLOWANCE = 0.1
 #: the band around the target (mmHg) whose first entry ends the start (:attr:`Caution.settle_floor`)
 #: and that a swing crosses (:attr:`Caution.swing_raise`)
 SETTLE_BAND_MMHG = 5.0
+#: the time constant (s) of the MAP's low-pass that a swing is read on (:attr:`Caution.swing_raise`):
+#: a loop's swing lasts minutes, while a monitor's noise (2 mmHg at 1 Hz raised K̂ on every patient
+#: unfiltered) and the breath's rhythm last seconds
+SWING_FILTER_S = 30.0
 
 
 def dose_ceiling_ml_h(
@@ -337,6 +343,8 @@ class CautiousSchedule:
         self._settling = self.settle_floor is not None or self.swing_raise is not None
         self._k_entry = 0.0  # K̂ when the start ended
         self._side = 0  # the side of the band the MAP last left it on after the start (+1, -1)
+        self._y_slow = 0.0  # the MAP's low-pass (SWING_FILTER_S) after the start (mmHg)
+        self._a_slow = math.exp(-ts / SWING_FILTER_S)
         self._slow = _UnitLag(self.evidence_T_s, d_hi, ts, lag2)
         self._fast = _UnitLag(t_lo, d_lo, ts)
         self._gate = SampleGate(ts, flatline_s=1e9)  # no flatline rule (class docstring)
@@ -389,8 +397,10 @@ class CautiousSchedule:
                 self._settling = False  # the MAP has risen into the band: the start ends here
                 self._k_settled = (self.settle_floor or 0.0) * k
                 self._k_entry = k
+                self._y_slow = y
         elif self.swing_raise is not None:
-            side = 1 if y > target + band else -1 if y < target - band else 0
+            self._y_slow = y_slow = y + self._a_slow * (self._y_slow - y)
+            side = 1 if y_slow > target + band else -1 if y_slow < target - band else 0
             if side and side != self._side:
                 if side > 0 and self._side < 0:  # out above after out below: a swing (docstring)
                     raised = min(self.swing_raise * k, self._k_entry)
