@@ -377,15 +377,13 @@ class CautiousSchedule:
                 k = max(k * self._down, (dy + m) / s_slow, self.k_floor)
                 if self._inv_n:
                     k = self._under_the_ceiling(k, dy, s_slow, inputs.target_mmhg)
-                if k < self._k_settled:  # after the start (docstring)
-                    k = min(self.K, self._k_settled)
         else:
             pred_f = k * s_fast
             m_f = self._m + self._rel * pred_f
             if s_fast > 0.0 and dy > pred_f + m_f:  # more than the fastest K̂ patient could give
                 k = min(k * self._up, (dy - m_f) / s_fast, self.k_top)
-        if self.K < self._k_settled:  # a swing raised the floor: climb at the certified rise
-            k = max(k, min(self.K * self._up, self._k_settled))
+        if k < self._k_settled:  # the floor after the start: held, or climbed to at the certified
+            k = max(k, min(self.K * self._up, self._k_settled))  # rise once a swing raised it
         if k != self.K:
             self.K = k
             self._schedule = Schedule(k, self.T_s, self.tau_s, "cautious", True, True, False,
