@@ -100,7 +100,7 @@ from pressor.plumbing.files import write_atomic
 from pressor.plumbing.parallel import run_ordered
 from pressor.runtime.core.dose_guard import DoseLimits
 from pressor.runtime.core.supervisor_config import State
-from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution
+from pressor.runtime.estimation.caution import CAUTION_FOR_DRUG, Caution
 from pressor.runtime.estimation.sources import SOURCES
 from pressor.runtime.inputs.controller_loader import load_controller, lpv_design_module
 from pressor.runtime.inputs.defaults import DESIGN_FOR_DRUG, default_schedule

@@ -41,7 +41,7 @@ import numpy as np
 
 from pressor.contracts.drug import DoseScale
 from pressor.runtime.estimation import cautious
-from pressor.runtime.estimation.cautious import CAUTION_FOR_DRUG, Caution
+from pressor.runtime.estimation.caution import CAUTION_FOR_DRUG, Caution
 from pressor.runtime.estimation.design_envelope import DesignEnvelope
 
 LEVELS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
@@ -66,7 +66,7 @@ def use_cautious_source(cls: type[cautious.CautiousSchedule], **settings: Any) -
 
 def replace_caution(spec: str) -> None:
     """Replace a drug's caution in this process and the workers forked from it: ``spec`` is
-    ``DRUG:JSON``, the JSON the fields of :class:`~pressor.runtime.estimation.cautious.Caution`."""
+    ``DRUG:JSON``, the JSON the fields of :class:`~pressor.runtime.estimation.caution.Caution`."""
     drug, _, fields = spec.partition(":")
     CAUTION_FOR_DRUG[drug] = Caution(**json.loads(fields))
 
@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         metavar="DRUG:JSON",
         help="replace a drug's caution for this run (workers forked from here see it), e.g."
         """ 'phenylephrine:{"start_margin": 1, "T_s": 200, "effect_lag_s": null}'"""
-        " (runtime/estimation/cautious.py, Caution; default: the shipped CAUTION_FOR_DRUG)",
+        " (runtime/estimation/caution.py, Caution; default: the shipped CAUTION_FOR_DRUG)",
     )
     a = p.parse_args(argv)
     for spec in a.caution:

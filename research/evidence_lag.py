@@ -18,7 +18,7 @@ Usage (the table of :mod:`research.cautious_levels`, on this source)::
         --patient-model norepinephrine --levels 0.5,1,2,10 --patients 10 --seed 3
 
 ``--effect-site`` is ``none`` (the patient's first-order lag alone), ``keep`` (the drug's effect
-site of :data:`~pressor.runtime.estimation.cautious.CAUTION_FOR_DRUG` behind it, if it names one)
+site of :data:`~pressor.runtime.estimation.caution.CAUTION_FOR_DRUG` behind it, if it names one)
 or a lag in s. ``--lag SECONDS`` reads the evidence against a slowest patient of that T (and the
 box's longest τ) instead of the patient's own: how much of the box's lag range the evidence must
 cover::
@@ -36,9 +36,9 @@ from collections.abc import Callable
 
 from pressor.contracts.drug import DoseScale
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
-from pressor.runtime.estimation import cautious
 from pressor.runtime.estimation.cautious import CautiousSchedule
 from pressor.runtime.estimation.design_envelope import DesignEnvelope
+from pressor.runtime.estimation.unit_lag import UnitLag
 from research import cautious_levels
 
 #: the longest delay (s) the source can read the rate history back by (the shipped models' are
@@ -57,7 +57,7 @@ class KnownLagSchedule(CautiousSchedule):
         As :class:`~pressor.runtime.estimation.cautious.CautiousSchedule`.
     effect_lag_s
         A lag (s, > 0) behind the patient's own (an effect site); ``None``: none. Default: the
-        drug's effect site (:data:`~pressor.runtime.estimation.cautious.CAUTION_FOR_DRUG`).
+        drug's effect site (:data:`~pressor.runtime.estimation.caution.CAUTION_FOR_DRUG`).
     lag_T_s
         ``None`` (default): the device's T and τ. A lag (s, > 0): the evidence's slowest patient
         has this T (and the box's longest τ) in place of the box's longest T; the fastest stays
@@ -90,7 +90,7 @@ class KnownLagSchedule(CautiousSchedule):
             self._retune(self._slow, lag_T_s, envelope.box[2][1], lag2)
 
     def _retune(self, lag: object, T_s: float, tau_s: float, lag2_s: float | None) -> None:
-        fresh = cautious._UnitLag(T_s, min(tau_s, MAX_DELAY_S), self._ts, lag2_s)
+        fresh = UnitLag(T_s, min(tau_s, MAX_DELAY_S), self._ts, lag2_s)
         for name in ("a", "b", "k", "f", "a2", "b2"):
             setattr(lag, name, getattr(fresh, name))
 

@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 from pressor.contracts.drug import DoseScale
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
-from pressor.runtime.estimation import cautious
 from pressor.runtime.estimation.cautious import CautiousSchedule
 from pressor.runtime.estimation.design_envelope import DesignEnvelope
+from pressor.runtime.estimation.unit_lag import UnitLag
 from research import cautious_levels
 
 
@@ -74,9 +74,7 @@ class LagBankSchedule(CautiousSchedule):
         lags = [t_lo * (t_hi / t_lo) ** (i / (n_t - 1)) for i in range(n_t)]
         delays = [d_lo + (d_hi - d_lo) * i / (n_d - 1) for i in range(n_d)]
         self.hypotheses = [(T, d) for T in lags for d in delays]
-        self._bank = [
-            cautious._UnitLag(T, d, sample_period_s, self.effect_lag_s) for T, d in self.hypotheses
-        ]
+        self._bank = [UnitLag(T, d, sample_period_s, self.effect_lag_s) for T, d in self.hypotheses]
         n = len(self.hypotheses)
         self._slowest_first = sorted(range(n), key=lambda j: -sum(self.hypotheses[j]))
         self._sxy, self._sxx = [0.0] * n, [0.0] * n

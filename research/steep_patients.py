@@ -36,8 +36,8 @@ patients"):
   m))^(1/n), and K̂ is kept from falling below step/u_c, so the law's steady dose step/K̂ stays
   under it. The step here is the scenario's (``step_mmhg``, the sweep's 20 mmHg). Norepinephrine's
   default ships this ceiling at n = 2.5
-  (:attr:`~pressor.runtime.estimation.cautious.Caution.hill_ceiling`, on the target it is given;
-  the same :func:`~pressor.runtime.estimation.cautious.dose_ceiling_ml_h`); given here, ``hill``
+  (:attr:`~pressor.runtime.estimation.caution.Caution.hill_ceiling`, on the target it is given;
+  the same :func:`~pressor.runtime.estimation.caution.dose_ceiling_ml_h`); given here, ``hill``
   replaces it. ``ceiling_T_s`` reads the
   ceiling against a faster patient than the evidence's slowest, ``ceiling_margin`` with a
   smaller margin, and ``ceiling_on`` holds it as a cap on the generated law's command instead
@@ -68,8 +68,10 @@ from pressor.contracts.drug import DoseScale
 from pressor.hil_sim.patients.pkpd import PkpdPatient
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
 from pressor.runtime.estimation import design_envelope
-from pressor.runtime.estimation.cautious import CautiousSchedule, _UnitLag, dose_ceiling_ml_h
+from pressor.runtime.estimation.caution import dose_ceiling_ml_h
+from pressor.runtime.estimation.cautious import CautiousSchedule
 from pressor.runtime.estimation.design_envelope import DesignEnvelope
+from pressor.runtime.estimation.unit_lag import UnitLag
 from research import cautious_levels
 
 #: the generated modules (their ``LPV_DESIGNS`` names) :func:`install_dose_cap` gives a dose cap
@@ -248,7 +250,7 @@ class GuardedSchedule(CautiousSchedule):
         self._ceiling = (
             None
             if ceiling_T_s is None
-            else _UnitLag(ceiling_T_s, envelope.box[2][1], sample_period_s, self.effect_lag_s)
+            else UnitLag(ceiling_T_s, envelope.box[2][1], sample_period_s, self.effect_lag_s)
         )
         if not (math.isfinite(convexity) and convexity >= 1.0):
             raise ValueError(f"convexity={convexity!r} must be finite and >= 1")

@@ -19,4 +19,13 @@ light: imports only the standard library, ``contracts``, ``baselines`` and, belo
     oracle and nominal sources and the protocol are :mod:`pressor.runtime.core.scheduling`).
 :mod:`pressor.runtime.estimation.validated`, :mod:`pressor.runtime.estimation.validation`
     The opt-in validated source and the held-out model bank it validates on.
+:mod:`pressor.runtime.estimation.cautious`
+    The cautious start (the default source of a design on a log-K scale): K̂ from the population's
+    most sensitive patient down, on evidence.
+:mod:`pressor.runtime.estimation.caution`
+    Each drug's settings of the cautious start, and its dose ceiling's formula.
+:mod:`pressor.runtime.estimation.unit_lag`
+    The unit-gain patients the cautious start reads its evidence against.
+:mod:`pressor.runtime.estimation.design_envelope`
+    What a generated module declares: its box, certified rates, population and syringe.
 """

@@ -9,7 +9,7 @@ frontier are in docs/notes/cautious-start.md (the section named in each item).
 * **Start at the top.** K̂ starts at the top of the design's patient population
   (``POPULATION_K_UG_KG_MIN``, mmHg per µg/kg/min, converted once to ml/h of the syringe and
   patient at hand, :class:`pressor.contracts.drug.DoseScale`), times the drug's start margin
-  (:data:`CAUTION_FOR_DRUG`), inside the box. The controller's gains are 1/K̂ (the feedback's and
+  (:data:`~pressor.runtime.estimation.caution.CAUTION_FOR_DRUG`), inside the box. The controller's gains are 1/K̂ (the feedback's and
   the feedforward's: the generated module's prefilter runs on the feedback's own, rate-limited K),
   so the first commands are what the most sensitive patient of the range needs, and no more: on
   that patient they land on the target; on any other they fall short.
@@ -30,23 +30,23 @@ frontier are in docs/notes/cautious-start.md (the section named in each item).
   answered at least as much as it, which holds while the rate has not been cut. After a cut the
   low half of an oscillation would read as a less sensitive patient, so K̂ falls only while
   ``s_fast >= s_slow`` ("Steep patients").
-* **A dose ceiling** (:attr:`Caution.hill_ceiling`, norepinephrine's). On a Hill curve that starts
+* **A dose ceiling** (:attr:`~pressor.runtime.estimation.caution.Caution.hill_ceiling`, norepinephrine's). On a Hill curve that starts
   from zero the first doses answer almost nothing, and the bound above would lower K̂ to that
   low-dose gain. For Hill exponents up to n, E(c)/cⁿ does not grow with the concentration, and the
   effect site of a patient no slower than the evidence's slowest holds at least s_slow, so
   E(u) <= (Δy + m)(u/s_slow)ⁿ (m the evidence's ``margin_mmhg``). The dose that could lift the MAP
-  past the step (target − first MAP) and :data:`CEILING_ALLOWANCE` of it is u_c
-  (:func:`dose_ceiling_ml_h`), and a falling K̂ stops at step/u_c, where the law's steady dose
+  past the step (target − first MAP) and :data:`~pressor.runtime.estimation.caution.CEILING_ALLOWANCE` of it
+  is u_c (:func:`~pressor.runtime.estimation.caution.dose_ceiling_ml_h`), and a falling K̂ stops at step/u_c, where the law's steady dose
   reaches it. It never raises
   K̂ and needs the target (:attr:`~pressor.runtime.core.scheduling.ScheduleInput.target_mmhg`). It
   acts through K̂, a pace the law's transient may pass, because held as a cap on the command it
   starves every patient ("Steep patients").
-* **After the start** (:attr:`Caution.settle_floor`, norepinephrine's). Once the MAP, having begun
+* **After the start** (:attr:`~pressor.runtime.estimation.caution.Caution.settle_floor`, norepinephrine's). Once the MAP, having begun
   more than :data:`SETTLE_BAND_MMHG` below the target, first comes within it, K̂ no longer falls
   below that fraction of its value then: a disturbance that lowers the MAP afterwards (a
   haemorrhage, while the law raises the rate) would otherwise read as a less sensitive patient,
   and the loop, scheduled too low, oscillates ("Steep patients").
-* **A swing raises K** (:attr:`Caution.swing_raise`, both drugs'). After the start, a MAP (read
+* **A swing raises K** (:attr:`~pressor.runtime.estimation.caution.Caution.swing_raise`, both drugs'). After the start, a MAP (read
   through a :data:`SWING_FILTER_S` low-pass, so that a monitor's noise is no swing) that leaves
   the band above the target after it last left it below has been driven past the target
   by the loop: K̂ is below the patient's gain there (a steep dose-response curve's local gain is up
@@ -62,21 +62,7 @@ frontier are in docs/notes/cautious-start.md (the section named in each item).
   :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`), and its module's bumpless integral
   keeps the command continuous while K̂ moves (:mod:`pressor.synthesis.families.smith.law`).
 
-Why each drug's caution (:data:`CAUTION_FOR_DRUG`):
-
-* phenylephrine's PK/PD patients answer later than any first-order patient of the box and are
-  less sensitive at low doses than near the target, so its evidence waits for a 60 s effect site
-  behind the slowest patient, K̂ starts at twice the population's top, and the law runs on T 300 s
-  (a weaker integral): together about 4 minutes to the target at 1x, for the overshoot bound
-  ("Phenylephrine's evidence lag");
-* norepinephrine's evidence reads a slowest patient of 550 s instead of the box's 750 s (K̂ had
-  stopped up to twice a typical patient's gain: "Norepinephrine's evidence lag"); its design
-  certifies a faster fall of ln K ("Norepinephrine's faster fall"); its dose ceiling (n = 2.5, a
-  second model's steepest curves) and floor after the start (half) keep steep patients' steps
-  and haemorrhages safe, and its law went back from T 250 s to 300 s because the ceiling's
-  steep patients still overshot on the stronger integral. The issue ranks no hypertensive
-  overshoot before time to the target: this costs the typical patient 4-7 minutes ("Steep
-  patients", "Measured").
+Each drug's settings, and why they are what they are: :mod:`pressor.runtime.estimation.caution`.
 
 What is not covered. The evidence assumes the drug's effect rises with the dose (a vasopressor).
 The certificate covers K̂ = K, not K̂ ≠ K, and the construction bounds the first commands, not the
@@ -89,133 +75,21 @@ beyond its box ("Norepinephrine over the link, on a second model").
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
+from pressor.runtime.estimation.caution import (
+    CAUTION_FOR_DRUG,
+    SETTLE_BAND_MMHG,
+    SWING_FILTER_S,
+    Caution,
+    dose_ceiling_ml_h,
+)
 from pressor.runtime.estimation.design_envelope import DesignEnvelope
 from pressor.runtime.estimation.gate import SampleGate
+from pressor.runtime.estimation.unit_lag import UnitLag
 
-__all__ = [
-    "CAUTION_FOR_DRUG",
-    "CEILING_ALLOWANCE",
-    "SETTLE_BAND_MMHG",
-    "SWING_FILTER_S",
-    "Caution",
-    "CautiousSchedule",
-    "dose_ceiling_ml_h",
-]
-
-
-@dataclass(frozen=True)
-class Caution:
-    """How cautiously a drug's patients are started (module docstring, "Why each drug's caution").
-
-    Attributes
-    ----------
-    start_margin
-        K̂ starts at this multiple of the population's top (1, >= 1; clamped to the box).
-    T_s
-        The lag the law is scheduled on (s), inside the box; None: the box's geometric-mean T.
-    effect_lag_s
-        An effect site's lag (s, > 0) behind the evidence's slowest patient; None: none.
-    evidence_T_s
-        The lag (s) of the evidence's slowest patient, inside the box; None: the box's longest T.
-    hill_ceiling
-        The dose ceiling's Hill exponent n (>= 1; module docstring, "A dose ceiling"); None: no
-        ceiling.
-    settle_floor
-        Once the MAP has first come within :data:`SETTLE_BAND_MMHG` of the target, K̂ no longer
-        falls below this fraction (0, 1] of its value then (module docstring, "After the start");
-        None: no such floor.
-    swing_raise
-        After the start, each swing of the MAP (low-passed, :data:`SWING_FILTER_S`) up through the
-        band (it leaves the band above the target after it last left it below) raises K̂'s floor to this multiple (> 1) of K̂ then,
-        never above K̂ when the start ended, and K̂ climbs to it at the certified rise (module
-        docstring, "A swing raises K"); None: no such rule.
-    """
-
-    start_margin: float = 1.0
-    T_s: float | None = None
-    effect_lag_s: float | None = None
-    evidence_T_s: float | None = None
-    hill_ceiling: float | None = None
-    settle_floor: float | None = None
-    swing_raise: float | None = None
-
-
-#: the drug's caution (lower-case drug name -> :class:`Caution`); other drugs take ``Caution()``
-CAUTION_FOR_DRUG: dict[str, Caution] = {
-    "phenylephrine": Caution(start_margin=2.0, T_s=300.0, effect_lag_s=60.0, swing_raise=1.5),
-    "norepinephrine": Caution(
-        T_s=300.0, evidence_T_s=550.0, hill_ceiling=2.5, settle_floor=0.5, swing_raise=1.5
-    ),
-}
-#: the rise above the step (a fraction of it) the dose ceiling lets a Hill curve reach: the
-#: issue's overshoot bound (10 % of the step)
-CEILING_ALLOWANCE = 0.1
-#: the band around the target (mmHg) whose first entry ends the start (:attr:`Caution.settle_floor`)
-#: and that a swing crosses (:attr:`Caution.swing_raise`)
-SETTLE_BAND_MMHG = 5.0
-#: the time constant (s) of the MAP's low-pass that a swing is read on (:attr:`Caution.swing_raise`):
-#: a loop's swing lasts minutes, while a monitor's noise (2 mmHg at 1 Hz raised K̂ on every patient
-#: unfiltered) and the breath's rhythm last seconds
-SWING_FILTER_S = 30.0
-
-
-def dose_ceiling_ml_h(
-    s_ml_h: float,
-    step_mmhg: float,
-    dy_mmhg: float,
-    margin_mmhg: float,
-    inv_n: float,
-    allowance: float = CEILING_ALLOWANCE,
-) -> float:
-    """u_c (ml/h): the steady dose past which a Hill curve from zero of exponent n = 1/``inv_n``
-    could lift the MAP beyond ``(1 + allowance) step_mmhg``, given that a patient that has
-    absorbed ``s_ml_h`` answered ``dy_mmhg`` (clipped at 0) within ``margin_mmhg`` (module
-    docstring, "A dose ceiling"): ``s (1.1 step/(Δy + m))^(1/n)``."""
-    rise = (1.0 + allowance) * step_mmhg / ((dy_mmhg if dy_mmhg > 0.0 else 0.0) + margin_mmhg)
-    return s_ml_h * rise**inv_n
-
-
-class _UnitLag:
-    """A unit-gain first-order lag with a delay, driven by the delivered rate's history (exact
-    discretisation for a rate held over each tick; the delay read with linear interpolation),
-    and optionally a second lag behind it (an effect site; its input held over the tick)."""
-
-    __slots__ = ("a", "b", "k", "f", "y", "a2", "b2", "y2")
-
-    def __init__(
-        self, T_s: float, tau_s: float, sample_period_s: float, lag2_s: float | None = None
-    ) -> None:
-        self.a = math.exp(-sample_period_s / T_s)
-        self.b = 1.0 - self.a
-        d = tau_s / sample_period_s  # the delay in ticks: whole ticks k and the fraction f
-        self.k = int(d)
-        self.f = d - self.k
-        self.y = 0.0
-        self.a2 = None if lag2_s is None else math.exp(-sample_period_s / lag2_s)
-        self.b2 = 0.0 if self.a2 is None else 1.0 - self.a2
-        self.y2 = 0.0
-
-    @property
-    def response(self) -> float:
-        """The answer of the last :meth:`step` (the effect site's, if there is one)."""
-        return self.y if self.a2 is None else self.y2
-
-    def step(self, hist: list[float], head: int) -> float:
-        n = len(hist)
-        i = (head - 1 - self.k) % n
-        j = (i - 1) % n
-        u_i = hist[i]
-        u = u_i + (hist[j] - u_i) * self.f
-        self.y = y = self.a * self.y + self.b * u
-        a2 = self.a2
-        if a2 is None:
-            return y
-        self.y2 = y2 = a2 * self.y2 + self.b2 * y
-        return y2
+__all__ = ["CautiousSchedule"]
 
 
 class CautiousSchedule:
@@ -345,8 +219,8 @@ class CautiousSchedule:
         self._side = 0  # the side of the band the MAP last left it on after the start (+1, -1)
         self._y_slow = 0.0  # the MAP's low-pass (SWING_FILTER_S) after the start (mmHg)
         self._a_slow = math.exp(-ts / SWING_FILTER_S)
-        self._slow = _UnitLag(self.evidence_T_s, d_hi, ts, lag2)
-        self._fast = _UnitLag(t_lo, d_lo, ts)
+        self._slow = UnitLag(self.evidence_T_s, d_hi, ts, lag2)
+        self._fast = UnitLag(t_lo, d_lo, ts)
         self._gate = SampleGate(ts, flatline_s=1e9)  # no flatline rule (class docstring)
         self._anchor: float | None = None
         self.K = self.k_top
