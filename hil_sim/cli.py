@@ -194,7 +194,7 @@ def _trial(argv: Sequence[str]) -> int:
     from pressor.runtime.core.closed_loop import ControllerError
     from pressor.runtime.inputs.controller_loader import ControllerSpecError, load_controller
     from pressor.runtime.inputs.controller_plugin import split_controller_list
-    from pressor.runtime.inputs.defaults import default_schedule
+    from pressor.runtime.inputs.defaults import caution_warning, default_schedule
 
     period = 1.0 / args.rate
     try:
@@ -229,6 +229,9 @@ def _trial(argv: Sequence[str]) -> int:
         except (ControllerSpecError, PatientModelError) as exc:
             raise UsageError(str(exc)) from None
         schedules[spec] = args.schedule or default_schedule(controller)
+        caution = caution_warning(spec, schedules[spec])
+        if caution is not None:  # first doses for a typical patient: said before the run
+            print(f"pressor trial: warning: {caution}", file=sys.stderr)
     folders = [controller_dir_name(spec) for spec in specs]
     if len(specs) > 1 and len(set(folders)) != len(folders):
         dup = next(f for f in folders if folders.count(f) > 1)

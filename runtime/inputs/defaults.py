@@ -4,7 +4,8 @@ One set, chosen on the sensitivity sweep (docs/notes/cautious-start.md): each dr
 log-K scale, scheduled by the cautious start (its first doses are safe for the most sensitive
 patient of the drug's 0.1x-10x population, and the MAP's evidence buys speed at the certified
 rates). Any other LPV design schedules on the online estimate by default (a real device sends no
-K, T, tau); the oracle stays for research, by name.
+K, T, tau); the oracle stays for research, by name. A run on any schedule but the cautious start
+(or the oracle) says so on stderr and in its summary (:func:`caution_warning`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ __all__ = [
     "DEFAULT_CONTROLLER",
     "DEFAULT_SCENARIO",
     "DESIGN_FOR_DRUG",
+    "caution_warning",
     "default_controller",
     "default_schedule",
 ]
@@ -45,3 +47,37 @@ def default_schedule(controller: Any) -> str:
     from pressor.contracts.drug import dose_scaled
 
     return "cautious" if dose_scaled(controller) else "estimated"
+
+
+def caution_warning(spec: str, schedule: str) -> str | None:
+    """The line a run prints when its first doses are not sized for the most sensitive patient.
+
+    Only the cautious start (``--schedule cautious``, a design on a log-K scale) sizes the first
+    doses for the most sensitive patient of the drug's 0.1x-10x population; the oracle knows the
+    simulated patient (research only). Any other schedule, and the PI and the Smith predictor
+    (which schedule on nothing), dose for a typical patient from the first second, and a
+    drug-sensitive one overshoots: on the paper model at 10x the PI's step overshoot p90 is 673 %
+    of the step (docs/notes/cautious-start.md, "Measured").
+
+    Parameters
+    ----------
+    spec
+        The ``--controller`` as given.
+    schedule
+        The run's ``--schedule`` (given, or :func:`default_schedule`'s).
+
+    Returns
+    -------
+    str or None
+        The warning, naming the controller, the schedule and what starts safe; None for
+        ``cautious`` and ``oracle``.
+    """
+    if schedule in ("cautious", "oracle"):
+        return None
+    return (
+        f"--controller {spec} on --schedule {schedule} does not start cautiously: its first doses"
+        " are sized for a typical patient, so a drug-sensitive one overshoots (several times the"
+        " step at 10x sensitivity, docs/notes/cautious-start.md); each drug's default design"
+        f" ({', '.join(DESIGN_FOR_DRUG.values())}) on --schedule cautious starts safe for the"
+        " most sensitive patient"
+    )
