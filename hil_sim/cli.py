@@ -229,9 +229,6 @@ def _trial(argv: Sequence[str]) -> int:
         except (ControllerSpecError, PatientModelError) as exc:
             raise UsageError(str(exc)) from None
         schedules[spec] = args.schedule or default_schedule(controller)
-        caution = caution_warning(spec, schedules[spec])
-        if caution is not None:  # first doses for a typical patient: said before the run
-            print(f"pressor trial: warning: {caution}", file=sys.stderr)
     folders = [controller_dir_name(spec) for spec in specs]
     if len(specs) > 1 and len(set(folders)) != len(folders):
         dup = next(f for f in folders if folders.count(f) > 1)
@@ -245,6 +242,9 @@ def _trial(argv: Sequence[str]) -> int:
     trajectories: dict[str, dict[str, Any]] = {}
     for spec in specs:
         out = args.out if len(specs) == 1 else args.out / controller_dir_name(spec)
+        caution = caution_warning(spec, schedules[spec])
+        if caution is not None:  # first doses for a typical patient: said before its cohort runs
+            print(f"pressor trial: warning: {caution}", file=sys.stderr)
         try:
             records[spec], summary, trajectory = run_cohort(
                 scenario,

@@ -339,7 +339,7 @@ def run_sil(
     """
     from pressor.link import PtyPair
     from pressor.runtime.core.closed_loop import ControllerError
-    from pressor.runtime.inputs.config import load_signing, warn_uncautious
+    from pressor.runtime.inputs.config import load_signing
     from pressor.runtime.session import run_runtime, start_run
     from pressor.runtime.shell.interrupt import Interrupted
     from pressor.runtime.shell.placement import lockstep_cpus
@@ -358,7 +358,6 @@ def run_sil(
     }
     if key_warnings:  # only then: the summaries of other runs keep their bytes
         identity["signing_warnings"] = key_warnings
-    warn_uncautious(run, identity, "pressor sil")
     if config.patient_model != "paper":  # the default's summaries keep their bytes
         identity["patient_model"] = config.patient_model
     if config.target_mmhg is not None:

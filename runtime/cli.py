@@ -63,7 +63,7 @@ def _run_parser() -> UsageParser:
 
 def _main_run(argv: Sequence[str]) -> int:
     from pressor.link import fast_port, open_port
-    from pressor.runtime.inputs.config import load_signing, warn_uncautious
+    from pressor.runtime.inputs.config import load_signing
     from pressor.runtime.session import run_runtime, start_run
     from pressor.runtime.summary import finish
 
@@ -96,7 +96,6 @@ def _main_run(argv: Sequence[str]) -> int:
     }
     if key_warnings:  # only then: the summaries of other runs keep their bytes
         identity["signing_warnings"] = key_warnings
-    warn_uncautious(config, identity, "pressor run")
     summary, result = run_runtime(port, config, identity, signing)
     return finish(summary, result, config, "pressor run")
 

@@ -25,7 +25,7 @@ from pressor.runtime.ending import (  # run_guarded, start_run: re-exported, the
 )
 from pressor.runtime.handshake import handshake
 from pressor.runtime.inputs.clinician import TARGET_MAX_MMHG, TARGET_MIN_MMHG, ClinicianInput
-from pressor.runtime.inputs.config import RunConfig, load_controller
+from pressor.runtime.inputs.config import RunConfig, load_controller, warn_uncautious
 from pressor.runtime.shell.boundary import Unwritten
 from pressor.runtime.shell.placement import Pinned
 
@@ -128,6 +128,10 @@ def run_runtime(
             write_failed_summary(config, identity, exc)
             raise
         identity = _run_identity(identity, config, peer)
+        # said once the run will dose: first doses for a typical patient (not a refused run)
+        caution = warn_uncautious(config, _prog(config))
+        if caution is not None:  # only then: the summaries of other runs keep their bytes
+            identity = {**identity, "caution_warning": caution}
         sup = _build_supervisor(config, controller, clinician, peer)
         recorder = _open_recorder(config, identity, clinician, peer, live)
         unstarted = recorder if isinstance(recorder, Unwritten) else None
@@ -135,6 +139,8 @@ def run_runtime(
             recorder = None
         if recorder is not None:
             recorder.plan_markers(_markers(config, events))
+            if caution is not None:  # on the clinician's timeline too
+                recorder.event(0, 0.0, caution)
         result, target = _run_loop(config, controller, clinician, sup, ep, peer, recorder, cpus,
                                    on_tick, tlog, unstarted)  # fmt: skip
         ep.close()  # the device sees the end at once; the record is written after

@@ -273,17 +273,16 @@ def load_controller(spec: str, period_s: float) -> Any:
         raise UsageError(f"--controller {spec}: {exc}{hint}") from None
 
 
-def warn_uncautious(config: RunConfig, identity: dict[str, Any], prog: str) -> None:
-    """Say on stderr, as ``PROG: warning: ...``, and in the run's summary (``identity``'s
-    ``caution_warning``) when the run's first doses are not sized for the most sensitive patient
-    (:func:`pressor.runtime.inputs.defaults.caution_warning`); nothing otherwise, so that other
-    runs' summaries keep their bytes."""
+def warn_uncautious(config: RunConfig, prog: str) -> str | None:
+    """Say on stderr, as ``PROG: warning: ...``, when the run's first doses are not sized for the
+    most sensitive patient (:func:`pressor.runtime.inputs.defaults.caution_warning`), and return
+    the line for the summary and the recording; None, and nothing said, otherwise."""
     from pressor.runtime.inputs.defaults import caution_warning
 
     line = caution_warning(config.controller, config.schedule)
     if line is not None:
         print(f"{prog}: warning: {line}", file=sys.stderr)
-        identity["caution_warning"] = line
+    return line
 
 
 def load_signing(

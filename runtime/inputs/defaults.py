@@ -50,7 +50,7 @@ def default_schedule(controller: Any) -> str:
 
 
 def caution_warning(spec: str, schedule: str) -> str | None:
-    """The line a run prints when its first doses are not sized for the most sensitive patient.
+    """The line a run prints when nothing sizes its first doses for the most sensitive patient.
 
     Only the cautious start (``--schedule cautious``, a design on a log-K scale) sizes the first
     doses for the most sensitive patient of the drug's 0.1x-10x population; the oracle knows the
@@ -75,9 +75,10 @@ def caution_warning(spec: str, schedule: str) -> str | None:
     if schedule in ("cautious", "oracle"):
         return None
     return (
-        f"--controller {spec} on --schedule {schedule} does not start cautiously: its first doses"
-        " are sized for a typical patient, so a drug-sensitive one overshoots (several times the"
-        " step at 10x sensitivity, docs/notes/cautious-start.md); each drug's default design"
+        f"--controller {spec} on --schedule {schedule} does not start cautiously: nothing sizes"
+        " its first doses for the most sensitive patient, and doses sized for a typical one"
+        " overshoot a drug-sensitive patient (several times the step at 10x sensitivity,"
+        " docs/notes/cautious-start.md); each drug's default design"
         f" ({', '.join(DESIGN_FOR_DRUG.values())}) on --schedule cautious starts safe for the"
         " most sensitive patient"
     )
