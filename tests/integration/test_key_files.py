@@ -63,18 +63,11 @@ def test_a_sil_run_with_a_key_file_every_user_can_read_says_so_in_its_summary(tm
     key = Signing.generate().write(tmp_path / "shared.key")
     key.chmod(0o644)
     summary = tmp_path / "s.json"
+    # the default controller: a baseline's run adds its own warning (not the cautious start)
     out = pressor(
-        "sil",
-        "--duration",
-        "5",
-        "--signing-key",
-        str(key),
-        "--summary",
-        str(summary),
-        "--rrd",
-        str(tmp_path / "r.rrd"),
-        cwd=tmp_path,
-    )  # fmt: skip (the default controller: a baseline's run adds its own warning)
+        "sil", "--duration", "5", "--signing-key", str(key),
+        "--summary", str(summary), "--rrd", str(tmp_path / "r.rrd"), cwd=tmp_path,
+    )  # fmt: skip
     assert out.returncode == 0, out.stderr
     [line] = _lines(out.stderr)
     assert line.startswith(f"pressor sil: warning: signing key {key}: readable by every user")
