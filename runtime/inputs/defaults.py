@@ -5,7 +5,7 @@ log-K scale, scheduled by the cautious start (its first doses are safe for the m
 patient of the drug's 0.1x-10x population, and the MAP's evidence buys speed at the certified
 rates). Any other LPV design schedules on the online estimate by default (a real device sends no
 K, T, tau); the oracle stays for research, by name. A run on any schedule but the cautious start
-(or the oracle) says so on stderr and in its summary (:func:`caution_warning`).
+(or the oracle) says so as it starts (:func:`caution_warning`).
 """
 
 from __future__ import annotations
