@@ -192,9 +192,10 @@ def _trial(argv: Sequence[str]) -> int:
     from pressor.plumbing.files import write_atomic
     from pressor.plumbing.parallel import BackendError, WorkerLost
     from pressor.runtime.core.closed_loop import ControllerError
+    from pressor.runtime.inputs.config import warn_uncautious
     from pressor.runtime.inputs.controller_loader import ControllerSpecError, load_controller
     from pressor.runtime.inputs.controller_plugin import split_controller_list
-    from pressor.runtime.inputs.defaults import caution_warning, default_schedule
+    from pressor.runtime.inputs.defaults import default_schedule
 
     period = 1.0 / args.rate
     try:
@@ -242,9 +243,7 @@ def _trial(argv: Sequence[str]) -> int:
     trajectories: dict[str, dict[str, Any]] = {}
     for spec in specs:
         out = args.out if len(specs) == 1 else args.out / controller_dir_name(spec)
-        caution = caution_warning(spec, schedules[spec])
-        if caution is not None:  # first doses for a typical patient: said before its cohort runs
-            print(f"pressor trial: warning: {caution}", file=sys.stderr)
+        warn_uncautious(spec, schedules[spec], "pressor trial")  # before its cohort runs
         try:
             records[spec], summary, trajectory = run_cohort(
                 scenario,

@@ -129,7 +129,7 @@ def run_runtime(
             raise
         identity = _run_identity(identity, config, peer)
         # said once the run will dose: first doses for a typical patient (not a refused run)
-        caution = warn_uncautious(config, _prog(config))
+        caution = warn_uncautious(config.controller, config.schedule, _prog(config))
         if caution is not None:  # only then: the summaries of other runs keep their bytes
             identity = {**identity, "caution_warning": caution}
         sup = _build_supervisor(config, controller, clinician, peer)

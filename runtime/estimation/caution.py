@@ -84,9 +84,9 @@ CEILING_ALLOWANCE = 0.1
 #: the band around the target (mmHg) whose first entry ends the start (:attr:`Caution.settle_floor`)
 #: and that a swing crosses (:attr:`Caution.swing_raise`)
 SETTLE_BAND_MMHG = 5.0
-#: the time constant (s) of the MAP's low-pass that a swing is read on (:attr:`Caution.swing_raise`):
-#: a loop's swing lasts minutes, while a monitor's noise (2 mmHg at 1 Hz raised K̂ on every patient
-#: unfiltered) and the breath's rhythm last seconds
+#: the time constant (s) of the MAP's low-pass that a swing is read on
+#: (:attr:`Caution.swing_raise`): a loop's swing lasts minutes, while a monitor's noise (2 mmHg at
+#: 1 Hz raised K̂ on every patient unfiltered) and the breath's rhythm last seconds
 SWING_FILTER_S = 30.0
 
 

@@ -9,7 +9,7 @@ frontier are in docs/notes/cautious-start.md (the section named in each item).
 * **Start at the top.** K̂ starts at the top of the design's patient population
   (``POPULATION_K_UG_KG_MIN``, mmHg per µg/kg/min, converted once to ml/h of the syringe and
   patient at hand, :class:`pressor.contracts.drug.DoseScale`), times the drug's start margin
-  (:data:`~pressor.runtime.estimation.caution.CAUTION_FOR_DRUG`), inside the box. The controller's gains are 1/K̂ (the feedback's and
+  (:data:`CAUTION_FOR_DRUG`), inside the box. The controller's gains are 1/K̂ (the feedback's and
   the feedforward's: the generated module's prefilter runs on the feedback's own, rate-limited K),
   so the first commands are what the most sensitive patient of the range needs, and no more: on
   that patient they land on the target; on any other they fall short.
@@ -30,23 +30,23 @@ frontier are in docs/notes/cautious-start.md (the section named in each item).
   answered at least as much as it, which holds while the rate has not been cut. After a cut the
   low half of an oscillation would read as a less sensitive patient, so K̂ falls only while
   ``s_fast >= s_slow`` ("Steep patients").
-* **A dose ceiling** (:attr:`~pressor.runtime.estimation.caution.Caution.hill_ceiling`, norepinephrine's). On a Hill curve that starts
+* **A dose ceiling** (:attr:`Caution.hill_ceiling`, norepinephrine's). On a Hill curve that starts
   from zero the first doses answer almost nothing, and the bound above would lower K̂ to that
   low-dose gain. For Hill exponents up to n, E(c)/cⁿ does not grow with the concentration, and the
   effect site of a patient no slower than the evidence's slowest holds at least s_slow, so
   E(u) <= (Δy + m)(u/s_slow)ⁿ (m the evidence's ``margin_mmhg``). The dose that could lift the MAP
-  past the step (target − first MAP) and :data:`~pressor.runtime.estimation.caution.CEILING_ALLOWANCE` of it
-  is u_c (:func:`~pressor.runtime.estimation.caution.dose_ceiling_ml_h`), and a falling K̂ stops at step/u_c, where the law's steady dose
-  reaches it. It never raises
-  K̂ and needs the target (:attr:`~pressor.runtime.core.scheduling.ScheduleInput.target_mmhg`). It
-  acts through K̂, a pace the law's transient may pass, because held as a cap on the command it
-  starves every patient ("Steep patients").
-* **After the start** (:attr:`~pressor.runtime.estimation.caution.Caution.settle_floor`, norepinephrine's). Once the MAP, having begun
+  past the step (target − first MAP) and :data:`CEILING_ALLOWANCE` of it is u_c
+  (:func:`dose_ceiling_ml_h`), and a falling K̂ stops at step/u_c, where the law's steady dose
+  reaches it. It never raises K̂ and needs the target
+  (:attr:`~pressor.runtime.core.scheduling.ScheduleInput.target_mmhg`). It acts through K̂, a pace
+  the law's transient may pass, because held as a cap on the command it starves every patient
+  ("Steep patients").
+* **After the start** (:attr:`Caution.settle_floor`, norepinephrine's). Once the MAP, having begun
   more than :data:`SETTLE_BAND_MMHG` below the target, first comes within it, K̂ no longer falls
   below that fraction of its value then: a disturbance that lowers the MAP afterwards (a
   haemorrhage, while the law raises the rate) would otherwise read as a less sensitive patient,
   and the loop, scheduled too low, oscillates ("Steep patients").
-* **A swing raises K** (:attr:`~pressor.runtime.estimation.caution.Caution.swing_raise`, both drugs'). After the start, a MAP (read
+* **A swing raises K** (:attr:`Caution.swing_raise`, both drugs'). After the start, a MAP (read
   through a :data:`SWING_FILTER_S` low-pass, so that a monitor's noise is no swing) that leaves
   the band above the target after it last left it below has been driven past the target
   by the loop: K̂ is below the patient's gain there (a steep dose-response curve's local gain is up
@@ -62,7 +62,9 @@ frontier are in docs/notes/cautious-start.md (the section named in each item).
   :mod:`pressor.synthesis.certificates.wirtinger.k_scaling`), and its module's bumpless integral
   keeps the command continuous while K̂ moves (:mod:`pressor.synthesis.families.smith.law`).
 
-Each drug's settings, and why they are what they are: :mod:`pressor.runtime.estimation.caution`.
+Each drug's settings, and why they are what they are, with :class:`Caution`,
+:data:`CAUTION_FOR_DRUG`, the constants named here and :func:`dose_ceiling_ml_h`:
+:mod:`pressor.runtime.estimation.caution`.
 
 What is not covered. The evidence assumes the drug's effect rises with the dose (a vasopressor).
 The certificate covers K̂ = K, not K̂ ≠ K, and the construction bounds the first commands, not the
@@ -75,6 +77,7 @@ beyond its box ("Norepinephrine over the link, on a second model").
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 from pressor.contracts.drug import REFERENCE_WEIGHT_KG, DoseScale
 from pressor.runtime.core.scheduling import Schedule, ScheduleInput
@@ -90,6 +93,20 @@ from pressor.runtime.estimation.gate import SampleGate
 from pressor.runtime.estimation.unit_lag import UnitLag
 
 __all__ = ["CautiousSchedule"]
+
+
+def _rule_setting(
+    name: str, given: float | None, drug: float | None, ok: Callable[[float], bool], allowed: str
+) -> float | None:
+    """An optional rule's setting: ``given`` (0 turns the rule off), else the ``drug``'s; None
+    when off. A finite value that fails ``ok`` is a :class:`ValueError` naming it and
+    ``allowed``."""
+    value = drug if given is None else float(given)
+    if value is None or value == 0.0:
+        return None
+    if not (math.isfinite(value) and ok(value)):
+        raise ValueError(f"{name}={value!r} must be {allowed} (0: none)")
+    return value
 
 
 class CautiousSchedule:
@@ -199,19 +216,24 @@ class CautiousSchedule:
         if lag2 is not None and not (math.isfinite(lag2) and lag2 > 0.0):
             raise ValueError(f"effect_lag_s={lag2!r} must be finite and > 0 (s)")
         self.effect_lag_s = lag2
-        n = caution.hill_ceiling if hill_ceiling is None else float(hill_ceiling)
-        if n is not None and n != 0.0 and not (math.isfinite(n) and n >= 1.0):
-            raise ValueError(f"hill_ceiling={hill_ceiling!r} must be finite and >= 1 (0: none)")
-        self.hill_ceiling = n or None
-        self._inv_n = 0.0 if n is None or n == 0.0 else 1.0 / n
-        f = caution.settle_floor if settle_floor is None else float(settle_floor)
-        if f is not None and f != 0.0 and not 0.0 < f <= 1.0:
-            raise ValueError(f"settle_floor={settle_floor!r} must be in (0, 1] (0: none)")
-        self.settle_floor = f or None
-        r = caution.swing_raise if swing_raise is None else float(swing_raise)
-        if r is not None and r != 0.0 and not (math.isfinite(r) and r > 1.0):
-            raise ValueError(f"swing_raise={swing_raise!r} must be finite and > 1 (0: none)")
-        self.swing_raise = r or None
+        self.hill_ceiling = n = _rule_setting(
+            "hill_ceiling",
+            hill_ceiling,
+            caution.hill_ceiling,
+            lambda v: v >= 1.0,
+            "finite and >= 1",
+        )
+        self._inv_n = 0.0 if n is None else 1.0 / n
+        self.settle_floor = _rule_setting(
+            "settle_floor",
+            settle_floor,
+            caution.settle_floor,
+            lambda v: 0.0 < v <= 1.0,
+            "in (0, 1]",
+        )
+        self.swing_raise = _rule_setting(
+            "swing_raise", swing_raise, caution.swing_raise, lambda v: v > 1.0, "finite and > 1"
+        )
         self._k_settled = 0.0  # K̂'s floor once the start has ended (0 before, or without one)
         # the start has not ended yet (tracked only for a rule that acts after it)
         self._settling = self.settle_floor is not None or self.swing_raise is not None

@@ -273,13 +273,14 @@ def load_controller(spec: str, period_s: float) -> Any:
         raise UsageError(f"--controller {spec}: {exc}{hint}") from None
 
 
-def warn_uncautious(config: RunConfig, prog: str) -> str | None:
-    """Say on stderr, as ``PROG: warning: ...``, when the run's first doses are not sized for the
-    most sensitive patient (:func:`pressor.runtime.inputs.defaults.caution_warning`), and return
-    the line for the summary and the recording; None, and nothing said, otherwise."""
+def warn_uncautious(spec: str, schedule: str, prog: str) -> str | None:
+    """Say on stderr, as ``PROG: warning: ...``, when nothing sizes the first doses of
+    ``--controller spec`` on ``--schedule schedule`` for the most sensitive patient
+    (:func:`pressor.runtime.inputs.defaults.caution_warning`), and return the line (for a run's
+    summary and recording); None, and nothing said, otherwise."""
     from pressor.runtime.inputs.defaults import caution_warning
 
-    line = caution_warning(config.controller, config.schedule)
+    line = caution_warning(spec, schedule)
     if line is not None:
         print(f"{prog}: warning: {line}", file=sys.stderr)
     return line
